@@ -1,0 +1,46 @@
+"""hcard: the haptic-card standard and toolkit for friction-modulation touchscreens.
+
+Cards are ``hcard.v1.card_pb2.Card`` protobuf messages (re-exported as :data:`Card`).
+
+>>> import hcard
+>>> card = hcard.load("surface.hcard")          # doctest: +SKIP
+>>> problems = hcard.validate(card)              # doctest: +SKIP
+>>> frames = hcard.render(card, track)           # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+__version__ = "0.1.0"
+
+from hcard.card_io import dumps, load, parse_card, save, to_json  # noqa: E402
+from hcard.errors import (  # noqa: E402
+    CardError,
+    CardValidationError,
+    HcardError,
+    ImageError,
+    PluginError,
+    Problem,
+    TrackError,
+)
+from hcard.v1.card_pb2 import Card, Component, Texture  # noqa: E402
+from hcard.validate import validate  # noqa: E402
+
+__all__ = [
+    "Card",
+    "CardError",
+    "CardValidationError",
+    "Component",
+    "HcardError",
+    "ImageError",
+    "PluginError",
+    "Problem",
+    "Texture",
+    "TrackError",
+    "__version__",
+    "dumps",
+    "load",
+    "parse_card",
+    "save",
+    "to_json",
+    "validate",
+]

@@ -1,0 +1,176 @@
+"""Reading and writing haptic cards: binary protobuf (``.hcard``) and the JSON mapping.
+
+The binary form is the plain serialised ``hcard.v1.Card`` message, readable by any protobuf
+tool. The JSON form is the protobuf JSON mapping with the proto field names. ``load`` detects
+the form from the content, not the file name. Every failure raises :class:`CardError` (or its
+subclass :class:`CardValidationError`) naming the file, the field and the reason.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Literal
+
+from google.protobuf import json_format
+
+from hcard import limits
+from hcard.atomic import write_atomically
+from hcard.errors import CardError, CardValidationError
+from hcard.v1 import card_pb2 as pb
+from hcard.validate import errors_of, validate
+
+CardFormat = Literal["binary", "json"]
+MEDIA_TYPE = "application/vnd.hcard+protobuf"
+JSON_MEDIA_TYPE = "application/vnd.hcard+json"
+FILE_EXTENSION = ".hcard"
+
+
+def format_for_path(path: str | os.PathLike[str]) -> CardFormat:
+    """The format a file name asks for: ``.json`` (including ``.hcard.json``) is JSON."""
+    return "json" if str(path).lower().endswith(".json") else "binary"
+
+
+def looks_like_json(data: bytes) -> bool:
+    """True when ``data`` starts (after white space and a UTF-8 BOM) with ``{``.
+
+    A binary card never does: ``{`` would be the deprecated start-group tag of field 15.
+    """
+    return data.lstrip(b"\xef\xbb\xbf \t\r\n").startswith(b"{")
+
+
+def card_from_bytes(data: bytes, *, source: str | os.PathLike[str] | None = None) -> pb.Card:
+    """Parse a card from binary or JSON bytes (detected from the content). Does not validate."""
+    if not data:
+        raise CardError("empty input: no card bytes", source=source)
+    if len(data) > limits.MAX_CARD_BYTES:
+        raise CardError(
+            f"{len(data)} bytes exceed the card size limit of {limits.MAX_CARD_BYTES}",
+            source=source,
+        )
+    if looks_like_json(data):
+        return _card_from_json_bytes(data, source)
+    card = pb.Card()
+    try:
+        card.ParseFromString(data)
+    except Exception as exc:  # noqa: BLE001 - any parser failure is a corrupt card
+        raise CardError(f"corrupt or truncated card bytes ({exc})", source=source) from None
+    return card
+
+
+def _card_from_json_bytes(data: bytes, source: str | os.PathLike[str] | None) -> pb.Card:
+    try:
+        text = data.decode("utf-8-sig")
+        obj = json.loads(text)
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise CardError(f"not valid JSON ({exc})", source=source) from None
+    if not isinstance(obj, dict):
+        raise CardError("JSON card must be an object", source=source)
+    card = pb.Card()
+    try:
+        # Unknown fields are those of a newer minor version: ignored, per the versioning rules.
+        json_format.ParseDict(obj, card, ignore_unknown_fields=True)
+    except Exception as exc:  # noqa: BLE001 - json_format raises several types
+        raise CardError(f"JSON does not match the card schema ({exc})", source=source) from None
+    return card
+
+
+def check_version(card: pb.Card, *, source: str | os.PathLike[str] | None = None) -> None:
+    """Reject a card whose major version this reader does not implement (spec rule V1)."""
+    if not card.HasField("version"):
+        raise CardError(
+            "missing format version (not an hcard card?)", source=source, path="version"
+        )
+    major = card.version.major
+    if major != limits.FORMAT_MAJOR:
+        raise CardError(
+            f"unsupported major version {major}.{card.version.minor}: this reader implements "
+            f"major version {limits.FORMAT_MAJOR}",
+            source=source,
+            path="version.major",
+        )
+
+
+def parse_card(
+    data: bytes, *, source: str | os.PathLike[str] | None = None, check: bool = True
+) -> pb.Card:
+    """Parse card bytes, check the version and (when ``check``) validate; raise on failure."""
+    card = card_from_bytes(data, source=source)
+    check_version(card, source=source)
+    if check:
+        problems = errors_of(validate(card))
+        if problems:
+            raise CardValidationError(problems, source=source)
+    return card
+
+
+def load(path: str | os.PathLike[str], *, check: bool = True) -> pb.Card:
+    """Read a card file (binary or JSON), check its version and validate it.
+
+    Raises:
+        CardError: the file is missing, unreadable, too large, corrupt, of an unknown major
+            version, or (with ``check``) invalid, in which case it is a
+            :class:`CardValidationError` listing every problem.
+    """
+    file = Path(path)
+    try:
+        size = file.stat().st_size
+        if size > limits.MAX_CARD_BYTES:
+            raise CardError(
+                f"{size} bytes exceed the card size limit of {limits.MAX_CARD_BYTES}", source=file
+            )
+        data = file.read_bytes()
+    except IsADirectoryError:
+        raise CardError("is a directory, not a card file", source=file) from None
+    except FileNotFoundError:
+        raise CardError("no such file", source=file) from None
+    except OSError as exc:
+        raise CardError(f"cannot read ({exc.strerror or exc})", source=file) from None
+    return parse_card(data, source=file, check=check)
+
+
+def to_bytes(card: pb.Card) -> bytes:
+    """Binary serialisation (deterministic: the same card always gives the same bytes)."""
+    return card.SerializeToString(deterministic=True)
+
+
+def to_json(card: pb.Card) -> str:
+    """JSON mapping with proto field names, every field written, enums by name."""
+    return (
+        json_format.MessageToJson(
+            card,
+            preserving_proto_field_name=True,
+            always_print_fields_with_no_presence=True,
+            indent=2,
+        )
+        + "\n"
+    )
+
+
+def dumps(card: pb.Card, fmt: CardFormat = "binary") -> bytes:
+    """Serialise ``card`` in the given format."""
+    return to_json(card).encode("utf-8") if fmt == "json" else to_bytes(card)
+
+
+def save(
+    card: pb.Card,
+    path: str | os.PathLike[str],
+    *,
+    fmt: CardFormat | None = None,
+    check: bool = True,
+) -> None:
+    """Write ``card`` to ``path`` atomically; the format follows the file name unless given.
+
+    With ``check`` the card is validated first and an invalid card is not written. On any
+    failure the previous file at ``path`` is left intact.
+    """
+    if check:
+        problems = errors_of(validate(card))
+        if problems:
+            raise CardValidationError(problems, source=path)
+    data = dumps(card, fmt or format_for_path(path))
+    try:
+        write_atomically(path, data)
+    except OSError as exc:
+        raise CardError(f"cannot write ({exc.strerror or exc})", source=path) from None
