@@ -1,0 +1,195 @@
+"""Batch and streaming rendering of a card along a finger track.
+
+Both modes run the same code: touch samples go through :func:`extend_table`, frames through
+:func:`frame_state` and :func:`evaluate_frames`, so a stream fed block by block gives the
+numbers of a batch rendering of the whole track.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from hcard.errors import CardValidationError, TrackError
+from hcard.render.compiled import CompiledCard, compile_card
+from hcard.render.kernel import evaluate_frames, frame_state
+from hcard.render.options import RenderOptions
+from hcard.render.touch import TouchTable, empty_table, extend_table
+from hcard.track import FingerTrack, make_track
+from hcard.v1 import card_pb2 as pb
+from hcard.validate import errors_of, validate
+
+BATCH_CHUNK_FRAMES = 1 << 15
+"""Frames evaluated per kernel call in batch mode (keeps temporaries in cache)."""
+
+
+@dataclass(frozen=True)
+class Frames:
+    """Rendered frames.
+
+    Attributes:
+        t: frame times, s.
+        uv: UV target relative friction, in [0, 1].
+        ev: EV target relative friction, in [1, 4].
+        contact: finger on the surface.
+        texture: active palette index, -1 for a neutral frame.
+        phase: optional (N, max components) unwrapped component phase, turns.
+    """
+
+    t: np.ndarray
+    uv: np.ndarray
+    ev: np.ndarray
+    contact: np.ndarray
+    texture: np.ndarray
+    phase: np.ndarray | None = None
+
+    @property
+    def friction(self) -> np.ndarray:
+        """Total target relative friction ``uv * ev`` (coupled model, thesis Eq. 4.1)."""
+        return self.uv * self.ev
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    @staticmethod
+    def concatenate(parts: list[Frames]) -> Frames:
+        """Frames of ``parts`` one after another."""
+        phase = None
+        if parts and all(p.phase is not None for p in parts):
+            phase = np.concatenate([p.phase for p in parts])  # type: ignore[misc]
+        return Frames(
+            np.concatenate([p.t for p in parts]),
+            np.concatenate([p.uv for p in parts]),
+            np.concatenate([p.ev for p in parts]),
+            np.concatenate([p.contact for p in parts]),
+            np.concatenate([p.texture for p in parts]),
+            phase,
+        )
+
+
+class Renderer:
+    """Renders one card with fixed options; cheap to reuse for many tracks."""
+
+    def __init__(self, card: pb.Card, options: RenderOptions | None = None) -> None:
+        problems = errors_of(validate(card))
+        if problems:
+            raise CardValidationError(problems)
+        self.card = card
+        self.options = options or RenderOptions()
+        self.compiled: CompiledCard = compile_card(card, self.options)
+
+    def frame_times(self, t0: float, first: int, count: int) -> np.ndarray:
+        """Times of frames ``first .. first+count-1`` of a rendering starting at ``t0``, s."""
+        return t0 + np.arange(first, first + count, dtype=np.float64) / self.options.frame_rate_hz
+
+    def _block(self, table: TouchTable, times: np.ndarray, with_phase: bool) -> Frames:
+        state = frame_state(self.compiled, table, times, self.options)
+        uv, ev, phase = evaluate_frames(self.compiled, state, self.options, with_phase=with_phase)
+        return Frames(times, uv, ev, state.texture >= 0, state.texture, phase)
+
+    def render(
+        self,
+        track: FingerTrack,
+        *,
+        with_phase: bool = False,
+        progress: Callable[[int, int], None] | None = None,
+    ) -> Frames:
+        """Render the whole track (batch mode): frames from its first to its last sample.
+
+        Args:
+            track: touch samples.
+            with_phase: also return each component's unwrapped phase (diagnostics).
+            progress: called as ``progress(frames_done, frames_total)`` after each chunk.
+        """
+        table = extend_table(
+            empty_table(),
+            track.t,
+            np.column_stack((track.x, track.y)),
+            track.contact,
+            self.options.dead_reckoning_s,
+        )
+        total = int(math.floor(track.duration_s * self.options.frame_rate_hz + 1e-9)) + 1
+        t0 = float(track.t[0])
+        parts = []
+        for first in range(0, total, BATCH_CHUNK_FRAMES):
+            count = min(BATCH_CHUNK_FRAMES, total - first)
+            parts.append(self._block(table, self.frame_times(t0, first, count), with_phase))
+            if progress is not None:
+                progress(first + count, total)
+        return Frames.concatenate(parts)
+
+    def stream(self, t0: float | None = None) -> RenderStream:
+        """A streaming renderer; frame 0 falls at ``t0`` (default: the first pushed sample)."""
+        return RenderStream(self, t0)
+
+
+class RenderStream:
+    """Streaming mode: push touch samples as they arrive, pull blocks of frames.
+
+    A frame uses the samples pushed before it is rendered; push every sample with time up to
+    the end of a block before rendering that block to get batch-identical numbers.
+    """
+
+    def __init__(self, renderer: Renderer, t0: float | None = None) -> None:
+        self.renderer = renderer
+        self.t0 = t0
+        self.next_frame = 0
+        self._table = empty_table()
+
+    @property
+    def next_time(self) -> float:
+        """Time of the next frame to be rendered, s (NaN before the first sample)."""
+        if self.t0 is None:
+            return math.nan
+        return float(self.renderer.frame_times(self.t0, self.next_frame, 1)[0])
+
+    def push(
+        self,
+        t: np.ndarray | float,
+        x: np.ndarray | float,
+        y: np.ndarray | float,
+        fn: np.ndarray | float | None = None,
+        contact: np.ndarray | bool | None = None,
+    ) -> None:
+        """Append touch samples (scalars or arrays), later than every sample pushed so far."""
+        samples = make_track(t, x, y, fn, contact, source="stream")
+        if len(self._table) and samples.t[0] <= self._table.t[-1]:
+            raise TrackError(
+                f"stream: sample time {samples.t[0]} does not follow the last pushed sample "
+                f"({self._table.t[-1]})"
+            )
+        if self.t0 is None:
+            self.t0 = float(samples.t[0])
+        new = extend_table(
+            self._table,
+            samples.t,
+            np.column_stack((samples.x, samples.y)),
+            samples.contact,
+            self.renderer.options.dead_reckoning_s,
+        )
+        self._table = self._table.concat(new)
+
+    def render(self, n_frames: int, *, with_phase: bool = False) -> Frames:
+        """Render the next ``n_frames`` frames."""
+        if self.t0 is None:
+            raise TrackError("stream: push a touch sample before rendering")
+        times = self.renderer.frame_times(self.t0, self.next_frame, n_frames)
+        frames = self.renderer._block(self._table, times, with_phase)
+        self.next_frame += n_frames
+        # Keep only the samples later frames can still use: the last one at or before the
+        # next frame time and everything after it.
+        if len(self._table):
+            keep = max(int(np.searchsorted(self._table.t, self.next_time, side="right")) - 1, 0)
+            if keep:
+                self._table = self._table.tail(keep)
+        return frames
+
+
+def render(
+    card: pb.Card, track: FingerTrack, options: RenderOptions | None = None
+) -> Frames:
+    """Render ``card`` along ``track`` (batch mode)."""
+    return Renderer(card, options).render(track)

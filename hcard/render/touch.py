@@ -1,0 +1,153 @@
+"""Per-touch-sample state of the rendering equation (spec/README.md section 6).
+
+For each sample: the velocity estimate, the contact time origin and the odometer (the
+velocity-locked position). Computed vectorised over a block of samples, with the state of the
+previous sample carried in, so batch and streaming rendering share this code.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class TouchTable:
+    """Derived state of touch samples, arrays of length M.
+
+    Attributes:
+        t: sample time, s.
+        position: (M, 2) measured position, mm.
+        contact: finger on the surface.
+        velocity: (M, 2) velocity estimate, mm/s (finite difference of the last two samples of
+            the contact; zero at touch-down).
+        odometer: (M, 2) velocity-locked position, mm.
+        contact_start: time of the touch-down of the current contact, s.
+        samples_in_contact: 0 at touch-down, then 1, 2, ...
+    """
+
+    t: np.ndarray
+    position: np.ndarray
+    contact: np.ndarray
+    velocity: np.ndarray
+    odometer: np.ndarray
+    contact_start: np.ndarray
+    samples_in_contact: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    def tail(self, start: int) -> TouchTable:
+        """Rows from ``start`` on."""
+        return TouchTable(
+            self.t[start:],
+            self.position[start:],
+            self.contact[start:],
+            self.velocity[start:],
+            self.odometer[start:],
+            self.contact_start[start:],
+            self.samples_in_contact[start:],
+        )
+
+    def concat(self, other: TouchTable) -> TouchTable:
+        """This table followed by ``other``."""
+        return TouchTable(
+            *(
+                np.concatenate((getattr(self, name), getattr(other, name)))
+                for name in (
+                    "t",
+                    "position",
+                    "contact",
+                    "velocity",
+                    "odometer",
+                    "contact_start",
+                    "samples_in_contact",
+                )
+            )
+        )
+
+
+def empty_table() -> TouchTable:
+    """A table with no samples."""
+    return TouchTable(
+        np.zeros(0),
+        np.zeros((0, 2)),
+        np.zeros(0, dtype=bool),
+        np.zeros((0, 2)),
+        np.zeros((0, 2)),
+        np.zeros(0),
+        np.zeros(0, dtype=np.int64),
+    )
+
+
+def extend_table(
+    previous: TouchTable,
+    t: np.ndarray,
+    position: np.ndarray,
+    contact: np.ndarray,
+    horizon_s: float,
+) -> TouchTable:
+    """Derive the state of new samples that follow the last row of ``previous``.
+
+    Args:
+        previous: table whose last row (if any) is the sample before ``t[0]``.
+        t: (M,) times, s, strictly increasing and after ``previous``.
+        position: (M, 2) positions, mm.
+        contact: (M,) contact flags.
+        horizon_s: dead-reckoning horizon H, s.
+    """
+    m = t.shape[0]
+    has_prev = len(previous) > 0
+    prev_t = np.concatenate(([previous.t[-1] if has_prev else -np.inf], t[:-1]))
+    prev_p = np.concatenate(
+        (previous.position[-1:] if has_prev else np.zeros((1, 2)), position[:-1])
+    )
+    prev_c = np.concatenate(([bool(previous.contact[-1]) if has_prev else False], contact[:-1]))
+    touchdown = contact & ~prev_c
+    idx = np.arange(m)
+    last_touchdown = np.maximum.accumulate(np.where(touchdown, idx, -1))
+
+    carried = int(previous.samples_in_contact[-1]) + 1 if has_prev else 0
+    in_contact = np.where(last_touchdown >= 0, idx - last_touchdown, carried + idx)
+
+    moving = contact & ~touchdown
+    dt = t - prev_t
+    velocity = np.zeros((m, 2))
+    velocity[moving] = (position[moving] - prev_p[moving]) / dt[moving, None]
+
+    prev_start = previous.contact_start[-1] if has_prev else 0.0
+    contact_start = np.where(
+        last_touchdown >= 0, t[np.maximum(last_touchdown, 0)], prev_start
+    )
+
+    # Odometer: anchored to the measured position at touch-down and at the first velocity
+    # estimate (the second sample of a contact); otherwise advanced by the previous velocity
+    # over at most the dead-reckoning horizon.
+    anchor = contact & (in_contact <= 1)
+    prev_v = np.concatenate(
+        (previous.velocity[-1:] if has_prev else np.zeros((1, 2)), velocity[:-1])
+    )
+    step = prev_v * np.minimum(dt, horizon_s)[:, None]
+    step[anchor | ~contact] = 0.0
+    travelled = np.cumsum(step, axis=0)
+    last_anchor = np.maximum.accumulate(np.where(anchor, idx, -1))
+    k = np.maximum(last_anchor, 0)
+    start_odometer = previous.odometer[-1] if has_prev else np.zeros(2)
+    base = np.where(
+        (last_anchor >= 0)[:, None],
+        position[k] - travelled[k],
+        start_odometer[None, :],
+    )
+    odometer = base + travelled
+    odometer[~contact] = position[~contact]
+    velocity[~contact] = 0.0
+    return TouchTable(
+        t.copy(),
+        position.copy(),
+        contact.copy(),
+        velocity,
+        odometer,
+        contact_start,
+        in_contact,
+    )

@@ -1,0 +1,179 @@
+"""Finger tracks: touch samples (t, x, y, Fn, contact) as arrays, and their CSV form.
+
+The CSV format is normative in spec/track-format.md: a header row naming the columns ``t_s``
+(s), ``x_mm``, ``y_mm`` (required), ``fn_n`` (N, default 0.5) and ``contact`` (0/1, default 1);
+``#`` comment lines; strictly increasing time; finite numbers.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from hcard.errors import TrackError
+
+DEFAULT_NORMAL_FORCE_N = 0.5
+REQUIRED_COLUMNS = ("t_s", "x_mm", "y_mm")
+OPTIONAL_COLUMNS = ("fn_n", "contact")
+
+
+@dataclass(frozen=True)
+class FingerTrack:
+    """Touch samples of one finger.
+
+    Attributes:
+        t: sample times, s, strictly increasing, shape (M,).
+        x, y: positions on the surface, mm (origin top-left, +y down), shape (M,).
+        fn: normal force, N, shape (M,).
+        contact: True while the finger touches the surface, shape (M,).
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    fn: np.ndarray
+    contact: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    @property
+    def duration_s(self) -> float:
+        """Time from the first to the last sample, s."""
+        return float(self.t[-1] - self.t[0]) if len(self) else 0.0
+
+
+def make_track(
+    t: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    fn: np.ndarray | float | None = None,
+    contact: np.ndarray | bool | None = None,
+    *,
+    source: str = "track",
+) -> FingerTrack:
+    """Build a checked :class:`FingerTrack` from array-likes; raise :class:`TrackError`."""
+    t_arr = np.atleast_1d(np.asarray(t, dtype=np.float64))
+    n = t_arr.shape[0]
+    if n == 0:
+        raise TrackError(f"{source}: no samples")
+
+    def column(values: object, name: str, default: float) -> np.ndarray:
+        if values is None:
+            return np.full(n, default, dtype=np.float64)
+        arr = np.asarray(values, dtype=np.float64)
+        if arr.ndim == 0:
+            return np.full(n, float(arr))
+        arr = arr.ravel()
+        if arr.shape[0] != n:
+            raise TrackError(f"{source}: column {name} has {arr.shape[0]} values, t has {n}")
+        return arr
+
+    x_arr = column(x, "x_mm", math.nan)
+    y_arr = column(y, "y_mm", math.nan)
+    fn_arr = column(fn, "fn_n", DEFAULT_NORMAL_FORCE_N)
+    contact_arr = column(contact, "contact", 1.0)
+    for name, arr in (("t_s", t_arr), ("x_mm", x_arr), ("y_mm", y_arr), ("fn_n", fn_arr)):
+        bad = np.flatnonzero(~np.isfinite(arr))
+        if bad.size:
+            raise TrackError(
+                f"{source}: column {name} has a non-finite value at sample {int(bad[0])}"
+            )
+    steps = np.diff(t_arr)
+    bad = np.flatnonzero(steps <= 0)
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise TrackError(
+            f"{source}: time must increase strictly, but t_s[{i}] = {t_arr[i]} follows "
+            f"{t_arr[i - 1]}"
+        )
+    if not np.all(np.isin(contact_arr, (0.0, 1.0))):
+        raise TrackError(f"{source}: column contact must hold only 0 or 1")
+    return FingerTrack(t_arr, x_arr, y_arr, fn_arr, contact_arr.astype(bool))
+
+
+def read_track_csv(path: str | os.PathLike[str]) -> FingerTrack:
+    """Read a track CSV (spec/track-format.md); raise :class:`TrackError` naming file and line."""
+    file = Path(path)
+    try:
+        text = file.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise TrackError(f"{file}: no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise TrackError(f"{file}: cannot read ({exc})") from None
+    return parse_track_csv(text, source=str(file))
+
+
+def parse_track_csv(text: str, *, source: str = "track") -> FingerTrack:
+    """Parse the CSV text of a track."""
+    rows = [
+        (number, row)
+        for number, row in enumerate(csv.reader(io.StringIO(text)), start=1)
+        if row and not row[0].lstrip().startswith("#") and any(cell.strip() for cell in row)
+    ]
+    if not rows:
+        raise TrackError(f"{source}: empty track (no header row)")
+    header_line, header = rows[0]
+    names = [cell.strip() for cell in header]
+    missing = [name for name in REQUIRED_COLUMNS if name not in names]
+    if missing:
+        raise TrackError(
+            f"{source}:{header_line}: header lacks column(s) {', '.join(missing)} "
+            f"(found {', '.join(names) or 'nothing'})"
+        )
+    wanted = [name for name in (*REQUIRED_COLUMNS, *OPTIONAL_COLUMNS) if name in names]
+    positions = {name: names.index(name) for name in wanted}
+    data = {name: [] for name in wanted}
+    for number, row in rows[1:]:
+        for name, col in positions.items():
+            try:
+                data[name].append(float(row[col]))
+            except IndexError:
+                raise TrackError(f"{source}:{number}: missing value for {name}") from None
+            except ValueError:
+                raise TrackError(
+                    f"{source}:{number}: {name} = {row[col].strip()!r} is not a number"
+                ) from None
+    if not data["t_s"]:
+        raise TrackError(f"{source}: no samples after the header")
+    return make_track(
+        data["t_s"],
+        data["x_mm"],
+        data["y_mm"],
+        data.get("fn_n"),
+        data.get("contact"),
+        source=source,
+    )
+
+
+def track_to_csv(track: FingerTrack) -> str:
+    """The CSV text of ``track`` (full float precision)."""
+    lines = ["t_s,x_mm,y_mm,fn_n,contact"]
+    for t, x, y, fn, c in zip(
+        track.t, track.x, track.y, track.fn, track.contact, strict=True
+    ):
+        lines.append(f"{t!r},{x!r},{y!r},{fn!r},{int(c)}")
+    return "\n".join(lines) + "\n"
+
+
+def straight_stroke(
+    start_mm: tuple[float, float],
+    velocity_mm_s: tuple[float, float],
+    duration_s: float,
+    *,
+    rate_hz: float = 50.0,
+    fn: float = DEFAULT_NORMAL_FORCE_N,
+    t0: float = 0.0,
+) -> FingerTrack:
+    """A constant-velocity stroke sampled at ``rate_hz`` (a capacitive touch screen: 50 Hz)."""
+    n = int(math.floor(duration_s * rate_hz + 1e-9)) + 1
+    t = t0 + np.arange(n) / rate_hz
+    x = start_mm[0] + velocity_mm_s[0] * (t - t0)
+    y = start_mm[1] + velocity_mm_s[1] * (t - t0)
+    return make_track(t, x, y, fn)
