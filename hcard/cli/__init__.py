@@ -1,0 +1,1 @@
+"""The ``hcard`` command line (click)."""

@@ -1,0 +1,29 @@
+"""Entry point of the ``hcard`` command: the click group and its commands."""
+
+from __future__ import annotations
+
+import click
+
+from hcard import __version__
+from hcard.cli.errors import UserErrorGroup
+
+
+@click.group(cls=UserErrorGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="hcard")
+def cli() -> None:
+    """hcard: author, check, render and preview haptic cards for friction-modulation screens.
+
+    A card (.hcard binary, or .json) describes a surface as a grid of taxtels, each playing a
+    texture of (frequency, amplitude, phase) components on the UV and EV channels.
+    """
+
+
+def _register_commands() -> None:
+    from hcard.cli import card_cmds, encode_cmd, plugins_cmd, preview_cmd, render_cmd
+
+    for module in (encode_cmd, card_cmds, render_cmd, preview_cmd, plugins_cmd):
+        for command in module.COMMANDS:
+            cli.add_command(command)
+
+
+_register_commands()
