@@ -5,15 +5,16 @@ Cards are ``hcard.v1.card_pb2.Card`` protobuf messages (re-exported as :data:`Ca
 >>> import hcard
 >>> card = hcard.load("surface.hcard")          # doctest: +SKIP
 >>> problems = hcard.validate(card)              # doctest: +SKIP
->>> frames = hcard.render(card, track)           # doctest: +SKIP
+>>> from hcard.render import render
+>>> frames = render(card, track)                 # doctest: +SKIP
 """
 
 from __future__ import annotations
 
 __version__ = "0.1.0"
 
-from hcard.card_io import dumps, load, parse_card, save, to_json  # noqa: E402
-from hcard.errors import (  # noqa: E402
+from hcard.card_io import dumps, load, parse_card, save, to_json
+from hcard.errors import (
     CardError,
     CardValidationError,
     HcardError,
@@ -22,8 +23,8 @@ from hcard.errors import (  # noqa: E402
     Problem,
     TrackError,
 )
-from hcard.v1.card_pb2 import Card, Component, Texture  # noqa: E402
-from hcard.validate import validate  # noqa: E402
+from hcard.v1.card_pb2 import Card, Component, Texture
+from hcard.validate import validate
 
 __all__ = [
     "Card",

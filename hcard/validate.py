@@ -85,7 +85,11 @@ def _check_surface_and_grid(card: pb.Card, out: list[Problem]) -> None:
     width_ok = _check_length(surface.width_mm, "surface.width_mm", limits.MAX_SURFACE_MM, 0, out)
     height_ok = _check_length(surface.height_mm, "surface.height_mm", limits.MAX_SURFACE_MM, 0, out)
     tw_ok = _check_length(
-        grid.taxtel_width_mm, "grid.taxtel_width_mm", limits.MAX_SURFACE_MM, limits.MIN_TAXTEL_MM, out
+        grid.taxtel_width_mm,
+        "grid.taxtel_width_mm",
+        limits.MAX_SURFACE_MM,
+        limits.MIN_TAXTEL_MM,
+        out,
     )
     th_ok = _check_length(
         grid.taxtel_height_mm,
@@ -165,7 +169,9 @@ def _check_textures(card: pb.Card, out: list[Problem]) -> None:
         out.append(Problem("textures", "the palette is empty: a card needs at least one texture"))
     elif len(textures) > limits.MAX_TEXTURES:
         out.append(
-            Problem("textures", f"{len(textures)} textures exceed the limit of {limits.MAX_TEXTURES}")
+            Problem(
+                "textures", f"{len(textures)} textures exceed the limit of {limits.MAX_TEXTURES}"
+            )
         )
     names: dict[str, int] = {}
     for t, texture in enumerate(textures):
