@@ -1,0 +1,156 @@
+"""The info, validate and render commands, and user errors without tracebacks (item 6)."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from cards import two_texture_card
+from click.testing import CliRunner
+
+import hcard
+from hcard.card_io import to_bytes
+from hcard.cli.main import cli
+from hcard.render import render
+from hcard.track import read_track_csv, straight_stroke, track_to_csv
+
+
+@pytest.fixture()
+def card_file(tmp_path):
+    path = tmp_path / "two.hcard"
+    hcard.save(two_texture_card(), path)
+    return path
+
+
+@pytest.fixture()
+def track_file(tmp_path):
+    path = tmp_path / "stroke.csv"
+    stroke = straight_stroke((1.0, 5.0), (40.0, 0.0), 0.4)
+    path.write_text("# a 0.4 s stroke\n" + track_to_csv(stroke))
+    return path
+
+
+def run(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args])
+
+
+def one_line_error(result, *fragments):
+    assert result.exit_code != 0
+    assert "Traceback" not in result.output
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("Error: ")
+    for fragment in fragments:
+        assert fragment in lines[0]
+
+
+def test_every_command_has_help():
+    for command in ("encode", "info", "validate", "render", "preview", "plugins"):
+        result = run(command, "--help")
+        assert result.exit_code == 0 and "Usage: " in result.output
+        assert len(result.output.splitlines()) > 3
+
+
+def test_info_summarises_the_card(card_file):
+    result = run("info", card_file)
+    assert result.exit_code == 0, result.output
+    assert "surface: 20 x 10 mm" in result.output
+    assert "grid: 4 x 2 taxtels of 5 x 5 mm" in result.output
+    assert "[0] 'grating': baseline 0.7, UV, velocity locking, 2 component(s), on 4 taxtel(s)" \
+        in result.output
+    assert "spatial 1 c/mm (period 1 mm)" in result.output
+    assert "orientation=30.0 deg" in result.output
+
+
+def test_validate_accepts_a_good_card(card_file):
+    result = run("validate", card_file)
+    assert result.exit_code == 0
+    assert "valid hcard 1.0 card (binary, 2 textures, 4 x 2 taxtels)" in result.output
+
+
+def test_validate_lists_field_paths_and_exits_non_zero(tmp_path):
+    card = two_texture_card()
+    card.textures[0].components[0].frequency = -2.0
+    card.grid.texture_index[3] = 7
+    path = tmp_path / "bad.hcard"
+    path.write_bytes(to_bytes(card))
+    result = run("validate", path)
+    assert result.exit_code == 1
+    assert "textures[0].components[0].frequency: must be > 0, got -2.0" in result.output
+    assert "grid.texture_index[3]: texture 7 is outside the palette" in result.output
+    as_json = run("validate", "--json", path)
+    assert as_json.exit_code == 1 and '"valid": false' in as_json.output
+
+
+@pytest.mark.parametrize("command", ["info", "validate", "preview"])
+def test_corrupt_and_missing_cards_give_one_line(command, tmp_path):
+    corrupt = tmp_path / "corrupt.hcard"
+    corrupt.write_bytes(b"\x0a\xff\x01")
+    extra = ["-o", tmp_path / "p.png"] if command == "preview" else []
+    one_line_error(run(command, corrupt, *extra), "corrupt.hcard", "corrupt or truncated")
+    one_line_error(run(command, tmp_path / "none.hcard", *extra), "none.hcard", "no such file")
+    future = tmp_path / "future.hcard"
+    card = two_texture_card()
+    card.version.major = 3
+    future.write_bytes(to_bytes(card))
+    one_line_error(run(command, future, *extra), "unsupported major version 3")
+
+
+def test_render_csv_matches_the_renderer(card_file, track_file, tmp_path):
+    out = tmp_path / "frames.csv"
+    result = run("render", card_file, "--track", track_file, "-o", out)
+    assert result.exit_code == 0, result.output
+    assert "4001 frames at 10000 Hz" in result.output
+    table = np.genfromtxt(out, delimiter=",", names=True)
+    frames = render(two_texture_card(), read_track_csv(track_file))
+    assert table.dtype.names == ("t_s", "uv", "ev", "friction", "contact", "texture")
+    np.testing.assert_allclose(table["uv"], frames.uv, atol=1e-8)
+    np.testing.assert_allclose(table["friction"], frames.friction, atol=1e-8)
+    assert np.array_equal(table["texture"].astype(int), frames.texture)
+
+
+def test_render_npz_and_position_only(card_file, track_file, tmp_path):
+    out = tmp_path / "frames.npz"
+    result = run("render", card_file, "--track", track_file, "-o", out, "--mode", "position-only",
+                 "--frame-rate", "2000", "--band-limit", "500")
+    assert result.exit_code == 0, result.output
+    data = np.load(out)
+    assert data["t_s"].shape == (801,) and data["contact"].dtype == bool
+    assert data["texture"].dtype == np.int32
+    assert math.isclose(data["t_s"][1] - data["t_s"][0], 1 / 2000)
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("t_s,x_mm\n0,1\n", "header lacks column(s) y_mm"),
+        ("t_s,x_mm,y_mm\n0,1,1\n0.01,abc,1\n", "x_mm = 'abc' is not a number"),
+        ("t_s,x_mm,y_mm\n0,1,1\n0,2,1\n", "time must increase strictly"),
+        ("t_s,x_mm,y_mm\n0,1,1\n0.02,nan,1\n", "non-finite value"),
+        ("t_s,x_mm,y_mm,contact\n0,1,1,2\n", "only 0 or 1"),
+        ("# nothing\n", "empty track"),
+    ],
+)
+def test_bad_tracks_give_one_line(card_file, tmp_path, text, message):
+    track = tmp_path / "bad.csv"
+    track.write_text(text)
+    one_line_error(run("render", card_file, "--track", track, "-o", tmp_path / "o.csv"), message)
+
+
+def test_bad_render_options(card_file, track_file, tmp_path):
+    result = run("render", card_file, "--track", track_file, "-o", tmp_path / "o.txt")
+    assert result.exit_code == 2 and "must end in .csv or .npz" in result.output
+    result = run("render", card_file, "--track", track_file, "-o", tmp_path / "o.csv",
+                 "--frame-rate", "1000", "--band-limit", "900")
+    assert result.exit_code == 2 and "alias" in result.output
+
+
+def test_console_script_reports_user_errors_without_traceback(tmp_path):
+    missing = tmp_path / "missing.hcard"
+    proc = subprocess.run([sys.executable, "-m", "hcard", "info", str(missing)],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 1
+    assert proc.stderr.strip() == f"Error: {missing}: no such file"
+    assert "Traceback" not in proc.stderr
