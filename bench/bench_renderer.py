@@ -19,11 +19,11 @@ import time
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from hcard import build  # noqa: E402
-from hcard.render import Renderer, RenderOptions  # noqa: E402
-from hcard.track import make_track  # noqa: E402
+from hcard import build
+from hcard.render import Renderer, RenderOptions
+from hcard.track import make_track
 
 FRAME_RATE_HZ = 10_000.0
 COMPONENTS = 8

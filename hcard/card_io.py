@@ -54,7 +54,7 @@ def card_from_bytes(data: bytes, *, source: str | os.PathLike[str] | None = None
     card = pb.Card()
     try:
         card.ParseFromString(data)
-    except Exception as exc:  # noqa: BLE001 - any parser failure is a corrupt card
+    except Exception as exc:
         raise CardError(f"corrupt or truncated card bytes ({exc})", source=source) from None
     return card
 
@@ -71,7 +71,7 @@ def _card_from_json_bytes(data: bytes, source: str | os.PathLike[str] | None) ->
     try:
         # Unknown fields are those of a newer minor version: ignored, per the versioning rules.
         json_format.ParseDict(obj, card, ignore_unknown_fields=True)
-    except Exception as exc:  # noqa: BLE001 - json_format raises several types
+    except Exception as exc:
         raise CardError(f"JSON does not match the card schema ({exc})", source=source) from None
     return card
 

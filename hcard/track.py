@@ -172,7 +172,7 @@ def straight_stroke(
     t0: float = 0.0,
 ) -> FingerTrack:
     """A constant-velocity stroke sampled at ``rate_hz`` (a capacitive touch screen: 50 Hz)."""
-    n = int(math.floor(duration_s * rate_hz + 1e-9)) + 1
+    n = math.floor(duration_s * rate_hz + 1e-9) + 1
     t = t0 + np.arange(n) / rate_hz
     x = start_mm[0] + velocity_mm_s[0] * (t - t0)
     y = start_mm[1] + velocity_mm_s[1] * (t - t0)

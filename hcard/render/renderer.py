@@ -111,7 +111,7 @@ class Renderer:
             track.contact,
             self.options.dead_reckoning_s,
         )
-        total = int(math.floor(track.duration_s * self.options.frame_rate_hz + 1e-9)) + 1
+        total = math.floor(track.duration_s * self.options.frame_rate_hz + 1e-9) + 1
         t0 = float(track.t[0])
         parts = []
         for first in range(0, total, BATCH_CHUNK_FRAMES):
