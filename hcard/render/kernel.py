@@ -113,8 +113,9 @@ def _texture_deviation(
     turns = inputs @ texture.phase_weights
     if phase_out is not None:
         phase_out[:, : texture.n_components] = turns
-    turns -= np.floor(turns)
-    wave = np.cos(turns.astype(np.float32) * TWO_PI_F32)
+    wave = (turns - np.rint(turns)).astype(np.float32)  # one turn, in [-1/2, 1/2]
+    wave *= TWO_PI_F32
+    np.cos(wave, out=wave)
     edge = PASSBAND_FRACTION * options.band_limit_hz
     fastest = float(np.max(speed, initial=0.0))
     if fastest * texture.max_wave_number <= edge and texture.max_temporal_hz <= edge:

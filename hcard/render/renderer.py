@@ -22,7 +22,7 @@ from hcard.track import FingerTrack, make_track
 from hcard.v1 import card_pb2 as pb
 from hcard.validate import errors_of, validate
 
-BATCH_CHUNK_FRAMES = 1 << 15
+BATCH_CHUNK_FRAMES = 1 << 14
 """Frames evaluated per kernel call in batch mode (keeps temporaries in cache)."""
 
 
