@@ -84,8 +84,10 @@ def main() -> None:
     elapsed = best_of(args.repeat, lambda: hybrid.render(track))
     fps = n / elapsed
     print(f"card: 16 textures x {COMPONENTS} components; track {args.seconds:g} s at 50 Hz")
-    print(f"batch hybrid:   {n} frames in {elapsed * 1e3:.1f} ms = {fps / 1e6:.2f} Mframes/s "
-          f"= {fps / FRAME_RATE_HZ:.0f}x real time at 10 kHz (aim >= 1000x)")
+    print(
+        f"batch hybrid:   {n} frames in {elapsed * 1e3:.1f} ms = {fps / 1e6:.2f} Mframes/s "
+        f"= {fps / FRAME_RATE_HZ:.0f}x real time at 10 kHz (aim >= 1000x)"
+    )
 
     position = Renderer(card, RenderOptions(frame_rate_hz=FRAME_RATE_HZ, mode="position-only"))
     p_elapsed = best_of(args.repeat, lambda: position.render(track))
@@ -106,8 +108,10 @@ def main() -> None:
         return costs
 
     costs = np.array(min((run_stream() for _ in range(args.repeat)), key=np.median))
-    print(f"streaming 5 ms blocks ({block} frames): median {np.median(costs) * 1e3:.3f} ms, "
-          f"p99 {np.percentile(costs, 99) * 1e3:.3f} ms (aim <= 0.5 ms)")
+    print(
+        f"streaming 5 ms blocks ({block} frames): median {np.median(costs) * 1e3:.3f} ms, "
+        f"p99 {np.percentile(costs, 99) * 1e3:.3f} ms (aim <= 0.5 ms)"
+    )
 
 
 if __name__ == "__main__":

@@ -105,14 +105,8 @@ def parse_card(
     return card
 
 
-def load(path: str | os.PathLike[str], *, check: bool = True) -> pb.Card:
-    """Read a card file (binary or JSON), check its version and validate it.
-
-    Raises:
-        CardError: the file is missing, unreadable, too large, corrupt, of an unknown major
-            version, or (with ``check``) invalid, in which case it is a
-            :class:`CardValidationError` listing every problem.
-    """
+def read_card_file(path: str | os.PathLike[str]) -> bytes:
+    """The bytes of a card file; :class:`CardError` when missing, unreadable or too large."""
     file = Path(path)
     try:
         size = file.stat().st_size
@@ -127,7 +121,18 @@ def load(path: str | os.PathLike[str], *, check: bool = True) -> pb.Card:
         raise CardError("no such file", source=file) from None
     except OSError as exc:
         raise CardError(f"cannot read ({exc.strerror or exc})", source=file) from None
-    return parse_card(data, source=file, check=check)
+    return data
+
+
+def load(path: str | os.PathLike[str], *, check: bool = True) -> pb.Card:
+    """Read a card file (binary or JSON), check its version and validate it.
+
+    Raises:
+        CardError: the file is missing, unreadable, too large, corrupt, of an unknown major
+            version, or (with ``check``) invalid, in which case it is a
+            :class:`CardValidationError` listing every problem.
+    """
+    return parse_card(read_card_file(path), source=path, check=check)
 
 
 def to_bytes(card: pb.Card) -> bytes:

@@ -158,7 +158,7 @@ def track_to_csv(track: FingerTrack) -> str:
     for t, x, y, fn, c in zip(
         track.t, track.x, track.y, track.fn, track.contact, strict=True
     ):
-        lines.append(f"{t!r},{x!r},{y!r},{fn!r},{int(c)}")
+        lines.append(f"{float(t)!r},{float(x)!r},{float(y)!r},{float(fn)!r},{int(c)}")
     return "\n".join(lines) + "\n"
 
 

@@ -7,9 +7,15 @@ from pathlib import Path
 
 import click
 
-from hcard.card_io import card_from_bytes, check_version, format_for_path, load, looks_like_json
+from hcard.card_io import (
+    card_from_bytes,
+    check_version,
+    format_for_path,
+    looks_like_json,
+    parse_card,
+    read_card_file,
+)
 from hcard.describe import describe_card
-from hcard.errors import CardError
 from hcard.validate import validate
 
 CARD = click.Path(dir_okay=False, path_type=Path)
@@ -19,8 +25,8 @@ CARD = click.Path(dir_okay=False, path_type=Path)
 @click.argument("card", type=CARD)
 def info(card: Path) -> None:
     """Print a readable summary of CARD: metadata, surface, grid and every texture."""
-    loaded = load(card)
-    data = card.read_bytes()
+    data = read_card_file(card)
+    loaded = parse_card(data, source=card)
     form = "JSON" if looks_like_json(data) else "binary"
     click.echo(f"{card}: hcard card, {form}, {len(data)} bytes")
     for line in describe_card(loaded):
@@ -36,10 +42,7 @@ def validate_cmd(card: Path, as_json: bool, strict: bool) -> None:
 
     Exits 0 when the card is valid, 1 when it has errors (or warnings, with --strict).
     """
-    try:
-        data = card.read_bytes()
-    except OSError as exc:
-        raise CardError(f"cannot read ({exc.strerror or exc})", source=card) from None
+    data = read_card_file(card)
     parsed = card_from_bytes(data, source=card)
     check_version(parsed, source=card)
     problems = validate(parsed)
