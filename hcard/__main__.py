@@ -1,0 +1,8 @@
+"""``python -m hcard``: the same command line as the ``hcard`` console script."""
+
+from __future__ import annotations
+
+from hcard.cli.main import cli
+
+if __name__ == "__main__":
+    cli(prog_name="hcard")

@@ -1,0 +1,423 @@
+"""Discovery and bookkeeping of hcard plugins.
+
+Plugins are found through the entry-point group ``hcard.plugins``, the built-ins included
+(``hcard_builtins``), and registered with a ``pluggy.PluginManager("hcard")``. Discovery never
+raises because of a third-party package: a plugin that fails to import, to register, whose hook
+raises, or whose hook returns unusable objects is skipped with an :class:`HcardPluginWarning`
+naming the entry point, its distribution and the reason, and is listed in
+:attr:`PluginRegistry.broken`. Every hook implementation is called on its own, so one broken
+plugin never hides the others.
+
+>>> from hcard.plugins import get_registry
+>>> encoder = get_registry().get("encoder", "image")      # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import importlib.metadata as metadata
+import os
+import threading
+import traceback
+import types
+import warnings
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+import pluggy
+
+from hcard.errors import PluginError
+from hcard.plugins import hookspecs
+from hcard.plugins.kinds import KINDS
+
+HOOK_KINDS: dict[str, str] = {
+    "hcard_encoders": "encoder",
+    "hcard_predictors": "predictor",
+    "hcard_drivers": "driver",
+    "hcard_calibration_effects": "calibration-effect",
+    "hcard_conformance_checks": "conformance-check",
+}
+"""Hook name -> kind of the objects it returns (one entry per kind of :data:`KINDS`)."""
+
+_PLUGGY_DIR = os.path.dirname(pluggy.__file__)
+
+CORE_DISTRIBUTION = "hcard"
+"""Distribution whose entry points are loaded first, so built-in names cannot be shadowed."""
+
+
+class HcardPluginWarning(UserWarning):
+    """A plugin was skipped (wholly or in part); the message names entry point, package, reason."""
+
+
+class BrokenPlugin(NamedTuple):
+    """A plugin problem found during discovery or registration.
+
+    ``entry_point`` is the entry-point name (or the registered name of a plugin added with
+    :meth:`PluginRegistry.register`); ``reason`` is the full message, as warned.
+    """
+
+    entry_point: str
+    reason: str
+
+
+@dataclass(frozen=True)
+class PluginInfo:
+    """One usable plugin object and where it came from.
+
+    Attributes:
+        name: the object's ``name``, unique within its kind.
+        kind: one of :data:`hcard.plugins.kinds.KINDS`.
+        version: version of the distribution that provided it ("" when unknown).
+        package: name of that distribution (for example ``"hcard"``).
+        entry_point: entry-point name in the ``hcard.plugins`` group ("" when registered in code).
+        obj: the plugin object itself.
+    """
+
+    name: str
+    kind: str
+    version: str
+    package: str
+    entry_point: str
+    obj: Any
+
+    @property
+    def description(self) -> str:
+        """The object's one-line description ("" when it has none)."""
+        return str(getattr(self.obj, "description", "") or "")
+
+
+@dataclass(frozen=True)
+class _Source:
+    """Where a registered plugin (module or object) came from."""
+
+    entry_point: str
+    package: str
+    version: str
+
+    def label(self) -> str:
+        version = f" (version {self.version})" if self.version else ""
+        return f"plugin '{self.entry_point}' from package '{self.package}'{version}"
+
+
+def _describe(exc: BaseException) -> str:
+    """``Type: message (at file:line)`` of an exception raised by plugin code."""
+    message = " ".join(str(exc).split())  # one line, whatever the plugin raised
+    text = f"{type(exc).__name__}: {message}" if message else type(exc).__name__
+    frames = traceback.extract_tb(exc.__traceback__)
+    # Point at the plugin's code, not at the import machinery or pluggy's validation.
+    if frames and not frames[-1].filename.startswith(("<", _PLUGGY_DIR)):
+        text += f" (at {frames[-1].filename}:{frames[-1].lineno})"
+    return text
+
+
+def _distribution_of(obj: Any) -> tuple[str, str]:
+    """(distribution name, version) providing the module of ``obj``, best effort."""
+    module = obj.__name__ if isinstance(obj, types.ModuleType) else type(obj).__module__
+    top = (module or "").partition(".")[0]
+    try:
+        names = metadata.packages_distributions().get(top, [])
+    except Exception:  # a malformed distribution elsewhere must not break registration
+        names = []
+    for name in names:
+        try:
+            return name, metadata.version(name)
+        except metadata.PackageNotFoundError:
+            continue
+    return top or "unknown", ""
+
+
+class PluginRegistry:
+    """The plugins of one process, by kind and name.
+
+    ``PluginRegistry()`` is empty; :meth:`discover` (used by :func:`get_registry`) loads the
+    installed entry points. :meth:`register` adds a module or object in code, for example in a
+    vendor's tests::
+
+        registry = PluginRegistry()
+        registry.register(my_vendor_plugin_module)
+        encoder = registry.get("encoder", "my-encoder")
+    """
+
+    def __init__(self) -> None:
+        self.plugin_manager = pluggy.PluginManager(hookspecs.PROJECT)
+        self.plugin_manager.add_hookspecs(hookspecs)
+        self._by_kind: dict[str, dict[str, PluginInfo]] = {kind: {} for kind in KINDS}
+        self.broken: list[BrokenPlugin] = []
+        """Problems found so far, in discovery order."""
+
+    # ----------------------------------------------------------------------------- discovery
+
+    @classmethod
+    def discover(cls, group: str = hookspecs.ENTRY_POINT_GROUP) -> PluginRegistry:
+        """A registry of every plugin installed in the entry-point ``group``; never raises."""
+        registry = cls()
+        registry.load_entry_points(group)
+        return registry
+
+    def load_entry_points(self, group: str = hookspecs.ENTRY_POINT_GROUP) -> None:
+        """Load, register and collect every entry point of ``group``.
+
+        Entry points of the ``hcard`` distribution come first, then the others sorted by
+        distribution and entry-point name, so the outcome does not depend on ``sys.path`` order.
+        Problems are warned (:class:`HcardPluginWarning`) and recorded in :attr:`broken`.
+        """
+        try:
+            found = list(metadata.entry_points(group=group))
+        except Exception as exc:  # a malformed entry_points.txt somewhere on sys.path
+            self._problem("entry points", f"cannot list entry points of '{group}': {exc}")
+            return
+        for entry_point in sorted(found, key=_entry_point_order):
+            self._load_entry_point(entry_point)
+
+    def _load_entry_point(self, entry_point: metadata.EntryPoint) -> None:
+        dist = entry_point.dist
+        source = _Source(
+            entry_point=entry_point.name,
+            package=dist.name if dist is not None else "unknown",
+            version=dist.version if dist is not None else "",
+        )
+        try:
+            plugin = entry_point.load()
+        except (Exception, SystemExit) as exc:
+            self._problem(
+                source.entry_point,
+                f"{source.label()} failed to import '{entry_point.value}': {_describe(exc)}",
+            )
+            return
+        self._add(plugin, source, strict=False)
+
+    # ---------------------------------------------------------------------- registration
+
+    def register(
+        self,
+        plugin: Any,
+        *,
+        name: str | None = None,
+        package: str | None = None,
+        version: str | None = None,
+    ) -> list[PluginInfo]:
+        """Register a module or object implementing hcard hooks, and collect its plugins.
+
+        ``name`` defaults to the module name, ``package`` and ``version`` to the distribution
+        that installed the module (when there is one). Unlike discovery this is strict: any
+        problem raises :class:`PluginError` and leaves the registry unchanged.
+
+        Returns:
+            The :class:`PluginInfo` of every object the plugin provided.
+        """
+        default_package, default_version = _distribution_of(plugin)
+        label = name or getattr(plugin, "__name__", None) or type(plugin).__name__
+        source = _Source(
+            entry_point=label,
+            package=package or default_package,
+            version=default_version if version is None else version,
+        )
+        return self._add(plugin, source, strict=True)
+
+    def _add(self, plugin: Any, source: _Source, *, strict: bool) -> list[PluginInfo]:
+        """Register ``plugin`` with pluggy and collect its objects.
+
+        Not strict: problems are warned and the usable objects kept. Strict: all problems are
+        raised in one :class:`PluginError` and nothing is kept.
+        """
+        pm = self.plugin_manager
+        if pm.is_registered(plugin):
+            if strict:
+                raise PluginError(f"{source.label()} is already registered")
+            # The same module named by two entry points: its hooks are collected once.
+            return []
+        problems: list[str] = []
+        try:
+            registered = pm.register(plugin, name=f"{source.package}:{source.entry_point}")
+        except Exception as exc:
+            registered = None
+            problems.append(f"{source.label()} could not be registered: {_describe(exc)}")
+        infos: list[PluginInfo] = []
+        if registered is not None:
+            infos = self._collect(plugin, source, problems)
+        if strict and problems:
+            if registered is not None:
+                pm.unregister(plugin)
+            raise PluginError("; ".join(problems))
+        for reason in problems:
+            self._problem(source.entry_point, reason)
+        for info in infos:
+            self._by_kind[info.kind][info.name] = info
+        return infos
+
+    def _collect(self, plugin: Any, source: _Source, problems: list[str]) -> list[PluginInfo]:
+        """Call each hook implementation of ``plugin`` on its own and check what it returns."""
+        pm = self.plugin_manager
+        callers = pm.get_hookcallers(plugin) or []
+        unknown = sorted(c.name for c in callers if not c.has_spec())
+        if unknown:
+            problems.append(
+                f"{source.label()} implements unknown hook(s) {', '.join(unknown)} "
+                f"(known: {', '.join(HOOK_KINDS)}); they are ignored"
+            )
+        if not callers:
+            problems.append(
+                f"{source.label()} defines no hcard hook implementations "
+                "(are its hooks decorated with hcard.plugins.hookimpl?)"
+            )
+        infos: list[PluginInfo] = []
+        staged: dict[tuple[str, str], PluginInfo] = {}
+        for hook_name, kind in HOOK_KINDS.items():
+            caller = getattr(pm.hook, hook_name)
+            for impl in caller.get_hookimpls():
+                if impl.plugin is not plugin:
+                    continue
+                if impl.hookwrapper or impl.wrapper:
+                    problems.append(f"{source.label()}: {hook_name} must not be a hook wrapper")
+                    continue
+                try:
+                    result = impl.function()
+                except (Exception, SystemExit) as exc:
+                    problems.append(f"{source.label()}: {hook_name}() raised {_describe(exc)}")
+                    continue
+                for obj in self._objects_of(result, hook_name, source, problems):
+                    info = self._check(obj, kind, hook_name, source, staged, problems)
+                    if info is not None:
+                        staged[(kind, info.name)] = info
+                        infos.append(info)
+        return infos
+
+    @staticmethod
+    def _objects_of(
+        result: Any, hook_name: str, source: _Source, problems: list[str]
+    ) -> Iterable[Any]:
+        if isinstance(result, list | tuple):
+            return result
+        problems.append(
+            f"{source.label()}: {hook_name}() returned {type(result).__name__}, "
+            "expected a list of plugin objects"
+        )
+        return ()
+
+    def _check(
+        self,
+        obj: Any,
+        kind: str,
+        hook_name: str,
+        source: _Source,
+        staged: dict[tuple[str, str], PluginInfo],
+        problems: list[str],
+    ) -> PluginInfo | None:
+        """A :class:`PluginInfo` for ``obj`` when it is a valid ``kind`` plugin, else None."""
+        where = f"{source.label()}: {hook_name}() returned"
+        name = getattr(obj, "name", None)
+        if not isinstance(name, str) or not name.strip():
+            problems.append(
+                f"{where} an object of type '{type(obj).__name__}' without a string 'name'"
+            )
+            return None
+        description = getattr(obj, "description", "")
+        if not isinstance(description, str):
+            problems.append(f"{where} '{name}' whose 'description' is not a string")
+            return None
+        declared = getattr(obj, "kind", kind)
+        if declared != kind:
+            problems.append(f"{where} '{name}' of kind '{declared}', expected '{kind}'")
+            return None
+        other = staged.get((kind, name)) or self._by_kind[kind].get(name)
+        if other is not None:
+            problems.append(
+                f"{where} {kind} '{name}', a name already taken by plugin "
+                f"'{other.entry_point}' from package '{other.package}'; it is ignored"
+            )
+            return None
+        return PluginInfo(
+            name=name,
+            kind=kind,
+            version=source.version,
+            package=source.package,
+            entry_point=source.entry_point,
+            obj=obj,
+        )
+
+    def _problem(self, entry_point: str, reason: str) -> None:
+        self.broken.append(BrokenPlugin(entry_point, reason))
+        warnings.warn(reason, HcardPluginWarning, stacklevel=3)
+
+    # ---------------------------------------------------------------------------- queries
+
+    def of_kind(self, kind: str) -> dict[str, Any]:
+        """Plugin objects of ``kind`` by name (a copy)."""
+        return {name: info.obj for name, info in self._infos_of(kind).items()}
+
+    def _infos_of(self, kind: str) -> dict[str, PluginInfo]:
+        try:
+            return self._by_kind[kind]
+        except KeyError:
+            raise PluginError(
+                f"unknown plugin kind '{kind}'; kinds are: {', '.join(KINDS)}"
+            ) from None
+
+    @property
+    def encoders(self) -> dict[str, Any]:
+        """Encoders by name."""
+        return self.of_kind("encoder")
+
+    @property
+    def predictors(self) -> dict[str, Any]:
+        """Physics predictors by name."""
+        return self.of_kind("predictor")
+
+    @property
+    def drivers(self) -> dict[str, Any]:
+        """Device drivers by name."""
+        return self.of_kind("driver")
+
+    @property
+    def calibration_effects(self) -> dict[str, Any]:
+        """Calibration effects by name."""
+        return self.of_kind("calibration-effect")
+
+    @property
+    def conformance_checks(self) -> dict[str, Any]:
+        """Conformance checks by name."""
+        return self.of_kind("conformance-check")
+
+    def all(self) -> list[PluginInfo]:
+        """Every plugin, sorted by kind (in :data:`KINDS` order), then name."""
+        return [info for kind in KINDS for _, info in sorted(self._by_kind[kind].items())]
+
+    def info(self, kind: str, name: str) -> PluginInfo:
+        """The :class:`PluginInfo` of plugin ``name`` of ``kind``.
+
+        Raises:
+            PluginError: no such kind or plugin; the message lists the available names.
+        """
+        infos = self._infos_of(kind)
+        try:
+            return infos[name]
+        except KeyError:
+            available = ", ".join(sorted(infos)) or "none installed"
+            raise PluginError(f"no {kind} plugin named '{name}'; available: {available}") from None
+
+    def get(self, kind: str, name: str) -> Any:
+        """The plugin object ``name`` of ``kind`` (raises :class:`PluginError` listing names)."""
+        return self.info(kind, name).obj
+
+
+def _entry_point_order(entry_point: metadata.EntryPoint) -> tuple[bool, str, str]:
+    dist = entry_point.dist
+    package = dist.name if dist is not None else ""
+    return (package != CORE_DISTRIBUTION, package.lower(), entry_point.name)
+
+
+_default: PluginRegistry | None = None
+_default_lock = threading.Lock()
+
+
+def get_registry(*, refresh: bool = False) -> PluginRegistry:
+    """The process-wide registry of installed plugins, discovered on first use.
+
+    ``refresh=True`` discovers again (after installing a package, or in tests that change
+    ``sys.path``); warnings of broken plugins are issued by each discovery.
+    """
+    global _default
+    with _default_lock:
+        if _default is None or refresh:
+            _default = PluginRegistry.discover()
+        return _default
