@@ -1,0 +1,50 @@
+"""``hcard preview``: draw a card as a PNG picture (taxtel map and texture profiles)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+import hcard
+
+
+@click.command("preview")
+@click.argument("card", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False, writable=True, path_type=Path),
+    default=None,
+    help="PNG file to write [default: CARD with the suffix .preview.png].",
+)
+@click.option(
+    "--dpi",
+    type=click.IntRange(20, 1200),
+    default=120,
+    show_default=True,
+    help="Resolution in dots per inch (the picture is 14 inches wide).",
+)
+def preview(card: Path, output: Path | None, dpi: int) -> None:
+    """Draw CARD as a PNG picture of its taxtels and textures.
+
+    Left, the taxtel grid over the surface (mm, origin top-left, y downwards) coloured by
+    texture; right, each texture's relative friction over one period.
+
+    The PNG is written atomically: an existing file is replaced only once the picture is
+    complete.
+    """
+    from hcard.preview import render_preview  # matplotlib loads only for this command
+
+    out = output if output is not None else card.with_suffix(".preview.png")
+    if out.suffix.lower() != ".png":
+        raise click.UsageError(f"output must be a .png file, got '{out}'")
+    loaded = hcard.load(card)
+    try:
+        render_preview(loaded, out, dpi=dpi)
+    except OSError as exc:
+        raise click.ClickException(f"cannot write {out}: {exc.strerror or exc}") from None
+    click.echo(f"wrote {out}")
+
+
+COMMANDS = [preview]

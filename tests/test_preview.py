@@ -1,0 +1,206 @@
+"""The preview picture: profiles against the analytic cosine, pixels of the taxtel map, CLI."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from PIL import Image
+
+import hcard
+from hcard import build
+from hcard.preview import (
+    GRID_AXES_LABEL,
+    preview_figure,
+    render_preview,
+    temporal_profile,
+    texture_colors,
+    texture_profile,
+)
+
+TAXTEL_MM = 20.0
+INDEX = np.array([[0, 1, 2], [2, 0, 1]])
+
+
+def three_texture_card() -> hcard.Card:
+    textures = [
+        build.texture(
+            0.7, [build.spatial(1.0, 0.2)], channel="uv", locking="velocity", name="fine"
+        ),
+        build.texture(
+            1.3, [build.grating_period(8.0, 0.25, orientation=math.pi / 4)], channel="ev"
+        ),
+        build.texture(1.0, [build.temporal(50.0, 0.1)], channel="bipolar", locking="position"),
+    ]
+    return build.card(
+        60.0, 40.0, taxtel_mm=TAXTEL_MM, textures=textures, texture_index=INDEX, title="three"
+    )
+
+
+# ----------------------------------------------------------------------------- profiles
+
+
+def test_profile_of_a_grating_is_the_analytic_cosine() -> None:
+    grating = build.spatial(0.25, 0.2, phase=0.3, orientation=0.5)
+    s_mm, friction = texture_profile(build.texture(0.7, [grating]), n=2001)
+    assert s_mm.shape == friction.shape == (2001,)
+    assert s_mm[0] == 0.0
+    assert s_mm[-1] == pytest.approx(4.0)  # one period of 0.25 cycles/mm
+    assert friction.max() == pytest.approx(0.9, abs=1e-6)
+    assert friction.min() == pytest.approx(0.5, abs=1e-6)
+    assert friction[0] == pytest.approx(0.7 + 0.2 * math.cos(0.3))
+    assert friction[-1] == pytest.approx(friction[0])
+    # The minimum is where the phase reaches pi: s = (pi - 0.3) / (2 pi 0.25) = 1.8090 mm.
+    assert s_mm[np.argmin(friction)] == pytest.approx(1.8090, abs=0.002)
+    assert s_mm[np.argmax(friction)] == pytest.approx(4.0 - 0.1910, abs=0.002)
+
+
+def test_profile_follows_the_strongest_component_and_projects_the_others() -> None:
+    strong = build.spatial(0.5, 0.3, orientation=math.pi / 3)
+    perpendicular = build.spatial(2.0, 0.1, phase=0.4, orientation=math.pi / 3 + math.pi / 2)
+    s_mm, friction = texture_profile(build.texture(1.0, [strong, perpendicular]), n=401)
+    # The perpendicular grating does not vary along the strongest's direction: constant
+    # 0.1 cos(0.4) = 0.0921; its own period (0.5 mm) does not set the window (2 mm does).
+    assert s_mm[-1] == pytest.approx(2.0)
+    assert friction.max() == pytest.approx(1.3 + 0.1 * math.cos(0.4), abs=1e-9)
+    assert friction.min() == pytest.approx(0.7 + 0.1 * math.cos(0.4), abs=1e-4)
+
+
+def test_profile_window_is_capped_by_the_strongest_component_and_50_mm() -> None:
+    slow_weak = build.spatial(0.01, 0.05)  # 100 mm period
+    fast_strong = build.spatial(2.0, 0.3)  # 0.5 mm period: window 4 x 0.5 = 2 mm
+    s_mm, _ = texture_profile(build.texture(1.0, [slow_weak, fast_strong]))
+    assert s_mm[-1] == pytest.approx(2.0)
+    s_mm, friction = texture_profile(build.texture(1.0, [build.spatial(0.01, 0.2)]))
+    assert s_mm[-1] == pytest.approx(50.0)
+    assert friction[-1] == pytest.approx(1.0 + 0.2 * math.cos(2 * math.pi * 0.5))
+
+
+def test_flat_and_temporal_profiles() -> None:
+    s_mm, friction = texture_profile(build.texture(0.8), n=64)
+    assert s_mm[-1] == pytest.approx(10.0)
+    assert np.all(friction == 0.8)
+    t_ms, friction = temporal_profile(build.texture(1.1, [build.temporal(50.0, 0.1)]), n=1001)
+    assert t_ms[-1] == pytest.approx(20.0)  # one period of 50 Hz, in milliseconds
+    assert friction.max() == pytest.approx(1.2)
+    assert friction.min() == pytest.approx(1.0, abs=1e-6)
+    assert t_ms[np.argmin(friction)] == pytest.approx(10.0, abs=0.02)
+    # Temporal components stay out of the spatial profile.
+    _, spatial = texture_profile(build.texture(1.1, [build.temporal(50.0, 0.1)]))
+    assert np.all(spatial == 1.1)
+
+
+# ------------------------------------------------------------------------------ picture
+
+
+def test_preview_png_shows_the_texture_of_every_taxtel(tmp_path: Path) -> None:
+    card = three_texture_card()
+    out = tmp_path / "preview.png"
+    render_preview(card, out, dpi=100)
+
+    with Image.open(out) as image:
+        assert image.format == "PNG"
+        width, height = image.size
+        pixels = np.asarray(image.convert("RGB"))
+    assert width == 1400  # 14 inches at 100 dpi
+    assert 550 <= height <= 1200
+
+    # Locate the taxtels in pixels with the same (deterministic) layout.
+    fig = preview_figure(card, dpi=100)
+    fig.canvas.draw()
+    assert fig.canvas.get_width_height() == (width, height)
+    grid_ax = next(ax for ax in fig.axes if ax.get_label() == GRID_AXES_LABEL)
+    colours = np.round(texture_colors(3)[:, :3] * 255)
+    seen: dict[int, set[tuple[int, ...]]] = {0: set(), 1: set(), 2: set()}
+    for (row, col), texture in np.ndenumerate(INDEX):
+        # A quarter of the way into the taxtel: away from the borders and the number label.
+        x_mm, y_mm = (col + 0.25) * TAXTEL_MM, (row + 0.3) * TAXTEL_MM
+        x_px, y_px = grid_ax.transData.transform((x_mm, y_mm))
+        rgb = pixels[round(height - y_px), round(x_px)].astype(float)
+        np.testing.assert_allclose(rgb, colours[texture], atol=2.0)
+        seen[texture].add(tuple(int(v) for v in rgb))
+    distinct = {colour for colours_of in seen.values() for colour in colours_of}
+    assert len(distinct) == 3
+    # The map lies in the left part of the picture, y growing downwards.
+    top_left = grid_ax.transData.transform((0.0, 0.0))
+    bottom_left = grid_ax.transData.transform((0.0, 40.0))
+    assert top_left[1] > bottom_left[1]
+    assert grid_ax.transData.transform((60.0, 0.0))[0] < 0.6 * width
+
+
+def test_preview_panels_are_labelled_and_capped_at_24() -> None:
+    titles = [ax.get_title(loc="left") for ax in preview_figure(three_texture_card()).axes]
+    assert "texture 0 (fine):\nUV, VELOCITY, 1 component" in titles
+    assert "texture 2:\nBIPOLAR, POSITION, 1 component" in titles
+
+    textures = [build.texture(1.0, [build.spatial(0.1 * (i + 1), 0.1)]) for i in range(30)]
+    index = [i % 30 for i in range(36)]  # a 6 x 6 grid using all 30 textures
+    card = build.card(30.0, 30.0, taxtel_mm=5.0, textures=textures, texture_index=index)
+    fig = preview_figure(card)
+    panel_titles = [t for ax in fig.axes if (t := ax.get_title(loc="left")).startswith("texture")]
+    assert len(panel_titles) == 24
+    notes = [text.get_text() for ax in fig.axes for text in ax.texts]
+    assert "+6 more" in notes
+
+
+def test_invalid_card_is_refused() -> None:
+    card = three_texture_card()
+    card.grid.texture_index[0] = 7  # no texture 7
+    with pytest.raises(hcard.CardValidationError, match="texture_index"):
+        preview_figure(card)
+
+
+# ---------------------------------------------------------------------------------- CLI
+
+
+def _cli():
+    from hcard.cli.main import cli
+
+    return cli
+
+
+def test_cli_preview_writes_png(tmp_path: Path) -> None:
+    card_path = tmp_path / "three.hcard"
+    hcard.save(three_texture_card(), card_path)
+    out = tmp_path / "three.png"
+    result = CliRunner().invoke(_cli(), ["preview", str(card_path), "-o", str(out), "--dpi", "50"])
+    assert result.exit_code == 0, result.output
+    assert f"wrote {out}" in result.stdout
+    with Image.open(out) as image:
+        assert image.format == "PNG"
+        assert image.size[0] == 700
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no temp files
+
+
+@pytest.mark.parametrize(
+    ("content", "reason"),
+    [(None, "no such file"), (b"\x0a\xff\xff\xffgarbage", "corrupt or truncated")],
+    ids=["missing", "corrupt"],
+)
+def test_cli_preview_bad_card_is_one_line_error(
+    tmp_path: Path, content: bytes | None, reason: str
+) -> None:
+    card_path = tmp_path / "bad.hcard"
+    if content is not None:
+        card_path.write_bytes(content)
+    out = tmp_path / "out.png"
+    out.write_bytes(b"previous picture")
+    result = CliRunner().invoke(_cli(), ["preview", str(card_path), "-o", str(out)])
+    assert result.exit_code == 1
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("Error: ")
+    assert reason in lines[0]
+    assert "Traceback" not in result.output
+    assert out.read_bytes() == b"previous picture"
+
+
+def test_cli_preview_refuses_other_formats(tmp_path: Path) -> None:
+    card_path = tmp_path / "three.hcard"
+    hcard.save(three_texture_card(), card_path)
+    result = CliRunner().invoke(_cli(), ["preview", str(card_path), "-o", str(tmp_path / "a.jpg")])
+    assert result.exit_code == 2
+    assert "output must be a .png file" in result.stderr
