@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import sys
+import warnings
+from typing import Any
+
 import click
 
 from hcard import __version__
@@ -16,6 +20,12 @@ def cli() -> None:
     A card (.hcard binary, or .json) describes a surface as a grid of taxtels, each playing a
     texture of (frequency, amplitude, phase) components on the UV and EV channels.
     """
+    warnings.showwarning = _show_warning
+
+
+def _show_warning(message: Warning | str, category: type[Warning], *_args: Any, **_kw: Any) -> None:
+    """Warnings on the command line as one ``warning: ...`` line each, without source lines."""
+    print(f"warning: {message}", file=sys.stderr)
 
 
 def _register_commands() -> None:
