@@ -1,0 +1,9 @@
+"""Physics predictors: actuation and finger state to friction, and back (DESIGN.md section 5).
+
+SI units inside (m, s, N, V, Hz, Pa); :mod:`hcard.physics.units` converts user text such as
+``"2um"`` or ``"27.5 kHz"`` at the boundary.
+"""
+
+from hcard.physics.predictor import Parameter, Predictor, PredictorError, Variable
+
+__all__ = ["Parameter", "Predictor", "PredictorError", "Variable"]
