@@ -67,6 +67,8 @@ class CompiledCard:
     taxtel_height_mm: float
     grid: np.ndarray
     textures: tuple[CompiledTexture, ...]
+    channel_groups: tuple[int, ...]
+    """Channel groups (GROUP_UV, GROUP_EV, GROUP_BIPOLAR) that some texture of the card uses."""
 
     @property
     def max_components(self) -> int:
@@ -130,11 +132,17 @@ def compile_card(card: pb.Card, options: RenderOptions) -> CompiledCard:
     """Compile a validated card for rendering with ``options``."""
     grid = card.grid
     index = np.asarray(grid.texture_index, dtype=np.int32).reshape(grid.rows, grid.cols)
+    textures = tuple(compile_texture(t, options) for t in card.textures)
+    used = np.zeros(3, dtype=bool)
+    for texture in textures:
+        used |= texture.baseline_deviation != 0
+        used |= texture.group_matrix.any(axis=0)
     return CompiledCard(
         width_mm=card.surface.width_mm,
         height_mm=card.surface.height_mm,
         taxtel_width_mm=grid.taxtel_width_mm,
         taxtel_height_mm=grid.taxtel_height_mm,
         grid=index,
-        textures=tuple(compile_texture(t, options) for t in card.textures),
+        textures=textures,
+        channel_groups=tuple(int(g) for g in np.flatnonzero(used)),
     )

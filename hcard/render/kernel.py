@@ -7,11 +7,19 @@ before the cosine, which is evaluated in float32 (error < 1e-6 relative friction
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from hcard.render.compiled import PHASE_INPUTS, CompiledCard, CompiledTexture
+from hcard.render.compiled import (
+    GROUP_BIPOLAR,
+    GROUP_EV,
+    GROUP_UV,
+    PHASE_INPUTS,
+    CompiledCard,
+    CompiledTexture,
+)
 from hcard.render.options import PASSBAND_FRACTION, RenderMode, RenderOptions
 from hcard.render.touch import TouchTable
 
@@ -27,24 +35,70 @@ class FrameState:
         texture: (N,) active palette index, -1 where the frame is neutral.
         phase_inputs: (N, 5) dead-reckoned x, y (mm), odometer x, y (mm), time since
             touch-down (s).
-        velocity: (N, 2) velocity estimate, mm/s.
-        speed: (N,) magnitude of ``velocity``, mm/s.
+        sample: (N,) index of each frame's touch sample in ``sample_velocity``.
+        sample_velocity: (M, 2) velocity estimate of each touch sample, mm/s.
+        speed: (N,) magnitude of the frame's velocity, mm/s.
     """
 
     texture: np.ndarray
     phase_inputs: np.ndarray
-    velocity: np.ndarray
+    sample: np.ndarray
+    sample_velocity: np.ndarray
     speed: np.ndarray
 
 
+class Workspace:
+    """Scratch arrays reused from block to block.
+
+    Fresh multi-megabyte temporaries cost more in page faults than the arithmetic done in
+    them; reusing these buffers makes the kernel several times faster.
+    """
+
+    def __init__(self, frames: int = 0, components: int = 0) -> None:
+        self.frames = -1
+        self.components = -1
+        self.reserve(frames, components)
+
+    def reserve(self, frames: int, components: int) -> None:
+        """Make room for ``frames`` frames of up to ``components`` components."""
+        if frames <= self.frames and components <= self.components:
+            return
+        self.frames = max(frames, self.frames)
+        self.components = max(components, self.components, 1)
+        size = self.frames * self.components
+        self.inputs = np.empty((self.frames, PHASE_INPUTS))
+        self.rate = np.empty((self.frames, PHASE_INPUTS))
+        self.sorted_inputs = np.empty((self.frames, PHASE_INPUTS))
+        self.turns = np.empty(size)
+        self.rounded = np.empty(size)
+        self.wave = np.empty(size, dtype=np.float32)
+        self.deviation = np.empty(self.frames * 3)
+
+    def matrix(self, name: str, rows: int, cols: int) -> np.ndarray:
+        """A (rows, cols) C-contiguous view of the flat buffer ``name``."""
+        return getattr(self, name)[: rows * cols].reshape(rows, cols)
+
+
 def frame_state(
-    card: CompiledCard, table: TouchTable, times: np.ndarray, options: RenderOptions
+    card: CompiledCard,
+    table: TouchTable,
+    times: np.ndarray,
+    options: RenderOptions,
+    workspace: Workspace,
 ) -> FrameState:
-    """Look up the touch sample, dead-reckon and find the taxtel of each frame time."""
+    """Look up the touch sample, dead-reckon and find the taxtel of each frame time.
+
+    The returned ``phase_inputs`` live in ``workspace`` until its next use.
+    """
     n = times.shape[0]
+    workspace.reserve(n, card.max_components)
     if len(table) == 0:
         return FrameState(
-            np.full(n, -1, np.int32), np.zeros((n, PHASE_INPUTS)), np.zeros((n, 2)), np.zeros(n)
+            np.full(n, -1, np.int32),
+            np.zeros((n, PHASE_INPUTS)),
+            np.zeros(n, dtype=np.intp),
+            np.zeros((1, 2)),
+            np.zeros(n),
         )
     # Frame times and sample times are both sorted: each sample owns the run of frames from
     # the first one at or after it, so a repeat replaces a per-frame binary search.
@@ -58,11 +112,11 @@ def frame_state(
     start, rate = _sample_coefficients(table, options)
     reckon = np.minimum(times - np.take(table.t, i), options.dead_reckoning_s)
     # np.take is several times faster than fancy indexing for row gathers.
-    inputs = np.take(start, i, axis=0)
-    sample_rate = np.take(rate, i, axis=0)
-    inputs += sample_rate * reckon[:, None]
+    inputs = np.take(start, i, axis=0, out=workspace.inputs[:n])
+    travel = np.take(rate, i, axis=0, out=workspace.rate[:n])
+    np.multiply(travel, reckon[:, None], out=travel)
+    np.add(inputs, travel, out=inputs)
     inputs[:, 4] += times
-    velocity = sample_rate[:, 2:4]
     x, y = inputs[:, 0], inputs[:, 1]
     inside = contact & (x >= 0) & (x < card.width_mm) & (y >= 0) & (y < card.height_mm)
     rows, cols = card.grid.shape
@@ -70,7 +124,7 @@ def frame_state(
     row = np.clip(np.floor(y / card.taxtel_height_mm), 0, rows - 1).astype(np.intp)
     texture = np.where(inside, np.take(card.grid.ravel(), row * cols + col), -1).astype(np.int32)
     speed = np.take(np.hypot(table.velocity[:, 0], table.velocity[:, 1]), i)
-    return FrameState(texture, inputs, velocity, speed)
+    return FrameState(texture, inputs, i, table.velocity, speed)
 
 
 def _sample_coefficients(
@@ -100,38 +154,50 @@ def band_limit_gain(frequency_hz: np.ndarray, band_limit_hz: float) -> np.ndarra
 
 def _texture_deviation(
     texture: CompiledTexture,
+    columns: list[int],
     inputs: np.ndarray,
-    velocity: np.ndarray,
+    velocity: Callable[[], np.ndarray],
     speed: np.ndarray,
     options: RenderOptions,
+    workspace: Workspace,
+    out: np.ndarray,
     phase_out: np.ndarray | None,
-) -> np.ndarray:
-    """(n, 3) deviation from 1 per channel group for n frames of one texture."""
-    n = inputs.shape[0]
-    if texture.n_components == 0:
-        return np.broadcast_to(texture.baseline_deviation, (n, 3))
-    turns = inputs @ texture.phase_weights
+) -> None:
+    """Write into ``out`` (n, len(columns)) the deviation from 1 in the given channel groups
+    for n frames of one texture; ``velocity()`` gathers the frames' velocities when the band
+    limit needs them."""
+    n, c = inputs.shape[0], texture.n_components
+    baseline = texture.baseline_deviation[columns]
+    if c == 0:
+        out[:] = baseline
+        return
+    turns = np.matmul(inputs, texture.phase_weights, out=workspace.matrix("turns", n, c))
     if phase_out is not None:
-        phase_out[:, : texture.n_components] = turns
-    wave = (turns - np.rint(turns)).astype(np.float32)  # one turn, in [-1/2, 1/2]
-    wave *= TWO_PI_F32
+        phase_out[:, :c] = turns
+    within = workspace.matrix("rounded", n, c)
+    np.rint(turns, out=within)
+    np.subtract(turns, within, out=within)  # one turn, in [-1/2, 1/2]
+    wave = workspace.matrix("wave", n, c)
+    np.multiply(within, 2.0 * np.pi, out=wave, casting="same_kind")
     np.cos(wave, out=wave)
     edge = PASSBAND_FRACTION * options.band_limit_hz
     fastest = float(np.max(speed, initial=0.0))
     if fastest * texture.max_wave_number <= edge and texture.max_temporal_hz <= edge:
         # Every component is in the passband: unit gain, exactly.
-        return wave @ texture.weighted_groups + texture.baseline_deviation
-    frequency = np.abs(velocity @ texture.wave_vectors) + texture.temporal_hz
+        np.add(wave @ texture.weighted_groups[:, columns], baseline, out=out)
+        return
+    frequency = np.abs(velocity() @ texture.wave_vectors) + texture.temporal_hz
     gain = band_limit_gain(frequency, options.band_limit_hz)
     gain[:, ~texture.band_limited] = 1.0
     gain *= texture.amplitude
-    return (wave * gain) @ texture.group_matrix + texture.baseline_deviation
+    np.add((wave * gain) @ texture.group_matrix[:, columns], baseline, out=out)
 
 
 def evaluate_frames(
     card: CompiledCard,
     state: FrameState,
     options: RenderOptions,
+    workspace: Workspace,
     *,
     with_phase: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
@@ -146,32 +212,49 @@ def evaluate_frames(
     sorted_textures = np.take(state.texture, order)
     starts = np.flatnonzero(np.diff(sorted_textures, prepend=-2))
     ends = np.append(starts[1:], n)
-    inputs = np.take(state.phase_inputs, order, axis=0)
-    velocity = np.take(state.velocity, order, axis=0)
+    inputs = np.take(state.phase_inputs, order, axis=0, out=workspace.sorted_inputs[:n])
     speed = np.take(state.speed, order)
+    columns = list(card.channel_groups)
     # Work in texture-sorted order, where each texture's frames are one contiguous slice.
-    deviation_sorted = np.zeros((n, 3))
+    deviation_sorted = workspace.matrix("deviation", n, len(columns))
+    deviation_sorted.fill(0.0)
     phase_sorted = np.full((n, card.max_components), np.nan) if with_phase else None
     for start, end in zip(starts, ends, strict=True):
         index = int(sorted_textures[start])
         if index < 0:
             continue
-        deviation_sorted[start:end] = _texture_deviation(
+        samples = np.take(state.sample, order[start:end])
+        _texture_deviation(
             card.textures[index],
+            columns,
             inputs[start:end],
-            velocity[start:end],
+            lambda samples=samples: np.take(state.sample_velocity, samples, axis=0),
             speed[start:end],
             options,
+            workspace,
+            deviation_sorted[start:end],
             None if phase_sorted is None else phase_sorted[start:end],
         )
     inverse = np.empty_like(order)
     inverse[order] = np.arange(n)
     deviation = np.take(deviation_sorted, inverse, axis=0)
     phase = None if phase_sorted is None else np.take(phase_sorted, inverse, axis=0)
-    uv = np.clip(1.0 + deviation[:, 0], 0.0, 1.0)
-    ev = np.clip(1.0 + deviation[:, 1], 1.0, MAX_RELATIVE_FRICTION)
-    bipolar = np.clip(1.0 + deviation[:, 2], 0.0, MAX_RELATIVE_FRICTION)
-    uv *= np.minimum(bipolar, 1.0)
-    ev *= np.maximum(bipolar, 1.0)
-    np.minimum(ev, MAX_RELATIVE_FRICTION, out=ev)
-    return uv, ev, phase
+    return (*split_channels(deviation, columns), phase)
+
+
+def split_channels(deviation: np.ndarray, columns: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """UV and EV targets from the group deviations (spec rule R-split; thesis Eq. 4.1)."""
+    ones = np.ones(deviation.shape[0])
+
+    def group(g: int) -> np.ndarray | None:
+        return 1.0 + deviation[:, columns.index(g)] if g in columns else None
+
+    uv_group, ev_group, bipolar = group(GROUP_UV), group(GROUP_EV), group(GROUP_BIPOLAR)
+    uv = ones.copy() if uv_group is None else np.clip(uv_group, 0.0, 1.0)
+    ev = ones.copy() if ev_group is None else np.clip(ev_group, 1.0, MAX_RELATIVE_FRICTION)
+    if bipolar is not None:
+        np.clip(bipolar, 0.0, MAX_RELATIVE_FRICTION, out=bipolar)
+        uv *= np.minimum(bipolar, 1.0)
+        ev *= np.maximum(bipolar, 1.0)
+        np.minimum(ev, MAX_RELATIVE_FRICTION, out=ev)
+    return uv, ev

@@ -15,14 +15,14 @@ import numpy as np
 
 from hcard.errors import CardValidationError, TrackError
 from hcard.render.compiled import CompiledCard, compile_card
-from hcard.render.kernel import evaluate_frames, frame_state
+from hcard.render.kernel import Workspace, evaluate_frames, frame_state
 from hcard.render.options import RenderOptions
 from hcard.render.touch import TouchTable, empty_table, extend_table
 from hcard.track import FingerTrack, make_track
 from hcard.v1 import card_pb2 as pb
 from hcard.validate import errors_of, validate
 
-BATCH_CHUNK_FRAMES = 1 << 14
+BATCH_CHUNK_FRAMES = 1 << 15
 """Frames evaluated per kernel call in batch mode (keeps temporaries in cache)."""
 
 
@@ -80,14 +80,17 @@ class Renderer:
         self.card = card
         self.options = options or RenderOptions()
         self.compiled: CompiledCard = compile_card(card, self.options)
+        self._workspace = Workspace(BATCH_CHUNK_FRAMES, self.compiled.max_components)
 
     def frame_times(self, t0: float, first: int, count: int) -> np.ndarray:
         """Times of frames ``first .. first+count-1`` of a rendering starting at ``t0``, s."""
         return t0 + np.arange(first, first + count, dtype=np.float64) / self.options.frame_rate_hz
 
     def _block(self, table: TouchTable, times: np.ndarray, with_phase: bool) -> Frames:
-        state = frame_state(self.compiled, table, times, self.options)
-        uv, ev, phase = evaluate_frames(self.compiled, state, self.options, with_phase=with_phase)
+        state = frame_state(self.compiled, table, times, self.options, self._workspace)
+        uv, ev, phase = evaluate_frames(
+            self.compiled, state, self.options, self._workspace, with_phase=with_phase
+        )
         return Frames(times, uv, ev, state.texture >= 0, state.texture, phase)
 
     def render(
@@ -113,13 +116,22 @@ class Renderer:
         )
         total = math.floor(track.duration_s * self.options.frame_rate_hz + 1e-9) + 1
         t0 = float(track.t[0])
-        parts = []
+        out = Frames(
+            self.frame_times(t0, 0, total),
+            np.empty(total),
+            np.empty(total),
+            np.empty(total, dtype=bool),
+            np.empty(total, dtype=np.int32),
+            np.empty((total, self.compiled.max_components)) if with_phase else None,
+        )
         for first in range(0, total, BATCH_CHUNK_FRAMES):
-            count = min(BATCH_CHUNK_FRAMES, total - first)
-            parts.append(self._block(table, self.frame_times(t0, first, count), with_phase))
+            part = self._block(table, out.t[first : first + BATCH_CHUNK_FRAMES], with_phase)
+            for name in ("uv", "ev", "contact", "texture", "phase"):
+                if getattr(part, name) is not None:
+                    getattr(out, name)[first : first + len(part)] = getattr(part, name)
             if progress is not None:
-                progress(first + count, total)
-        return Frames.concatenate(parts)
+                progress(first + len(part), total)
+        return out
 
     def stream(self, t0: float | None = None) -> RenderStream:
         """A streaming renderer; frame 0 falls at ``t0`` (default: the first pushed sample)."""
