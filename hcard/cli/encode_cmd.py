@@ -1,0 +1,279 @@
+"""``hcard encode``: a grayscale friction image to a haptic card (the built-in image encoder)."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+from typing import Any
+
+import click
+
+from hcard import limits
+from hcard.card_io import format_for_path, save
+from hcard.errors import CardError, HcardError
+from hcard.v1 import card_pb2 as pb
+
+DEFAULT_MAX_PIXELS = 64_000_000  # same as hcard_builtins.image.DEFAULT_MAX_PIXELS (help text)
+
+
+@click.command()
+@click.argument("image", type=click.Path(path_type=Path))
+@click.option(
+    "-o",
+    "--output",
+    required=True,
+    type=click.Path(path_type=Path),
+    help="Card file to write: a name ending in .json gets the JSON form, any other the binary "
+    "form (.hcard).",
+)
+@click.option(
+    "--width-mm",
+    type=float,
+    help="Physical width of the image in millimetres (alone: square pixels, aspect kept).",
+)
+@click.option(
+    "--height-mm",
+    type=float,
+    help="Physical height of the image in millimetres (with --width-mm: rectangular pixels "
+    "allowed).",
+)
+@click.option(
+    "--dpi",
+    type=float,
+    help="Resolution in dots per inch, instead of a size. Default: the DPI stored in the "
+    "image, else 254 (0.1 mm per pixel).",
+)
+@click.option(
+    "--taxtel-mm",
+    type=float,
+    default=5.0,
+    show_default=True,
+    help="Side of a square taxtel in millimetres. Gratings longer than half a taxtel become "
+    "baseline steps between taxtels.",
+)
+@click.option(
+    "--components",
+    type=click.IntRange(0, limits.MAX_COMPONENTS_PER_TEXTURE),
+    default=8,
+    show_default=True,
+    help="Most grating components kept per taxtel texture (strongest first).",
+)
+@click.option(
+    "--max-textures",
+    type=click.IntRange(1, limits.MAX_TEXTURES),
+    default=64,
+    show_default=True,
+    help="Most textures in the card's palette; the closest textures are merged until it fits.",
+)
+@click.option(
+    "--min-amplitude",
+    type=float,
+    default=0.01,
+    show_default=True,
+    help="Smallest component amplitude kept, relative friction; a taxtel whose friction "
+    "varies less than this (standard deviation) keeps only its baseline.",
+)
+@click.option(
+    "--merge-tolerance",
+    type=float,
+    default=limits.RELATIVE_FRICTION_JND / 2,
+    show_default=True,
+    help="Taxtels whose textures differ by less than this RMS relative friction share one "
+    "palette texture (default: half the 8% friction JND).",
+)
+@click.option(
+    "--channel",
+    type=click.Choice(["uv", "ev", "bipolar"]),
+    default="uv",
+    show_default=True,
+    help="Actuator of the textures: uv lowers friction, ev raises it, bipolar does both.",
+)
+@click.option(
+    "--locking",
+    type=click.Choice(["auto", "position", "velocity"]),
+    default="auto",
+    show_default=True,
+    help="Phase locking of the textures: position (tied to the surface), velocity (texture "
+    "control from the finger speed) or auto (by grating period).",
+)
+@click.option(
+    "--friction-range",
+    nargs=2,
+    type=float,
+    metavar="LO HI",
+    default=None,
+    help="Relative friction of white (LO) and black (HI). Defaults: uv 0.3 1.0, ev 1.0 1.6, "
+    "bipolar 0.5 1.5. UV cannot go above 1 nor EV below 1.",
+)
+@click.option(
+    "--max-pixels",
+    type=click.IntRange(min=1),
+    default=DEFAULT_MAX_PIXELS,
+    show_default=True,
+    help="Refuse images with more pixels than this (checked from the header, before "
+    "decoding: a guard against decompression bombs).",
+)
+@click.option("--title", default=None, help="Card title. Default: the image file name stem.")
+@click.option("--author", default="", help="Card author (metadata).")
+@click.option("--licence", default="", help="Card licence, an SPDX identifier or free text.")
+@click.option(
+    "--preview",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Also write a PNG preview of the card to this file.",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of text.")
+def encode(
+    image: Path,
+    output: Path,
+    width_mm: float | None,
+    height_mm: float | None,
+    dpi: float | None,
+    taxtel_mm: float,
+    components: int,
+    max_textures: int,
+    min_amplitude: float,
+    merge_tolerance: float,
+    channel: str,
+    locking: str,
+    friction_range: tuple[float, float] | None,
+    max_pixels: int,
+    title: str | None,
+    author: str,
+    licence: str,
+    preview: Path | None,
+    as_json: bool,
+) -> None:
+    """Encode the grayscale IMAGE into a haptic card: black is high friction, white low.
+
+    The image is cut into taxtels; each taxtel's friction becomes a baseline plus up to
+    --components gratings (frequency, orientation, amplitude, phase), and similar taxtels
+    share a palette texture. Prints a summary: grid, textures, components, card size and the
+    reconstruction error against the image (relative friction and multiples of the 8% JND).
+    """
+    from hcard_builtins.image import EncodeOptions, encode_image
+
+    try:
+        options = EncodeOptions(
+            width_mm=width_mm,
+            height_mm=height_mm,
+            dpi=dpi,
+            taxtel_mm=taxtel_mm,
+            components=components,
+            max_textures=max_textures,
+            min_amplitude=min_amplitude,
+            merge_tolerance=merge_tolerance,
+            channel=channel,
+            locking=locking,
+            friction_range=tuple(friction_range) if friction_range else None,
+            max_pixels=max_pixels,
+            title=title,
+            author=author,
+            licence=licence,
+        ).checked()
+    except ValueError as exc:
+        raise click.UsageError(_option_names(str(exc))) from None
+    try:
+        _check_writable(output, "card")
+        if preview is not None:
+            _check_writable(preview, "preview")
+        result = encode_image(image, options, progress=_progress)
+        save(result.card, output)
+        if preview is not None:
+            _write_preview(result.card, preview)
+    except HcardError as exc:
+        raise click.ClickException(str(exc)) from None
+    summary = dict(result.stats)
+    summary.update(
+        output=str(output),
+        output_format=format_for_path(output),
+        output_bytes=output.stat().st_size,
+        preview=str(preview) if preview is not None else None,
+    )
+    if as_json:
+        click.echo(json.dumps(summary, indent=2))
+    else:
+        for line in summary_lines(summary):
+            click.echo(line)
+
+
+_OPTION_FIELDS = (
+    "width_mm",
+    "height_mm",
+    "dpi",
+    "taxtel_mm",
+    "components",
+    "max_textures",
+    "min_amplitude",
+    "merge_tolerance",
+    "max_pixels",
+)
+
+
+def _option_names(message: str) -> str:
+    """An encoder message with its field names written as the options of this command."""
+    for name in _OPTION_FIELDS:
+        message = re.sub(rf"\b{name}\b", "--" + name.replace("_", "-"), message)
+    return message
+
+
+def _progress(line: str) -> None:
+    click.echo(f"hcard encode: {line}", err=True)
+
+
+def _check_writable(path: Path, what: str) -> None:
+    """Fail before the (possibly long) encode when ``path`` obviously cannot be written."""
+    parent = path.parent if str(path.parent) else Path(".")
+    if path.is_dir():
+        raise CardError(f"cannot write the {what}: is a directory", source=path)
+    if not parent.is_dir():
+        raise CardError(f"cannot write the {what}: directory {parent} does not exist", source=path)
+
+
+def _write_preview(card: pb.Card, path: Path) -> None:
+    """Write the PNG preview (hcard.preview, imported only when asked for: it loads matplotlib)."""
+    from hcard.preview import render_preview
+
+    try:
+        render_preview(card, path)
+    except OSError as exc:
+        raise CardError(f"cannot write the preview ({exc.strerror or exc})", source=path) from None
+
+
+def summary_lines(s: dict[str, Any]) -> list[str]:
+    """The text summary of an encode (``s``: the encoder's stats plus the output fields)."""
+    pitch_x, pitch_y = s["pixel_pitch_mm"]
+    low, high = s["friction_range"]
+    raw = s["raw_bitmap_bytes"]
+    card_bytes = s["card_bytes"]
+    taxtels = s["cols"] * s["rows"]
+    merged = (
+        f" ({s['distinct_textures']} distinct before merging)"
+        if s["distinct_textures"] > s["textures"]
+        else ""
+    )
+    lines = [
+        f"image       {s['image']}: {s['image_width_px']} x {s['image_height_px']} pixels, "
+        f"mode {s['image_mode']}",
+        f"surface     {s['width_mm']:.6g} x {s['height_mm']:.6g} mm, pixel pitch "
+        f"{pitch_x:.4g} x {pitch_y:.4g} mm ({s['size_source']})",
+        f"grid        {s['cols']} x {s['rows']} taxtels of {s['taxtel_mm']:g} mm "
+        f"(tiles of {s['tile_px'][0]} x {s['tile_px'][1]} pixels)",
+        f"textures    {s['textures']} in the palette{merged}; {s['textured_taxtels']} of "
+        f"{taxtels} taxtels carry gratings",
+        f"components  {s['components']} in total",
+        f"channel     {s['channel']}: black = {high:g}, white = {low:g} relative friction; "
+        f"locking {s['locking']}",
+        f"card size   {card_bytes} bytes (binary); raw 8-bit bitmap at 0.1 mm: {raw} bytes "
+        f"(card = {100.0 * card_bytes / raw:.3g} % of it)",
+        f"error       rms {s['rms_error']:.4f}, max {s['max_error']:.4f} relative friction; "
+        f"rms = {s['rms_error_jnd']:.2f} x the {limits.RELATIVE_FRICTION_JND:g} friction JND",
+        f"wrote       {s['output']} ({s['output_format']}, {s['output_bytes']} bytes)",
+    ]
+    if s.get("preview"):
+        lines.append(f"preview     {s['preview']}")
+    return lines
+
+
+COMMANDS = [encode]

@@ -1,0 +1,373 @@
+"""The image encoder: a grayscale picture of friction to a haptic card.
+
+Black is high friction and white low (thesis section 5.4.2). The image covers the surface; the
+surface is cut into square taxtels; every taxtel's friction is analysed into a baseline plus up
+to ``components`` gratings (frequency, orientation, amplitude, phase); similar taxtels share a
+palette texture. Gratings longer than a taxtel cannot be resolved inside it and show up as
+baseline steps between taxtels (the hybrid position/texture representation of chapter 5).
+
+>>> from hcard_builtins.image import encode_image
+>>> result = encode_image("bumps.png", taxtel_mm=5.0, channel="uv")   # doctest: +SKIP
+>>> result.stats["rms_error_jnd"]                                     # doctest: +SKIP
+0.21
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, fields, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hcard import __version__, build, limits
+from hcard.card_io import to_bytes
+from hcard.errors import CardValidationError
+from hcard.plugins.kinds import Encoder, EncodeResult
+from hcard.v1 import card_pb2 as pb
+from hcard.validate import errors_of, validate
+
+from .geometry import Geometry, resolve_geometry
+from .loading import DEFAULT_MAX_PIXELS, GrayImage, load_gray
+from .palette import Palette, build_palette
+from .reconstruct import FrictionMap, ReconstructionError, reconstruction_error
+from .spectral import TileSpectra, analyse_tiles, tile_centres, to_surface
+from .textures import orientation_and_phase
+
+DEFAULT_FRICTION_RANGE: dict[str, tuple[float, float]] = {
+    "uv": (0.3, 1.0),
+    "ev": (1.0, 1.6),
+    "bipolar": (0.5, 1.5),
+}
+"""Relative friction of white and black per channel (UV only lowers friction, EV only raises)."""
+CHANNELS = tuple(DEFAULT_FRICTION_RANGE)
+LOCKINGS = ("auto", "position", "velocity")
+PROGRESS_MIN_PIXELS = 1_000_000
+"""Images larger than this (pixels) report their stages through the progress callback."""
+CHUNK_PIXELS = 1 << 24
+"""Tiles are analysed in chunks of about this many pixels, which bounds the memory used."""
+GENERATOR = f"hcard {__version__} image encoder"
+
+
+@dataclass(frozen=True)
+class EncodeOptions:
+    """Options of the image encoder (the ``hcard encode`` options, same names).
+
+    Attributes:
+        width_mm, height_mm: physical size of the image, millimetres (one keeps the aspect
+            ratio; both allow rectangular pixels).
+        dpi: resolution, dots per inch (instead of a size).
+        taxtel_mm: taxtel side, millimetres.
+        components: most components per texture (0 to 16).
+        max_textures: most textures in the palette (1 to 256).
+        min_amplitude: components weaker than this (relative friction) are dropped, and a
+            taxtel whose friction standard deviation is below it keeps only its baseline.
+        merge_tolerance: taxtels whose textures differ by less than this RMS relative friction
+            share a texture (default half the 8 % friction JND).
+        channel: ``"uv"``, ``"ev"`` or ``"bipolar"``.
+        locking: ``"auto"``, ``"position"`` or ``"velocity"``.
+        friction_range: relative friction of white and of black, ``(low, high)``; ``None`` for
+            the channel's default (:data:`DEFAULT_FRICTION_RANGE`).
+        max_pixels: largest image accepted, pixels (a guard against decompression bombs).
+        title: card title; ``None`` for the image file's stem.
+        author, licence: card metadata.
+    """
+
+    width_mm: float | None = None
+    height_mm: float | None = None
+    dpi: float | None = None
+    taxtel_mm: float = 5.0
+    components: int = 8
+    max_textures: int = 64
+    min_amplitude: float = 0.01
+    merge_tolerance: float = limits.RELATIVE_FRICTION_JND / 2
+    channel: str = "uv"
+    locking: str = "auto"
+    friction_range: tuple[float, float] | None = None
+    max_pixels: int = DEFAULT_MAX_PIXELS
+    title: str | None = None
+    author: str = ""
+    licence: str = ""
+
+    @property
+    def friction_limits(self) -> tuple[float, float]:
+        """``(low, high)``: relative friction of white and of black (channel default if unset)."""
+        low, high = self.friction_range or DEFAULT_FRICTION_RANGE[self.channel]
+        return float(low), float(high)
+
+    def checked(self) -> EncodeOptions:
+        """These options with the friction range filled in; ``ValueError`` when one is bad."""
+        for name in ("width_mm", "height_mm", "dpi"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive number, got {value}")
+        if self.dpi is not None and (self.width_mm is not None or self.height_mm is not None):
+            raise ValueError("give either a DPI or a width/height in millimetres, not both")
+        if not (
+            math.isfinite(self.taxtel_mm)
+            and limits.MIN_TAXTEL_MM <= self.taxtel_mm <= limits.MAX_SURFACE_MM
+        ):
+            raise ValueError(
+                f"taxtel_mm must be between {limits.MIN_TAXTEL_MM} and {limits.MAX_SURFACE_MM:g} "
+                f"mm, got {self.taxtel_mm}"
+            )
+        if not 0 <= self.components <= limits.MAX_COMPONENTS_PER_TEXTURE:
+            raise ValueError(
+                f"components must be 0 to {limits.MAX_COMPONENTS_PER_TEXTURE}, got "
+                f"{self.components}"
+            )
+        if not 1 <= self.max_textures <= limits.MAX_TEXTURES:
+            raise ValueError(
+                f"max_textures must be 1 to {limits.MAX_TEXTURES}, got {self.max_textures}"
+            )
+        for name in ("min_amplitude", "merge_tolerance"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be a number >= 0, got {value}")
+        if self.channel not in CHANNELS:
+            raise ValueError(f"channel must be one of {', '.join(CHANNELS)}, got {self.channel!r}")
+        if self.locking not in LOCKINGS:
+            raise ValueError(f"locking must be one of {', '.join(LOCKINGS)}, got {self.locking!r}")
+        if self.max_pixels < 1:
+            raise ValueError(f"max_pixels must be at least 1, got {self.max_pixels}")
+        for name in ("title", "author", "licence"):
+            text = getattr(self, name)
+            if text is not None and len(text) > limits.MAX_TEXT_LENGTH:
+                raise ValueError(f"{name} is longer than {limits.MAX_TEXT_LENGTH} characters")
+        low, high = self.friction_limits
+        _check_range(low, high, self.channel)
+        return replace(self, friction_range=(low, high))
+
+
+def _check_range(low: float, high: float, channel: str) -> None:
+    if not (math.isfinite(low) and math.isfinite(high)):
+        raise ValueError(f"friction range must be finite, got {low} .. {high}")
+    if not 0.0 <= low < high <= limits.MAX_RELATIVE_FRICTION:
+        raise ValueError(
+            f"friction range must satisfy 0 <= low < high <= {limits.MAX_RELATIVE_FRICTION:g}, "
+            f"got {low:g} .. {high:g}"
+        )
+    if channel == "uv" and high > 1.0:
+        raise ValueError(
+            f"UV can only lower friction: the range {low:g} .. {high:g} goes above 1 "
+            "(use --channel ev or bipolar)"
+        )
+    if channel == "ev" and low < 1.0:
+        raise ValueError(
+            f"EV can only raise friction: the range {low:g} .. {high:g} goes below 1 "
+            "(use --channel uv or bipolar)"
+        )
+
+
+def encode_image(
+    path: str | Path,
+    options: EncodeOptions | None = None,
+    *,
+    progress: Callable[[str], None] | None = None,
+    **overrides: Any,
+) -> EncodeResult:
+    """Encode the image at ``path`` into a card.
+
+    Args:
+        path: image file.
+        options: encoder options (defaults when ``None``); keyword ``overrides`` replace
+            single fields, for example ``taxtel_mm=2.5``.
+        progress: called with a line of text at each stage, for images over
+            :data:`PROGRESS_MIN_PIXELS` pixels.
+
+    Returns:
+        The card, with figures in ``stats``: image size (``image_width_px``,
+        ``image_height_px``), surface (``width_mm``, ``height_mm``, ``pixel_pitch_mm``,
+        ``size_source``), grid (``cols``, ``rows``, ``taxtel_mm``), ``textures``,
+        ``components`` (total over the palette), ``card_bytes`` (binary form),
+        ``raw_bitmap_bytes`` (8-bit bitmap at 0.1 mm), and the reconstruction error ``rms_error``,
+        ``max_error`` (relative friction) and ``rms_error_jnd`` (multiples of the 8 % JND).
+
+    Raises:
+        ImageError: the image cannot be read or is too large (see :func:`load_gray`), or the
+            surface or grid exceed the card limits.
+        ValueError: an option is out of range.
+    """
+    opts = _options(options, overrides)
+    started = time.perf_counter()
+    image = load_gray(path, max_pixels=opts.max_pixels)
+    large = image.width * image.height > PROGRESS_MIN_PIXELS
+
+    def say(line: str) -> None:
+        if progress is not None and large:
+            progress(line)
+
+    say(f"decoded {image.width} x {image.height} pixels")
+    geometry = resolve_geometry(
+        image.width,
+        image.height,
+        taxtel_mm=opts.taxtel_mm,
+        width_mm=opts.width_mm,
+        height_mm=opts.height_mm,
+        dpi=opts.dpi,
+        embedded_dpi=image.dpi,
+        source=image.path,
+    )
+    low, high = opts.friction_limits
+    mapping = FrictionMap(high=high, scale=(high - low) / image.full_scale)
+    say(f"analysing {geometry.n_taxtels} taxtels of {geometry.tile_w} x {geometry.tile_h} pixels")
+    spectra = analyse_image(image, geometry, opts.components, opts.min_amplitude / mapping.scale)
+    per_taxtel = to_surface(
+        spectra,
+        geometry,
+        high=high,
+        low=low,
+        scale=mapping.scale,
+        min_amplitude=opts.min_amplitude,
+    )
+    say(f"merging {geometry.n_taxtels} taxtel textures into at most {opts.max_textures}")
+    palette = build_palette(
+        per_taxtel,
+        tile_centres(geometry),
+        bin_width=1.0 / opts.taxtel_mm,
+        tolerance=opts.merge_tolerance,
+        max_textures=opts.max_textures,
+        min_amplitude=opts.min_amplitude,
+    )
+    say("rendering the card back to measure the reconstruction error")
+    error = reconstruction_error(image.pixels, geometry, palette, mapping)
+    card = make_card(image, geometry, palette, opts)
+    problems = errors_of(validate(card))
+    if problems:
+        raise CardValidationError(problems, source=image.path)
+    stats = _stats(image, geometry, palette, error, card, opts)
+    stats["seconds"] = time.perf_counter() - started
+    log = [f"physical size {geometry.size_source}"]
+    if palette.leaders > len(card.textures):
+        log.append(
+            f"{palette.leaders} distinct textures merged into {len(card.textures)} "
+            f"(--max-textures {opts.max_textures})"
+        )
+    return EncodeResult(card=card, stats=stats, log=log)
+
+
+def analyse_image(
+    image: GrayImage, geometry: Geometry, components: int, min_amplitude_gray: float
+) -> TileSpectra:
+    """Spectral analysis of every taxtel tile, in chunks of whole taxtel rows."""
+    columns = geometry.tile_columns()
+    step = max(1, CHUNK_PIXELS // (geometry.tile_h * geometry.tile_w * geometry.cols))
+    parts = []
+    for first in range(0, geometry.rows, step):
+        stop = min(geometry.rows, first + step)
+        tiles = geometry.gather(image.pixels, first, stop, columns)
+        parts.append(analyse_tiles(tiles, n_peaks=components, min_amplitude=min_amplitude_gray))
+    return TileSpectra.concatenate(parts)
+
+
+def make_card(
+    image: GrayImage, geometry: Geometry, palette: Palette, opts: EncodeOptions
+) -> pb.Card:
+    """The card message for an analysed image."""
+    textures = palette.textures
+    low, high = opts.friction_limits
+    frequency = np.hypot(textures.k[..., 0], textures.k[..., 1])
+    orientation, phase = orientation_and_phase(textures)
+    amplitude = np.abs(textures.coef)
+    palette_textures = []
+    for p in range(textures.baseline.size):
+        parts = [
+            build.spatial(
+                float(frequency[p, j]),
+                float(amplitude[p, j]),
+                phase=float(phase[p, j]),
+                orientation=float(orientation[p, j]),
+            )
+            for j in np.nonzero(textures.valid[p])[0]
+        ]
+        palette_textures.append(
+            build.texture(
+                float(textures.baseline[p]), parts, channel=opts.channel, locking=opts.locking
+            )
+        )
+    card = build.card(
+        geometry.width_mm,
+        geometry.height_mm,
+        taxtel_mm=opts.taxtel_mm,
+        textures=palette_textures,
+        texture_index=palette.index,
+        title=image.path.stem if opts.title is None else opts.title,
+        author=opts.author,
+        licence=opts.licence,
+        description=(
+            f"Encoded from {image.path.name} ({image.width} x {image.height} pixels): "
+            f"black = relative friction {high:g}, white = {low:g}, channel {opts.channel}."
+        ),
+    )
+    card.metadata.generator = GENERATOR
+    return card
+
+
+def raw_bitmap_bytes(width_mm: float, height_mm: float) -> int:
+    """Size of an 8-bit friction bitmap of the surface at 0.1 mm resolution, bytes."""
+    return math.ceil(width_mm * 10 - 1e-9) * math.ceil(height_mm * 10 - 1e-9)
+
+
+def _options(options: EncodeOptions | None, overrides: dict[str, Any]) -> EncodeOptions:
+    opts = options or EncodeOptions()
+    known = {f.name for f in fields(EncodeOptions)}
+    unknown = sorted(set(overrides) - known)
+    if unknown:
+        raise ValueError(f"unknown image encoder option(s): {', '.join(unknown)}")
+    return replace(opts, **overrides).checked()
+
+
+def _stats(
+    image: GrayImage,
+    geometry: Geometry,
+    palette: Palette,
+    error: ReconstructionError,
+    card: pb.Card,
+    opts: EncodeOptions,
+) -> dict[str, Any]:
+    card_bytes = len(to_bytes(card))
+    raw = raw_bitmap_bytes(geometry.width_mm, geometry.height_mm)
+    textured = np.asarray(palette.textures.valid.any(axis=1))[palette.index]
+    return {
+        "image": str(image.path),
+        "image_width_px": image.width,
+        "image_height_px": image.height,
+        "image_mode": image.mode,
+        "width_mm": geometry.width_mm,
+        "height_mm": geometry.height_mm,
+        "pixel_pitch_mm": geometry.pixel_pitch_mm,
+        "size_source": geometry.size_source,
+        "cols": geometry.cols,
+        "rows": geometry.rows,
+        "taxtel_mm": opts.taxtel_mm,
+        "tile_px": (geometry.tile_w, geometry.tile_h),
+        "channel": opts.channel,
+        "locking": opts.locking,
+        "friction_range": opts.friction_range,
+        "textures": len(card.textures),
+        "components": sum(len(t.components) for t in card.textures),
+        "textured_taxtels": int(textured.sum()),
+        "distinct_textures": palette.leaders,
+        "card_bytes": card_bytes,
+        "raw_bitmap_bytes": raw,
+        "rms_error": error.rms,
+        "max_error": error.max,
+        "rms_error_jnd": error.rms / limits.RELATIVE_FRICTION_JND,
+    }
+
+
+class ImageEncoder(Encoder):
+    """Encoder plugin ``image``: see :func:`encode_image` for the options."""
+
+    name = "image"
+    description = (
+        "Grayscale image to card (black = high friction): per-taxtel spectral analysis into a "
+        "palette of grating textures"
+    )
+
+    def encode(self, source: Path, **options: Any) -> EncodeResult:
+        """Encode the image ``source``; ``options`` are :class:`EncodeOptions` fields."""
+        return encode_image(source, **options)

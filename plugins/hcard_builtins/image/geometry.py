@@ -1,0 +1,248 @@
+"""Physical size of the image and its tiling into taxtels.
+
+The image covers the surface exactly: pixel (row r, column c) covers x in [c/ppx, (c+1)/ppx) mm
+and y in [r/ppy, (r+1)/ppy) mm, with ``ppx``, ``ppy`` pixels per millimetre, origin at the top-left
+corner, +y down. Taxtel (column c, row r) covers [c*T, (c+1)*T) x [r*T, (r+1)*T) mm. A pixel
+belongs to the taxtel that contains its centre.
+
+For the analysis every taxtel gets a tile of a uniform size in pixels, ``ceil(T * pp)``, starting
+at the first pixel the taxtel owns; a tile may reach one pixel into the next taxtel when ``T * pp``
+is not a whole number. The last column or row of taxtels may overhang the surface: its tile is
+moved back inside the image (ending at the image edge) so that it is analysed on real pixels
+rather than on a mirrored copy, which would show the taxtel's gratings reflected. Only an image
+smaller than one tile is completed by reflection at its edges.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from hcard import limits
+from hcard.build import grid_count
+from hcard.errors import ImageError
+
+MM_PER_INCH = 25.4
+DEFAULT_DPI = 254.0
+"""Resolution assumed when neither the options nor the file give one: 0.1 mm per pixel."""
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """How pixels map to the surface and to taxtels.
+
+    Attributes:
+        width_px, height_px: image size, pixels.
+        width_mm, height_mm: surface size, millimetres.
+        ppx, ppy: pixels per millimetre along x and y.
+        taxtel_mm: taxtel side, millimetres.
+        cols, rows: taxtel grid.
+        tile_w, tile_h: analysis tile size, pixels.
+        col_start, row_start: first pixel owned by each taxtel column / row (``int64``).
+        col_owned, row_owned: pixels owned by each taxtel column / row (their centres lie in the
+            taxtel and inside the image); always at most the tile size.
+        col_tile, row_tile: first pixel of each column's / row's analysis tile (``int64``);
+            the owned pixels are ``col_start - col_tile`` onwards within the tile.
+        size_source: how the physical size was found, in words (for the summary).
+    """
+
+    width_px: int
+    height_px: int
+    width_mm: float
+    height_mm: float
+    ppx: float
+    ppy: float
+    taxtel_mm: float
+    cols: int
+    rows: int
+    tile_w: int
+    tile_h: int
+    col_start: np.ndarray
+    row_start: np.ndarray
+    col_owned: np.ndarray
+    row_owned: np.ndarray
+    col_tile: np.ndarray
+    row_tile: np.ndarray
+    size_source: str
+
+    @property
+    def n_taxtels(self) -> int:
+        """Number of taxtels, ``cols * rows``."""
+        return self.cols * self.rows
+
+    @property
+    def pixel_pitch_mm(self) -> tuple[float, float]:
+        """Pixel size along x and y, millimetres."""
+        return 1.0 / self.ppx, 1.0 / self.ppy
+
+    def tile_columns(self) -> np.ndarray:
+        """Image column of every pixel of every tile column, ``(cols * tile_w,)``, reflected."""
+        index = self.col_tile[:, None] + np.arange(self.tile_w)[None, :]
+        return reflect_index(index.ravel(), self.width_px)
+
+    def tile_rows(self, first: int = 0, stop: int | None = None) -> np.ndarray:
+        """Image row of every pixel of tile rows ``first:stop``, ``(n * tile_h,)``, reflected."""
+        index = self.row_tile[first:stop, None] + np.arange(self.tile_h)[None, :]
+        return reflect_index(index.ravel(), self.height_px)
+
+    def owned_mask(self, axis: str, first: int = 0, stop: int | None = None) -> np.ndarray:
+        """``(n, tile)`` booleans: which pixels of each tile (``axis`` ``"x"``: columns,
+        ``"y"``: rows ``first:stop``) belong to the tile's taxtel."""
+        if axis == "x":
+            start, tile, owned, size = self.col_start, self.col_tile, self.col_owned, self.tile_w
+        else:
+            start, tile, owned, size = self.row_start, self.row_tile, self.row_owned, self.tile_h
+        offset = (start - tile)[first:stop, None]
+        j = np.arange(size)[None, :]
+        return (j >= offset) & (j < offset + owned[first:stop, None])
+
+    def gather(
+        self, pixels: np.ndarray, first: int, stop: int, columns: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Tiles of taxtel rows ``first:stop``: array ``(stop-first, tile_h, cols, tile_w)``.
+
+        ``columns`` is :meth:`tile_columns` (pass it to avoid recomputing it per chunk). Runs
+        of consecutive pixels are copied as slices (a tiling of whole pixels is then a reshaped
+        view of the image), anything else is gathered with ``take``.
+        """
+        cols_index = self.tile_columns() if columns is None else columns
+        block = _select(pixels, self.tile_rows(first, stop), axis=0)
+        block = _select(block, cols_index, axis=1)
+        return block.reshape(stop - first, self.tile_h, self.cols, self.tile_w)
+
+
+def _select(array: np.ndarray, index: np.ndarray, axis: int) -> np.ndarray:
+    """``array.take(index, axis)``, as a view or a few slice copies when ``index`` consists of
+    a few runs of consecutive indices (the usual case), which is several times faster."""
+    breaks = np.flatnonzero(np.diff(index) != 1) + 1
+    if breaks.size > 4:
+        return array.take(index, axis=axis)
+    runs = np.split(index, breaks)
+    pieces = [
+        array[int(run[0]) : int(run[-1]) + 1]
+        if axis == 0
+        else array[:, int(run[0]) : int(run[-1]) + 1]
+        for run in runs
+    ]
+    return pieces[0] if len(pieces) == 1 else np.concatenate(pieces, axis=axis)
+
+
+def reflect_index(index: np.ndarray, size: int) -> np.ndarray:
+    """Map any integer pixel index onto ``0..size-1`` by mirror reflection at the edges.
+
+    Reflection excludes the edge pixel (``-1 -> 1``, ``size -> size-2``), like ``numpy.pad``'s
+    ``"reflect"`` mode, and repeats for indices beyond one image width.
+    """
+    index = np.asarray(index, dtype=np.int64)
+    if size == 1:
+        return np.zeros_like(index)
+    period = 2 * size - 2
+    folded = np.mod(index, period)
+    return np.where(folded >= size, period - folded, folded)
+
+
+def resolve_geometry(
+    width_px: int,
+    height_px: int,
+    *,
+    taxtel_mm: float,
+    width_mm: float | None = None,
+    height_mm: float | None = None,
+    dpi: float | None = None,
+    embedded_dpi: tuple[float, float] | None = None,
+    source: Path | str = "",
+) -> Geometry:
+    """The geometry of an image of ``width_px`` x ``height_px`` pixels.
+
+    The physical size comes from ``width_mm``/``height_mm`` (one of them keeps the aspect ratio
+    with square pixels; both allow rectangular pixels), else from ``dpi``, else from the file's
+    ``embedded_dpi``, else from :data:`DEFAULT_DPI`.
+
+    Raises:
+        ValueError: ``dpi`` given together with a width or height.
+        ImageError: the surface or the taxtel grid exceeds the card limits.
+    """
+    if dpi is not None and (width_mm is not None or height_mm is not None):
+        raise ValueError("give either a DPI or a width/height in millimetres, not both")
+    if width_mm is not None and height_mm is not None:
+        ppx, ppy = width_px / width_mm, height_px / height_mm
+        how = "from --width-mm and --height-mm"
+    elif width_mm is not None:
+        ppx = ppy = width_px / width_mm
+        how = "from --width-mm, square pixels"
+    elif height_mm is not None:
+        ppx = ppy = height_px / height_mm
+        how = "from --height-mm, square pixels"
+    elif dpi is not None:
+        ppx = ppy = dpi / MM_PER_INCH
+        how = f"from --dpi {dpi:g}"
+    elif embedded_dpi is not None:
+        ppx, ppy = embedded_dpi[0] / MM_PER_INCH, embedded_dpi[1] / MM_PER_INCH
+        how = f"from the DPI stored in the image ({embedded_dpi[0]:g} x {embedded_dpi[1]:g})"
+    else:
+        ppx = ppy = DEFAULT_DPI / MM_PER_INCH
+        how = f"assumed {DEFAULT_DPI:g} dpi: no size given and no DPI stored in the image"
+    surface_w, surface_h = width_px / ppx, height_px / ppy
+    prefix = f"{source}: " if str(source) else ""
+    if max(surface_w, surface_h) > limits.MAX_SURFACE_MM:
+        raise ImageError(
+            f"{prefix}the surface would be {surface_w:g} x {surface_h:g} mm ({how}), over the "
+            f"limit of {limits.MAX_SURFACE_MM:g} mm; give --width-mm/--height-mm or --dpi"
+        )
+    cols, rows = grid_count(surface_w, taxtel_mm), grid_count(surface_h, taxtel_mm)
+    if (
+        cols > limits.MAX_GRID_COLS
+        or rows > limits.MAX_GRID_ROWS
+        or cols * rows > limits.MAX_TAXTELS
+    ):
+        raise ImageError(
+            f"{prefix}{surface_w:g} x {surface_h:g} mm in {taxtel_mm:g} mm taxtels needs a "
+            f"{cols} x {rows} grid, over the card limits ({limits.MAX_GRID_COLS} x "
+            f"{limits.MAX_GRID_ROWS}, {limits.MAX_TAXTELS} taxtels); use a larger --taxtel-mm"
+        )
+    tile_w = max(1, math.ceil(taxtel_mm * ppx - 1e-9))
+    tile_h = max(1, math.ceil(taxtel_mm * ppy - 1e-9))
+    col_start, col_owned = _spans(cols, taxtel_mm * ppx, width_px, tile_w)
+    row_start, row_owned = _spans(rows, taxtel_mm * ppy, height_px, tile_h)
+    # Tiles end inside the image where it is large enough (see the module docstring).
+    col_tile = np.minimum(col_start, max(width_px - tile_w, 0))
+    row_tile = np.minimum(row_start, max(height_px - tile_h, 0))
+    return Geometry(
+        width_px=width_px,
+        height_px=height_px,
+        width_mm=surface_w,
+        height_mm=surface_h,
+        ppx=ppx,
+        ppy=ppy,
+        taxtel_mm=taxtel_mm,
+        cols=cols,
+        rows=rows,
+        tile_w=tile_w,
+        tile_h=tile_h,
+        col_start=col_start,
+        row_start=row_start,
+        col_owned=col_owned,
+        row_owned=row_owned,
+        col_tile=col_tile,
+        row_tile=row_tile,
+        size_source=how,
+    )
+
+
+def _spans(
+    count: int, taxtel_px: float, size_px: int, tile_px: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """First pixel and number of owned pixels of each of ``count`` taxtels along one axis.
+
+    Pixel ``j`` belongs to taxtel ``floor((j + 0.5) / taxtel_px)``, so taxtel ``c`` starts at
+    ``ceil(c * taxtel_px - 0.5)``.
+    """
+    edges = np.ceil(np.arange(count + 1) * taxtel_px - 0.5 - 1e-9).astype(np.int64)
+    edges = np.clip(edges, 0, size_px)
+    edges[-1] = size_px
+    start = np.minimum(edges[:-1], size_px - 1)
+    owned = np.clip(edges[1:] - edges[:-1], 0, tile_px)
+    return start, owned

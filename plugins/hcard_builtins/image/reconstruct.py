@@ -1,0 +1,137 @@
+"""Reconstruction error: the card rendered back at pixel resolution against the image.
+
+Every taxtel's palette texture is evaluated position-locked (absolute surface coordinates) at the
+centres of the pixels the taxtel owns. Per tile the texture is separable,
+
+    f(y_i, x_j) = b + sum_k Re(C_k e^{2 pi i ky_k y_i} e^{2 pi i kx_k x_j}),
+
+so a tile is one real matrix product ``[Re(C e_y), -Im(C e_y), b] @ [Re e_x; Im e_x; 1]`` with
+inner size ``2K + 1``; all tiles of a chunk go through one batched ``matmul``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .geometry import Geometry
+from .palette import Palette
+
+
+@dataclass(frozen=True)
+class ReconstructionError:
+    """Difference between the card and the image, relative friction units, over all pixels.
+
+    Attributes:
+        rms: root-mean-square error.
+        max: largest absolute error.
+        pixels: number of pixels compared.
+    """
+
+    rms: float
+    max: float
+    pixels: int
+
+
+@dataclass(frozen=True)
+class FrictionMap:
+    """Linear map from gray levels to relative friction: ``friction = high - scale * gray``."""
+
+    high: float
+    scale: float
+
+
+def render_tiles(
+    palette: Palette, geometry: Geometry, first: int, stop: int, mapping: FrictionMap
+) -> np.ndarray:
+    """The card's gray levels (the inverse of ``mapping``) on the tiles of taxtel rows
+    ``first:stop``: array ``((stop-first) * cols, tile_h, tile_w)``, float32.
+
+    Tiles are grouped by the number of components of their texture, so that each group's
+    matrix product is no wider than it needs to be; baseline-only tiles are just filled.
+    """
+    cols, nh, nw = geometry.cols, geometry.tile_h, geometry.tile_w
+    textures = palette.textures
+    index = palette.index[first * cols : stop * cols]
+    tile_row = np.repeat(np.arange(first, stop), cols)
+    tile_col = np.tile(np.arange(cols), stop - first)
+    # Gray-level palette: gray = (high - friction) / scale.
+    baseline = (mapping.high - textures.baseline) / mapping.scale
+    coef = np.where(textures.valid, -textures.coef / mapping.scale, 0.0)
+    count = textures.valid.sum(axis=1)[index]
+    out = np.empty((index.size, nh, nw), dtype=np.float32)
+    for slots in np.unique(count):
+        tiles = np.nonzero(count == slots)[0]
+        p, r, c = index[tiles], tile_row[tiles], tile_col[tiles]
+        if slots == 0:
+            out[tiles] = baseline[p][:, None, None]
+            continue
+        # Left factor per (texture, tile row), right factor per (texture, tile column):
+        # computed once for each pair in use, then gathered per tile.
+        rows_used, row_of_tile = np.unique(p * geometry.rows + r, return_inverse=True)
+        cols_used, col_of_tile = np.unique(p * geometry.cols + c, return_inverse=True)
+        p_row, r_used = rows_used // geometry.rows, rows_used % geometry.rows
+        p_col, c_used = cols_used // geometry.cols, cols_used % geometry.cols
+        y = (geometry.row_tile[r_used][:, None] + 0.5 + np.arange(nh)[None, :]) / geometry.ppy
+        x = (geometry.col_tile[c_used][:, None] + 0.5 + np.arange(nw)[None, :]) / geometry.ppx
+        # Cycles, reduced modulo 1 in double precision before the (single precision) factors.
+        turns_y = np.mod(textures.k[p_row, :slots, 1][:, :, None] * y[:, None, :], 1.0)
+        turns_x = np.mod(textures.k[p_col, :slots, 0][:, :, None] * x[:, None, :], 1.0)
+        wave_y = coef[p_row, :slots][:, :, None] * np.exp(2j * np.pi * turns_y)
+        wave_x = np.exp(2j * np.pi * turns_x)
+        left = np.empty((rows_used.size, nh, 2 * slots + 1), dtype=np.float32)
+        right = np.empty((cols_used.size, 2 * slots + 1, nw), dtype=np.float32)
+        left[:, :, :slots] = wave_y.real.transpose(0, 2, 1)
+        left[:, :, slots : 2 * slots] = -wave_y.imag.transpose(0, 2, 1)
+        left[:, :, 2 * slots] = baseline[p_row][:, None]
+        right[:, :slots, :] = wave_x.real
+        right[:, slots : 2 * slots, :] = wave_x.imag
+        right[:, 2 * slots, :] = 1.0
+        out[tiles] = np.matmul(left[row_of_tile.ravel()], right[col_of_tile.ravel()])
+    return out
+
+
+def reconstruction_error(
+    pixels: np.ndarray,
+    geometry: Geometry,
+    palette: Palette,
+    mapping: FrictionMap,
+    *,
+    chunk_pixels: int = 1 << 22,
+) -> ReconstructionError:
+    """RMS and maximum of (card - image) in relative friction over the image's pixels.
+
+    Args:
+        pixels: gray levels of the image (as analysed).
+        geometry: the tiling used for the card.
+        palette: palette and taxtel indices of the card.
+        mapping: gray to friction map used for the card.
+        chunk_pixels: work on about this many pixels at a time (bounds memory).
+    """
+    cols, nh, nw = geometry.cols, geometry.tile_h, geometry.tile_w
+    columns = geometry.tile_columns()
+    col_owned = geometry.owned_mask("x")
+    col_mask = col_owned.astype(np.float32)
+    cols_complete = bool(col_owned.all())
+    step = max(1, chunk_pixels // (nh * nw * cols))
+    squares = 0.0
+    largest = 0.0
+    for first in range(0, geometry.rows, step):
+        stop = min(geometry.rows, first + step)
+        tiles = geometry.gather(pixels, first, stop, columns).transpose(0, 2, 1, 3)
+        error = render_tiles(palette, geometry, first, stop, mapping).reshape(tiles.shape)
+        np.subtract(tiles, error, out=error)  # (rows, cols, tile_h, tile_w), in place
+        row_owned = geometry.owned_mask("y", first, stop)
+        if not row_owned.all():
+            error *= row_owned.astype(np.float32)[:, None, :, None]
+        if not cols_complete:
+            error *= col_mask[None, :, None, :]
+        per_tile = np.einsum("abij,abij->ab", error, error)
+        squares += float(np.sum(per_tile, dtype=np.float64))
+        largest = max(largest, float(error.max()), float(-error.min()))
+    count = int(geometry.row_owned.sum()) * int(geometry.col_owned.sum())
+    scale = mapping.scale
+    return ReconstructionError(
+        rms=scale * float(np.sqrt(squares / max(count, 1))), max=scale * largest, pixels=count
+    )
