@@ -26,8 +26,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-from hcard_builtins.image import encode_image
 from PIL import Image
+
+from hcard_builtins.image import encode_image
 
 PIXELS_PER_MM = 10.0
 AIM = 3.0

@@ -9,6 +9,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from PIL import Image
+
+import hcard
+from hcard import limits
+from hcard.errors import ImageError
+from hcard.v1 import card_pb2 as pb
+from hcard.validate import errors_of, validate
 from hcard_builtins import encoders
 from hcard_builtins.image import (
     DEFAULT_FRICTION_RANGE,
@@ -19,13 +26,6 @@ from hcard_builtins.image import (
     load_gray,
 )
 from hcard_builtins.image.palette import Textures, distances_from
-from PIL import Image
-
-import hcard
-from hcard import limits
-from hcard.errors import ImageError
-from hcard.v1 import card_pb2 as pb
-from hcard.validate import errors_of, validate
 
 PITCH_MM = 0.1  # 254 dpi
 UV_LOW, UV_HIGH = DEFAULT_FRICTION_RANGE["uv"]
