@@ -24,6 +24,9 @@ from hcard.render.options import PASSBAND_FRACTION, RenderMode, RenderOptions
 from hcard.render.touch import TouchTable
 
 MAX_RELATIVE_FRICTION = 4.0
+RUN_MODE_MIN_FRAMES = 256
+"""Evaluate runs of frames in time order when texture runs average at least this many frames;
+below, sort the frames by texture first (fewer, larger kernel calls)."""
 TWO_PI_F32 = np.float32(2.0 * np.pi)
 
 
@@ -111,9 +114,10 @@ def frame_state(
     # Every phase input is affine in the time since the sample: gather both coefficients once.
     start, rate = _sample_coefficients(table, options)
     reckon = np.minimum(times - np.take(table.t, i), options.dead_reckoning_s)
-    # np.take is several times faster than fancy indexing for row gathers.
-    inputs = np.take(start, i, axis=0, out=workspace.inputs[:n])
-    travel = np.take(rate, i, axis=0, out=workspace.rate[:n])
+    # np.take is several times faster than fancy indexing for row gathers; with ``out`` it
+    # needs mode="clip" (the indices are in range) to avoid a buffered slow path.
+    inputs = np.take(start, i, axis=0, out=workspace.inputs[:n], mode="clip")
+    travel = np.take(rate, i, axis=0, out=workspace.rate[:n], mode="clip")
     np.multiply(travel, reckon[:, None], out=travel)
     np.add(inputs, travel, out=inputs)
     inputs[:, 4] += times
@@ -208,22 +212,32 @@ def evaluate_frames(
         unwrapped turns (NaN where a frame has no such component) or None.
     """
     n = state.texture.shape[0]
-    order = np.argsort(state.texture, kind="stable")
-    sorted_textures = np.take(state.texture, order)
-    starts = np.flatnonzero(np.diff(sorted_textures, prepend=-2))
-    ends = np.append(starts[1:], n)
-    inputs = np.take(state.phase_inputs, order, axis=0, out=workspace.sorted_inputs[:n])
-    speed = np.take(state.speed, order)
     columns = list(card.channel_groups)
-    # Work in texture-sorted order, where each texture's frames are one contiguous slice.
-    deviation_sorted = workspace.matrix("deviation", n, len(columns))
-    deviation_sorted.fill(0.0)
-    phase_sorted = np.full((n, card.max_components), np.nan) if with_phase else None
+    change = np.flatnonzero(np.diff(state.texture)) + 1
+    if change.size * RUN_MODE_MIN_FRAMES <= n:
+        # Few texture changes: evaluate each run of frames in place, in time order.
+        order = None
+        inputs, speed, textures = state.phase_inputs, state.speed, state.texture
+        starts = np.concatenate(([0], change))
+    else:
+        # Many changes: sort the frames by texture so each texture is one contiguous slice.
+        order = np.argsort(state.texture, kind="stable")
+        textures = np.take(state.texture, order)
+        starts = np.flatnonzero(np.diff(textures, prepend=-2))
+        inputs = np.take(
+            state.phase_inputs, order, axis=0, out=workspace.sorted_inputs[:n], mode="clip"
+        )
+        speed = np.take(state.speed, order)
+    ends = np.append(starts[1:], n)
+    deviation = workspace.matrix("deviation", n, len(columns))
+    deviation.fill(0.0)
+    phase = np.full((n, card.max_components), np.nan) if with_phase else None
     for start, end in zip(starts, ends, strict=True):
-        index = int(sorted_textures[start])
+        index = int(textures[start])
         if index < 0:
             continue
-        samples = np.take(state.sample, order[start:end])
+        rows = slice(start, end) if order is None else order[start:end]
+        samples = state.sample[rows]
         _texture_deviation(
             card.textures[index],
             columns,
@@ -232,13 +246,14 @@ def evaluate_frames(
             speed[start:end],
             options,
             workspace,
-            deviation_sorted[start:end],
-            None if phase_sorted is None else phase_sorted[start:end],
+            deviation[start:end],
+            None if phase is None else phase[start:end],
         )
-    inverse = np.empty_like(order)
-    inverse[order] = np.arange(n)
-    deviation = np.take(deviation_sorted, inverse, axis=0)
-    phase = None if phase_sorted is None else np.take(phase_sorted, inverse, axis=0)
+    if order is not None:
+        inverse = np.empty_like(order)
+        inverse[order] = np.arange(n)
+        deviation = np.take(deviation, inverse, axis=0)
+        phase = None if phase is None else np.take(phase, inverse, axis=0)
     return (*split_channels(deviation, columns), phase)
 
 
