@@ -29,9 +29,16 @@ def _show_warning(message: Warning | str, category: type[Warning], *_args: Any, 
 
 
 def _register_commands() -> None:
-    from hcard.cli import card_cmds, encode_cmd, plugins_cmd, preview_cmd, render_cmd
+    from hcard.cli import (
+        card_cmds,
+        encode_cmd,
+        plugins_cmd,
+        predict_cmd,
+        preview_cmd,
+        render_cmd,
+    )
 
-    for module in (encode_cmd, card_cmds, render_cmd, preview_cmd, plugins_cmd):
+    for module in (encode_cmd, card_cmds, render_cmd, preview_cmd, predict_cmd, plugins_cmd):
         for command in module.COMMANDS:
             cli.add_command(command)
 
