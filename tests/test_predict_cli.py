@@ -73,10 +73,14 @@ def test_table_has_unit_columns_and_the_fixed_inputs():
     lines = result.output.splitlines()
     assert lines[0] == (f"# {DIMENSIONLESS}: frequency = 27.5 kHz, speed = 50 mm/s, "
                         "normal_force = 0.5 N")
-    assert lines[1].split() == ["amplitude", "[m]", "relative_friction", "[-]"]
+    # The table shows each column in a readable unit (the CSV stays in SI).
+    assert lines[1].split() == ["amplitude", "[µm]", "relative_friction", "[-]"]
     values = np.array([line.split() for line in lines[2:]], dtype=float)
-    assert values[0].tolist() == [0.0, 1.0]  # no vibration, natural friction
-    np.testing.assert_allclose(values[1:, 1], closed_form(values[1:, 0], speed=0.05), rtol=1e-5)
+    assert values[:, 0].tolist() == [0.0, 1.0, 2.0, 3.0, 4.0, 5.0]
+    assert values[0, 1] == 1.0  # no vibration, natural friction
+    np.testing.assert_allclose(
+        values[1:, 1], closed_form(values[1:, 0] * 1e-6, speed=0.05), rtol=1e-5
+    )
 
 
 def test_single_point_with_parameters_in_units():

@@ -120,9 +120,10 @@ class Prediction:
                 return item.unit
         raise PredictorError(f"{self.predictor.name}: no input or parameter {name!r}")
 
-    def columns(self, *, all_inputs: bool) -> tuple[list[str], np.ndarray]:
+    def columns(self, *, all_inputs: bool, readable: bool = False) -> tuple[list[str], np.ndarray]:
         """Headers and rows: the swept variable (and, with ``all_inputs``, every fixed input),
-        then the output."""
+        then the output; SI units, or with ``readable`` each column in a unit that suits its
+        values (um for plate amplitudes, mm/s for speeds), as in the plot."""
         count = self.output.size
         names: list[str] = []
         data: list[np.ndarray] = []
@@ -136,6 +137,12 @@ class Prediction:
         out = self.predictor.output
         names.append(column(out.name, out.unit))
         data.append(self.output.reshape(count))
+        if readable:
+            for i, (name, values) in enumerate(zip(names, data, strict=True)):
+                label, unit = name.rsplit(" [", 1)
+                unit = unit.rstrip("]")
+                scale, shown = display_unit("" if unit == "-" else unit, values)
+                names[i], data[i] = column(label, shown), values / scale
         return names, np.column_stack(data)
 
     def description(self) -> str:
@@ -434,7 +441,7 @@ def predict(model: str | None, params: tuple[str, ...], inputs: tuple[str, ...],
         _write(output, to_csv(headers, rows))
         click.echo(f"{output}: {len(rows)} rows ({prediction.description()})")
     else:
-        headers, rows = prediction.columns(all_inputs=False)
+        headers, rows = prediction.columns(all_inputs=False, readable=True)
         if prediction.sweep is not None:
             click.echo(f"# {prediction.description()}")
         click.echo(format_table(headers, rows))
