@@ -1,0 +1,153 @@
+"""The EV amplifier: a voltage envelope on a sinusoidal carrier, with its limits (section 4.2.1).
+
+The amplifier drives ``v(t) = V(t) sin(2 pi f_c t)`` (``f_c`` = 440 Hz on the coupled stimulator)
+into the capacitance ``C`` the finger and the insulator form (Eq. 3.8, about 33 pF; 0 without
+contact). The current through the user is ``i = C dv/dt``; for a steady carrier of peak ``V``
+its peak is ``I = 2 pi f_c C V``. Over one frame of length ``dt`` in which the envelope moves
+linearly from ``V_prev`` to ``V``, ``|dv/dt| <= w max(V, V_prev) + |V - V_prev| / dt``
+(``w = 2 pi f_c``), so the reported peak current of the frame is
+
+    I_k = C (w max(V_k, V_{k-1}) + |V_k - V_{k-1}| / dt),
+
+an upper bound of the true peak (the limiter holds it at ``I_max`` in the frames where it
+saturates, below). With the rate budget ``R = min(S, I_max / C)`` (``S`` the
+output slew-rate limit, V/s) the envelope obeys, frame by frame::
+
+    V_k <= V_max,
+    V_k <= (R + V_{k-1} / dt) / (w + 1 / dt)      (rising: C (w V_k + dV/dt) <= I_max),
+    V_k >= V_{k-1} - dt (R - w V_{k-1})           (falling: C (w V_{k-1} + |dV/dt|) <= I_max),
+
+so the current never exceeds ``I_max`` and the output never slews faster than ``S``. A load
+that grows faster than the present voltage allows (a large contact landing on a live plate,
+``w C V_{k-1} > I_max``), or a voltage limit lowered under the present envelope, puts the
+limiter in hard limit for that frame: the envelope collapses to the new bound while the current
+is held at ``I_max``. The voltage and the current therefore never exceed their limits.
+
+The recursion is exact; it runs vectorised wherever the clipped command already satisfies the
+rate bounds (smooth envelopes) and sample by sample only through the frames where a bound binds.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+_SLACK = 1e-9
+"""Relative margin kept under the current limit against rounding."""
+
+
+@dataclass(frozen=True)
+class AmplifierRun:
+    """Result of :meth:`EVAmplifier.run` over N frames.
+
+    Attributes:
+        voltage: (N,) peak voltage envelope, V.
+        current: (N,) peak current through the user, A.
+        voltage_limited: (N,) the envelope was held below the command by the voltage or slew
+            limit.
+        current_limited: (N,) the envelope was held below the command by the current limit.
+    """
+
+    voltage: np.ndarray
+    current: np.ndarray
+    voltage_limited: np.ndarray
+    current_limited: np.ndarray
+
+
+class EVAmplifier:
+    """The EV amplifier's envelope, limits and user current; the envelope carries over runs.
+
+    Args:
+        carrier_hz: carrier frequency ``f_c``, Hz.
+        frame_rate_hz: frames per second (the envelope is updated once a frame), Hz.
+        max_voltage_v: voltage limit, V.
+        max_current_a: current limit, A.
+        slew_v_per_s: output slew-rate limit, V/s.
+    """
+
+    def __init__(
+        self,
+        carrier_hz: float,
+        frame_rate_hz: float,
+        max_voltage_v: float,
+        max_current_a: float,
+        slew_v_per_s: float,
+    ) -> None:
+        self.omega = 2.0 * math.pi * carrier_hz
+        self.dt = 1.0 / frame_rate_hz
+        self.max_voltage_v = max_voltage_v
+        self.max_current_a = max_current_a
+        self.slew_v_per_s = slew_v_per_s
+        self.voltage_v = 0.0
+
+    def reset(self) -> None:
+        """Output at zero."""
+        self.voltage_v = 0.0
+
+    def _budget(self, capacitance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rate budget ``R`` (V/s) and whether the current (not the slew) sets it."""
+        limit = self.max_current_a * (1.0 - _SLACK)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            by_current = np.where(capacitance > 0, limit / capacitance, np.inf)
+        return np.minimum(self.slew_v_per_s, by_current), by_current < self.slew_v_per_s
+
+    def run(self, command: np.ndarray, capacitance: np.ndarray) -> AmplifierRun:
+        """Advance over ``len(command)`` frames.
+
+        Args:
+            command: (N,) commanded peak envelope, V (negative and NaN read as 0).
+            capacitance: (N,) load capacitance through the user, F (0 without contact).
+        """
+        cmd = np.nan_to_num(np.asarray(command, dtype=np.float64), nan=0.0)
+        np.maximum(cmd, 0.0, out=cmd)
+        cap = np.maximum(np.asarray(capacitance, dtype=np.float64), 0.0)
+        n = cmd.shape[0]
+        budget, by_current = self._budget(cap)
+        w, dt = self.omega, self.dt
+        steady = np.minimum(self.max_voltage_v, budget / w)
+        target = np.minimum(cmd, steady)
+        volts = np.empty(n)
+        hard = np.zeros(n, dtype=bool)
+        k, prev = 0, self.voltage_v
+        start = prev
+        while k < n:
+            # Vectorised pass: the clipped command, checked against the rate bounds.
+            v = target[k:]
+            before = np.concatenate(([prev], v[:-1]))
+            hi = (budget[k:] + before / dt) / (w + 1.0 / dt)
+            lo = before - dt * (budget[k:] - w * before)
+            bad = (v > hi * (1 + 1e-12)) | (v < lo * (1 - 1e-12))
+            j = int(np.argmax(bad)) if bad.any() else v.shape[0]
+            volts[k : k + j] = v[:j]
+            if j:
+                prev = float(v[j - 1])
+            k += j
+            # Sample by sample while a rate bound binds.
+            while k < n:
+                b = float(budget[k])
+                if w * prev > b or prev > self.max_voltage_v:
+                    # The load outgrew the voltage, or the limit fell under it: the limiter
+                    # saturates and the envelope collapses within the frame.
+                    value = float(steady[k])
+                    hard[k] = True
+                else:
+                    high = (b + prev / dt) / (w + 1.0 / dt)
+                    low = prev - dt * (b - w * prev)
+                    value = min(max(float(target[k]), low), high)
+                volts[k] = value
+                prev = value
+                k += 1
+                if value == target[k - 1]:
+                    break
+        self.voltage_v = prev
+        before = np.concatenate(([start], volts[:-1]))
+        current = cap * (w * np.maximum(volts, before) + np.abs(volts - before) / dt)
+        np.minimum(current, self.max_current_a, out=current, where=hard)
+        held = volts < cmd * (1.0 - 1e-9)
+        at_voltage_limit = volts >= self.max_voltage_v * (1.0 - 1e-9)
+        hard_current = hard & (w * before * cap > self.max_current_a * (1.0 - _SLACK))
+        current_limited = hard_current | (held & ~at_voltage_limit & by_current)
+        voltage_limited = (held | hard) & ~current_limited
+        return AmplifierRun(volts, current, voltage_limited, current_limited)

@@ -1,0 +1,154 @@
+"""What a card asks that a device cannot render: the clip report of ``load_card``.
+
+For each texture the grid uses, the extreme targets follow from its baseline and component
+amplitudes per channel group (the renderer's split, spec rule R-split, Eq. 4.1)::
+
+    uv_min = clip(1 + b_uv - A_uv, 0, 1) * min(clip(1 + b_bip - A_bip, 0, 4), 1)
+    ev_max = min(clip(1 + b_ev + A_ev, 1, 4) * max(clip(1 + b_bip + A_bip, 0, 4), 1), 4)
+
+(``b`` the baseline deviation and ``A`` the summed amplitudes of each group; reached when the
+components line up, so the report is conservative). They are checked at a reference finger state
+(:data:`REFERENCE_SPEED_M_S`, :data:`REFERENCE_FORCE_N`) against what the device profile can
+render at its limits: the UV target needs an amplitude that grows with the finger speed
+(velocity compensation, Eq. 2.30), the EV target a voltage that grows with the normal force
+(``F_e = (ev - 1) Fn``, Eq. 4.1). A channel the device lacks clips every target off neutral.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hcard.physics.profile import DeviceProfile
+from hcard.v1 import card_pb2 as pb
+
+REFERENCE_SPEED_M_S = 0.120
+"""Finger speed of the report, m/s: the top of the 10-120 mm/s exploration range (section
+1.4.2.3, [28]); the UV amplitude needed grows with speed."""
+REFERENCE_FORCE_N = 0.5
+"""Normal force of the report, N (the track default; the EV force needed grows with it)."""
+_TOLERANCE = 1e-9
+
+_GROUP = {pb.CHANNEL_UV: 0, pb.CHANNEL_EV: 1, pb.CHANNEL_BIPOLAR: 2}
+
+
+@dataclass(frozen=True)
+class ClipItem:
+    """One texture target the device cannot render.
+
+    Attributes:
+        texture: palette index.
+        name: texture name.
+        channel: ``"uv"`` or ``"ev"``.
+        reason: what limits it, in words.
+        target: the extreme relative friction the texture asks for.
+        achievable: the closest the device renders at the reference state.
+    """
+
+    texture: int
+    name: str
+    channel: str
+    reason: str
+    target: float
+    achievable: float
+
+    def __str__(self) -> str:
+        label = f"texture {self.texture}" + (f" ({self.name})" if self.name else "")
+        return (
+            f"{label}, {self.channel.upper()}: asks {self.target:.3f}, renders "
+            f"{self.achievable:.3f} ({self.reason})"
+        )
+
+
+@dataclass(frozen=True)
+class ClipReport:
+    """What a loaded card asks beyond the device (empty: it renders as written).
+
+    Attributes:
+        items: one entry per texture and channel that clips.
+        reference_speed_m_s: finger speed the targets were checked at, m/s.
+        reference_force_n: normal force they were checked at, N.
+    """
+
+    items: tuple[ClipItem, ...] = ()
+    reference_speed_m_s: float = REFERENCE_SPEED_M_S
+    reference_force_n: float = REFERENCE_FORCE_N
+
+    @property
+    def clipped(self) -> bool:
+        """True when some target cannot be rendered."""
+        return bool(self.items)
+
+    def summary(self) -> str:
+        """One line per item, or a line saying nothing clips."""
+        if not self.items:
+            return "the device renders every texture of the card"
+        head = (
+            f"at {self.reference_speed_m_s * 1e3:g} mm/s and {self.reference_force_n:g} N "
+            "the device cannot render:"
+        )
+        return "\n".join([head, *(f"  {item}" for item in self.items)])
+
+    def __str__(self) -> str:
+        return self.summary()
+
+
+def texture_extremes(texture: pb.Texture) -> tuple[float, float]:
+    """``(uv_min, ev_max)`` the texture can ask for (module formula)."""
+    base = np.zeros(3)
+    amp = np.zeros(3)
+    base[_GROUP[texture.channel]] = texture.baseline - 1.0
+    for comp in texture.components:
+        amp[_GROUP[comp.channel or texture.channel]] += abs(comp.amplitude)
+    uv = float(np.clip(1 + base[0] - amp[0], 0, 1) * min(np.clip(1 + base[2] - amp[2], 0, 4), 1))
+    ev = float(
+        min(np.clip(1 + base[1] + amp[1], 1, 4) * max(np.clip(1 + base[2] + amp[2], 0, 4), 1), 4)
+    )
+    return uv, ev
+
+
+def clip_report(
+    card: pb.Card,
+    profile: DeviceProfile,
+    *,
+    speed_m_s: float = REFERENCE_SPEED_M_S,
+    force_n: float = REFERENCE_FORCE_N,
+) -> ClipReport:
+    """The clip report of ``card`` on the device ``profile`` (its limits included)."""
+    used = sorted({int(i) for i in card.grid.texture_index if 0 <= i < len(card.textures)})
+    items: list[ClipItem] = []
+    limits = profile.limits
+    for index in used:
+        texture = card.textures[index]
+        uv_min, ev_max = texture_extremes(texture)
+        if uv_min < 1.0 - _TOLERANCE:
+            if profile.uv_model is None or limits.max_amplitude <= 0:
+                items.append(ClipItem(index, texture.name, "uv", "no UV channel", uv_min, 1.0))
+            else:
+                best = float(profile.uv_for(limits.max_amplitude, speed_m_s, force_n))
+                if best > uv_min + _TOLERANCE:
+                    needed = float(
+                        profile.amplitude_for(max(uv_min, 1e-6), speed_m_s, force_n)
+                    )
+                    items.append(ClipItem(
+                        index, texture.name, "uv",
+                        f"needs {needed * 1e6:.2f} um > max_amplitude "
+                        f"{limits.max_amplitude * 1e6:.2f} um",
+                        uv_min, best,
+                    ))
+        if ev_max > 1.0 + _TOLERANCE:
+            voltage_limit, limit_name = profile.voltage_limit
+            if profile.ev_model is None or voltage_limit <= 0:
+                items.append(ClipItem(index, texture.name, "ev", "no EV channel", ev_max, 1.0))
+            else:
+                force = float(profile.force_for(voltage_limit))
+                best = 1.0 + force / force_n
+                if best < ev_max - _TOLERANCE:
+                    needed = float(profile.voltage_for((ev_max - 1.0) * force_n))
+                    items.append(ClipItem(
+                        index, texture.name, "ev",
+                        f"needs {needed:.0f} V > {limit_name} bound {voltage_limit:.0f} V",
+                        ev_max, best,
+                    ))
+    return ClipReport(tuple(items), speed_m_s, force_n)

@@ -1,0 +1,198 @@
+"""The simulated finger: where it is (kinematics) and what it feels (physics).
+
+Kinematics (:class:`TrackFinger`, :class:`HostFinger`): the finger's true state at each frame --
+position (mm), normal force (N), contact and sliding speed (m/s) -- from a
+:class:`~hcard.track.FingerTrack` it follows (linear between samples) or from the latest state a
+host reported. A finger outside the surface is off the plate.
+
+Physics (:class:`FingerPhysics`), built from the predictors of :mod:`.models`:
+
+- the friction felt is the coupled forward map (Eq. 4.1) of the measured plate amplitude and EV
+  envelope at the finger's true speed and force:
+  ``friction = mu'(w, U, Fn) * (1 + <F_e(V)> / Fn)``, ``mu'`` from the dimensionless group
+  (Eqs. 2.30-2.33), ``<F_e>`` the carrier-averaged Kaczmarek force through the leakage gain
+  (Eqs. 3.12, 3.22-3.23; the envelope is taken as slow against the carrier);
+- the lateral force a tribometer measures is ``F_t = mu_f * friction * Fn`` plus its noise, with
+  ``mu_f = F_l / Fn`` the bare finger's friction coefficient (load power law Eq. 1.7/2.35,
+  occlusion Fig. 1.11, speed peak Fig. 1.12; :class:`FingerFriction`), so that
+  ``F_t = mu(w) (Fn + F_e)`` (Eq. 4.1).
+
+Without contact the friction reads 1 (neutral) and the tribometer reads its noise only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hcard.physics.profile import DeviceProfile
+from hcard.track import FingerTrack
+from hcard_builtins.physics.finger import FingerFriction
+
+MM = 1e-3
+"""Metres per millimetre."""
+
+
+@dataclass(frozen=True)
+class FingerTruth:
+    """True finger state at N frame times.
+
+    Attributes:
+        x_mm, y_mm: position, mm.
+        fn_n: normal force on the plate, N (0 off the plate).
+        contact: the finger touches the plate.
+        speed_m_s: sliding speed, m/s.
+        contact_time_s: time since the touch-down of the current contact, s.
+    """
+
+    x_mm: np.ndarray
+    y_mm: np.ndarray
+    fn_n: np.ndarray
+    contact: np.ndarray
+    speed_m_s: np.ndarray
+    contact_time_s: np.ndarray
+
+    @staticmethod
+    def absent(n: int) -> FingerTruth:
+        """No finger on the plate for ``n`` frames."""
+        zeros = np.zeros(n)
+        return FingerTruth(zeros, zeros.copy(), zeros.copy(), np.zeros(n, dtype=bool),
+                           zeros.copy(), zeros.copy())
+
+
+def _on_plate(
+    x: np.ndarray, y: np.ndarray, contact: np.ndarray, surface_mm: tuple[float, float]
+) -> np.ndarray:
+    width, height = surface_mm
+    return contact & (x >= 0) & (x <= width) & (y >= 0) & (y <= height)
+
+
+class TrackFinger:
+    """A finger following a track; track time ``track.t[0]`` falls at simulation time
+    ``start_s``. Before the track and after its last sample the finger is off the plate.
+
+    Args:
+        track: the touch samples to follow.
+        start_s: simulation time of the track's first sample, s.
+        surface_mm: the plate's (width, height), mm.
+    """
+
+    def __init__(self, track: FingerTrack, start_s: float, surface_mm: tuple[float, float]):
+        self.t = track.t - track.t[0] + start_s
+        self.x, self.y, self.fn = track.x, track.y, track.fn
+        self.contact = track.contact
+        self.surface_mm = surface_mm
+        previous = np.concatenate(([False], self.contact[:-1]))
+        touchdown = self.contact & ~previous
+        self.touchdown_t = np.where(touchdown, self.t, -np.inf)
+        np.maximum.accumulate(self.touchdown_t, out=self.touchdown_t)
+        dt = np.diff(self.t)
+        self.speed = np.zeros(len(track))
+        if len(track) > 1:
+            self.speed[:-1] = np.hypot(np.diff(self.x), np.diff(self.y)) / dt * MM
+
+    @property
+    def end_s(self) -> float:
+        """Simulation time of the track's last sample, s."""
+        return float(self.t[-1])
+
+    def state(self, times: np.ndarray) -> FingerTruth:
+        """True state at ``times`` (s): position and force interpolated linearly, contact and
+        speed of the segment the time falls in."""
+        i = np.searchsorted(self.t, times, side="right") - 1
+        inside = (i >= 0) & (times <= self.t[-1])
+        j = np.clip(i, 0, len(self.t) - 1)
+        x = np.interp(times, self.t, self.x)
+        y = np.interp(times, self.t, self.y)
+        fn = np.maximum(np.interp(times, self.t, self.fn), 0.0)
+        contact = _on_plate(x, y, inside & self.contact[j], self.surface_mm)
+        speed = np.where(contact, self.speed[j], 0.0)
+        contact_time = np.where(contact, times - self.touchdown_t[j], 0.0)
+        return FingerTruth(x, y, np.where(contact, fn, 0.0), contact, speed, contact_time)
+
+
+class HostFinger:
+    """A finger whose state the host reports (touch sensing on the host side); between reports
+    the last reported state holds, and the speed is that of the last two reports of a contact.
+
+    Args:
+        surface_mm: the plate's (width, height), mm.
+    """
+
+    def __init__(self, surface_mm: tuple[float, float]) -> None:
+        self.surface_mm = surface_mm
+        self.t = self.x = self.y = self.fn = 0.0
+        self.contact = False
+        self.speed_m_s = 0.0
+        self.touchdown_s = 0.0
+
+    def update(self, t: float, x: float, y: float, fn: float, contact: bool) -> None:
+        """A new report at time ``t`` (s), later than the previous one."""
+        if contact and self.contact and t > self.t:
+            self.speed_m_s = float(np.hypot(x - self.x, y - self.y)) / (t - self.t) * MM
+        else:
+            self.speed_m_s = 0.0
+        if contact and not self.contact:
+            self.touchdown_s = t
+        self.t, self.x, self.y, self.fn, self.contact = t, x, y, max(fn, 0.0), contact
+
+    def state(self, times: np.ndarray) -> FingerTruth:
+        """The held state at ``times`` (s)."""
+        n = times.shape[0]
+        on = bool(_on_plate(np.array([self.x]), np.array([self.y]), np.array([self.contact]),
+                            self.surface_mm)[0])
+        return FingerTruth(
+            np.full(n, self.x),
+            np.full(n, self.y),
+            np.full(n, self.fn if on else 0.0),
+            np.full(n, on),
+            np.full(n, self.speed_m_s if on else 0.0),
+            np.where(on, np.maximum(times - self.touchdown_s, 0.0), 0.0),
+        )
+
+
+class FingerPhysics:
+    """What the finger feels and what a tribometer under it measures.
+
+    Args:
+        profile: the device's predictors (its forward map is the coupled model, Eq. 4.1).
+        lateral_noise_n: standard deviation of the tribometer, N.
+        rng: random generator of the tribometer noise.
+        finger: the bare finger's friction model (default :class:`FingerFriction`).
+    """
+
+    def __init__(
+        self,
+        profile: DeviceProfile,
+        lateral_noise_n: float,
+        rng: np.random.Generator,
+        finger: FingerFriction | None = None,
+    ) -> None:
+        self.profile = profile
+        self.lateral_noise_n = lateral_noise_n
+        self.rng = rng
+        self.finger = finger if finger is not None else FingerFriction()
+
+    def friction(
+        self, amplitude_m: np.ndarray, voltage_v: np.ndarray, truth: FingerTruth
+    ) -> np.ndarray:
+        """Relative friction felt ``F_t / (mu0 Fn)`` (Eq. 4.1) per frame; 1 without contact."""
+        if not truth.contact.any():
+            return np.ones(truth.contact.shape[0])
+        uv, ev = self.profile.forward(amplitude_m, voltage_v, truth.speed_m_s, truth.fn_n)
+        return np.where(truth.contact, uv * ev, 1.0)
+
+    def lateral_force(self, friction: np.ndarray, truth: FingerTruth) -> np.ndarray:
+        """Lateral force a tribometer measures, N: ``mu_f friction Fn`` plus noise."""
+        n = friction.shape[0]
+        force = np.zeros(n)
+        pressing = truth.contact & (truth.fn_n > 0)
+        if pressing.any():
+            mu = self.finger.friction_coefficient(
+                normal_force=truth.fn_n[pressing],
+                speed=truth.speed_m_s[pressing],
+                contact_time=truth.contact_time_s[pressing],
+            )
+            force[pressing] = mu * friction[pressing] * truth.fn_n[pressing]
+        return force + self.rng.normal(0.0, 1.0, size=n) * self.lateral_noise_n

@@ -1,0 +1,187 @@
+"""The E-ViTa's sensors (thesis section 5.1.1): a 50 Hz capacitive touch screen and four
+resistive force sensors under the corners of the plate.
+
+Touch: the panel samples the finger at its own clock (``k / f_touch``) with a small position
+jitter and reports contact; the device holds the latest sample until the next one
+(sample-and-hold), and the renderer derives the finger velocity from the last two samples of a
+contact.
+
+Forces: a rigid plate on four corner supports. The finger's normal force at ``(x, y)`` on a
+``W x H`` surface splits by the lever rule along each axis (bilinear weights)::
+
+    F_tl = Fn (1 - x/W)(1 - y/H),  F_tr = Fn (x/W)(1 - y/H),
+    F_bl = Fn (1 - x/W)(y/H),      F_br = Fn (x/W)(y/H),
+
+(origin top-left, +y down) which sum to ``Fn`` and balance its moments, so the finger is located
+by ``x = W (F_tr + F_br) / sum F``, ``y = H (F_bl + F_br) / sum F`` (:func:`locate`). Each sensor
+adds independent Gaussian noise.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+CORNERS = ("top-left", "top-right", "bottom-left", "bottom-right")
+"""Order of the four corner sensors in every (N, 4) force array."""
+
+
+@dataclass(frozen=True)
+class TouchSamples:
+    """Touch samples (M of them): time (s), position (mm) and contact."""
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    contact: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    @staticmethod
+    def empty() -> TouchSamples:
+        """No samples."""
+        return TouchSamples(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool))
+
+    def concat(self, other: TouchSamples) -> TouchSamples:
+        """These samples followed by ``other``."""
+        return TouchSamples(
+            np.concatenate((self.t, other.t)),
+            np.concatenate((self.x, other.x)),
+            np.concatenate((self.y, other.y)),
+            np.concatenate((self.contact, other.contact)),
+        )
+
+    def tail(self, count: int) -> TouchSamples:
+        """The last ``count`` samples."""
+        start = max(len(self) - count, 0)
+        return TouchSamples(
+            self.t[start:], self.x[start:], self.y[start:], self.contact[start:]
+        )
+
+
+class TouchSensor:
+    """A touch panel sampling at ``rate_hz`` with Gaussian jitter ``noise_mm`` (mm, per axis).
+
+    Args:
+        rate_hz: sampling rate, Hz (its clock ticks at whole multiples of ``1 / rate_hz``).
+        noise_mm: standard deviation of the position jitter, mm.
+        rng: random generator of the jitter.
+    """
+
+    def __init__(self, rate_hz: float, noise_mm: float, rng: np.random.Generator) -> None:
+        self.rate_hz = rate_hz
+        self.noise_mm = noise_mm
+        self.rng = rng
+
+    def sample_times(self, t0: float, t1: float) -> np.ndarray:
+        """The sensor's sample times in ``[t0, t1)``, s."""
+        first = math.ceil(t0 * self.rate_hz - 1e-9)
+        last = math.ceil(t1 * self.rate_hz - 1e-9)
+        return np.arange(first, last, dtype=np.float64) / self.rate_hz
+
+    def measure(
+        self, t: np.ndarray, x: np.ndarray, y: np.ndarray, contact: np.ndarray
+    ) -> TouchSamples:
+        """Samples of the finger at ``(x, y)`` mm with ``contact`` at times ``t``; the position
+        gets the jitter (where there is no contact the panel still reports the last place, with
+        jitter, as capacitive panels do while hovering ends)."""
+        m = t.shape[0]
+        jitter = self.rng.normal(0.0, 1.0, size=(m, 2)) * self.noise_mm
+        return TouchSamples(
+            t.copy(), x + jitter[:, 0], y + jitter[:, 1], np.asarray(contact, dtype=bool).copy()
+        )
+
+
+def hold(samples: TouchSamples, times: np.ndarray) -> np.ndarray:
+    """Index of the latest sample at or before each time (-1 before the first)."""
+    return np.searchsorted(samples.t, times, side="right") - 1
+
+
+def predicted_speed(samples: TouchSamples, times: np.ndarray, horizon_s: float) -> np.ndarray:
+    """Finger speed at each time, mm/s, predicted from the touch samples for velocity
+    compensation.
+
+    Each sample's speed is the renderer's two-sample estimate ``|p_i - p_(i-1)| / (t_i -
+    t_(i-1))`` (both in contact, else 0), which describes the middle of the interval, half a
+    sensor period (10 ms at 50 Hz) before the sample, and is held for another period: a finger
+    that speeds up is compensated ~20 ms late. The prediction extrapolates it linearly,
+    ``s(t) = s_i + a_i (t - t_i + (t_i - t_(i-1)) / 2)`` over at most ``horizon_s``, with the slope
+    ``a_i = (s_i - s_(i-2)) / (t_i - t_(i-2))`` taken over two sensor periods (half the noise of
+    a one-period slope), and is never negative; ``a_i = 0`` until a contact has four samples.
+    Times before the first sample get 0.
+    """
+    m = len(samples)
+    out = np.zeros(times.shape[0])
+    if m < 2:
+        return out
+    dt = np.diff(samples.t)
+    moving = samples.contact[1:] & samples.contact[:-1] & (dt > 0)
+    speed = np.zeros(m)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        speed[1:] = np.where(
+            moving, np.hypot(np.diff(samples.x), np.diff(samples.y)) / dt, 0.0
+        )
+    valid = np.concatenate(([False], moving))
+    slope = np.zeros(m)
+    if m > 2:
+        span = samples.t[2:] - samples.t[:-2]
+        both = valid[2:] & valid[1:-1] & valid[:-2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            slope[2:] = np.where(both, (speed[2:] - speed[:-2]) / span, 0.0)
+    index = hold(samples, times)
+    known = index >= 0
+    i = index[known]
+    half = np.concatenate(([0.0], dt / 2))[i]
+    ahead = np.minimum(times[known] - samples.t[i] + half, horizon_s)
+    out[known] = np.maximum(speed[i] + slope[i] * ahead, 0.0)
+    return out
+
+
+class CornerForceSensors:
+    """Four force sensors under the corners of a ``width_mm x height_mm`` surface.
+
+    Args:
+        width_mm, height_mm: the surface, mm (sensors at its corners).
+        noise_n: standard deviation of each sensor, N.
+        rng: random generator of the noise.
+    """
+
+    def __init__(
+        self, width_mm: float, height_mm: float, noise_n: float, rng: np.random.Generator
+    ) -> None:
+        self.width_mm = width_mm
+        self.height_mm = height_mm
+        self.noise_n = noise_n
+        self.rng = rng
+
+    def split(self, force_n: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray) -> np.ndarray:
+        """(N, 4) noiseless corner forces (order :data:`CORNERS`) of a force at ``(x, y)``;
+        positions outside the surface are taken at its edge."""
+        u = np.clip(np.asarray(x_mm, dtype=np.float64) / self.width_mm, 0.0, 1.0)
+        v = np.clip(np.asarray(y_mm, dtype=np.float64) / self.height_mm, 0.0, 1.0)
+        f = np.asarray(force_n, dtype=np.float64)
+        return np.column_stack(
+            (f * (1 - u) * (1 - v), f * u * (1 - v), f * (1 - u) * v, f * u * v)
+        )
+
+    def measure(self, force_n: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray) -> np.ndarray:
+        """(N, 4) measured corner forces, N: :meth:`split` plus each sensor's noise."""
+        forces = self.split(force_n, x_mm, y_mm)
+        forces += self.rng.normal(0.0, 1.0, size=forces.shape) * self.noise_n
+        return forces
+
+
+def locate(
+    forces_n: np.ndarray, width_mm: float, height_mm: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Total force (N) and the position (x, y in mm) where it acts, from (N, 4) corner forces
+    (moment balance; NaN where the total is not positive)."""
+    f = np.asarray(forces_n, dtype=np.float64)
+    total = f.sum(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x = np.where(total > 0, width_mm * (f[:, 1] + f[:, 3]) / total, np.nan)
+        y = np.where(total > 0, height_mm * (f[:, 2] + f[:, 3]) / total, np.nan)
+    return total, x, y

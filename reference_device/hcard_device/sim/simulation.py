@@ -1,0 +1,635 @@
+"""The device simulation: card, finger, firmware rendering and physics, frame by frame.
+
+One :meth:`DeviceSimulation.step` of ``n`` frames (10 kHz) runs, in order:
+
+1. the finger's true state (a track the internal finger follows, or the host's last report);
+2. the sensors: the 50 Hz touch panel (internal finger; its samples feed the renderer) and the
+   four corner force sensors;
+3. the targets: the card through the hcard streaming renderer (:class:`hcard.render.Renderer`,
+   hybrid Position/Texture control on the touch samples), or directly streamed frames;
+4. the firmware's model-based rendering (:func:`hcard.physics.actuation.actuate`): plate
+   amplitude and EV envelope commands from the targets at the finger speed predicted from the
+   touch samples (velocity compensation, :func:`.sensors.predicted_speed`) and the force the
+   corner sensors measure, clipped to the limits;
+5. the output gain: 1 while running; a linear ramp to 0 over ``ramp_down_s`` after
+   :meth:`DeviceSimulation.stop` or when the watchdog expires;
+6. the physics: the PI amplitude loop over the plate envelope at 60 kHz (:mod:`.plate`), the EV
+   amplifier with its voltage, slew and current limits (:mod:`.amplifier`), and the finger
+   (:mod:`.finger`): the friction felt and the tribometer's lateral force.
+
+Safety holds whatever the host or the card asks: the amplitude reference is clipped to the
+limit and the loop's hard clamp keeps the plate at or under it; the amplifier keeps voltage and
+user current under theirs; a host that stops feeding the watchdog for ``watchdog_s`` while it
+drives the finger or streams frames gets its outputs ramped to zero (fault ``WATCHDOG``) until
+it feeds again.
+
+Faults per frame (:class:`~hcard_device.sim.faults.Faults`): condition flags (limits, watchdog,
+clipped card) are set on every frame they hold; event flags (``STREAM_OVERRUN``,
+``INVALID_REQUEST``) on the first frame of the step after the event.
+
+Determinism: every noise source has its own generator seeded from ``seed``, so a run is
+reproducible, and splitting a run into steps of other sizes gives the same numbers (to
+rounding).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from hcard.physics.actuation import actuate
+from hcard.physics.profile import DeviceProfile
+from hcard.render import Renderer, RenderOptions, RenderStream
+from hcard.track import FingerTrack
+from hcard.v1 import card_pb2 as pb
+from hcard_device.sim.amplifier import EVAmplifier
+from hcard_device.sim.clip import ClipReport, clip_report
+from hcard_device.sim.config import DeviceConfig
+from hcard_device.sim.faults import Faults
+from hcard_device.sim.finger import FingerPhysics, FingerTruth, HostFinger, TrackFinger
+from hcard_device.sim.models import device_profile, finger_capacitance
+from hcard_device.sim.plate import PIGains, PlateLoop, PlateModel
+from hcard_device.sim.sensors import (
+    CornerForceSensors,
+    TouchSamples,
+    TouchSensor,
+    hold,
+    predicted_speed,
+)
+
+TOUCH_DTYPE = np.dtype([("x_mm", "f8"), ("y_mm", "f8"), ("contact", "?"), ("t_s", "f8")])
+"""Fields of :attr:`SimBlock.touch`: the held touch sample (position mm, contact, its time s;
+NaN time before the first sample)."""
+
+HOST_SAMPLE_SPACING_S = 1e-6
+"""A host sample not later than the previous one is moved this much after it, s."""
+
+OFF_AMPLITUDE_M = 10e-9
+"""Plate amplitude counted as off, m (10 nm, a fifth of the loop's 50 nm tolerance)."""
+
+_TARGET_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Limits in force (hardware limits, or lower ones set by the host).
+
+    Attributes:
+        max_amplitude_m: peak-to-peak plate amplitude, m.
+        max_voltage_v: peak EV voltage, V.
+        max_current_a: peak user current, A.
+    """
+
+    max_amplitude_m: float
+    max_voltage_v: float
+    max_current_a: float
+
+
+@dataclass(frozen=True)
+class SimBlock:
+    """The frames of one :meth:`DeviceSimulation.step` (arrays of length N).
+
+    Attributes:
+        t_s: frame times, s.
+        target_uv, target_ev: target relative friction per channel (renderer or stream).
+        amplitude_command_m: plate amplitude command after the output gain, m.
+        voltage_command_v: EV envelope command after the output gain, V.
+        amplitude_m: measured plate amplitude (mean over the frame's loop samples), m p-p.
+        voltage_v: EV envelope (peak of the 440 Hz carrier), V.
+        current_a: peak current through the user, A.
+        friction: relative friction felt ``F_t / (mu0 Fn)`` (forward physics; 1 off contact).
+        lateral_force_n: lateral force a tribometer measures, N (with noise).
+        normal_force_n: the finger's true normal force on the plate, N.
+        corner_forces_n: (N, 4) corner force sensors, N (order ``sensors.CORNERS``).
+        touch: (N,) record array of the held touch sample (:data:`TOUCH_DTYPE`).
+        texture: (N,) palette index the renderer plays, -1 for a neutral frame (no card, no
+            contact, off the card, or direct streaming).
+        finger_x_mm, finger_y_mm: the finger's true position, mm.
+        finger_speed_m_s: its true sliding speed, m/s.
+        contact: it touches the plate.
+        faults: (N,) :class:`Faults` bits per frame (uint16).
+    """
+
+    t_s: np.ndarray
+    target_uv: np.ndarray
+    target_ev: np.ndarray
+    amplitude_command_m: np.ndarray
+    voltage_command_v: np.ndarray
+    amplitude_m: np.ndarray
+    voltage_v: np.ndarray
+    current_a: np.ndarray
+    friction: np.ndarray
+    lateral_force_n: np.ndarray
+    normal_force_n: np.ndarray
+    corner_forces_n: np.ndarray
+    touch: np.recarray
+    texture: np.ndarray
+    finger_x_mm: np.ndarray
+    finger_y_mm: np.ndarray
+    finger_speed_m_s: np.ndarray
+    contact: np.ndarray
+    faults: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.t_s.shape[0])
+
+    @property
+    def target(self) -> np.ndarray:
+        """Total target relative friction ``uv * ev`` (Eq. 4.1)."""
+        return self.target_uv * self.target_ev
+
+    def has(self, fault: Faults) -> np.ndarray:
+        """Per-frame mask of frames with ``fault`` set."""
+        return (self.faults & int(fault)) != 0
+
+    @staticmethod
+    def concatenate(blocks: list[SimBlock]) -> SimBlock:
+        """The frames of ``blocks`` one after another."""
+        values = {}
+        for f in fields(SimBlock):
+            parts = [getattr(b, f.name) for b in blocks]
+            joined = np.concatenate(parts)
+            values[f.name] = joined.view(np.recarray) if f.name == "touch" else joined
+        return SimBlock(**values)
+
+
+class DeviceSimulation:
+    """A simulated E-ViTa or coupled stimulator (see the module documentation).
+
+    Args:
+        config: the device (:meth:`DeviceConfig.evita` or :meth:`DeviceConfig.coupled`).
+        seed: seed of the noise generators.
+    """
+
+    def __init__(self, config: DeviceConfig, seed: int = 0) -> None:
+        self.config = config
+        touch_rng, force_rng, lateral_rng = (
+            np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(3)
+        )
+        self.hardware_limits = Limits(
+            config.max_amplitude_m, config.max_voltage_v, config.max_current_a
+        )
+        self._limits = self.hardware_limits
+        self._profile = device_profile(config)
+        plate = PlateModel(
+            config.plate_frequency_hz,
+            config.plate_quality_factor,
+            config.finger_damping_per_n,
+            config.full_drive_amplitude_m,
+        )
+        self.plate = PlateLoop(
+            plate,
+            PIGains.ziegler_nichols(plate, config.pi_dead_time_s, config.pi_tuning_force_n),
+            config.loop_rate_hz,
+            config.max_amplitude_m,
+        )
+        self.amplifier = (
+            EVAmplifier(
+                config.ev_carrier_hz,
+                config.frame_rate_hz,
+                config.max_voltage_v,
+                config.max_current_a,
+                config.amplifier_slew_v_per_s,
+            )
+            if config.has_ev
+            else None
+        )
+        self.finger_capacitance_f = finger_capacitance(config)
+        self.touch_sensor = TouchSensor(config.touch_rate_hz, config.touch_noise_mm, touch_rng)
+        width, height = config.surface_mm
+        self.force_sensors = CornerForceSensors(width, height, config.force_noise_n, force_rng)
+        self.finger_physics = FingerPhysics(
+            device_profile(config), config.lateral_force_noise_n, lateral_rng
+        )
+        self._options = RenderOptions(frame_rate_hz=config.frame_rate_hz)
+        self._frame = 0
+        self._running = False
+        self._gain = 0.0
+        self._finger: TrackFinger | HostFinger | None = None
+        self._history = TouchSamples.empty()
+        self._pending = TouchSamples.empty()
+        self._renderer: Renderer | None = None
+        self._stream: RenderStream | None = None
+        self._card_report = ClipReport()
+        self._streaming = False
+        self._queue: deque[tuple[np.ndarray, np.ndarray]] = deque()
+        self._queued = 0
+        self._last_feed = 0.0
+        self._events = 0
+        self.stream_overruns = 0
+        """Streamed frames dropped because the queue was full (total)."""
+        self.stream_underruns = 0
+        """Frames played neutral because the stream queue ran dry (total)."""
+        self.invalid_requests = 0
+        """Commands that carried invalid values (total)."""
+
+    # -- state -----------------------------------------------------------------------------
+    @property
+    def time_s(self) -> float:
+        """Simulated time, s (time of the next frame)."""
+        return self._frame / self.config.frame_rate_hz
+
+    @property
+    def running(self) -> bool:
+        """Whether outputs are enabled (:meth:`start`)."""
+        return self._running
+
+    @property
+    def limits(self) -> Limits:
+        """The limits in force."""
+        return self._limits
+
+    @property
+    def profile(self) -> DeviceProfile:
+        """The firmware's device profile (its limits are :attr:`limits`)."""
+        return self._profile
+
+    @property
+    def clip_report(self) -> ClipReport:
+        """Clip report of the loaded card under the limits in force (empty without a card)."""
+        return self._card_report
+
+    @property
+    def output_off_time_s(self) -> float:
+        """Time from a stop or a watchdog expiry until the outputs are off, s: the commands
+        reach zero after ``ramp_down_s`` (the EV envelope with them), and the plate, whose drive
+        is then cut, decays from at most the hardware limit to under :data:`OFF_AMPLITUDE_M`
+        within ``tau0 ln(A_max / OFF_AMPLITUDE_M)`` more (E-ViTa: 10 + 8.7 ms = 18.7 ms;
+        coupled stimulator: 10 + 37.7 ms = 47.7 ms)."""
+        config = self.config
+        decay = config.plate_time_constant_s * math.log(
+            max(config.max_amplitude_m / OFF_AMPLITUDE_M, 1.0)
+        )
+        return config.ramp_down_s + decay
+
+    @property
+    def host_driven(self) -> bool:
+        """The host drives the finger or streams frames (the watchdog is armed)."""
+        return isinstance(self._finger, HostFinger) or self._streaming
+
+    @property
+    def watchdog_expired(self) -> bool:
+        """The watchdog has expired (a host-driven device not fed for ``watchdog_s``)."""
+        return (
+            self.host_driven
+            and self._running
+            and self.time_s >= self._last_feed + self.config.watchdog_s
+        )
+
+    # -- commands --------------------------------------------------------------------------
+    def load_card(self, card: pb.Card) -> ClipReport:
+        """Play ``card`` (validated) from now on; returns what the device cannot render.
+
+        The card replaces any previous card and ends direct streaming. Raises only for an
+        invalid card (:class:`hcard.errors.CardValidationError`).
+        """
+        renderer = Renderer(card, self._options)
+        self._renderer = renderer
+        self._new_stream()
+        self._streaming = False
+        self._clear_queue()
+        self._card_report = clip_report(card, self._profile)
+        return self._card_report
+
+    def set_limits(
+        self,
+        max_amplitude_m: float | None = None,
+        max_voltage_v: float | None = None,
+        max_current_a: float | None = None,
+    ) -> Limits:
+        """Set limits at or below the hardware ones (None: keep). Values above the hardware
+        limit are clamped to it; negative values count as 0 and NaN leaves the limit as it was
+        (both flag ``INVALID_REQUEST``). Never raises. Returns the limits in force.
+
+        A limit lowered under the present output takes effect at once on the commands; the
+        plate, whose drive is cut, decays at its natural rate (``tau`` ~1.6 ms) to the new
+        limit, and the amplifier's envelope collapses within the frame.
+        """
+        hardware = self.hardware_limits
+        values = []
+        for name, value in (
+            ("max_amplitude_m", max_amplitude_m),
+            ("max_voltage_v", max_voltage_v),
+            ("max_current_a", max_current_a),
+        ):
+            current = getattr(self._limits, name)
+            if value is None:
+                values.append(current)
+                continue
+            try:
+                number = float(value)
+            except (TypeError, ValueError):
+                number = math.nan
+            if math.isnan(number) or number < 0:
+                self._invalid()
+                values.append(current if math.isnan(number) else 0.0)
+                continue
+            values.append(min(number, getattr(hardware, name)))
+        self._limits = Limits(*values)
+        self._profile = device_profile(
+            self.config,
+            max_amplitude_m=self._limits.max_amplitude_m,
+            max_voltage_v=self._limits.max_voltage_v,
+            max_current_a=self._limits.max_current_a,
+        )
+        self.plate.limit_m = self._limits.max_amplitude_m
+        if self.amplifier is not None:
+            self.amplifier.max_voltage_v = self._limits.max_voltage_v
+            self.amplifier.max_current_a = self._limits.max_current_a
+        if self._renderer is not None:
+            self._card_report = clip_report(self._renderer.card, self._profile)
+        return self._limits
+
+    def start(self) -> None:
+        """Enable the outputs (the watchdog, if armed, counts from now)."""
+        self._running = True
+        self._gain = 1.0
+        self._last_feed = self.time_s
+
+    def stop(self) -> None:
+        """Ramp the outputs to zero over ``ramp_down_s`` and drop streamed frames."""
+        self._running = False
+        self._clear_queue()
+
+    def feed_watchdog(self) -> None:
+        """The host is alive (the firmware calls this on every host report)."""
+        self._last_feed = self.time_s
+
+    def host_finger(
+        self, t_s: float, x_mm: float, y_mm: float, fn_n: float, contact: bool
+    ) -> None:
+        """A finger state from the host (touch sensing on the host side).
+
+        ``t_s`` is in the device clock (:attr:`time_s`); a time in the future is taken as now,
+        and one not later than the previous sample is moved just after it. Non-finite values
+        are rejected (``INVALID_REQUEST``); a negative force counts as 0.
+        """
+        try:
+            values = [float(v) for v in (t_s, x_mm, y_mm, fn_n)]
+        except (TypeError, ValueError):
+            self._invalid()
+            return
+        if not all(math.isfinite(v) for v in values):
+            self._invalid()
+            return
+        t, x, y, fn = values
+        if not isinstance(self._finger, HostFinger):
+            if not self.host_driven:
+                self._last_feed = self.time_s
+            self._finger = HostFinger(self.config.surface_mm)
+        last = self._last_sample_time()
+        t = min(t, self.time_s)
+        if t <= last:
+            t = last + HOST_SAMPLE_SPACING_S
+        sample = TouchSamples(
+            np.array([t]), np.array([x]), np.array([y]), np.array([bool(contact)])
+        )
+        self._pending = self._pending.concat(sample)
+        if self._stream is not None:
+            self._stream.push(t, x, y, max(fn, 0.0), bool(contact))
+        self._finger.update(t, x, y, fn, bool(contact))
+
+    def use_internal_finger(self, track: FingerTrack) -> None:
+        """Let the simulated finger follow ``track`` from now on (its first sample now), sensed
+        by the 50 Hz touch panel and the corner force sensors. Host finger reports stop
+        counting."""
+        self._finger = TrackFinger(track, self.time_s, self.config.surface_mm)
+        self._pending = TouchSamples.empty()
+
+    def stream_frames(self, uv: np.ndarray | float, ev: np.ndarray | float) -> int:
+        """Queue target relative friction frames (UV in [0, 1], EV in [1, 4]; broadcast
+        together) for direct streaming; returns how many were queued. Frames beyond the queue
+        capacity are dropped and counted (``STREAM_OVERRUN``). Out-of-range values are clipped
+        and NaN read as neutral (``INVALID_REQUEST``)."""
+        try:
+            uv_a, ev_a = np.broadcast_arrays(
+                np.atleast_1d(np.asarray(uv, dtype=np.float64)),
+                np.atleast_1d(np.asarray(ev, dtype=np.float64)),
+            )
+        except (TypeError, ValueError):
+            self._invalid()
+            return 0
+        uv_a, ev_a = uv_a.ravel(), ev_a.ravel()
+        if not self._streaming:
+            if not self.host_driven:
+                self._last_feed = self.time_s
+            self._streaming = True
+        bad = (
+            ~np.isfinite(uv_a) | ~np.isfinite(ev_a)
+            | (uv_a < -_TARGET_TOLERANCE) | (uv_a > 1 + _TARGET_TOLERANCE)
+            | (ev_a < 1 - _TARGET_TOLERANCE) | (ev_a > 4 + _TARGET_TOLERANCE)
+        )
+        if bad.any():
+            self._invalid()
+        uv_a = np.clip(np.nan_to_num(uv_a, nan=1.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
+        ev_a = np.clip(np.nan_to_num(ev_a, nan=1.0, posinf=4.0, neginf=1.0), 1.0, 4.0)
+        room = self.config.stream_queue_frames - self._queued
+        take = min(room, uv_a.shape[0])
+        if take < uv_a.shape[0]:
+            self.stream_overruns += uv_a.shape[0] - take
+            self._events |= int(Faults.STREAM_OVERRUN)
+        if take > 0:
+            self._queue.append((uv_a[:take].copy(), ev_a[:take].copy()))
+            self._queued += take
+        return take
+
+    @property
+    def queued_frames(self) -> int:
+        """Streamed frames waiting in the queue."""
+        return self._queued
+
+    # -- the step --------------------------------------------------------------------------
+    def step(self, n_frames: int) -> SimBlock:
+        """Advance ``n_frames`` frames (at ``frame_rate_hz``) and return them."""
+        cfg = self.config
+        n = max(int(n_frames), 0)
+        rate = cfg.frame_rate_hz
+        times = (self._frame + np.arange(n, dtype=np.float64)) / rate
+        t_end = (self._frame + n) / rate
+        faults = np.zeros(n, dtype=np.uint16)
+        if n and self._events:
+            faults[0] |= self._events
+            self._events = 0
+
+        # 1-2. finger, sensors.
+        truth = self._finger.state(times) if self._finger is not None else FingerTruth.absent(n)
+        new = self._sense_touch(self._frame / rate, t_end)
+        samples = self._history.concat(new)
+        index = hold(samples, times)
+        touch = np.zeros(n, dtype=TOUCH_DTYPE)
+        known = index >= 0
+        held = index[known]
+        touch["x_mm"][known] = samples.x[held]
+        touch["y_mm"][known] = samples.y[held]
+        touch["contact"][known] = samples.contact[held]
+        touch["t_s"] = np.nan
+        touch["t_s"][known] = samples.t[held]
+        speed_est = predicted_speed(samples, times, self._options.dead_reckoning_s) * 1e-3
+        self._history = samples.tail(4)
+        corners = self.force_sensors.measure(truth.fn_n, truth.x_mm, truth.y_mm)
+        fn_est = np.maximum(corners.sum(axis=1), 0.0)
+
+        # 3. targets.
+        uv_t, ev_t, texture = self._targets(n)
+
+        # 4. model-based rendering (neutral targets need no actuation).
+        if np.any(uv_t < 1.0) or np.any(ev_t > 1.0):
+            commands = actuate(self._profile, uv_t, ev_t, speed_est, fn_est)
+            amplitude_raw, voltage_raw = commands.amplitude, commands.voltage
+            faults |= self._command_faults(uv_t, ev_t, commands.uv, commands.ev)
+        else:
+            amplitude_raw, voltage_raw = np.zeros(n), np.zeros(n)
+
+        # 5. output gain (stop, watchdog).
+        gain, tripped = self._output_gain(times)
+        faults[tripped] |= int(Faults.WATCHDOG)
+        amplitude_cmd = np.minimum(amplitude_raw * gain, self._limits.max_amplitude_m)
+        voltage_cmd = np.minimum(voltage_raw * gain, self._limits.max_voltage_v)
+
+        # 6. physics.
+        m = cfg.loop_samples_per_frame
+        plate = self.plate.run(np.repeat(amplitude_cmd, m), np.repeat(truth.fn_n, m))
+        amplitude = plate.amplitude.reshape(n, m).mean(axis=1)
+        faults[plate.clamped.reshape(n, m).any(axis=1)] |= int(Faults.AMPLITUDE_LIMIT)
+        if self.amplifier is not None:
+            load = np.where(truth.contact, self.finger_capacitance_f, 0.0)
+            ev_run = self.amplifier.run(voltage_cmd, load)
+            voltage, current = ev_run.voltage, ev_run.current
+            faults[ev_run.voltage_limited] |= int(Faults.VOLTAGE_LIMIT)
+            faults[ev_run.current_limited] |= int(Faults.CURRENT_LIMIT)
+        else:
+            voltage, current = np.zeros(n), np.zeros(n)
+        friction = self.finger_physics.friction(amplitude, voltage, truth)
+        lateral = self.finger_physics.lateral_force(friction, truth)
+
+        self._frame += n
+        return SimBlock(
+            t_s=times,
+            target_uv=uv_t,
+            target_ev=ev_t,
+            amplitude_command_m=amplitude_cmd,
+            voltage_command_v=voltage_cmd,
+            amplitude_m=amplitude,
+            voltage_v=voltage,
+            current_a=current,
+            friction=friction,
+            lateral_force_n=lateral,
+            normal_force_n=truth.fn_n,
+            corner_forces_n=corners,
+            touch=touch.view(np.recarray),
+            texture=texture,
+            finger_x_mm=truth.x_mm,
+            finger_y_mm=truth.y_mm,
+            finger_speed_m_s=truth.speed_m_s,
+            contact=truth.contact,
+            faults=faults,
+        )
+
+    # -- pieces ----------------------------------------------------------------------------
+    def _invalid(self) -> None:
+        self.invalid_requests += 1
+        self._events |= int(Faults.INVALID_REQUEST)
+
+    def _last_sample_time(self) -> float:
+        if len(self._pending):
+            return float(self._pending.t[-1])
+        if len(self._history):
+            return float(self._history.t[-1])
+        return -math.inf
+
+    def _new_stream(self) -> None:
+        assert self._renderer is not None
+        self._stream = self._renderer.stream(t0=self.time_s)
+        old = self._history.concat(self._pending)
+        if len(old):
+            self._stream.push(old.t, old.x, old.y, None, old.contact)
+
+    def _sense_touch(self, t0: float, t1: float) -> TouchSamples:
+        """Touch samples of this step: the panel's (internal finger) or the host's."""
+        if isinstance(self._finger, TrackFinger):
+            times = self.touch_sensor.sample_times(t0, t1)
+            if times.shape[0] == 0:
+                return TouchSamples.empty()
+            state = self._finger.state(times)
+            samples = self.touch_sensor.measure(times, state.x_mm, state.y_mm, state.contact)
+            if self._stream is not None:
+                self._stream.push(samples.t, samples.x, samples.y, None, samples.contact)
+            return samples
+        samples, self._pending = self._pending, TouchSamples.empty()
+        return samples
+
+    def _targets(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """UV and EV targets and the palette index of the next ``n`` frames."""
+        neutral = np.full(n, -1, dtype=np.int32)
+        if self._streaming:
+            return (*self._pop_stream(n), neutral)
+        if self._stream is not None:
+            frames = self._stream.render(n)
+            return frames.uv, frames.ev, frames.texture.astype(np.int32)
+        return np.ones(n), np.ones(n), neutral
+
+    def _pop_stream(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        uv, ev = np.ones(n), np.ones(n)
+        filled = 0
+        while filled < n and self._queue:
+            chunk_uv, chunk_ev = self._queue[0]
+            take = min(n - filled, chunk_uv.shape[0])
+            uv[filled : filled + take] = chunk_uv[:take]
+            ev[filled : filled + take] = chunk_ev[:take]
+            filled += take
+            if take == chunk_uv.shape[0]:
+                self._queue.popleft()
+            else:
+                self._queue[0] = (chunk_uv[take:], chunk_ev[take:])
+        self._queued -= filled
+        self.stream_underruns += n - filled
+        return uv, ev
+
+    def _clear_queue(self) -> None:
+        self._queue.clear()
+        self._queued = 0
+
+    def _command_faults(
+        self, uv_t: np.ndarray, ev_t: np.ndarray, uv_r: np.ndarray, ev_r: np.ndarray
+    ) -> np.ndarray:
+        """Per-frame flags of the model-based rendering's clipping."""
+        n = uv_t.shape[0]
+        faults = np.zeros(n, dtype=np.uint16)
+        uv_short = uv_r > uv_t + 1e-6
+        ev_short = ev_r < ev_t - 1e-6
+        if self._profile.uv_model is not None and self._limits.max_amplitude_m > 0:
+            faults[uv_short] |= int(Faults.AMPLITUDE_LIMIT)
+            missing = np.zeros(n, dtype=bool)
+        else:
+            missing = uv_short
+        if self._profile.ev_model is not None and self._limits.max_voltage_v > 0:
+            name = self._profile.voltage_limit[1]
+            flag = Faults.CURRENT_LIMIT if name == "max_current" else Faults.VOLTAGE_LIMIT
+            faults[ev_short] |= int(flag)
+        else:
+            missing = missing | ev_short
+        if not self._streaming and self._card_report.clipped:
+            faults[uv_short | ev_short] |= int(Faults.CARD_CLIPPED)
+        faults[missing] |= int(Faults.CARD_CLIPPED)
+        return faults
+
+    def _output_gain(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per-frame output gain and the frames where the watchdog has expired."""
+        n = times.shape[0]
+        if self.host_driven and self._running:
+            tripped = times >= self._last_feed + self.config.watchdog_s
+        else:
+            tripped = np.zeros(n, dtype=bool)
+        off = tripped | (not self._running)
+        gain = np.ones(n)
+        if off.any():
+            first = int(np.argmax(off))
+            start = self._gain if first == 0 else 1.0
+            fall = 1.0 / (self.config.ramp_down_s * self.config.frame_rate_hz)
+            gain[first:] = np.maximum(start - fall * np.arange(1, n - first + 1), 0.0)
+        if n:
+            self._gain = float(gain[-1])
+        return gain, tripped
