@@ -1,0 +1,641 @@
+"""The device firmware: host reports in, simulation commands out, STATE reports back
+(spec/device-protocol.md).
+
+:class:`Firmware` sits between the USB-HID device and :class:`hcard_device.sim.DeviceSimulation`:
+
+- feature requests (:meth:`Firmware.get_feature`, :meth:`Firmware.set_feature`) answer with a
+  report or raise :class:`ProtocolError`, which the USB layer turns into a STALL;
+- output reports (:meth:`Firmware.handle_output`) become finger states, streamed frames and
+  commands; malformed ones are counted and flagged (fault INVALID_REQUEST), never raised;
+- the card upload runs through :class:`~hcard_device.protocol.upload.UploadStore` (staging
+  buffer, CRC-32, validation, atomic swap);
+- :meth:`Firmware.advance` runs the simulation and produces one STATE report per
+  ``frame_rate / 1000`` frames into a bounded queue (the oldest dropped and counted).
+
+Every accepted host report feeds the simulation's watchdog. All public methods are serialised
+by :attr:`Firmware.lock` (reentrant), so the USB threads and :meth:`run_realtime` may share one
+firmware.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+
+import numpy as np
+
+from hcard.track import FingerTrack, make_track
+from hcard.v1 import card_pb2 as pb
+from hcard_device.protocol import (
+    AMPLITUDE_UNIT_M,
+    CURRENT_UNIT_A,
+    FORCE_UNIT_N,
+    FRICTION_SCALE,
+    INPUT_RATE_HZ,
+    POSITION_UNIT_MM,
+    PROTOCOL_MAJOR,
+    PROTOCOL_MINOR,
+    STREAM_FRAMES_PER_REPORT,
+    TIME_UNIT_S,
+    VOLTAGE_UNIT_V,
+    Capability,
+    ClipReason,
+    ClipReport,
+    Command,
+    Control,
+    Counters,
+    DeviceInfo,
+    DeviceKind,
+    FaultBits,
+    Finger,
+    Limits,
+    ProtocolError,
+    Report,
+    ReportKind,
+    State,
+    StateFlags,
+    Stream,
+    TouchSource,
+    UploadAction,
+    UploadBegin,
+    UploadData,
+    UploadEnd,
+    UploadState,
+    decode_output,
+    report_class,
+)
+from hcard_device.protocol.constants import DEFAULT_MAX_CARD_BYTES
+from hcard_device.protocol.reports import POSITION_RANGE
+from hcard_device.protocol.upload import UploadStore, detail_text
+from hcard_device.sim import DeviceSimulation, Faults, SimBlock
+from hcard_device.sim.clip import ClipItem
+
+DEFAULT_INPUT_QUEUE = 128
+"""STATE reports the firmware keeps for the host before dropping the oldest (128 ms)."""
+MAX_BLOCK_FRAMES = 1000
+"""Largest simulation step of :meth:`Firmware.advance`, frames (0.1 s at 10 kHz)."""
+REALTIME_PERIOD_S = 1e-3
+"""Wake-up period of :meth:`Firmware.run_realtime`, s."""
+REALTIME_MAX_LAG_S = 0.05
+"""Most simulated time :meth:`Firmware.run_realtime` catches up in one go, s; beyond it the
+device falls behind the wall clock rather than stalling the USB threads."""
+
+_CONTACT, _RUNNING, _CARD_LOADED = (
+    int(StateFlags.CONTACT), int(StateFlags.RUNNING), int(StateFlags.CARD_LOADED)
+)
+_HOST_FINGER, _STREAMING, _UPLOADING = (
+    int(StateFlags.HOST_FINGER), int(StateFlags.STREAMING), int(StateFlags.UPLOADING)
+)
+_I16 = (-0x8000, 0x7FFF)
+_U16 = 0xFFFF
+_U32 = 0xFFFF_FFFF
+
+
+def _clamp(value: float, low: int, high: int) -> int:
+    """Round to the nearest count and saturate at the field range (rule PI2); NaN reads 0."""
+    if not math.isfinite(value):
+        return high if value > 0 else (low if value < 0 else max(low, min(0, high)))
+    return max(low, min(high, round(value)))
+
+
+def _counts(values: np.ndarray, unit: float, low: int, high: int) -> list[int]:
+    """SI values as wire counts: rounded, saturated at the field range (rule PI2), NaN as 0."""
+    scaled = np.nan_to_num(np.asarray(values, dtype=np.float64) / unit, nan=0.0)
+    return np.clip(np.rint(scaled), low, high).astype(np.int64).tolist()
+
+
+def _texture_column(block: SimBlock, ends: np.ndarray) -> list[int]:
+    """Active palette index at the frames ``ends`` (-1: neutral frame)."""
+    return np.clip(np.asarray(block.texture)[ends], -1, 255).astype(np.int64).tolist()
+
+
+_FAULT_MAP: tuple[tuple[int, int], ...] = tuple(
+    (int(flag), int(FaultBits[flag.name]))
+    for flag in Faults
+    if flag.value and flag.name in FaultBits.__members__
+)
+"""(simulation bit, wire bit) of every fault both know, matched by name."""
+
+
+def _fault_bits(sim_faults: int) -> int:
+    """Wire fault bits of the simulation's :class:`Faults`."""
+    out = 0
+    for sim_bit, wire_bit in _FAULT_MAP:
+        if sim_faults & sim_bit:
+            out |= wire_bit
+    return out
+
+
+def _no_finger_track() -> FingerTrack:
+    """A track without contact: the internal sensor of a simulation nobody touches."""
+    return make_track(np.zeros(1), np.zeros(1), np.zeros(1), 0.0, False, source="no finger")
+
+
+class Firmware:
+    """The firmware of one simulated device.
+
+    Args:
+        sim: the device simulation it drives.
+        input_queue: STATE reports kept for the host before the oldest are dropped.
+        max_card_bytes: largest card UPLOAD_BEGIN accepts, bytes.
+        internal_track: the finger the internal touch sensor sees after CONTROL
+            SET_TOUCH_SOURCE internal (None: nobody touches).
+    """
+
+    def __init__(
+        self,
+        sim: DeviceSimulation,
+        *,
+        input_queue: int = DEFAULT_INPUT_QUEUE,
+        max_card_bytes: int = DEFAULT_MAX_CARD_BYTES,
+        internal_track: FingerTrack | None = None,
+    ) -> None:
+        if input_queue < 1:
+            raise ValueError(f"input_queue must be >= 1, got {input_queue}")
+        self.sim = sim
+        self.config = sim.config
+        ratio = self.config.frame_rate_hz / INPUT_RATE_HZ
+        if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+            raise ValueError(
+                f"frame rate {self.config.frame_rate_hz} Hz is not a whole multiple of the "
+                f"{INPUT_RATE_HZ} Hz input report rate"
+            )
+        self.frames_per_report = round(ratio)
+        self.lock = threading.RLock()
+        self.upload = UploadStore(max_card_bytes)
+        self.internal_track = internal_track
+        self.input_capacity = input_queue
+        self._queue: deque[bytes] = deque()
+        self._latest: bytes = b""
+        self._frame_debt = 0.0
+        self._interval_frames = 0
+        self._interval_faults = 0
+        self._pending_faults = 0
+        self._watchdog_was_tripped = False
+        self._touch_source = TouchSource.INTERNAL
+        self._streaming = False
+        self._expected_seq: int | None = None
+        self._host_time_echo = 0
+        self._clip_index = 0
+        self._sequence = 0
+        # counters (spec 8.4), zeroed by CLEAR_COUNTERS
+        self.input_reports = 0
+        self.input_dropped = 0
+        self.output_reports = 0
+        self.rejected_requests = 0
+        self.stream_gaps = 0
+        self.watchdog_trips = 0
+        self.latched_faults = 0
+        self._stream_dropped_base = 0
+
+    # ---- host requests ----------------------------------------------------------------------
+
+    def get_feature(self, report_id: int) -> bytes:
+        """GET_REPORT(Feature): the report's bytes, report ID first.
+
+        Raises:
+            ProtocolError: unknown or non-feature report ID (answer with STALL).
+        """
+        with self.lock:
+            try:
+                cls = report_class(ReportKind.FEATURE, report_id)
+            except ProtocolError:
+                self.rejected_requests += 1
+                raise
+            self.sim.feed_watchdog()
+            return self._feature_report(cls).encode()
+
+    def set_feature(self, data: bytes) -> None:
+        """SET_REPORT(Feature) with the report's bytes, report ID first.
+
+        Upload failures are not errors here: they are reported in UPLOAD_STATUS (rule PU6).
+
+        Raises:
+            ProtocolError: unknown ID, read-only report, or malformed report (STALL).
+        """
+        with self.lock:
+            try:
+                report = self._decode_feature_set(data)
+                accepted = self._apply_feature(report)
+            except ProtocolError:
+                self.rejected_requests += 1
+                raise
+            if not accepted:
+                self.rejected_requests += 1
+            self.sim.feed_watchdog()
+
+    def handle_output(self, data: bytes) -> None:
+        """An output report (interrupt OUT or SET_REPORT(Output)), report ID first.
+
+        Never raises: a malformed or refused report is ignored, counted in
+        ``rejected_requests`` and flagged INVALID_REQUEST in the next STATE report (PE2).
+        """
+        with self.lock:
+            try:
+                report = decode_output(data)
+            except ProtocolError:
+                self._refuse()
+                return
+            if not self._apply_output(report):
+                self._refuse()
+                return
+            if not (isinstance(report, Control) and report.command == Command.CLEAR_COUNTERS):
+                self.output_reports += 1  # CLEAR_COUNTERS leaves every counter at 0
+            self.sim.feed_watchdog()
+
+    # ---- time -------------------------------------------------------------------------------
+
+    def advance(self, seconds: float) -> None:
+        """Run the simulation for ``seconds`` of device time (whole frames; the remainder is
+        carried to the next call) and queue the STATE reports of every completed interval."""
+        if not math.isfinite(seconds) or seconds <= 0:
+            return
+        with self.lock:
+            self._frame_debt += seconds * self.config.frame_rate_hz
+            frames = math.floor(self._frame_debt + 1e-9)
+            self._frame_debt = max(self._frame_debt - frames, 0.0)
+            while frames > 0:
+                n = min(frames, MAX_BLOCK_FRAMES)
+                queued_before = self.sim.queued_frames
+                self._run_block(self.sim.step(n), queued_before)
+                frames -= n
+            self.upload.poll(self.sim.time_s)
+
+    def take_input_reports(self, max_count: int | None = None) -> list[bytes]:
+        """Remove and return queued STATE reports, oldest first (at most ``max_count``)."""
+        with self.lock:
+            count = len(self._queue)
+            if max_count is not None:
+                count = max(0, min(max_count, count))
+            return [self._queue.popleft() for _ in range(count)]
+
+    def latest_input_report(self) -> bytes:
+        """The most recent STATE report (for GET_REPORT(Input)); produced now when none yet."""
+        with self.lock:
+            if not self._latest:
+                self._latest = self._idle_state().encode()
+            return self._latest
+
+    @property
+    def queued_input_reports(self) -> int:
+        """STATE reports waiting for the host."""
+        with self.lock:
+            return len(self._queue)
+
+    def run_realtime(
+        self,
+        stop_event: threading.Event,
+        *,
+        period_s: float = REALTIME_PERIOD_S,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        """Advance the simulation following ``clock`` until ``stop_event`` is set.
+
+        Wakes every ``period_s`` and advances by the wall time elapsed; when the simulation
+        falls more than :data:`REALTIME_MAX_LAG_S` behind, the excess is skipped (device time
+        then runs slower than the wall clock instead of building up a backlog)."""
+        start = clock()
+        simulated = 0.0
+        while not stop_event.is_set():
+            due = clock() - start - simulated
+            if due > REALTIME_MAX_LAG_S:
+                simulated += due - REALTIME_MAX_LAG_S
+                due = REALTIME_MAX_LAG_S
+            if due > 0:
+                self.advance(due)
+                simulated += due
+            stop_event.wait(period_s)
+
+    # ---- features ---------------------------------------------------------------------------
+
+    def _decode_feature_set(self, data: bytes) -> Report:
+        if not isinstance(data, (bytes, bytearray, memoryview)) or len(data) == 0:
+            raise ProtocolError("empty feature report")
+        cls = report_class(ReportKind.FEATURE, data[0])
+        if not cls.SET:
+            raise ProtocolError("read-only report", report=cls.name())
+        report = cls.decode(data)
+        if isinstance(report, UploadData) and not report.data:
+            raise ProtocolError("length 0: a chunk carries 1..58 bytes", report=cls.name())
+        if isinstance(report, UploadEnd) and report.action == UploadAction.NONE:
+            raise ProtocolError("action 0: COMMIT is 1, ABORT is 2", report=cls.name())
+        if isinstance(report, ClipReport) and report.item_index >= self._clip_item_count():
+            raise ProtocolError(
+                f"item_index {report.item_index} is beyond the "
+                f"{self._clip_item_count()} clipped items",
+                report=cls.name(),
+            )
+        return report
+
+    def _apply_feature(self, report: Report) -> bool:
+        """Carry out a decoded SET; False when the request was refused (an upload failure)."""
+        now = self.sim.time_s
+        if isinstance(report, Limits):
+            self.sim.set_limits(
+                max_amplitude_m=report.max_amplitude_m,
+                max_voltage_v=report.max_voltage_v,
+                max_current_a=report.max_current_a,
+            )
+            self._clip_index = 0
+            return True
+        if isinstance(report, ClipReport):
+            self._clip_index = report.item_index
+            return True
+        if isinstance(report, UploadBegin):
+            return self.upload.begin(report, now)
+        if isinstance(report, UploadData):
+            return self.upload.data(report, now)
+        assert isinstance(report, UploadEnd)
+        if report.action == UploadAction.ABORT:
+            return self.upload.abort(now)
+        committed = self.upload.commit(self._load_card, now)
+        if committed:
+            self._clip_index = 0
+        return committed
+
+    def _load_card(self, card: pb.Card) -> None:
+        """The loader of a COMMIT: the card goes into force between two frames."""
+        self.sim.load_card(card)
+        self._streaming = False
+
+    def _feature_report(self, cls: type[Report]) -> Report:
+        if cls is DeviceInfo:
+            return self.device_info()
+        if cls is Limits:
+            limits = self.sim.limits
+            return Limits.from_si(
+                limits.max_amplitude_m, limits.max_voltage_v, limits.max_current_a
+            )
+        if cls is UploadBegin:
+            return self.upload.begin_readback()
+        if cls is UploadData:
+            return self.upload.data_readback()
+        if cls is UploadEnd:
+            return UploadEnd(UploadAction.NONE)
+        if cls is ClipReport:
+            return self._clip_report()
+        if cls is Counters:
+            return self.counters()
+        return self.upload.status()
+
+    def device_info(self) -> DeviceInfo:
+        """The DEVICE_INFO report of this device."""
+        cfg = self.config
+        caps = (
+            Capability.HOST_FINGER
+            | Capability.DIRECT_STREAMING
+            | Capability.CORNER_FORCES
+            | Capability.LATERAL_FORCE
+        )
+        if cfg.has_uv:
+            caps |= Capability.UV
+        if cfg.has_ev:
+            caps |= Capability.EV
+        if cfg.touch_rate_hz > 0:  # always, for the simulated devices
+            caps |= Capability.INTERNAL_TOUCH
+        width, height = cfg.surface_mm
+        hw = self.sim.hardware_limits
+        return DeviceInfo(
+            protocol_major=PROTOCOL_MAJOR,
+            protocol_minor=PROTOCOL_MINOR,
+            device_kind=int(DeviceKind.COUPLED if cfg.has_ev else DeviceKind.EVITA),
+            capabilities=int(caps),
+            plate_frequency_hz=_clamp(cfg.plate_frequency_hz, 0, _U32),
+            frame_rate_hz=_clamp(cfg.frame_rate_hz, 0, _U16),
+            touch_rate_hz=_clamp(cfg.touch_rate_hz, 0, _U16),
+            input_rate_hz=INPUT_RATE_HZ,
+            ev_carrier_hz=_clamp(cfg.ev_carrier_hz, 0, _U16) if cfg.has_ev else 0,
+            max_amplitude_nm=_clamp(hw.max_amplitude_m / AMPLITUDE_UNIT_M, 0, _U16),
+            max_voltage_dv=_clamp(hw.max_voltage_v / VOLTAGE_UNIT_V, 0, _U16),
+            max_current_10na=_clamp(hw.max_current_a / CURRENT_UNIT_A, 0, _U16),
+            max_card_bytes=self.upload.max_card_bytes,
+            watchdog_ms=_clamp(cfg.watchdog_s * 1e3, 0, _U16),
+            stream_capacity_frames=_clamp(cfg.stream_queue_frames, 0, _U16),
+            stream_frames_per_report=STREAM_FRAMES_PER_REPORT,
+            surface_width_10um=_clamp(width / POSITION_UNIT_MM, 0, _U16),
+            surface_height_10um=_clamp(height / POSITION_UNIT_MM, 0, _U16),
+        )
+
+    def counters(self) -> Counters:
+        """The COUNTERS report."""
+        return Counters(
+            input_reports=self.input_reports & _U32,
+            input_dropped=self.input_dropped & _U32,
+            output_reports=self.output_reports & _U32,
+            rejected_requests=self.rejected_requests & _U32,
+            stream_frames_dropped=(self.sim.stream_overruns - self._stream_dropped_base) & _U32,
+            stream_gaps=self.stream_gaps & _U32,
+            watchdog_trips=self.watchdog_trips & _U32,
+            latched_faults=self.latched_faults & _U16,
+        )
+
+    def _clip_item_count(self) -> int:
+        return len(self.sim.clip_report.items) if self.upload.active else 0
+
+    def _clip_report(self) -> ClipReport:
+        report = self.sim.clip_report
+        items: tuple[ClipItem, ...] = report.items if self.upload.active else ()
+        flags = 0
+        for item in items:
+            reason = _clip_reason(item)
+            flags |= 1 << min(reason, 15)
+        common = {
+            "card_generation": self.upload.generation,
+            "item_count": min(len(items), 512),
+            "clipped_textures": len({item.texture for item in items}),
+            "flags": flags,
+            "reference_speed_mm_s": _clamp(report.reference_speed_m_s * 1e3, 0, _U16),
+            "reference_force_mn": _clamp(report.reference_force_n / FORCE_UNIT_N, 0, _U16),
+        }
+        if not items:
+            return ClipReport(**common, item_index=ClipReport.NO_ITEM, texture=-1, channel=0,
+                              reason=0, target_x1e4=0, achievable_x1e4=0)
+        index = min(self._clip_index, len(items) - 1)
+        item = items[index]
+        return ClipReport(
+            **common,
+            item_index=index,
+            texture=item.texture,
+            channel=1 if item.channel == "uv" else 2,
+            reason=_clip_reason(item),
+            target_x1e4=_clamp(item.target * FRICTION_SCALE, 0, 4 * FRICTION_SCALE),
+            achievable_x1e4=_clamp(item.achievable * FRICTION_SCALE, 0, 4 * FRICTION_SCALE),
+            texture_name=detail_text(item.name)[0][:41],
+        )
+
+    # ---- outputs ----------------------------------------------------------------------------
+
+    def _refuse(self) -> None:
+        self.rejected_requests += 1
+        self._pending_faults |= FaultBits.INVALID_REQUEST
+
+    def _apply_output(self, report: Report) -> bool:
+        """Carry out a decoded output report; False when it is refused (PO5)."""
+        if isinstance(report, Finger):
+            self._touch_source = TouchSource.HOST
+            self.sim.host_finger(
+                self.sim.time_s, report.x_mm, report.y_mm, report.fn_n, report.contact
+            )
+            self._host_time_echo = report.host_time_us
+            return True
+        if isinstance(report, Stream):
+            if self._expected_seq is not None and report.stream_seq != self._expected_seq:
+                self.stream_gaps += 1
+            self._expected_seq = (report.stream_seq + 1) & _U16
+            self.sim.stream_frames(np.asarray(report.uv), np.asarray(report.ev))
+            self._streaming = True
+            return True
+        assert isinstance(report, Control)
+        return self._command(report)
+
+    def _command(self, report: Control) -> bool:
+        command = report.command
+        if command == Command.KEEPALIVE:
+            return True
+        if command == Command.START:
+            self.sim.start()
+            return True
+        if command == Command.STOP:
+            self.sim.stop()
+            return True
+        if command == Command.CLEAR_COUNTERS:
+            self.input_reports = self.input_dropped = self.output_reports = 0
+            self.rejected_requests = self.stream_gaps = self.watchdog_trips = 0
+            self.latched_faults = 0
+            self._stream_dropped_base = self.sim.stream_overruns
+            return True
+        if command == Command.PLAY_CARD:
+            if self.upload.active is None:
+                return False
+            self._load_card(self.upload.active.card)
+            return True
+        # SET_TOUCH_SOURCE (the simulated devices have both touch sources)
+        if report.argument == TouchSource.HOST:
+            self._touch_source = TouchSource.HOST
+            return True
+        self._touch_source = TouchSource.INTERNAL
+        self.sim.use_internal_finger(self.internal_track or _no_finger_track())
+        return True
+
+    # ---- input reports ----------------------------------------------------------------------
+
+    def _run_block(self, block: SimBlock, queued_before: int) -> None:
+        """Turn a block of frames into STATE reports at every completed interval.
+
+        ``queued_before``: streamed frames queued before the block; the queue gives one frame
+        per frame period while it lasts, which gives its level at every frame of the block."""
+        n = len(block)
+        if n == 0:
+            return
+        faults = block.faults.astype(np.int64)
+        watchdog = (faults & int(Faults.WATCHDOG)) != 0
+        previous = np.concatenate(([self._watchdog_was_tripped], watchdog[:-1]))
+        self.watchdog_trips += int(np.count_nonzero(watchdog & ~previous))
+        self._watchdog_was_tripped = bool(watchdog[-1])
+        per = self.frames_per_report
+        first_end = per - self._interval_frames - 1  # index of the frame closing the interval
+        self._interval_frames = (self._interval_frames + n) % per
+        ends = np.arange(first_end, n, per)
+        if ends.size == 0:
+            self._interval_faults |= int(np.bitwise_or.reduce(faults))
+            return
+        starts = np.concatenate(([0], ends[:-1] + 1))
+        covered = np.bitwise_or.reduceat(faults[: ends[-1] + 1], starts)
+        covered[0] |= self._interval_faults
+        self._interval_faults = int(np.bitwise_or.reduce(faults[ends[-1] + 1 :]))
+        touch = block.touch
+        forces = block.corner_forces_n[ends]
+        columns = zip(
+            _counts(block.t_s[ends], TIME_UNIT_S, 0, 1 << 62),
+            np.asarray(touch.contact)[ends].tolist(),
+            _counts(np.asarray(touch.x_mm)[ends], POSITION_UNIT_MM, *POSITION_RANGE),
+            _counts(np.asarray(touch.y_mm)[ends], POSITION_UNIT_MM, *POSITION_RANGE),
+            *(_counts(forces[:, k], FORCE_UNIT_N, *_I16) for k in range(4)),
+            _counts(block.lateral_force_n[ends], FORCE_UNIT_N, *_I16),
+            _counts(block.amplitude_m[ends], AMPLITUDE_UNIT_M, 0, _U16),
+            _counts(block.voltage_v[ends], VOLTAGE_UNIT_V, 0, _U16),
+            _counts(block.current_a[ends], CURRENT_UNIT_A, 0, _U16),
+            _counts(block.target_uv[ends], 1 / FRICTION_SCALE, 0, FRICTION_SCALE),
+            _counts(block.target_ev[ends], 1 / FRICTION_SCALE, FRICTION_SCALE, 4 * FRICTION_SCALE),
+            _texture_column(block, ends),
+            np.maximum(queued_before - (ends + 1), self.sim.queued_frames).tolist(),
+            covered.tolist(),
+            strict=True,
+        )
+        for (time_us, contact, x, y, f0, f1, f2, f3, lateral, amplitude, voltage, current,
+             uv, ev, texture, queued, sim_faults) in columns:  # fmt: skip
+            self._emit(State(
+                timestamp_us=time_us & _U32, sequence=self._sequence,
+                flags=self._flags(contact), x_10um=x, y_10um=y,
+                corner_forces_mn=(f0, f1, f2, f3), lateral_force_mn=lateral,
+                amplitude_nm=amplitude, voltage_dv=voltage, current_10na=current,
+                target_uv_x1e4=uv, target_ev_x1e4=ev, texture=texture,
+                faults=self._faults(sim_faults), dropped_reports=self.input_dropped & _U16,
+                rejected_requests=self.rejected_requests & _U16,
+                stream_queued=min(max(queued, 0), _U16), host_time_echo_us=self._host_time_echo,
+                card_generation=self.upload.generation,
+            ))  # fmt: skip
+
+    def _flags(self, contact: bool) -> int:
+        """STATE flags of the device's present state."""
+        flags = _CONTACT if contact else 0
+        if self.sim.running:
+            flags |= _RUNNING
+        if self.upload.active is not None:
+            flags |= _CARD_LOADED
+        if self._touch_source == TouchSource.HOST:
+            flags |= _HOST_FINGER
+        if self._streaming:
+            flags |= _STREAMING
+        if self.upload.state == UploadState.RECEIVING:
+            flags |= _UPLOADING
+        return flags
+
+    def _faults(self, sim_faults: int) -> int:
+        """STATE faults: the interval's simulation faults plus the firmware's events since the
+        previous report (which are consumed)."""
+        faults = _fault_bits(sim_faults) | int(self._pending_faults)
+        if self._clip_item_count() and not self._streaming:
+            faults |= int(FaultBits.CARD_CLIPPED)
+        self._pending_faults = 0
+        return faults & _U16
+
+    def _emit(self, report: State) -> None:
+        """Queue a STATE report, dropping the oldest when the queue is full (rule PT5)."""
+        self.latched_faults |= report.faults
+        self._sequence = (self._sequence + 1) & _U16
+        self.input_reports += 1
+        data = report.encode()
+        self._latest = data
+        if len(self._queue) >= self.input_capacity:
+            self._queue.popleft()
+            self.input_dropped += 1
+            self._pending_faults |= FaultBits.INPUT_DROPPED
+        self._queue.append(data)
+
+    def _idle_state(self) -> State:
+        """A STATE report before the first interval completed."""
+        return State(
+            timestamp_us=round(self.sim.time_s / TIME_UNIT_S) & _U32, sequence=self._sequence,
+            flags=0, x_10um=0, y_10um=0, corner_forces_mn=(0, 0, 0, 0), lateral_force_mn=0,
+            amplitude_nm=0, voltage_dv=0, current_10na=0, target_uv_x1e4=FRICTION_SCALE,
+            target_ev_x1e4=FRICTION_SCALE, texture=-1, faults=0, dropped_reports=0,
+            rejected_requests=self.rejected_requests & _U16, stream_queued=0,
+            host_time_echo_us=self._host_time_echo, card_generation=self.upload.generation,
+        )  # fmt: skip
+
+
+def _clip_reason(item: ClipItem) -> int:
+    """CLIP_REPORT reason of one clipped item of the simulation's clip report."""
+    if item.reason.startswith("no UV"):
+        return ClipReason.NO_UV
+    if item.reason.startswith("no EV"):
+        return ClipReason.NO_EV
+    if item.channel == "uv":
+        return ClipReason.AMPLITUDE
+    if item.channel == "ev":
+        return ClipReason.VOLTAGE
+    return ClipReason.OTHER
