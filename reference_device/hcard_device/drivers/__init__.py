@@ -1,0 +1,94 @@
+"""Host drivers of the hcard reference device (and of any device speaking its protocol).
+
+:func:`open_device` picks the driver of a URI's scheme among the installed driver plugins
+(the built-ins are ``sim``, ``usbip``, ``pyusb`` and ``hid``; see :mod:`.uri`), and
+:func:`list_devices` asks every driver what it can reach.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+from typing import Any
+
+from hcard_device.drivers.base import DEFAULT_TIMEOUT_S, DeviceListing, Driver
+from hcard_device.drivers.errors import DeviceError, DeviceStall, DeviceTimeout, UriError
+from hcard_device.drivers.uri import SCHEMES, DeviceUri, parse_uri
+from hcard_device.usb.transport import DEFAULT_HOST, DEFAULT_PORT
+
+__all__ = [
+    "DEFAULT_TIMEOUT_S",
+    "DeviceError",
+    "DeviceListing",
+    "DeviceStall",
+    "DeviceTimeout",
+    "DeviceUri",
+    "Driver",
+    "UriError",
+    "driver_classes",
+    "list_devices",
+    "open_device",
+    "parse_uri",
+]
+
+
+def _builtin_drivers() -> list[Any]:
+    from hcard_device.drivers.plugin import hcard_drivers
+
+    return hcard_drivers()
+
+
+def driver_classes(*, plugins: bool = True) -> dict[str, Any]:
+    """Driver plugins by URI scheme: the built-ins, then (``plugins``) the installed driver
+    plugins for other schemes."""
+    by_scheme: dict[str, Any] = {}
+    for driver in _builtin_drivers():
+        for scheme in driver.schemes:
+            by_scheme[scheme] = driver
+    if not plugins:
+        return by_scheme
+    from hcard.plugins import get_registry
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # `hcard plugins` reports broken plugins
+        plugins = get_registry().drivers
+    for driver in plugins.values():
+        for scheme in getattr(driver, "schemes", ()):
+            by_scheme.setdefault(str(scheme), driver)
+    return by_scheme
+
+
+def open_device(uri: str | DeviceUri, *, timeout_s: float = DEFAULT_TIMEOUT_S) -> Driver:
+    """Open the device a URI names with the driver of its scheme.
+
+    Raises:
+        UriError: malformed URI or unknown scheme.
+        DeviceError: the device is missing, unreachable or not an hcard device.
+    """
+    scheme = (uri.split("://", 1)[0].lower() if isinstance(uri, str) else uri.scheme)
+    drivers = driver_classes(plugins=scheme not in SCHEMES)  # plugins only when needed
+    if isinstance(uri, str):
+        uri = parse_uri(uri, schemes=tuple(dict.fromkeys((*SCHEMES, *drivers))))
+    driver = drivers.get(uri.scheme)
+    if driver is None:
+        raise UriError(f"bad device URI {uri.text!r}: no driver for scheme {uri.scheme!r}")
+    return driver.open(uri, timeout_s=timeout_s)
+
+
+def list_devices(hosts: Sequence[tuple[str, int]] = ((DEFAULT_HOST, DEFAULT_PORT),), *,
+                 timeout_s: float = DEFAULT_TIMEOUT_S) -> list[DeviceListing]:
+    """Every device reachable now: hidapi devices with the hcard VID:PID, hcard devices on the
+    USB/IP servers ``hosts`` (devlist request), and the in-process ``sim://`` devices. One
+    driver failing does not hide the others."""
+    listings: list[DeviceListing] = []
+    seen: set[Any] = set()
+    for driver in driver_classes().values():
+        if driver in seen:
+            continue
+        seen.add(driver)
+        try:
+            listings += driver.enumerate(hosts, timeout_s=timeout_s)
+        except Exception as exc:  # a third-party driver must not break the listing
+            warnings.warn(f"driver {getattr(driver, 'name', driver)!r} cannot enumerate: {exc}",
+                          stacklevel=2)
+    return listings

@@ -1,0 +1,16 @@
+"""The reference device on USB: a USB-HID device built on :mod:`usbip` (pinned 0.7.0) and its
+USB/IP server.
+
+- :mod:`.device`: the HID interface (report descriptor, interrupt IN/OUT, GET/SET_REPORT) wired
+  to the firmware; VID/PID and strings.
+- :mod:`.transport`: USB/IP over TCP with ``TCP_NODELAY`` on every socket, connect timeouts and
+  a clean stop.
+- :mod:`.server`: :class:`~.server.DeviceServer` (firmware in real time, report pump, listener)
+  and ``python -m hcard_device.usb.server`` / ``hcard device serve``.
+"""
+
+from hcard_device.usb.device import IN_ENDPOINT, OUT_ENDPOINT, PID, VID, HcardHID
+from hcard_device.usb.server import DeviceServer
+from hcard_device.usb.transport import NoDelayUSBIP
+
+__all__ = ["IN_ENDPOINT", "OUT_ENDPOINT", "PID", "VID", "DeviceServer", "HcardHID", "NoDelayUSBIP"]

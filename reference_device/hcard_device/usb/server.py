@@ -1,0 +1,226 @@
+"""Serve the hcard reference device over USB/IP: ``python -m hcard_device.usb.server``.
+
+The firmware runs in real time on its own thread (:meth:`Firmware.run_realtime`); a pump thread
+moves its STATE reports to the interrupt IN endpoint every :data:`PUMP_INTERVAL_S`; the USB/IP
+listener (``TCP_NODELAY`` on every socket) serves URBs on per-connection threads. Any Linux
+host can then ``usbip attach -r HOST -b 1-1`` and get a ``/dev/hidrawN``. SIGINT and SIGTERM
+stop it cleanly: the firmware and pump threads end and are joined, the listener and every
+connection are closed (hosts see the device vanish), and the process exits with status 0.
+
+Options: ``--host`` (default 127.0.0.1), ``--port`` (default 3240; 0 picks a free port),
+``--device evita|coupled``, ``--seed``. The first line on stdout is
+``serving <variant> at usbip://HOST:PORT/1-1`` once the port is bound (tests wait for it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable
+from types import FrameType, TracebackType
+from typing import Any, ClassVar
+
+import usbip
+
+from hcard_device.usb.device import DEFAULT_IN_QUEUE, PRODUCTS, HcardHID, build_usb_device
+from hcard_device.usb.transport import DEFAULT_BUSID, DEFAULT_HOST, DEFAULT_PORT, NoDelayUSBIP
+
+PUMP_INTERVAL_S = 0.0005
+"""Period of the pump that moves STATE reports from the firmware to the IN endpoint, s."""
+SWITCH_INTERVAL_S = 0.0002
+"""GIL switch interval of the server process, s (Python's default is 5 ms)."""
+JOIN_TIMEOUT_S = 2.0
+"""Longest wait for a thread to end on stop, s."""
+
+
+def make_firmware(variant: str, seed: int = 0) -> Any:
+    """A :class:`~hcard_device.firmware.Firmware` on a fresh simulation of ``variant``."""
+    from hcard_device.firmware import Firmware
+    from hcard_device.sim import DeviceConfig, DeviceSimulation
+
+    if variant not in PRODUCTS:
+        raise ValueError(f"unknown device {variant!r}; known: {', '.join(PRODUCTS)}")
+    config = DeviceConfig.evita() if variant == "evita" else DeviceConfig.coupled()
+    return Firmware(DeviceSimulation(config, seed=seed))
+
+
+class DeviceServer:
+    """The device, its firmware thread, its pump thread and its USB/IP listener.
+
+    Args:
+        variant: ``evita`` or ``coupled``.
+        host, port: where to listen (port 0: a free one, see :attr:`port`).
+        seed: seed of the simulation's noise.
+        loopback: serve on an in-process socket pair (:class:`usbip.Loopback`) instead of TCP.
+        nodelay: ``TCP_NODELAY`` on the served sockets (benchmarks turn it off).
+        in_queue: STATE reports the IN endpoint holds before dropping the oldest.
+    """
+
+    _running: ClassVar[set[DeviceServer]] = set()
+    _running_lock: ClassVar[threading.Lock] = threading.Lock()
+
+    def __init__(self, variant: str = "evita", *, host: str = DEFAULT_HOST,
+                 port: int = DEFAULT_PORT, seed: int = 0, loopback: bool = False,
+                 nodelay: bool = True, in_queue: int = DEFAULT_IN_QUEUE) -> None:
+        if variant not in PRODUCTS:
+            raise ValueError(f"unknown device {variant!r}; known: {', '.join(PRODUCTS)}")
+        self.variant = variant
+        self.host = host
+        self.seed = seed
+        self.loopback = loopback
+        self.transport: Any = usbip.Loopback() if loopback else NoDelayUSBIP(
+            host, port, nodelay=nodelay)
+        self.in_queue = in_queue
+        self.firmware: Any = None
+        self.interface: HcardHID | None = None
+        self.usb_device: usbip.USBDevice | None = None
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self.thread_errors: list[BaseException] = []
+
+    @classmethod
+    def running_in_process(cls) -> bool:
+        """True while a device server runs in this process."""
+        with cls._running_lock:
+            return bool(cls._running)
+
+    @property
+    def port(self) -> int:
+        """The TCP port served (0 for a loopback server)."""
+        return 0 if self.loopback else int(self.transport.port)
+
+    @property
+    def uri(self) -> str:
+        """The URI a host driver opens."""
+        if self.loopback:
+            return f"usbip://loopback?device={self.variant}&seed={self.seed}"
+        return f"usbip://{self.host}:{self.port}/{DEFAULT_BUSID}"
+
+    def start(self) -> DeviceServer:
+        """Build the firmware and the USB device, start the threads, bind and serve.
+
+        Raises:
+            OSError: the address cannot be bound.
+        """
+        self.firmware = make_firmware(self.variant, self.seed)
+        self.usb_device, self.interface = build_usb_device(self.firmware, self.variant,
+                                                           in_queue=self.in_queue)
+        self.usb_device.plug(via=self.transport)
+        with self._running_lock:
+            self._running.add(self)
+        for target, name in ((self._run_firmware, "hcard-firmware"),
+                             (self._run_pump, "hcard-pump")):
+            thread = threading.Thread(target=target, name=name, daemon=True)
+            thread.start()
+            self._threads.append(thread)
+        return self
+
+    def _run_firmware(self) -> None:
+        try:
+            self.firmware.run_realtime(self._stop)
+        except BaseException as exc:  # reported by stop(); the device must not die silently
+            self.thread_errors.append(exc)
+            self._stop.set()
+
+    def _run_pump(self) -> None:
+        interface = self.interface
+        assert interface is not None
+        try:
+            while not self._stop.wait(PUMP_INTERVAL_S):
+                interface.pump()
+        except BaseException as exc:
+            self.thread_errors.append(exc)
+            self._stop.set()
+
+    @property
+    def stopped(self) -> bool:
+        """True once :meth:`stop` was called or a device thread failed."""
+        return self._stop.is_set()
+
+    def wait(self, timeout_s: float | None = None) -> bool:
+        """Block until the server stops (or ``timeout_s`` passes); True when stopped."""
+        return self._stop.wait(timeout_s)
+
+    def request_stop(self) -> None:
+        """Ask the server to stop (safe from a signal handler); :meth:`stop` finishes it."""
+        self._stop.set()
+
+    def stop(self) -> None:
+        """Stop the firmware and the pump, close every connection, unplug (idempotent)."""
+        self._stop.set()
+        for thread in self._threads:
+            thread.join(JOIN_TIMEOUT_S)
+        self._threads.clear()
+        if self.usb_device is not None:
+            self.usb_device.unplug()
+            self.usb_device = None
+        with self._running_lock:
+            self._running.discard(self)
+
+    def __enter__(self) -> DeviceServer:
+        return self.start() if self.usb_device is None else self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.stop()
+
+
+def _print(message: str, error: bool = False) -> None:
+    print(message, file=sys.stderr if error else sys.stdout, flush=True)
+
+
+def serve(variant: str = "evita", host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
+          seed: int = 0, *, echo: Callable[[str, bool], None] = _print) -> int:
+    """Serve until SIGINT or SIGTERM; returns the exit status (0 on a clean stop).
+
+    ``echo(message, error)`` prints a line (to stderr when ``error``), flushed at once.
+    """
+    # The firmware thread computes for up to a millisecond at a time; with the default 5 ms
+    # GIL switch interval the USB/IP threads would wait that long to answer a URB.
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
+    server = DeviceServer(variant, host=host, port=port, seed=seed)
+    try:
+        server.start()
+    except OSError as exc:
+        echo(f"error: cannot serve on {host}:{port} ({exc.strerror or exc})", True)
+        return 1
+
+    def on_signal(signum: int, _frame: FrameType | None) -> None:
+        server.request_stop()
+
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        port_option = "" if server.port == DEFAULT_PORT else f"--tcp-port {server.port} "
+        echo(f"serving {variant} at {server.uri} (attach: usbip {port_option}attach -r {host} "
+             f"-b {DEFAULT_BUSID}); Ctrl-C stops", False)
+        started = time.monotonic()
+        while not server.wait(0.5):
+            pass
+    finally:
+        server.stop()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    if server.thread_errors:
+        echo(f"error: the device stopped: {server.thread_errors[0]!r}", True)
+        return 1
+    echo(f"stopped after {time.monotonic() - started:.1f} s", False)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m hcard_device.usb.server``; returns the exit status."""
+    parser = argparse.ArgumentParser(prog="python -m hcard_device.usb.server",
+                                     description=__doc__.splitlines()[0])
+    parser.add_argument("--host", default=DEFAULT_HOST, help="address to listen on")
+    parser.add_argument("--port", type=int, default=DEFAULT_PORT, help="TCP port (0: any)")
+    parser.add_argument("--device", choices=sorted(PRODUCTS), default="evita")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the simulation noise")
+    args = parser.parse_args(argv)
+    return serve(args.device, args.host, args.port, args.seed)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

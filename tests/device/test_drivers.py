@@ -1,0 +1,440 @@
+"""Host drivers against the real firmware and simulation.
+
+Tier 1 (in-process, every run): ``sim://`` and the ``loopback`` USB/IP and pyusb drivers.
+Tier 2 (every CI run): the device in a separate process on 127.0.0.1 (``served_device``), with
+the usbip, pyusb and hidapi drivers (hidapi through hidraw-like calls carried over USB/IP; the
+QEMU guest tier of tests/device/test_guest.py runs it on a real kernel hidraw node).
+"""
+
+from __future__ import annotations
+
+import signal
+import time
+
+import numpy as np
+import pytest
+from hid_over_usbip import HidOverUsbip
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from served_device import served_device
+
+from hcard import build
+from hcard_device.drivers import (
+    DeviceError,
+    DeviceStall,
+    UriError,
+    list_devices,
+    open_device,
+    parse_uri,
+)
+from hcard_device.drivers.hidapi_driver import HidapiDriver, hidapi_module
+from hcard_device.drivers.sim import SimDriver
+from hcard_device.drivers.usbip_link import UNLINK_GRACE_S
+from hcard_device.protocol import (
+    Capability,
+    DeviceInfo,
+    DeviceKind,
+    FaultBits,
+    State,
+    StateFlags,
+    UploadBegin,
+    UploadData,
+    UploadResult,
+    UploadState,
+)
+from hcard_device.usb.device import PID, VID
+from hcard_device.usb.server import DeviceServer
+
+TIMEOUT_S = 1.0
+
+
+def step_card():
+    """20 x 10 mm, two 10 mm taxtels: plain glass (relative friction 1) on the left, a
+    constant UV friction reduction to 0.4 on the right."""
+    return build.card(
+        20.0, 10.0, taxtel_mm=10.0,
+        textures=[build.texture(1.0, channel="uv", name="plain"),
+                  build.texture(0.4, channel="uv", name="slippery")],
+        texture_index=[0, 1], title="step",
+    )
+
+
+def stroke(driver, x0_mm: float, x1_mm: float, seconds: float) -> list[State]:
+    """Move the host finger from ``x0_mm`` to ``x1_mm`` (y 5 mm, 0.5 N) in ``seconds``,
+    reporting it at 100 Hz, and return the STATE reports received meanwhile."""
+    states: list[State] = []
+    t0 = driver.clock()
+    end = t0 + seconds
+    while driver.clock() < end:
+        t = driver.clock()
+        driver.send_finger(t, x0_mm + (x1_mm - x0_mm) * (t - t0) / seconds, 5.0, 0.5, True)
+        states += driver.collect_until(min(t + 0.01, end))
+    return states
+
+
+def mean_lateral_n(states: list[State]) -> float:
+    """Mean lateral force of the last 50 reports, N."""
+    return float(np.mean([s.lateral_force_n for s in states[-50:]]))
+
+
+def started(driver):
+    """Upload the step card and start rendering from the host finger."""
+    outcome = driver.upload_card(step_card())
+    driver.set_touch_source(host=True)
+    driver.start()
+    return outcome
+
+
+# ---- URIs --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("text", "fields"), [
+    ("sim://", {"scheme": "sim", "variant": "evita", "seed": 0}),
+    ("sim://coupled?seed=7", {"scheme": "sim", "variant": "coupled", "seed": 7}),
+    ("usbip://", {"host": "127.0.0.1", "port": 3240, "busid": "1-1"}),
+    ("usbip://10.0.0.5:4000/2-1.3", {"host": "10.0.0.5", "port": 4000, "busid": "2-1.3"}),
+    ("usbip://[::1]:3241/1-1", {"host": "::1", "port": 3241}),
+    ("pyusb://loopback?device=coupled", {"scheme": "pyusb", "host": "loopback",
+                                         "variant": "coupled"}),
+    ("hid://1209:00ff", {"scheme": "hid", "vid": 0x1209, "pid": 0xFF, "path": ""}),
+    ("hid:///dev/hidraw3", {"path": "/dev/hidraw3", "vid": VID, "pid": PID}),
+    ("hid://", {"path": "", "vid": VID, "pid": PID}),
+])
+def test_uri_parsing(text, fields):
+    uri = parse_uri(text)
+    for name, value in fields.items():
+        assert getattr(uri, name) == value, name
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("127.0.0.1:3240", "has the form SCHEME://"),
+    ("ftp://x", "unknown scheme 'ftp'"),
+    ("usbip://127.0.0.1:port/1-1", "port 'port' is not a number"),
+    ("usbip://127.0.0.1:70000/1-1", "port '70000' is not a number in 1..65535"),
+    ("usbip://127.0.0.1/usb3", "bus ID 'usb3'"),
+    ("usbip://host?device=evita", "options apply to loopback only"),
+    ("sim://nano", "unknown device 'nano'"),
+    ("sim://?seed=-1", "seed '-1'"),
+    ("sim://evita?speed=2", "unknown option(s) speed"),
+    ("hid://12x9:1", "is not VID:PID in hexadecimal"),
+    ("hid://1209:0001/dev/hidraw0", "either VID:PID or a device path"),
+])
+def test_bad_uris_are_one_clear_line(text, message):
+    with pytest.raises(UriError) as info:
+        parse_uri(text)
+    assert message in str(info.value)
+    assert "\n" not in str(info.value)
+    assert "expected e.g." in str(info.value) or "known:" in str(info.value)
+
+
+# ---- tier 1: sim:// -----------------------------------------------------------------------------
+
+
+def test_sim_device_info_per_variant():
+    with open_device("sim://") as evita, open_device("sim://coupled") as coupled:
+        a, b = evita.info(), coupled.info()
+    assert (a.protocol_major, a.device_kind, a.plate_frequency_hz) == (1, DeviceKind.EVITA, 60750)
+    assert (b.device_kind, b.plate_frequency_hz, b.ev_carrier_hz) == (
+        DeviceKind.COUPLED, 38220, 440)
+    assert a.input_rate_hz == 1000 and a.frame_rate_hz == 10_000
+    assert not a.capabilities & Capability.EV and b.capabilities & Capability.EV
+    assert b.max_current_10na == 25_000  # 250 uA
+
+
+def test_sim_plays_the_card_from_the_host_finger():
+    with open_device("sim://") as driver:
+        assert isinstance(driver, SimDriver) and not driver.realtime
+        outcome = started(driver)
+        assert outcome.status.state == UploadState.COMMITTED
+        assert outcome.status.card_generation == 1 and outcome.clip.item_count == 0
+        left = stroke(driver, 2.0, 8.0, 0.15)
+        right = stroke(driver, 12.0, 18.0, 0.15)
+        assert driver.reports_lost == 0 and driver.malformed_inputs == 0
+        # one report per millisecond of device time, none lost
+        assert len(left) == pytest.approx(150, abs=1) and len(right) == pytest.approx(150, abs=1)
+        sequences = np.array([s.sequence for s in left + right])
+        assert np.all(np.diff(sequences) % 65536 == 1)
+        assert all(s.contact and s.flags & StateFlags.RUNNING for s in left[5:] + right[5:])
+        assert left[-1].x_mm == pytest.approx(8.0, abs=0.5)
+        assert left[-1].target_uv == 1.0 and left[-1].amplitude_nm < 50
+        assert right[-1].target_uv == pytest.approx(0.4)
+        assert right[-1].amplitude_nm > 300  # the plate vibrates to reduce friction
+        assert right[-1].normal_force_n == pytest.approx(0.5, abs=0.1)
+        assert right[-1].card_generation == 1
+        # the tribometer under the finger sees the friction reduction the card asks for
+        assert mean_lateral_n(right) / mean_lateral_n(left) == pytest.approx(0.4, abs=0.08)
+
+
+def test_sim_refused_feature_requests_are_stalls():
+    with open_device("sim://") as driver:
+        with pytest.raises(DeviceStall, match="refused"):
+            driver._get_feature(0x55, 8)
+        with pytest.raises(DeviceStall, match="refused"):
+            driver.set_report(driver.info())  # DEVICE_INFO is read-only
+        assert driver.counters().rejected_requests == 2
+        assert driver.info().protocol_major == 1  # still usable
+
+
+def test_sim_upload_cut_off_keeps_the_previous_card():
+    with open_device("sim://") as driver:
+        driver.upload_card(step_card())
+        data = b"\x0a\x05hello" * 20
+        driver.set_report(UploadBegin(len(data), 0x1234))
+        driver.set_report(UploadData(0, data[:58]))
+        assert driver.upload_status().state == UploadState.RECEIVING
+        driver.abort_upload()
+        status = driver.upload_status()
+        assert status.state == UploadState.FAILED and status.result == UploadResult.ABORTED
+        assert status.card_generation == 1 and status.received == 58
+        driver.start()
+        assert stroke(driver, 12.0, 18.0, 0.05)[-1].target_uv == pytest.approx(0.4)
+
+
+def test_sim_rejected_upload_raises_with_the_reason():
+    with open_device("sim://") as driver:
+        driver.upload_card(step_card())
+        with pytest.raises(DeviceError, match=r"INVALID_CARD.*previous card stays active"):
+            driver.upload_card(b"\x0a\x03abc")
+        assert driver.upload_status().card_generation == 1
+
+
+def test_sim_streamed_frames_are_rendered():
+    with open_device("sim://coupled") as driver:
+        driver.set_touch_source(host=True)
+        driver.start()
+        uv, ev = np.full(300, 0.5), np.full(300, 1.5)
+        assert driver.stream_frames(uv, ev) == 20  # 15 frames per report
+        states = stroke(driver, 2.0, 8.0, 0.02)
+        assert states[-1].flags & StateFlags.STREAMING
+        assert states[-1].target_uv == pytest.approx(0.5)
+        assert states[-1].target_ev == pytest.approx(1.5)
+
+
+def test_sim_watchdog_shows_in_the_reports():
+    with open_device("sim://") as driver:
+        started(driver)
+        stroke(driver, 12.0, 18.0, 0.05)
+        silent = driver.collect_until(driver.clock() + 0.3)  # no host report for 300 ms
+        assert silent[-1].faults & FaultBits.WATCHDOG
+        assert silent[-1].amplitude_nm < 20
+
+
+def test_closed_driver_raises():
+    driver = open_device("sim://")
+    driver.close()
+    driver.close()  # idempotent
+    with pytest.raises(DeviceError, match="closed"):
+        driver.read_inputs(0.01)
+
+
+def test_unknown_scheme_has_no_driver():
+    with pytest.raises(UriError, match="unknown scheme 'bluetooth'"):
+        open_device("bluetooth://device")
+
+
+# ---- the shared input-report parser ----------------------------------------------------------
+
+
+def _state(sequence: int) -> bytes:
+    return State(1000, sequence, 0, 0, 0, (0, 0, 0, 0), 0, 0, 0, 0, 10_000, 10_000, -1, 0, 0, 0,
+                 0, 0, 0).encode()
+
+
+def test_sequence_gaps_count_lost_reports():
+    driver = SimDriver(parse_uri("sim://"), firmware=None)
+    for sequence in (65533, 65534, 65535, 0, 1, 5, 6):
+        assert driver.parse_input(_state(sequence)).sequence == sequence
+    assert driver.reports_received == 7
+    assert driver.reports_lost == 3  # 2, 3 and 4; the wrap at 65535 -> 0 is no loss
+
+
+@settings(max_examples=400, deadline=None)
+@given(st.binary(max_size=80) | st.binary(min_size=52, max_size=64).map(lambda b: b"\x01" + b))
+def test_input_parsing_never_crashes(data):
+    driver = SimDriver(parse_uri("sim://"), firmware=None)
+    state = driver.parse_input(data)
+    if state is None:
+        assert driver.malformed_inputs == 1 and driver.reports_received == 0
+    else:
+        assert isinstance(state, State) and driver.reports_received == 1
+        assert state.encode() == bytes(data[:State.size()])
+
+
+# ---- tier 1: USB/IP and pyusb to a device served in this process -------------------------------
+
+
+@pytest.mark.parametrize("scheme", ["usbip", "pyusb"])
+def test_loopback_drivers_speak_usb_to_the_firmware(scheme):
+    with open_device(f"{scheme}://loopback", timeout_s=TIMEOUT_S) as driver:
+        assert driver.realtime
+        assert driver.info().device_kind == DeviceKind.EVITA
+        outcome = started(driver)
+        assert outcome.status.card_generation == 1
+        states = stroke(driver, 12.0, 18.0, 0.15)
+        assert len(states) > 50
+        assert states[-1].target_uv == pytest.approx(0.4)
+        assert states[-1].flags & StateFlags.HOST_FINGER
+        with pytest.raises(DeviceStall, match="STALL"):
+            driver._get_feature(0x55, 8)
+        with pytest.raises(DeviceStall, match="STALL"):
+            driver._set_feature(bytes([0x02, 0, 0]))  # no feature report 0x02
+        assert driver.counters().rejected_requests == 2
+
+
+# ---- hidapi ------------------------------------------------------------------------------------
+
+
+def test_hidapi_missing_device_is_a_clear_error():
+    with pytest.raises(DeviceError, match=r"no HID device 1209:fffe found"):
+        HidapiDriver.open("hid://1209:fffe")
+    with pytest.raises(DeviceError, match="no such device node /dev/hidraw-none"):
+        HidapiDriver.open("hid:///dev/hidraw-none")
+
+
+def test_hidapi_enumeration_lists_only_hcard_devices():
+    module = hidapi_module()
+    listings = HidapiDriver.enumerate()
+    assert len(listings) == len(module.enumerate(VID, PID))
+    assert all(listing.uri.startswith("hid://") for listing in listings)
+
+
+def test_hidapi_refuses_to_share_a_process_with_the_device():
+    with DeviceServer(loopback=True), pytest.raises(DeviceError, match="another process"):
+        HidapiDriver.open("hid://")
+
+
+def test_hidapi_driver_on_real_hardware():
+    """The hidapi driver on a real hidraw node: runs where an hcard device is attached (the
+    QEMU guest tier, or a workstation after ``usbip attach``)."""
+    found = [entry for entry in hidapi_module().enumerate(VID, PID)
+             if entry["path"].startswith(b"/dev/hidraw")]
+    if not found:
+        pytest.skip("no hcard device on /dev/hidraw* (missing hardware; the QEMU guest "
+                    "tier of test_guest.py attaches one)")
+    with HidapiDriver.open(f"hid://{found[0]['path'].decode()}") as driver:
+        started(driver)
+        states = stroke(driver, 12.0, 18.0, 0.2)
+        assert states[-1].target_uv == pytest.approx(0.4)
+
+
+# ---- tier 2: the device in a separate process ---------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def device_process():
+    """One device server process for the tier-2 tests that do not kill it."""
+    with served_device() as served:
+        yield served
+
+
+def _open(kind: str, served) -> object:
+    if kind == "hid":
+        return HidapiDriver.open("hid://", timeout_s=TIMEOUT_S,
+                                 module=HidOverUsbip((served.host, served.port)))
+    return open_device(served.uri.replace("usbip://", f"{kind}://"), timeout_s=TIMEOUT_S)
+
+
+@pytest.mark.parametrize("kind", ["usbip", "pyusb", "hid"])
+def test_tier2_upload_stream_and_read(kind, device_process):
+    with _open(kind, device_process) as driver:
+        outcome = started(driver)
+        assert outcome.status.state == UploadState.COMMITTED
+        t0 = time.monotonic()
+        left = stroke(driver, 2.0, 8.0, 0.15)
+        right = stroke(driver, 12.0, 18.0, 0.15)
+        elapsed = time.monotonic() - t0
+        states = left + right
+        # real time: about one report per millisecond, and none lost on loopback
+        assert len(states) == pytest.approx(elapsed * 1000, rel=0.15)
+        assert driver.reports_lost <= 2
+        assert left[-1].target_uv == 1.0 and right[-1].target_uv == pytest.approx(0.4)
+        assert right[-1].amplitude_nm > 300
+        assert right[-1].x_mm == pytest.approx(18.0, abs=1.0)  # 25 ms at 40 mm/s
+        assert mean_lateral_n(right) / mean_lateral_n(left) == pytest.approx(0.4, abs=0.1)
+        # the device applied a recent finger report (host time echoed, u32 microseconds)
+        age_us = (round(driver.clock() * 1e6) - right[-1].host_time_echo_us) % (1 << 32)
+        assert age_us < 50_000
+
+
+@pytest.mark.parametrize("kind", ["usbip", "pyusb", "hid"])
+def test_tier2_unknown_report_ids_stall(kind, device_process):
+    with _open(kind, device_process) as driver:
+        before = driver.counters().rejected_requests
+        with pytest.raises(DeviceStall):
+            driver._get_feature(0x55, 8)
+        with pytest.raises(DeviceStall):
+            driver._set_feature(bytes([0x01] + [0] * 51))  # STATE is an input report
+        driver._write_output(bytes([0x7F, 1, 2, 3]))  # unknown output: counted, no STALL
+        assert driver.counters().rejected_requests == before + 3
+        assert isinstance(driver.info(), DeviceInfo)
+
+
+@pytest.mark.parametrize("kind", ["usbip", "pyusb", "hid"])
+def test_tier2_vanished_device_raises_within_the_timeout(kind):
+    with served_device() as served, _open(kind, served) as driver:
+        started(driver)
+        stroke(driver, 12.0, 18.0, 0.05)
+        served.kill()
+        t0 = time.monotonic()
+        with pytest.raises(DeviceError):
+            for _ in range(100):
+                stroke(driver, 12.0, 18.0, 0.02)
+        assert time.monotonic() - t0 < TIMEOUT_S + 0.5
+
+
+def test_tier2_hung_device_times_out():
+    """A device that stops answering (SIGSTOP) costs a timeout, never a hang."""
+    timeout_s = 0.3
+    with served_device() as served:
+        for kind in ("usbip", "pyusb"):
+            driver = open_device(served.uri.replace("usbip://", f"{kind}://"),
+                                 timeout_s=timeout_s)
+            driver.info()
+            served.process.send_signal(signal.SIGSTOP)
+            try:
+                driver.read_inputs(0.05)  # whatever was already on its way
+                t0 = time.monotonic()
+                assert driver.read_inputs(0.2) == []  # no report: an empty answer after 0.2 s
+                assert 0.19 < time.monotonic() - t0 < 0.4
+                t0 = time.monotonic()
+                with pytest.raises(DeviceError, match=r"no answer|timed out"):
+                    driver.counters()
+                # the transfer timed out, then its unlink went unanswered: the link is given up
+                assert time.monotonic() - t0 < timeout_s + UNLINK_GRACE_S + 0.3, kind
+                with pytest.raises(DeviceError):
+                    driver.counters()
+            finally:
+                served.process.send_signal(signal.SIGCONT)
+                driver.close()
+
+
+def test_tier2_listing_finds_the_served_device(device_process):
+    listings = list_devices([(device_process.host, device_process.port), ("127.0.0.1", 1)])
+    uris = {listing.uri for listing in listings}
+    assert device_process.uri in uris
+    assert device_process.uri.replace("usbip://", "pyusb://") in uris
+    assert {"sim://evita", "sim://coupled"} <= uris
+    assert not any(":1/" in uri for uri in uris)  # nothing listens on port 1
+
+
+def test_unencodable_host_values_are_device_errors():
+    with open_device("sim://") as driver:
+        with pytest.raises(DeviceError, match="cannot send the finger state"):
+            driver.send_finger(0.0, float("nan"), 0.0, 0.5, True)
+        with pytest.raises(DeviceError, match="cannot stream"):
+            driver.stream_frames([1.5], [1.0])  # UV above 1
+        assert driver.counters().rejected_requests == 0  # nothing malformed reached it
+
+
+def test_drivers_register_as_a_plugin():
+    from hcard.plugins.registry import PluginRegistry
+    from hcard_device.drivers import plugin
+
+    registry = PluginRegistry()
+    infos = registry.register(plugin, name="builtin-drivers")
+    assert sorted(info.name for info in infos) == ["hid", "pyusb", "sim", "usbip"]
+    assert all(info.kind == "driver" and info.description for info in infos)
+    schemes = {scheme for info in infos for scheme in info.obj.schemes}
+    assert schemes == {"sim", "usbip", "pyusb", "hid"}
+    with registry.get("driver", "sim").open("sim://coupled") as driver:
+        assert driver.info().device_kind == DeviceKind.COUPLED
