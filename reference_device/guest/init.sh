@@ -69,7 +69,8 @@ mount -t tmpfs tmpfs /host/run || fail "mount /host/run"
 mkdir -p /host/run/tmp
 say "host root mounted at $(uptime_s) s"
 
-[ -x "/host$python" ] || fail "host python $python not found in the 9p share"
+# Test inside the chroot: a venv's python3 is an absolute symlink into the host tree.
+chroot /host test -x "$python" || fail "host python $python not found in the 9p share"
 # shellcheck disable=SC2086,SC2016  # args is a list of words; $1/$@ belong to the inner sh
 chroot /host /usr/bin/env -i PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin \
     HOME=/root LANG=C.UTF-8 TMPDIR=/run/tmp PYTHONDONTWRITEBYTECODE=1 PYTHONUNBUFFERED=1 \
