@@ -392,16 +392,18 @@ def test_tier2_hung_device_times_out():
             driver.info()
             served.process.send_signal(signal.SIGSTOP)
             try:
-                driver.read_inputs(0.05)  # whatever was already on its way
+                # The stop may land between two messages (reads then come back empty and the
+                # next request times out) or in the middle of one (the link gives up at once):
+                # either way the driver must raise DeviceError within its timeout plus the
+                # unlink grace, never hang.
                 t0 = time.monotonic()
-                assert driver.read_inputs(0.2) == []  # no report: an empty answer after 0.2 s
-                assert 0.19 < time.monotonic() - t0 < 0.4
-                t0 = time.monotonic()
-                with pytest.raises(DeviceError, match=r"no answer|timed out"):
-                    driver.counters()
-                # the transfer timed out, then its unlink went unanswered: the link is given up
-                assert time.monotonic() - t0 < timeout_s + UNLINK_GRACE_S + 0.3, kind
-                with pytest.raises(DeviceError):
+                with pytest.raises(DeviceError, match=r"no answer|timed out|stopped in the middle"):
+                    for _ in range(50):
+                        assert driver.read_inputs(0.05) is not None
+                        driver.counters()
+                elapsed = time.monotonic() - t0
+                assert elapsed < 0.05 + timeout_s + UNLINK_GRACE_S + 0.3, (kind, elapsed)
+                with pytest.raises(DeviceError):  # the link stays given up
                     driver.counters()
             finally:
                 served.process.send_signal(signal.SIGCONT)
