@@ -24,14 +24,21 @@ PROGRESS_FRAMES = 2_000_000
 
 
 def frames_to_csv(frames: Frames) -> bytes:
-    """CSV bytes with columns t_s, uv, ev, friction, contact, texture (spec/track-format.md)."""
-    buffer = io.StringIO()
-    buffer.write("t_s,uv,ev,friction,contact,texture\n")
-    table = np.column_stack(
-        (frames.t, frames.uv, frames.ev, frames.friction, frames.contact, frames.texture)
-    )
-    np.savetxt(buffer, table, delimiter=",", fmt=["%.7f", "%.9g", "%.9g", "%.9g", "%d", "%d"])
-    return buffer.getvalue().encode()
+    """CSV bytes with columns t_s, uv, ev, friction, contact, texture (spec/track-format.md).
+
+    Floats are written in their shortest round-trip form (rule O1), so reading the CSV back
+    gives the rendered numbers exactly.
+    """
+    columns = [
+        map(repr, frames.t.tolist()),
+        map(repr, frames.uv.tolist()),
+        map(repr, frames.ev.tolist()),
+        map(repr, frames.friction.tolist()),
+        map(str, frames.contact.astype(int).tolist()),
+        map(str, frames.texture.astype(int).tolist()),
+    ]
+    rows = (",".join(cells) for cells in zip(*columns, strict=True))
+    return ("t_s,uv,ev,friction,contact,texture\n" + "\n".join(rows) + "\n").encode()
 
 
 def frames_to_npz(frames: Frames) -> bytes:
