@@ -1,0 +1,144 @@
+"""The vector finger tracks: 50 Hz touch samples after thesis section 5.4.
+
+Speed classes (thesis 5.4.3, spec/conformance.md): ``slow`` below 30 mm/s, ``moderate`` 30 to
+180 mm/s, ``fast`` above 180 mm/s, judged by the median speed between consecutive in-contact
+samples. Every track is short (at most 1.2 s) so that the golden renders stay small.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from hcard.track import FingerTrack, make_track
+
+TOUCH_RATE_HZ = 50.0
+"""Capacitive touch sampling rate (thesis 5.1.1)."""
+SLOW_MAX_MM_S = 30.0
+"""Upper bound of the slow class, mm/s (thesis 5.4)."""
+FAST_MIN_MM_S = 180.0
+"""Lower bound of the fast class, mm/s (thesis 5.4)."""
+NOISE_SEED = 20260601
+"""Seed of the only random track (sensor noise), fixed so that generation is deterministic."""
+
+
+@dataclass(frozen=True)
+class VectorTrack:
+    """A vector track with its name, speed class and tags."""
+
+    name: str
+    speed_class: str
+    tags: tuple[str, ...]
+    track: FingerTrack
+    description: str = ""
+
+
+def _times(duration_s: float) -> np.ndarray:
+    n = math.floor(duration_s * TOUCH_RATE_HZ + 1e-9) + 1
+    return np.arange(n) / TOUCH_RATE_HZ
+
+
+def _stroke(start: tuple[float, float], velocity: tuple[float, float],
+            duration_s: float) -> FingerTrack:
+    t = _times(duration_s)
+    return make_track(t, start[0] + velocity[0] * t, start[1] + velocity[1] * t)
+
+
+def slow_stroke() -> VectorTrack:
+    """25 mm/s along +x at y = 30 mm, 1.2 s, crossing x = 60 mm."""
+    return VectorTrack("slow-stroke", "slow", ("stroke",), _stroke((45.0, 30.0), (25.0, 0.0), 1.2))
+
+
+def moderate_stroke() -> VectorTrack:
+    """100 mm/s along +x at y = 30 mm from x = 5 to 115 mm, 1.1 s."""
+    return VectorTrack("moderate-stroke", "moderate", ("stroke",),
+                       _stroke((5.0, 30.0), (100.0, 0.0), 1.1))
+
+
+def fast_stroke() -> VectorTrack:
+    """250 mm/s along +x at y = 30 mm from x = 5 to 115 mm, 0.44 s."""
+    return VectorTrack("fast-stroke", "fast", ("stroke",),
+                       _stroke((5.0, 30.0), (250.0, 0.0), 0.44))
+
+
+def diagonal_stroke() -> VectorTrack:
+    """120 mm/s along the direction (3, 2) from (10, 10) mm, 0.8 s, across all quadrants."""
+    norm = math.hypot(3.0, 2.0)
+    velocity = (120.0 * 3.0 / norm, 120.0 * 2.0 / norm)
+    return VectorTrack("diagonal-stroke", "moderate", ("stroke", "diagonal"),
+                       _stroke((10.0, 10.0), velocity, 0.8))
+
+
+def reversal() -> VectorTrack:
+    """80 mm/s back and forth between x = 44 and 76 mm at y = 30 mm: reversals at 0.4 and
+    0.8 s, 1.2 s; crosses x = 60 mm (the ``edge`` card) three times."""
+    t = _times(1.2)
+    period = 0.8
+    phase = np.mod(t, period) / period
+    x = 44.0 + 32.0 * np.where(phase < 0.5, 2.0 * phase, 2.0 - 2.0 * phase)
+    return VectorTrack("reversal", "moderate", ("reversal",),
+                       make_track(t, x, np.full_like(t, 30.0)))
+
+
+def liftoff() -> VectorTrack:
+    """60 mm/s along +x; lift-off at 0.5 s, touch-down 0.2 s later 30 mm further on; 1.2 s."""
+    t = _times(1.2)
+    x = 10.0 + 60.0 * t
+    lifted = (t > 0.5 + 1e-9) & (t < 0.7 - 1e-9)
+    x = np.where(t >= 0.7 - 1e-9, 70.0 + 60.0 * (t - 0.7), x)
+    fn = np.where(lifted, 0.0, 0.5)
+    return VectorTrack("liftoff", "moderate", ("liftoff", "touchdown"),
+                       make_track(t, x, np.full_like(t, 30.0), fn, ~lifted))
+
+
+def noisy_stroke() -> VectorTrack:
+    """60 mm/s along +x at y = 50 mm with seeded sensor noise: 0.05 mm position noise (normal)
+    and +-1 ms time-stamp jitter (uniform), 1.0 s."""
+    rng = np.random.default_rng(NOISE_SEED)
+    t = _times(1.0)
+    t = t + rng.uniform(-0.001, 0.001, t.shape)
+    x = 20.0 + 60.0 * t + rng.normal(0.0, 0.05, t.shape)
+    y = 50.0 + rng.normal(0.0, 0.05, t.shape)
+    return VectorTrack("noisy-stroke", "moderate", ("noise",), make_track(t, x, y))
+
+
+TRACK_FACTORIES: tuple[Callable[[], VectorTrack], ...] = (
+    slow_stroke,
+    moderate_stroke,
+    fast_stroke,
+    diagonal_stroke,
+    reversal,
+    liftoff,
+    noisy_stroke,
+)
+
+
+def vector_tracks() -> list[VectorTrack]:
+    """Every vector track, in manifest order."""
+    out = []
+    for factory in TRACK_FACTORIES:
+        doc = " ".join((factory.__doc__ or "").split())
+        out.append(dataclasses.replace(factory(), description=doc))
+    return out
+
+
+def contact_speeds(track: FingerTrack) -> np.ndarray:
+    """Speeds between consecutive samples that are both in contact, mm/s."""
+    both = track.contact[1:] & track.contact[:-1]
+    dt = np.diff(track.t)
+    speed = np.hypot(np.diff(track.x), np.diff(track.y)) / dt
+    return speed[both]
+
+
+def speed_class(track: FingerTrack) -> str:
+    """``slow``, ``moderate`` or ``fast`` from the median in-contact speed (thesis 5.4)."""
+    median = float(np.median(contact_speeds(track)))
+    if median < SLOW_MAX_MM_S:
+        return "slow"
+    if median > FAST_MIN_MM_S:
+        return "fast"
+    return "moderate"
