@@ -31,6 +31,7 @@ def _show_warning(message: Warning | str, category: type[Warning], *_args: Any, 
 def _register_commands() -> None:
     from hcard.cli import (
         card_cmds,
+        conformance_cmd,
         device_cmd,
         encode_cmd,
         plugins_cmd,
@@ -40,7 +41,7 @@ def _register_commands() -> None:
     )
 
     for module in (encode_cmd, card_cmds, render_cmd, preview_cmd, predict_cmd, plugins_cmd,
-                   device_cmd):
+                   device_cmd, conformance_cmd):
         for command in module.COMMANDS:
             cli.add_command(command)
 

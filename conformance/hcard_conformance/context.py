@@ -1,0 +1,159 @@
+"""What the suite runs against: the implementation under test and the vectors.
+
+A :class:`Context` names the implementation (``reference``, a device URI such as ``sim://``, or
+a negative-control driver ``control:...``), opens its driver, and renders a card along a finger
+track *the way that implementation does*:
+
+* ``reference`` renders with :func:`hcard.render.render` itself, at the golden frame times;
+* a driver plays the track through the device as the host's finger
+  (:func:`hcard_device.drivers.play.play`) and returns the targets the device *reports* in its
+  STATE input reports (``target_uv``, ``target_ev``), one frame per report, on the track's time
+  base (see :func:`reported_frames`).
+
+Checks take a Context and never care which of the two they got.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from hcard.render import Frames, RenderOptions
+from hcard.render import render as reference_render
+from hcard.track import FingerTrack
+from hcard.v1 import card_pb2 as pb
+
+if TYPE_CHECKING:
+    from hcard_device.drivers.base import Driver
+    from hcard_device.protocol import State
+
+REFERENCE = "reference"
+"""Driver name of the reference implementation (hcard.render, no device)."""
+CONTROL_PREFIX = "control:"
+"""Prefix of the negative-control drivers of :mod:`hcard_conformance.controls`."""
+DEFAULT_VECTORS = Path(__file__).resolve().parents[2] / "spec" / "vectors"
+"""The vectors of this repository (``spec/vectors``)."""
+
+Renderer = Callable[[pb.Card, FingerTrack, RenderOptions], Frames]
+
+
+def reported_frames(states: list[State], track: FingerTrack) -> Frames:
+    """The targets a device reported, as frames on the track's time base (spec Q5).
+
+    Each STATE report carries ``host_time_echo_us``, the host time (the track time sent with
+    the FINGER report) of the last finger sample the device applied. The device clock's offset
+    from the track clock is estimated as the smallest delay between a sample's time and the
+    first report echoing it, less one report period (a sample is applied at most one period
+    before the first report that echoes it). Report times shifted by that offset are therefore
+    never earlier than the truth, and at most one report period plus the transport delay later:
+    a constant lag that the lag search of metric A1 (up to 10 ms) absorbs. Transport delay is
+    judged by the device level's latency check, not here. Reports before the first applied
+    sample are left out.
+    """
+    from hcard_device.drivers.play import unwrapped_times
+
+    device_t = unwrapped_times(states)
+    echo = np.array([s.host_time_echo_us for s in states], dtype=np.int64)
+    keep = echo > 0
+    if not np.any(keep):
+        empty = np.zeros(0)
+        return Frames(empty, empty, empty, np.zeros(0, bool), np.zeros(0, np.int32))
+    t0 = float(track.t[0]) if len(track) else 0.0
+    # the echo is the host time in u32 microseconds; restore the track's base past a wrap
+    base = t0 - (round(t0 * 1e6) % (1 << 32)) * 1e-6
+    echo_s = echo * 1e-6 + base
+    first = np.flatnonzero(keep & np.concatenate(([True], echo[1:] != echo[:-1])))
+    period = float(np.median(np.diff(device_t))) if len(states) > 1 else 0.0
+    offset = float(np.min(device_t[first] - echo_s[first])) - period
+    t = device_t - offset
+    uv = np.array([s.target_uv for s in states], dtype=float)
+    ev = np.array([s.target_ev for s in states], dtype=float)
+    contact = np.array([bool(s.contact) for s in states])
+    texture = np.array([s.texture for s in states], dtype=np.int32)
+    return Frames(t=t[keep], uv=uv[keep], ev=ev[keep], contact=contact[keep],
+                  texture=texture[keep])
+
+
+@dataclass
+class Context:
+    """The implementation under test, the vectors and run options.
+
+    Attributes:
+        driver_name: ``reference``, a device URI, or ``control:NAME``.
+        open_driver: opens a fresh driver (None for ``reference``, which has no device).
+        vectors_root: the vectors directory (``spec/vectors``).
+        options: free-form options for checks (for example ``{"tail_s": 0.05}``).
+        renderer: override of :meth:`render` (tests use it to plant a wrong renderer).
+    """
+
+    driver_name: str
+    open_driver: Callable[[], Driver] | None = None
+    vectors_root: Path = DEFAULT_VECTORS
+    options: dict[str, Any] = field(default_factory=dict)
+    renderer: Renderer | None = None
+    cache: dict[Any, Any] = field(default_factory=dict, repr=False)
+    _manifest: Any = field(default=None, init=False, repr=False)
+
+    @property
+    def is_reference(self) -> bool:
+        """True for the reference implementation (no device)."""
+        return self.open_driver is None
+
+    @property
+    def frame_exact(self) -> bool:
+        """True when the implementation renders frame by frame at the golden frame times (the
+        reference, or a software renderer given as :attr:`renderer`), so the exact metric A0
+        applies; False for a driver, whose reports are resampled."""
+        return self.open_driver is None
+
+    @property
+    def manifest(self) -> Any:
+        """The vectors' :class:`hcard_conformance.vectors.Manifest` (loaded once)."""
+        if self._manifest is None:
+            from hcard_conformance.vectors import load_manifest
+
+            self._manifest = load_manifest(Path(self.vectors_root))
+        return self._manifest
+
+    def render(self, card: pb.Card, track: FingerTrack, options: RenderOptions) -> Frames:
+        """Target friction of ``card`` along ``track`` as this implementation renders it.
+
+        Reference: :func:`hcard.render.render` with ``options`` (frames at the golden frame
+        times). A driver: the targets its reports carry (:func:`reported_frames`); ``options``
+        do not apply, the device renders with its own settings.
+        """
+        if self.renderer is not None:
+            return self.renderer(card, track, options)
+        if self.open_driver is None:
+            return reference_render(card, track, options)
+        from hcard_device.drivers.play import play
+
+        with self.open_driver() as driver:
+            result = play(driver, card, track, **({"tail_s": self.options["tail_s"]}
+                                                  if "tail_s" in self.options else {}))
+        return reported_frames(result.states, track)
+
+    @classmethod
+    def for_driver(cls, name: str, *, vectors_root: Path | None = None,
+                   options: dict[str, Any] | None = None) -> Context:
+        """A Context for ``reference``, ``control:NAME`` or a device URI (``sim://``, ...).
+
+        The driver is not opened here; an unknown name fails on first use with the driver's
+        own error.
+        """
+        root = Path(vectors_root) if vectors_root is not None else DEFAULT_VECTORS
+        opts = dict(options or {})
+        if name == REFERENCE:
+            return cls(REFERENCE, None, root, opts)
+        if name.startswith(CONTROL_PREFIX):
+            from hcard_conformance.controls import open_control
+
+            control = name[len(CONTROL_PREFIX):]
+            return cls(name, lambda: open_control(control), root, opts)
+        from hcard_device.drivers import open_device
+
+        return cls(name, lambda: open_device(name), root, opts)

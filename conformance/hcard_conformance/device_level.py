@@ -1,0 +1,488 @@
+"""Device-level conformance checks: through a driver, what the device physically renders.
+
+Every check opens a fresh driver from the :class:`~hcard_conformance.context.Context` and
+reads STATE input reports (spec/device-protocol.md). Thresholds (spec/conformance.md):
+
+``device.friction``
+    Rendered relative friction vs the card's target. Rendered friction is the device's
+    *measured* actuation (plate amplitude, EV voltage, normal force in STATE) through the
+    forward map of the device's physics profile (:func:`device_profile_for`), at the finger
+    speed of the track the host drove; the target is :func:`hcard.render.render` of the card
+    along that track (hybrid, 10 kframes/s). Reports within :data:`SETTLE_S` of touch-down or
+    of a step of the target larger than the JND are left out (the loop settling; boundary
+    placement is judged by the renderer level). Metric: RMS relative error
+    ``(rendered - target) / target``; threshold :data:`FRICTION_JND` (8 %).
+``device.dynamics`` (D1 bandwidth, D2 rise time)
+    Direct streaming of sinusoidal and step UV targets while the host's finger slides at
+    60 mm/s; the plate amplitude in STATE is fitted (sinusoids, least squares at the known
+    frequency) or timed 10-90 % (step). Thresholds per device class (:data:`CLASS_DYNAMICS`).
+    The plate amplitude is used rather than rendered friction held still (spec 4.1 method):
+    with the finger still the UV forward map saturates (zero speed gives zero friction at any
+    amplitude), so a still finger cannot show the dynamics.
+``device.latency``
+    Median, over :data:`LATENCY_TRIALS` moves of the host finger across a texture boundary,
+    of the time from sending the FINGER report to the measured plate amplitude crossing half
+    way to its new settled value; threshold :data:`LATENCY_THRESHOLD_S` (10 ms: half the
+    20 ms period of a 50 Hz touch screen, so a change is felt before the next touch sample).
+``device.safety`` (S1)
+    Cards, host-set limits and streamed frames asking for more than the limits; metric: the
+    number of reports whose measured amplitude / voltage / current exceeds the limit in force
+    (one report count of quantisation allowed) or whose targets leave [0, 1] x [1, 4]; must be 0.
+``device.watchdog``
+    The host goes silent while driving the finger; metric: time from the last host report to
+    outputs off (amplitude <= :data:`OFF_AMPLITUDE_M`, voltage <= 1 V) with fault WATCHDOG
+    reported; threshold ``watchdog_ms`` + :data:`WATCHDOG_ALLOWANCE_S`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from hcard import build
+from hcard.physics.profile import DeviceProfile
+from hcard.render import render
+from hcard.track import FingerTrack, straight_stroke
+from hcard.v1 import card_pb2 as pb
+from hcard_conformance.context import Context, reported_frames
+from hcard_conformance.registry import check
+from hcard_conformance.result import CheckResult
+from hcard_device.drivers.base import Driver
+from hcard_device.drivers.play import play, unwrapped_times
+from hcard_device.protocol import Capability, DeviceInfo, DeviceKind, FaultBits, State
+from hcard_device.sim import DeviceConfig
+from hcard_device.sim.models import device_profile
+
+LEVEL = "device"
+FRICTION_JND = 0.08
+"""Relative friction JND: threshold of the RMS relative friction error."""
+SETTLE_S = 0.025
+"""Reports this long after touch-down or a target step are left out of the friction error, s:
+one 20 ms touch period plus the plate's ~5 ms settling."""
+STROKE_SPEED_MM_S = 60.0
+"""Speed of the device-level strokes (moderate class of section 5.4), mm/s."""
+STROKE_S = 0.6
+"""Duration of the device-level strokes, s."""
+LATENCY_TRIALS = 10
+LATENCY_THRESHOLD_S = 0.010
+OFF_AMPLITUDE_M = 50e-9
+"""Plate amplitude counted as off, m (the E-ViTa loop's 50 nm amplitude tolerance)."""
+WATCHDOG_ALLOWANCE_S = 0.050
+"""Time allowed after ``watchdog_ms`` for the 10 ms ramp and the plate's decay, s."""
+
+
+@dataclass(frozen=True)
+class Dynamics:
+    """Plate dynamics required of a device class.
+
+    Attributes:
+        min_bandwidth_hz: -3 dB bandwidth of the plate amplitude at least, Hz.
+        max_rise_s: 10-90 % rise time of the plate amplitude at most, s.
+        why: where the numbers come from.
+    """
+
+    min_bandwidth_hz: float
+    max_rise_s: float
+    why: str
+
+
+CLASS_DYNAMICS = {
+    "e-vita": Dynamics(
+        400.0, 0.002, "e-vita class (spec/conformance.md D1, D2): 400 Hz at 2 um (thesis "
+        "5.1.2); rise-time JND 2 ms"),
+    "coupled": Dynamics(
+        20.0, 0.015, "coupled class: standalone plate of thesis 4.3.2, ~15 ms response "
+        "(tau 6.8 ms, 23 Hz)"),
+}
+"""Required plate dynamics by device class (``--option device_class=...``; by default from
+DEVICE_INFO.device_kind: 1 e-vita, 2 coupled)."""
+BANDWIDTH_FREQUENCIES_HZ = (50.0, 100.0, 200.0, 300.0, 400.0, 500.0)
+"""Sweep of D1, Hz (under the 500 Hz Nyquist frequency of 1 kHz STATE reports)."""
+BANDWIDTH_REFERENCE_HZ = 25.0
+BANDWIDTH_UV_MEAN, BANDWIDTH_UV_SWING = 0.25, 0.05
+"""Streamed UV target of D1, ``mean + swing sin``: about 2 um of plate amplitude at
+60 mm/s and 0.5 N on the E-ViTa, the operating point of its 400 Hz bandwidth."""
+
+
+def device_class(ctx: Context, info: DeviceInfo) -> str:
+    """The device class of the run: ``ctx.options["device_class"]``, else by device kind."""
+    name = str(ctx.options.get("device_class", ""))
+    if name:
+        if name not in CLASS_DYNAMICS:
+            raise ValueError(f"unknown device class {name!r}; known: {', '.join(CLASS_DYNAMICS)}")
+        return name
+    return "coupled" if info.device_kind == DeviceKind.COUPLED else "e-vita"
+
+
+def device_profile_for(info: DeviceInfo) -> DeviceProfile:
+    """The physics profile of a device: the reference device's models for its kind."""
+    config = DeviceConfig.coupled() if info.capabilities & Capability.EV else DeviceConfig.evita()
+    return device_profile(config)
+
+
+def _result(name: str, case: str, metric: str, value: float, threshold: float, unit: str,
+            detail: str, *, at_most: bool = True) -> CheckResult:
+    passed = math.isfinite(value) and (value <= threshold if at_most else value >= threshold)
+    return CheckResult(name, LEVEL, case, passed, metric, value, threshold, unit, detail)
+
+
+# ---------------------------------------------------------------------- (a) friction
+
+def friction_cases(info: DeviceInfo) -> list[tuple[str, pb.Card, FingerTrack]]:
+    """Device-level (card, track) cases, one moderate 60 mm/s stroke at 50 Hz touch: a coarse
+    checkerboard of uniform UV textures (10 mm taxtels, friction 1 and 0.5), a dense 4 mm UV
+    grating (0.35-0.85), and, for devices with EV, a checkerboard of BIPOLAR textures 0.6 (UV)
+    and 1.2 (EV; within what the coupled stimulator reaches at 0.5 N, about 1.23)."""
+    width, height = info.surface_width_10um * 0.01, info.surface_height_10um * 0.01
+    track = straight_stroke((10.0, height / 2), (STROKE_SPEED_MM_S, 0.0), STROKE_S)
+    cols = math.ceil(width / 10.0)
+    rows = math.ceil(height / 10.0)
+    coarse = build.card(width, height, taxtel_mm=10.0, textures=[
+        build.texture(1.0, channel="uv"), build.texture(0.5, channel="uv")],
+        texture_index=[(r + c) % 2 for r in range(rows) for c in range(cols)], title="coarse")
+    dense = build.card(width, height, taxtel_mm=width, textures=[
+        build.texture(0.6, [build.grating_period(4.0, 0.25)], channel="uv")], title="dense")
+    cases = [("coarse-taxtels", coarse, track), ("dense-grating", dense, track)]
+    if info.capabilities & Capability.EV:
+        bipolar = build.card(width, height, taxtel_mm=10.0, textures=[
+            build.texture(0.6, channel="bipolar"), build.texture(1.2, channel="bipolar")],
+            texture_index=[(r + c) % 2 for r in range(rows) for c in range(cols)],
+            title="bipolar")
+        cases.append(("bipolar", bipolar, track))
+    return cases
+
+
+@dataclass(frozen=True)
+class FrictionMeasurement:
+    """Rendered against target friction over the settled reports in contact.
+
+    Attributes:
+        rms_relative_error: RMS of ``(rendered - target) / target``.
+        reports: reports compared.
+        t_s: their track times, s; rendered, target: relative friction.
+    """
+
+    rms_relative_error: float
+    reports: int
+    t_s: np.ndarray
+    rendered: np.ndarray
+    target: np.ndarray
+
+
+def rendered_friction(states: list[State], track: FingerTrack,
+                      profile: DeviceProfile) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Track time (s), rendered relative friction and contact of each report applied: the
+    measured amplitude and voltage through ``profile.forward`` at the track's speed and the
+    measured normal force."""
+    echo = np.array([s.host_time_echo_us for s in states], dtype=np.int64) > 0
+    applied = [s for s, ok in zip(states, echo, strict=True) if ok]
+    t = reported_frames(states, track).t
+    speed = np.hypot(np.gradient(track.x, track.t), np.gradient(track.y, track.t)) * 1e-3
+    v = np.interp(t, track.t, speed)
+    amplitude = np.array([s.amplitude_m for s in applied])
+    voltage = np.array([s.voltage_v for s in applied])
+    fn = np.array([s.normal_force_n for s in applied])
+    uv, ev = profile.forward(amplitude, voltage, v, np.maximum(fn, 1e-3))
+    contact = np.array([bool(s.contact) for s in applied]) & (fn > 0.05)
+    return t, uv * ev, contact
+
+
+def measure_friction(driver: Driver, card: pb.Card, track: FingerTrack) -> FrictionMeasurement:
+    """Play ``card`` along ``track`` and compare rendered with target friction."""
+    profile = device_profile_for(driver.info())
+    result = play(driver, card, track)
+    t, rendered, contact = rendered_friction(result.states, track, profile)
+    golden = render(card, track)
+    target = np.interp(t, golden.t, golden.friction)
+    settled = contact & (t >= track.t[0] + SETTLE_S) & (t <= track.t[-1])
+    steps = golden.t[1:][np.abs(np.diff(golden.friction)) > FRICTION_JND]
+    for step in steps:
+        settled &= ~((t >= step) & (t < step + SETTLE_S))
+    error = (rendered[settled] - target[settled]) / target[settled]
+    rms = float(np.sqrt(np.mean(error**2))) if error.size else math.nan
+    return FrictionMeasurement(rms, int(error.size), t[settled], rendered[settled],
+                               target[settled])
+
+
+@check(name="device.friction", level=LEVEL,
+       description="rendered friction (measured actuation) matches the card's target")
+def check_friction(ctx: Context) -> Iterator[CheckResult]:
+    """Rendered friction from measured actuation vs the card's target, per case."""
+    if ctx.open_driver is None:
+        return
+    with ctx.open_driver() as driver:
+        cases = friction_cases(driver.info())
+    for case, card, track in cases:
+        with ctx.open_driver() as driver:
+            m = measure_friction(driver, card, track)
+        yield _result("device.friction", case, "rms_relative_error", m.rms_relative_error,
+                      FRICTION_JND, "relative", f"{m.reports} settled reports in contact")
+
+
+# ---------------------------------------------------------------------- (b) dynamics
+
+def _stream(driver: Driver, uv: np.ndarray, chunk_s: float = 0.01) -> list[State]:
+    """Stream UV frames at the device frame rate while the host's finger strokes at
+    :data:`STROKE_SPEED_MM_S` (finger samples every 10 ms, so the firmware's velocity
+    compensation sees a sliding finger); returns the STATE reports."""
+    info = driver.info()
+    rate = info.frame_rate_hz
+    y = info.surface_height_10um * 0.005
+    x0 = info.surface_width_10um * 0.0025
+    per = round(chunk_s * rate)
+    states: list[State] = []
+    if info.capabilities & Capability.HOST_FINGER:
+        driver.set_touch_source(host=True)
+    start = driver.clock()
+    driver.start()
+    for k in range(0, uv.shape[0], per):
+        part = uv[k:k + per]
+        now = driver.clock()
+        driver.send_finger(now, x0 + STROKE_SPEED_MM_S * (now - start), y, 0.5, True)
+        driver.stream_frames(part, np.ones_like(part))
+        states += driver.collect_until(driver.clock() + part.shape[0] / rate)
+    driver.stop()
+    return states
+
+
+def amplitude_gain(driver: Driver, frequency_hz: float, duration_s: float = 0.3) -> float:
+    """Fitted amplitude (m) of the plate amplitude's response at ``frequency_hz`` to a
+    streamed UV target :data:`BANDWIDTH_UV_MEAN` + :data:`BANDWIDTH_UV_SWING` sin; the first
+    50 ms are left out. The UV model is a static map before the plate's linear dynamics, so
+    gains relative to the reference frequency are those of the plate loop."""
+    rate = driver.info().frame_rate_hz
+    t = np.arange(round(duration_s * rate)) / rate
+    states = _stream(driver, BANDWIDTH_UV_MEAN
+                     + BANDWIDTH_UV_SWING * np.sin(2 * np.pi * frequency_hz * t))
+    ts = unwrapped_times(states)
+    amp = np.array([s.amplitude_m for s in states])
+    keep = ts >= 0.05
+    basis = np.column_stack([np.sin(2 * np.pi * frequency_hz * ts[keep]),
+                             np.cos(2 * np.pi * frequency_hz * ts[keep]), np.ones(keep.sum())])
+    coef = np.linalg.lstsq(basis, amp[keep], rcond=None)[0]
+    return float(np.hypot(coef[0], coef[1]))
+
+
+def measure_bandwidth(open_driver: Callable[[], Driver]) -> float:
+    """-3 dB frequency of the plate amplitude (Hz), log-interpolated between the sweep points
+    of :data:`BANDWIDTH_FREQUENCIES_HZ`; the last one when never reached."""
+    with open_driver() as driver:
+        reference = amplitude_gain(driver, BANDWIDTH_REFERENCE_HZ)
+    previous_f, previous_db = BANDWIDTH_REFERENCE_HZ, 0.0
+    for f in BANDWIDTH_FREQUENCIES_HZ:
+        with open_driver() as driver:
+            db = 20 * math.log10(max(amplitude_gain(driver, f), 1e-15) / reference)
+        if db <= -3.0:
+            x = (-3.0 - previous_db) / (db - previous_db)
+            return float(math.exp(math.log(previous_f) + x * math.log(f / previous_f)))
+        previous_f, previous_db = f, db
+    return BANDWIDTH_FREQUENCIES_HZ[-1]
+
+
+def measure_rise_time(driver: Driver) -> float:
+    """10-90 % rise time (s) of the plate amplitude after a streamed UV step 1 -> 0.3."""
+    rate = driver.info().frame_rate_hz
+    uv = np.concatenate([np.ones(round(0.03 * rate)), np.full(round(0.05 * rate), 0.3)])
+    states = _stream(driver, uv)
+    ts = unwrapped_times(states) + states[0].timestamp_us * 1e-6
+    amp = np.array([s.amplitude_m for s in states])
+    final = float(np.median(amp[ts > ts[-1] - 0.015]))
+    rising = ts >= ts[np.searchsorted(ts, 0.03) - 1]
+
+    def crossing(level: float) -> float:
+        idx = np.flatnonzero(rising & (amp >= level * final))[0]
+        t0, t1, a0, a1 = ts[idx - 1], ts[idx], amp[idx - 1], amp[idx]
+        return float(t0 + (level * final - a0) / (a1 - a0) * (t1 - t0)) if a1 > a0 else float(t1)
+
+    return crossing(0.9) - crossing(0.1)
+
+
+@check(name="device.dynamics", level=LEVEL,
+       description="plate amplitude -3 dB bandwidth and rise time meet the device class")
+def check_dynamics(ctx: Context) -> Iterator[CheckResult]:
+    """Bandwidth and rise time of the plate amplitude under direct streaming."""
+    if ctx.open_driver is None:
+        return
+    with ctx.open_driver() as driver:
+        dyn = CLASS_DYNAMICS[device_class(ctx, driver.info())]
+        rise = measure_rise_time(driver)
+    bandwidth = measure_bandwidth(ctx.open_driver)
+    yield _result("device.dynamics", "bandwidth", "bandwidth_-3dB", bandwidth,
+                  dyn.min_bandwidth_hz, "Hz", dyn.why, at_most=False)
+    yield _result("device.dynamics", "rise-time", "rise_10_90", rise * 1e3,
+                  dyn.max_rise_s * 1e3, "ms", dyn.why)
+
+
+# ---------------------------------------------------------------------- (c) latency
+
+def measure_latency(driver: Driver, trials: int = LATENCY_TRIALS) -> list[float]:
+    """Latencies (s) from a FINGER report moving onto a UV 0.4 taxtel to the measured plate
+    amplitude crossing half its settled value (method of bench/bench_device_latency.py)."""
+    info = driver.info()
+    width, height = info.surface_width_10um * 0.01, info.surface_height_10um * 0.01
+    card = build.card(width, height, taxtel_mm=(width / 2, height), textures=[
+        build.texture(1.0, channel="uv"), build.texture(0.4, channel="uv")],
+        texture_index=[0, 1])
+    left, right, y = width / 4, 3 * width / 4, height / 2
+    driver.upload_card(card)
+    driver.set_touch_source(host=True)
+    driver.start()
+
+    def hold(x: float, seconds: float, poll_s: float = 0.0005) -> list[tuple[State, float]]:
+        """Send the finger at ``x`` (twice: zero velocity) every 10 ms for ``seconds``;
+        returns each report with the driver time since the first send when it was seen."""
+        seen: list[tuple[State, float]] = []
+        start = driver.clock()
+        next_send = start
+        while driver.clock() < start + seconds:
+            if driver.clock() >= next_send:
+                t = driver.clock()
+                driver.send_finger(t, x, y, 0.5, True)
+                driver.send_finger(t, x, y, 0.5, True)
+                next_send += 0.01
+            states = driver.collect_until(driver.clock() + poll_s)
+            seen += [(s, driver.clock() - start) for s in states]
+        return seen
+
+    latencies: list[float] = []
+    hold(left, 0.05)
+    for _ in range(trials):
+        seen = hold(right, 0.06)
+        settled = float(np.mean([s.amplitude_m for s, _ in seen[-10:]]))
+        half = next((dt for s, dt in seen if s.amplitude_m >= settled / 2), math.nan)
+        latencies.append(half)
+        hold(left, 0.04)
+    driver.stop()
+    return latencies
+
+
+@check(name="device.latency", level=LEVEL,
+       description="finger move to friction change, median within 10 ms")
+def check_latency(ctx: Context) -> Iterator[CheckResult]:
+    """End-to-end latency from a host finger update to the plate's change."""
+    if ctx.open_driver is None:
+        return
+    with ctx.open_driver() as driver:
+        lat = measure_latency(driver)
+    median = float(np.median(lat)) * 1e3
+    yield _result("device.latency", "boundary-move", "median_latency", median,
+                  LATENCY_THRESHOLD_S * 1e3, "ms",
+                  f"{len(lat)} moves, max {np.nanmax(lat) * 1e3:.1f} ms")
+
+
+# ---------------------------------------------------------------------- (d) safety
+
+def _over(states: list[State], driver: Driver) -> tuple[int, float]:
+    """Reports with a measured output above its limit in force (one report count of
+    quantisation allowed) or a target outside [0, 1] x [1, 4], and the worst output/limit."""
+    limits = driver.limits()
+    over = np.zeros(len(states), dtype=bool)
+    worst = 0.0
+    for value, limit, count in (
+        (np.array([s.amplitude_m for s in states]), limits.max_amplitude_m, 1e-9),
+        (np.array([s.voltage_v for s in states]), limits.max_voltage_v, 0.1),
+        (np.array([s.current_a for s in states]), limits.max_current_a, 1e-8),
+    ):
+        over |= value > limit + count
+        if limit > 0 and value.size:
+            worst = max(worst, float(value.max()) / limit)
+    targets = np.array([(s.target_uv, s.target_ev) for s in states]).reshape(-1, 2)
+    over |= (targets[:, 0] < 0) | (targets[:, 0] > 1) | (targets[:, 1] < 1) | (targets[:, 1] > 4)
+    return int(np.count_nonzero(over)), worst
+
+
+def measure_safety(open_driver: Callable[[], Driver]) -> dict[str, tuple[int, float]]:
+    """Per case, reports over a limit and the worst measured output / limit: a card asking for
+    more than the device can do, the same under host limits halved, streamed extreme frames."""
+    out: dict[str, tuple[int, float]] = {}
+    with open_driver() as driver:
+        info = driver.info()
+        w, h = info.surface_width_10um * 0.01, info.surface_height_10um * 0.01
+        greedy = build.card(w, h, taxtel_mm=(w / 2, h), textures=[
+            build.texture(0.0, channel="uv"),
+            build.texture(4.0, channel="ev") if info.capabilities & Capability.EV
+            else build.texture(0.0, channel="uv")],
+            texture_index=[0, 1])
+    track = straight_stroke((w / 4, h / 2), (100.0, 0.0), 0.4)
+    with open_driver() as driver:
+        out["card-over-limit"] = _over(play(driver, greedy, track).states, driver)
+    with open_driver() as driver:
+        hw = driver.limits()
+        driver.set_limits(hw.max_amplitude_m / 2, hw.max_voltage_v / 2, hw.max_current_a / 2)
+        out["host-limits"] = _over(play(driver, greedy, track).states, driver)
+    with open_driver() as driver:
+        driver.send_finger(driver.clock(), w / 2, h / 2, 0.5, True)
+        n = round(0.1 * info.frame_rate_hz)
+        uv = np.zeros(n)
+        driver.start()
+        states: list[State] = []
+        for k in range(0, n, 100):
+            driver.stream_frames(uv[k:k + 100], np.full(100, 4.0))
+            driver.send_finger(driver.clock(), w / 2, h / 2, 0.5, True)
+            states += driver.collect_until(driver.clock() + 0.01)
+        driver.stop()
+        out["stream-extremes"] = _over(states, driver)
+    return out
+
+
+@check(name="device.safety", level=LEVEL,
+       description="measured amplitude, voltage and current never exceed the limits")
+def check_safety(ctx: Context) -> Iterator[CheckResult]:
+    """Outputs stay within the limits in force whatever is asked (spec PS1)."""
+    if ctx.open_driver is None:
+        return
+    for case, (n_over, worst) in measure_safety(ctx.open_driver).items():
+        yield _result("device.safety", case, "n_over", n_over, 0.0, "reports",
+                      f"largest measured output {worst:.3f} x its limit in force")
+
+
+# ---------------------------------------------------------------------- (e) watchdog
+
+def measure_watchdog(driver: Driver) -> tuple[float, bool, float]:
+    """Stroke the host finger over a UV 0.3 card for 0.2 s, then go silent.
+
+    Returns the time (s) from the last host report to outputs off (inf when they never go
+    off), whether WATCHDOG was reported, and the plate amplitude before the silence (m)."""
+    info = driver.info()
+    w, h = info.surface_width_10um * 0.01, info.surface_height_10um * 0.01
+    card = build.card(w, h, taxtel_mm=(w, h), textures=[build.texture(0.3, channel="uv")])
+    driver.upload_card(card)
+    driver.set_touch_source(host=True)
+    driver.start()
+    start = driver.clock()
+    before: list[State] = []
+    last = start
+    while driver.clock() < start + 0.2:
+        last = driver.clock()
+        driver.send_finger(last, w / 4 + STROKE_SPEED_MM_S * (last - start), h / 2, 0.5, True)
+        before += driver.collect_until(last + 0.02)
+    driven = float(np.median([s.amplitude_m for s in before[-10:]]))
+    seen: list[tuple[State, float]] = []
+    while driver.clock() < last + info.watchdog_ms * 1e-3 + 0.2:
+        seen += [(s, driver.clock() - last) for s in driver.collect_until(driver.clock() + 5e-4)]
+    driver.stop()
+    watchdog = any(s.faults & FaultBits.WATCHDOG for s, _ in seen)
+    on = [t for s, t in seen if s.amplitude_m > OFF_AMPLITUDE_M or s.voltage_v > 1.0]
+    off = max(on, default=0.0)
+    if not seen or seen[-1][0].amplitude_m > OFF_AMPLITUDE_M or seen[-1][0].voltage_v > 1.0:
+        off = math.inf
+    return off, watchdog, driven
+
+
+@check(name="device.watchdog", level=LEVEL,
+       description="outputs ramp to zero and WATCHDOG is reported when the host goes silent")
+def check_watchdog(ctx: Context) -> Iterator[CheckResult]:
+    """Fault behaviour on host silence (spec PS3)."""
+    if ctx.open_driver is None:
+        return
+    with ctx.open_driver() as driver:
+        limit = driver.info().watchdog_ms * 1e-3 + WATCHDOG_ALLOWANCE_S
+        off, reported, driven = measure_watchdog(driver)
+    yield _result("device.watchdog", "host-silent", "time_to_off", off * 1e3, limit * 1e3,
+                  "ms", f"plate at {driven * 1e9:.0f} nm before the host went silent; off "
+                  f"means <= {OFF_AMPLITUDE_M * 1e9:.0f} nm and <= 1 V")
+    yield CheckResult("device.watchdog", LEVEL, "fault-reported", reported, "watchdog_fault",
+                      float(reported), 1.0, "bool", "fault WATCHDOG in STATE")

@@ -1,0 +1,375 @@
+"""The accuracy metrics A0-A5 of spec/conformance.md, on arrays (no I/O, no device).
+
+Each function compares an implementation's signal with the golden render at the golden frame
+times and returns a :class:`Metric`: the value, a one-line detail, and whether the metric was
+applicable at all (spec Q6: a metric that finds nothing to assess is *not applicable*, never
+passed). The renderer level applies them to friction targets, the device level to rendered
+friction.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+
+from hcard.render import RenderOptions
+from hcard.render.compiled import velocity_locked
+from hcard.track import FingerTrack
+from hcard.v1 import card_pb2 as pb
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    """Thresholds and constants of spec/conformance.md section 0 (manifest ``tolerances``)."""
+
+    friction_abs: float = 1e-5
+    time_abs_s: float = 1e-9
+    friction_rel_jnd: float = 0.08
+    component_amplitude_rel: float = 0.08
+    component_frequency_rel: float = 0.05
+    spatial_phase_mm: float = 2.5
+    boundary_mm: float = 2.5
+    latency_s: float = 0.010
+    guard_s: float = 0.020
+    relative_floor: float = 0.1
+    peak_min_amplitude: float = 0.02
+    segment_min_s: float = 0.2
+    correlation_window_s: float = 0.050
+    speed_min_mm_s: float = 5.0
+
+    @classmethod
+    def from_mapping(cls, data: dict[str, Any] | None) -> Tolerances:
+        """Defaults overridden by the keys of ``data`` that name a field (others ignored)."""
+        known = {f.name for f in fields(cls)}
+        return cls(**{k: float(v) for k, v in (data or {}).items()
+                      if k in known and isinstance(v, int | float)})
+
+
+@dataclass(frozen=True)
+class Signal:
+    """Friction frames at the golden frame times.
+
+    Attributes:
+        t: frame times, s.
+        m: relative friction (``uv * ev``).
+        contact: finger on the surface.
+        texture: active palette index (-1 neutral), or None when not known.
+        uv, ev: channel targets, or None when not known.
+    """
+
+    t: np.ndarray
+    m: np.ndarray
+    contact: np.ndarray
+    texture: np.ndarray | None = None
+    uv: np.ndarray | None = None
+    ev: np.ndarray | None = None
+
+    @classmethod
+    def of(cls, frames: Any) -> Signal:
+        """From :class:`hcard.render.Frames` or a golden dict (``t_s``/``t``, ``uv``, ``ev``,
+        ``friction``, ``contact``, ``texture``)."""
+        if isinstance(frames, dict):
+            t = np.asarray(frames["t_s"] if "t_s" in frames else frames["t"], dtype=float)
+            uv = np.asarray(frames["uv"], dtype=float)
+            ev = np.asarray(frames["ev"], dtype=float)
+            m = np.asarray(frames["friction"], dtype=float) if "friction" in frames else uv * ev
+            return cls(t, m, np.asarray(frames["contact"], dtype=bool),
+                       np.asarray(frames["texture"]) if "texture" in frames else None, uv, ev)
+        return cls(np.asarray(frames.t, float), np.asarray(frames.friction, float),
+                   np.asarray(frames.contact, bool), np.asarray(frames.texture),
+                   np.asarray(frames.uv, float), np.asarray(frames.ev, float))
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+
+@dataclass(frozen=True)
+class Metric:
+    """One metric's outcome: ``value`` (NaN when not applicable) and a detail line."""
+
+    value: float
+    detail: str
+    applicable: bool = True
+
+
+NOT_APPLICABLE = Metric(math.nan, "not applicable", applicable=False)
+
+
+def frame_rate(golden: Signal) -> float:
+    """The golden frame rate, Hz, from its frame times."""
+    if len(golden) < 2:
+        return 1.0
+    return float(round(1.0 / float(np.median(np.diff(golden.t))), 6))
+
+
+def resample_hold(t_report: np.ndarray, values: np.ndarray, t: np.ndarray,
+                  before: float | bool = 0.0) -> np.ndarray:
+    """Zero-order hold of reports at times ``t`` (the last report at or before each time);
+    ``before`` where no report is yet available."""
+    index = np.searchsorted(t_report, t, side="right") - 1
+    out = np.asarray(values)[np.clip(index, 0, None)] if len(t_report) else np.zeros(len(t))
+    out = np.array(out, copy=True)
+    out[index < 0] = before
+    return out
+
+
+# ---------------------------------------------------------------------------------- A0
+
+
+def exact_error(impl: Signal, golden: Signal, tol: Tolerances) -> tuple[Metric, bool]:
+    """A0: ``(metric, passed)``: the largest channel/friction difference; inf when the frame
+    counts differ; fails also on frame times beyond ``time_abs_s`` or any contact/texture
+    mismatch (named in the detail)."""
+    if len(impl) != len(golden):
+        return Metric(math.inf, f"{len(impl)} frames, golden has {len(golden)}"), False
+    if len(golden) == 0:
+        return Metric(0.0, "no frames"), True
+    diffs = [np.abs(impl.m - golden.m)]
+    for a, b in ((impl.uv, golden.uv), (impl.ev, golden.ev)):
+        if a is not None and b is not None:
+            diffs.append(np.abs(a - b))
+    per_frame = np.max(np.vstack(diffs), axis=0)
+    worst = int(np.argmax(per_frame))
+    value = float(per_frame[worst])
+    problems = []
+    dt = float(np.max(np.abs(impl.t - golden.t)))
+    if dt > tol.time_abs_s:
+        problems.append(f"frame times differ by up to {dt:.3g} s")
+    bad_contact = np.flatnonzero(impl.contact != golden.contact)
+    if bad_contact.size:
+        problems.append(f"contact differs on {bad_contact.size} frames "
+                        f"(first at {golden.t[bad_contact[0]]:.4f} s)")
+    if impl.texture is not None and golden.texture is not None:
+        bad_texture = np.flatnonzero(impl.texture != golden.texture)
+        if bad_texture.size:
+            problems.append(f"texture differs on {bad_texture.size} frames "
+                            f"(first at {golden.t[bad_texture[0]]:.4f} s)")
+    detail = (f"largest difference {value:.3g} at t={golden.t[worst]:.4f} s "
+              f"(friction {impl.m[worst]:.6f}, golden {golden.m[worst]:.6f})")
+    if problems:
+        detail += "; " + "; ".join(problems)
+    return Metric(value, detail), value <= tol.friction_abs and not problems
+
+
+# ---------------------------------------------------------------------------------- A-sel
+
+
+def compared_frames(impl: Signal, golden: Signal, tol: Tolerances) -> np.ndarray:
+    """A-sel: frames in contact in both signals and at least ``guard_s`` from every golden
+    discontinuity (a change of golden contact or texture)."""
+    fs = frame_rate(golden)
+    mask = golden.contact & impl.contact
+    change = np.zeros(len(golden), dtype=bool)
+    change[1:] = golden.contact[1:] != golden.contact[:-1]
+    if golden.texture is not None:
+        change[1:] |= golden.texture[1:] != golden.texture[:-1]
+    guard = round(tol.guard_s * fs)
+    where = np.flatnonzero(change)
+    if where.size:
+        near = np.zeros(len(golden) + 1, dtype=int)
+        np.add.at(near, np.clip(where - guard, 0, len(golden)), 1)
+        np.add.at(near, np.clip(where + guard + 1, 0, len(golden)), -1)
+        mask &= np.cumsum(near)[:-1] == 0
+    return mask
+
+
+# ---------------------------------------------------------------------------------- A1
+
+
+def relative_error(impl: Signal, golden: Signal, tol: Tolerances) -> Metric:
+    """A1: RMS relative friction error minimised over a lag of 0..``latency_s``."""
+    fs = frame_rate(golden)
+    selected = np.flatnonzero(compared_frames(impl, golden, tol))
+    if selected.size == 0:
+        return NOT_APPLICABLE
+    denominator = np.maximum(golden.m[selected], tol.relative_floor)
+    best = (math.inf, 0)
+    for d in range(round(tol.latency_s * fs) + 1):
+        j = selected[selected + d < len(impl)]
+        if j.size == 0:
+            break
+        r = (impl.m[j + d] - golden.m[j]) / denominator[: j.size]
+        value = float(np.sqrt(np.mean(r * r)))
+        if value < best[0]:
+            best = (value, d)
+    return Metric(best[0], f"RMS relative error {best[0]:.4f} over {selected.size} frames "
+                  f"at lag {1e3 * best[1] / fs:.1f} ms")
+
+
+# ---------------------------------------------------------------------------------- A2-A4
+
+
+def segments(impl: Signal, golden: Signal, tol: Tolerances) -> list[tuple[int, int]]:
+    """Maximal runs ``[start, stop)`` of compared frames with one golden texture, at least
+    ``segment_min_s`` long."""
+    mask = compared_frames(impl, golden, tol)
+    texture = golden.texture if golden.texture is not None else np.zeros(len(golden), int)
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.astype(np.int8), [0]))))
+    runs: list[tuple[int, int]] = []
+    shortest = round(tol.segment_min_s * frame_rate(golden))
+    for start, stop in zip(edges[::2], edges[1::2], strict=True):
+        cuts = np.flatnonzero(np.diff(texture[start:stop])) + start + 1
+        bounds = [start, *cuts.tolist(), stop]
+        runs += [(a, b) for a, b in itertools.pairwise(bounds)
+                 if b - a >= shortest]
+    return runs
+
+
+def _spectrum(m: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:
+    n = m.size
+    w = 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(n) / (n - 1))
+    k = 8 * 2 ** math.ceil(math.log2(n))
+    amplitude = 2.0 * np.abs(np.fft.rfft(w * (m - m.mean()), k)) / w.sum()
+    return np.arange(amplitude.size) * fs / k, amplitude
+
+
+def _nearest_peak(spectrum: np.ndarray, window: np.ndarray, k: int) -> int:
+    """The local maximum of ``spectrum`` inside ``window`` nearest to bin ``k`` (the larger on
+    a tie); the window's largest bin when it holds no local maximum.
+
+    Taking the nearest peak rather than the window's largest keeps a strong neighbouring
+    component (a grating's harmonic 15 % away) from being matched to a weaker golden peak,
+    which would fail even the golden render against itself.
+    """
+    inner = window[(window > 0) & (window < spectrum.size - 1)]
+    rising = spectrum[inner] >= spectrum[inner - 1]
+    local = inner[rising & (spectrum[inner] > spectrum[inner + 1])]
+    if local.size == 0:
+        return int(window[np.argmax(spectrum[window])])
+    order = np.lexsort((-spectrum[local], np.abs(local - k)))
+    return int(local[order[0]])
+
+
+def component_errors(impl: Signal, golden: Signal, tol: Tolerances,
+                     band_limit_hz: float) -> tuple[Metric, Metric]:
+    """A2 (amplitude, relative to the golden mean) and A3 (relative frequency): the worst over
+    the four largest golden spectral peaks of every segment."""
+    fs = frame_rate(golden)
+    worst_a: tuple[float, str] = (-1.0, "")
+    worst_f: tuple[float, str] = (-1.0, "")
+    for start, stop in segments(impl, golden, tol):
+        n = stop - start
+        f, gold = _spectrum(golden.m[start:stop], fs)
+        _, mine = _spectrum(impl.m[start:stop], fs)
+        peak = np.zeros(gold.size, dtype=bool)
+        peak[1:-1] = (gold[1:-1] >= gold[:-2]) & (gold[1:-1] > gold[2:])
+        peak &= (gold >= tol.peak_min_amplitude) & (f > 2 * fs / n) & (f <= band_limit_hz)
+        top = np.flatnonzero(peak)
+        top = top[np.argsort(gold[top])[::-1][:4]]
+        mean = float(np.mean(golden.m[start:stop]))
+        where = f"{golden.t[start]:.2f}-{golden.t[stop - 1]:.2f} s"
+        for k in top:
+            window = np.flatnonzero(np.abs(f - f[k]) <= max(0.2 * f[k], 2 * fs / n))
+            hat = _nearest_peak(mine, window, int(k))
+            e_a = abs(mine[hat] - gold[k]) / mean
+            e_f = abs(f[hat] - f[k]) / f[k]
+            if e_a > worst_a[0]:
+                worst_a = (e_a, f"peak {f[k]:.1f} Hz: amplitude {mine[hat]:.4f} vs golden "
+                           f"{gold[k]:.4f} (mean {mean:.3f}), {where}")
+            if e_f > worst_f[0]:
+                worst_f = (e_f, f"peak {f[k]:.1f} Hz found at {f[hat]:.1f} Hz, {where}")
+    if worst_a[0] < 0:
+        return NOT_APPLICABLE, NOT_APPLICABLE
+    return Metric(*worst_a), Metric(*worst_f)
+
+
+def sample_speeds(track: FingerTrack) -> np.ndarray:
+    """|v_i| of each touch sample, mm/s (backward difference; the first takes the second's)."""
+    if len(track) < 2:
+        return np.zeros(len(track))
+    v = np.hypot(np.diff(track.x), np.diff(track.y)) / np.diff(track.t)
+    return np.concatenate(([v[0]], v))
+
+
+def speed_at(track: FingerTrack, t: float) -> float:
+    """|v| of the touch sample in effect at ``t`` (the last at or before it), mm/s."""
+    i = int(np.searchsorted(track.t, t, side="right")) - 1
+    return float(sample_speeds(track)[max(i, 0)])
+
+
+def position_locked_textures(card: pb.Card, options: RenderOptions) -> set[int]:
+    """Palette indices of textures with spatial components all resolving to POSITION (R8)."""
+    out = set()
+    for index, texture in enumerate(card.textures):
+        spatial = [c for c in texture.components if c.domain != pb.DOMAIN_TEMPORAL]
+        if spatial and not any(velocity_locked(c, texture.locking, options) for c in spatial):
+            out.add(index)
+    return out
+
+
+def spatial_phase_error(impl: Signal, golden: Signal, tol: Tolerances, track: FingerTrack,
+                        locked: set[int]) -> Metric:
+    """A4: the displacement (mm) of position-locked features, from the cross-correlation
+    lag, worst over segments."""
+    fs = frame_rate(golden)
+    window = round(tol.correlation_window_s * fs)
+    speeds = sample_speeds(track)
+    worst: tuple[float, str] | None = None
+    for start, stop in segments(impl, golden, tol):
+        if golden.texture is not None and int(golden.texture[start]) not in locked:
+            continue
+        gold = golden.m[start:stop]
+        if np.max(np.abs(gold - gold.mean())) < tol.peak_min_amplitude:
+            continue
+        inside = (track.t >= golden.t[start]) & (track.t <= golden.t[stop - 1])
+        if not np.any(inside):
+            continue
+        vbar = float(np.mean(speeds[inside]))
+        if vbar < tol.speed_min_mm_s:
+            continue
+        mine = impl.m - float(np.mean(impl.m[start:stop]))
+        padded = np.zeros(stop - start + 2 * window)
+        lo, hi = max(start - window, 0), min(stop + window, len(impl))
+        padded[lo - (start - window): hi - (start - window)] = mine[lo:hi]
+        c = np.correlate(padded, gold - gold.mean(), mode="valid")
+        lags = np.arange(-window, window + 1)
+        top = np.flatnonzero(c == c.max())
+        d = int(lags[top[np.argmin(np.abs(lags[top]))]])
+        dx = vbar * abs(d) / fs
+        if worst is None or dx > worst[0]:
+            worst = (dx, f"features displaced {dx:.2f} mm (lag {1e3 * d / fs:.1f} ms at "
+                     f"{vbar:.0f} mm/s), {golden.t[start]:.2f}-{golden.t[stop - 1]:.2f} s")
+    return NOT_APPLICABLE if worst is None else Metric(*worst)
+
+
+def boundary_error(impl: Signal, golden: Signal, tol: Tolerances, track: FingerTrack) -> Metric:
+    """A5: the worst misplacement (mm) of a golden texture transition in contact."""
+    if golden.texture is None:
+        return NOT_APPLICABLE
+    fs = frame_rate(golden)
+    window = round(tol.correlation_window_s * fs)
+    gt = golden.texture
+    both = golden.contact[1:] & golden.contact[:-1]
+    transitions = np.flatnonzero(both & (gt[1:] != gt[:-1])) + 1
+    worst: tuple[float, str] | None = None
+    for j_star in transitions.tolist():
+        v = speed_at(track, float(golden.t[j_star]))
+        if v < tol.speed_min_mm_s:
+            continue
+        a, b = int(gt[j_star - 1]), int(gt[j_star])
+        lo, hi = max(j_star - window, 1), min(j_star + window + 1, len(impl))
+        if impl.texture is not None:
+            it = impl.texture
+            cand = np.flatnonzero((it[lo - 1:hi - 1] == a) & (it[lo:hi] == b)) + lo
+        else:
+            before = golden.m[max(j_star - int(0.010 * fs), 0):j_star]
+            after = golden.m[j_star + int(0.010 * fs):j_star + int(0.020 * fs)]
+            level = 0.5 * (float(np.mean(before)) + float(np.mean(after)))
+            rising = float(np.mean(after)) > float(np.mean(before))
+            side = impl.m >= level if rising else impl.m <= level
+            cand = np.flatnonzero(side[lo:hi] & ~side[lo - 1:hi - 1]) + lo
+            cand = cand[:1]
+        if cand.size == 0:
+            db, text = math.inf, "no matching transition found"
+        else:
+            j = int(cand[np.argmin(np.abs(cand - j_star))])
+            db = v * abs(j - j_star) / fs
+            text = f"{1e3 * (j - j_star) / fs:+.1f} ms at {v:.0f} mm/s"
+        if worst is None or db > worst[0]:
+            worst = (db, f"boundary {a}->{b} at t={golden.t[j_star]:.3f} s misplaced "
+                     f"{db:.2f} mm ({text})")
+    return NOT_APPLICABLE if worst is None else Metric(*worst)

@@ -1,0 +1,213 @@
+"""Renderer level (spec/conformance.md Q5-Q6, A0-A5): friction *targets* vs golden renders.
+
+For each golden render ``(card, track)`` of the manifest the implementation renders the card
+along the track (:meth:`Context.render`):
+
+* the reference (and any software renderer producing frames at the golden frame times) is held
+  to **A0**: the same frames to 1e-5 relative friction, contact and texture equal;
+* a driver plays the track through the device; its reported ``target_uv * target_ev`` are put
+  on the track's time base (:func:`hcard_conformance.context.reported_frames`: the clock offset
+  from ``host_time_echo_us``) and resampled at the golden frame times by zero-order hold. A
+  device cannot meet A0 (it reports at 1 kHz, quantised to 1e-4), so it is held to the
+  perceptual metrics only: **A1** relative friction error (RMS, lag up to 10 ms) <= 0.08 on
+  every render, **A2/A3** component amplitude/frequency on ``dense``, ``oriented``,
+  ``temporal`` and ``bipolar`` cards, **A4** spatial phase on ``coarse``/``sparse`` cards,
+  **A5** boundary placement where the golden texture changes in contact.
+
+A1-A5 also run on frame-exact implementations (they must pass trivially when A0 passes).
+A position-only renderer at 50 Hz fails A1/A2 on dense textures (it holds one grating phase
+per 20 ms touch sample) and passes A4 on coarse ones, which is the distinction the metrics
+are built to make.
+
+Each implementation rendering is computed once per run and shared by the checks
+(``Context.cache``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+
+from hcard.render import Frames
+from hcard_conformance import metrics
+from hcard_conformance.context import Context
+from hcard_conformance.metrics import Metric, Signal, Tolerances
+from hcard_conformance.registry import check
+from hcard_conformance.result import CheckResult, measured
+
+LEVEL = "renderer"
+COMPONENT_TAGS = frozenset({"dense", "oriented", "temporal", "bipolar"})
+"""Card tags selecting A2 and A3 (Q6)."""
+PHASE_TAGS = frozenset({"coarse", "sparse"})
+"""Card tags selecting A4 (Q6)."""
+
+
+def tolerances(ctx: Context, entry: Any = None) -> Tolerances:
+    """Manifest defaults, overridden by a render entry's own ``tolerance`` and by
+    ``ctx.options['tolerances']`` (a device class may tighten them)."""
+    merged: dict[str, Any] = dict(ctx.manifest.tolerances)
+    if entry is not None:
+        merged.update(entry.tolerance)
+    merged.update(ctx.options.get("tolerances", {}))
+    return Tolerances.from_mapping(merged)
+
+
+def resample_reports(frames: Frames, t: np.ndarray) -> Signal:
+    """Reported frames at times ``t``: targets interpolated linearly between reports, contact
+    and texture held from the last report at or before each time (none yet: no contact).
+
+    A STATE report carries the target of one frame, a point sample of a signal the device
+    computes at its own frame rate; reports come at 1 kHz. Holding a sample for a whole report
+    period (zero-order hold) adds a staircase error of ``2 pi f A P / sqrt(24)`` RMS, 0.1
+    relative friction for a 250 Hz, 0.3-amplitude grating, above the JND although the device
+    computed every target exactly; linear interpolation leaves ``(2 pi f)^2 A P^2 / 8`` at
+    most (0.09 peak, 0.03 RMS there), well inside it, while a position-only renderer, whose
+    targets are wrong between touch samples, still fails.
+    """
+    def between(values: np.ndarray) -> np.ndarray:
+        if len(frames.t) == 0:
+            return np.ones(len(t))
+        return np.interp(t, frames.t, values)
+
+    uv, ev = between(frames.uv), between(frames.ev)
+    return Signal(
+        t=np.asarray(t, float),
+        m=uv * ev,
+        contact=metrics.resample_hold(frames.t, frames.contact, t, False).astype(bool),
+        texture=metrics.resample_hold(frames.t, frames.texture, t, -1).astype(np.int32),
+        uv=uv,
+        ev=ev,
+    )
+
+
+def case(ctx: Context, entry: Any) -> dict[str, Any]:
+    """Everything the checks need for one render entry, computed once per Context:
+    ``golden``/``impl`` signals, ``card``, ``track``, ``tags``, ``raw`` (the implementation's
+    frames as returned)."""
+    key = ("renderer-case", entry.name)
+    if key not in ctx.cache:
+        manifest = ctx.manifest
+        card_entry = manifest.card(entry.card)
+        card = card_entry.load_card()
+        track = manifest.track(entry.track).load_track()
+        golden = Signal.of(entry.load_arrays())
+        raw = ctx.render(card, track, entry.options())
+        impl = Signal.of(raw) if ctx.frame_exact else resample_reports(raw, golden.t)
+        ctx.cache[key] = {"golden": golden, "impl": impl, "card": card, "track": track,
+                          "tags": set(card_entry.tags), "raw": raw}
+    return ctx.cache[key]
+
+
+def _entries(ctx: Context) -> list[Any]:
+    wanted = ctx.options.get("renders")  # optional subset of case names, e.g. in tests
+    return [e for e in ctx.manifest.renders if not wanted or e.name in wanted]
+
+
+def _result(name: str, entry: Any, metric_id: str, metric: Metric, threshold: float,
+            unit: str, *, higher_is_better: bool = False) -> CheckResult:
+    result = measured(name, LEVEL, entry.name, metric_id, metric.value, threshold, unit=unit,
+                      detail=metric.detail, higher_is_better=higher_is_better)
+    if math.isinf(metric.value):
+        result.passed = False
+    return result
+
+
+@check(name="renderer.exact", level=LEVEL, applies=lambda ctx: ctx.frame_exact,
+       description="A0: every golden render reproduced frame for frame within 1e-5")
+def check_exact(ctx: Context) -> Iterator[CheckResult]:
+    """A0 on every golden render (frame-exact implementations only)."""
+    for entry in _entries(ctx):
+        data = case(ctx, entry)
+        tol = tolerances(ctx, entry)
+        metric, passed = metrics.exact_error(data["impl"], data["golden"], tol)
+        result = _result("renderer.exact", entry, "A0", metric, tol.friction_abs,
+                         "relative friction")
+        result.passed = passed
+        yield result
+
+
+@check(name="renderer.friction_error", level=LEVEL,
+       description="A1: RMS relative friction error within the 8% JND on every golden render")
+def check_friction_error(ctx: Context) -> Iterator[CheckResult]:
+    """A1 on every golden render."""
+    for entry in _entries(ctx):
+        data = case(ctx, entry)
+        tol = tolerances(ctx, entry)
+        metric = metrics.relative_error(data["impl"], data["golden"], tol)
+        if metric.applicable:
+            yield _result("renderer.friction_error", entry, "A1", metric,
+                          tol.friction_rel_jnd, "relative friction")
+
+
+def _tags(ctx: Context, entry: Any) -> set[str]:
+    return set(ctx.manifest.card(entry.card).tags)
+
+
+def _changes_texture_in_contact(ctx: Context, entry: Any) -> bool:
+    """Whether the golden texture changes while in contact (A5 applies), without rendering."""
+    golden = entry.load_arrays()
+    contact, texture = golden["contact"], golden["texture"]
+    return bool(np.any(contact[1:] & contact[:-1] & (texture[1:] != texture[:-1])))
+
+
+def _components(ctx: Context, entry: Any) -> tuple[Metric, Metric] | None:
+    if not _tags(ctx, entry) & COMPONENT_TAGS:
+        return None
+    data = case(ctx, entry)
+    return metrics.component_errors(data["impl"], data["golden"], tolerances(ctx, entry),
+                                    entry.band_limit_hz)
+
+
+@check(name="renderer.component_amplitude", level=LEVEL,
+       description="A2: amplitude of each golden spectral peak within 8% of the mean friction")
+def check_component_amplitude(ctx: Context) -> Iterator[CheckResult]:
+    """A2 on dense, oriented, temporal and bipolar cards."""
+    for entry in _entries(ctx):
+        found = _components(ctx, entry)
+        if found is not None and found[0].applicable:
+            yield _result("renderer.component_amplitude", entry, "A2", found[0],
+                          tolerances(ctx, entry).component_amplitude_rel, "relative friction")
+
+
+@check(name="renderer.component_frequency", level=LEVEL,
+       description="A3: frequency of each golden spectral peak within 5%")
+def check_component_frequency(ctx: Context) -> Iterator[CheckResult]:
+    """A3 on dense, oriented, temporal and bipolar cards."""
+    for entry in _entries(ctx):
+        found = _components(ctx, entry)
+        if found is not None and found[1].applicable:
+            yield _result("renderer.component_frequency", entry, "A3", found[1],
+                          tolerances(ctx, entry).component_frequency_rel, "fraction")
+
+
+@check(name="renderer.spatial_phase", level=LEVEL,
+       description="A4: position-locked features within 2.5 mm of where they are drawn")
+def check_spatial_phase(ctx: Context) -> Iterator[CheckResult]:
+    """A4 on coarse and sparse cards."""
+    for entry in _entries(ctx):
+        if not _tags(ctx, entry) & PHASE_TAGS:
+            continue
+        data = case(ctx, entry)
+        tol = tolerances(ctx, entry)
+        locked = metrics.position_locked_textures(data["card"], entry.options())
+        metric = metrics.spatial_phase_error(data["impl"], data["golden"], tol, data["track"],
+                                             locked)
+        if metric.applicable:
+            yield _result("renderer.spatial_phase", entry, "A4", metric, tol.spatial_phase_mm, "mm")
+
+
+@check(name="renderer.boundary", level=LEVEL,
+       description="A5: taxtel boundaries within 2.5 mm of where they are drawn")
+def check_boundary(ctx: Context) -> Iterator[CheckResult]:
+    """A5 on every golden render whose texture changes while in contact."""
+    for entry in _entries(ctx):
+        if not _changes_texture_in_contact(ctx, entry):
+            continue
+        data = case(ctx, entry)
+        tol = tolerances(ctx, entry)
+        metric = metrics.boundary_error(data["impl"], data["golden"], tol, data["track"])
+        if metric.applicable:
+            yield _result("renderer.boundary", entry, "A5", metric, tol.boundary_mm, "mm")

@@ -1,0 +1,120 @@
+"""``hcard conformance``: run the conformance suite against an implementation.
+
+Prints a readable table, writes JUnit XML (``--junit``) and JSON (``--json``) atomically, and
+exits 0 when every case passes, 1 when one fails, 2 on a usage or infrastructure error (unknown
+driver, device unreachable, vectors missing) (spec/conformance.md Q7).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import click
+
+from hcard.errors import HcardError
+
+LEVEL_NAMES = ("format", "renderer", "device")
+
+
+def _option_value(text: str) -> Any:
+    """``KEY=VALUE`` option values: numbers as float, ``true``/``false`` as bool, else text."""
+    lowered = text.lower()
+    if lowered in ("true", "false"):
+        return lowered == "true"
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def _parse_options(pairs: tuple[str, ...]) -> dict[str, Any]:
+    options: dict[str, Any] = {}
+    tolerances: dict[str, Any] = {}
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        if not sep or not key.strip():
+            raise click.BadParameter(f"{pair!r} is not KEY=VALUE", param_hint="--option")
+        key = key.strip()
+        if key.startswith("tolerance."):
+            tolerances[key.removeprefix("tolerance.")] = _option_value(value)
+        else:
+            options[key] = _option_value(value)
+    if tolerances:
+        options["tolerances"] = tolerances
+    return options
+
+
+@click.command()
+@click.option("--driver", "driver_name", required=True, metavar="NAME",
+              help="Implementation under test: 'reference' (hcard.render), a device URI "
+                   "(sim://, usbip://HOST:PORT/BUSID, ...) or a negative control "
+                   "(control:position-only, control:latency-30ms, control:no-ev, "
+                   "control:over-limit).")
+@click.option("--level", "levels", multiple=True, type=click.Choice(LEVEL_NAMES),
+              help="Level to run (repeatable); default: all levels.")
+@click.option("--check", "select", multiple=True, metavar="PREFIX",
+              help="Only checks whose name starts with PREFIX (repeatable).")
+@click.option("--junit", "junit_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write JUnit XML here (for CI).")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the JSON report here (for tools).")
+@click.option("--vectors", "vectors_dir", type=click.Path(file_okay=False, path_type=Path),
+              help="Vectors directory (default: spec/vectors of this installation).")
+@click.option("--option", "option_pairs", multiple=True, metavar="KEY=VALUE",
+              help="Option for checks (repeatable); 'tolerance.NAME=VALUE' tightens a "
+                   "threshold of the manifest.")
+@click.option("-v", "--verbose", is_flag=True, help="List every case, not only failures.")
+@click.option("-q", "--quiet", is_flag=True, help="No progress lines on stderr.")
+def conformance(driver_name: str, levels: tuple[str, ...], select: tuple[str, ...],
+                junit_path: Path | None, json_path: Path | None, vectors_dir: Path | None,
+                option_pairs: tuple[str, ...], verbose: bool, quiet: bool) -> None:
+    """Run the hcard conformance suite against an implementation (spec/conformance.md)."""
+    from hcard_conformance.context import Context
+    from hcard_conformance.report import table, write_json, write_junit
+    from hcard_conformance.runner import run_suite
+
+    options = _parse_options(option_pairs)
+    ctx = Context.for_driver(driver_name, vectors_root=vectors_dir, options=options)
+    try:
+        ctx.manifest  # noqa: B018 - load now: missing vectors are a usage error (exit 2)
+    except (OSError, ValueError, KeyError) as exc:
+        raise click.UsageError(f"cannot read the vectors in {ctx.vectors_root}: {exc}") from None
+    if ctx.open_driver is not None:
+        try:
+            ctx.open_driver().close()
+        except (HcardError, OSError, ValueError) as exc:
+            raise click.UsageError(f"cannot open driver {driver_name!r}: {exc}") from None
+
+    stderr = click.get_text_stream("stderr")
+    started = time.perf_counter()
+
+    def check_done(chk: Any, results: list[Any], seconds: float) -> None:
+        if quiet:
+            return
+        failed = sum(not r.passed for r in results)
+        state = "ok" if not failed else f"{failed} FAILED"
+        click.echo(f"[{time.perf_counter() - started:7.2f} s] {chk.name}: {len(results)} "
+                   f"case(s), {state} ({seconds:.2f} s)", file=stderr)
+
+    report = run_suite(ctx, levels or LEVEL_NAMES, select=select, check_done=check_done)
+    if not report.results:
+        raise click.UsageError(
+            f"no check of level(s) {', '.join(report.levels)} applies to {driver_name!r}"
+            + (f" (not applicable: {', '.join(report.not_applicable)})"
+               if report.not_applicable else ""))
+    click.echo(table(report, verbose=verbose), nl=False)
+    for path, write in ((junit_path, write_junit), (json_path, write_json)):
+        if path is not None:
+            try:
+                write(report, path)
+            except OSError as exc:
+                raise HcardError(f"{path}: cannot write ({exc.strerror or exc})") from None
+            if not quiet:
+                click.echo(f"wrote {path}", file=stderr)
+    if not report.passed:
+        raise SystemExit(1)
+
+
+COMMANDS = [conformance]

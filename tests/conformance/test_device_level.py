@@ -1,0 +1,93 @@
+"""Device-level conformance checks against the reference device (``sim://``, ``sim://coupled``).
+
+The reference device must pass every device check; the measured metrics are asserted, so a
+regression in the device or in a check's method shows as a number, not only as a flip.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from hcard_conformance import device_level as dl
+from hcard_conformance.context import Context
+from hcard_conformance.registry import all_checks
+from hcard_conformance.result import CheckResult
+from hcard_conformance.runner import run_suite
+from hcard_device.drivers import open_device
+
+DEVICE_CHECKS = {"device.friction", "device.dynamics", "device.latency", "device.safety",
+                 "device.watchdog"}
+
+
+def _results(uri: str) -> dict[tuple[str, str], CheckResult]:
+    report = run_suite(Context.for_driver(uri), levels=("device",), select=("device.",))
+    return {(r.check, r.case): r for r in report.results}
+
+
+@pytest.fixture(scope="module")
+def evita() -> dict[tuple[str, str], CheckResult]:
+    return _results("sim://")
+
+
+@pytest.fixture(scope="module")
+def coupled() -> dict[tuple[str, str], CheckResult]:
+    return _results("sim://coupled")
+
+
+def test_device_checks_are_registered() -> None:
+    names = {c.name for c in all_checks(("device",), plugins=False)}
+    assert names >= DEVICE_CHECKS
+
+
+@pytest.mark.parametrize("device", ["evita", "coupled"])
+def test_reference_device_passes_every_device_check(
+        device: str, request: pytest.FixtureRequest) -> None:
+    results = request.getfixturevalue(device)
+    assert {check for check, _ in results} == DEVICE_CHECKS
+    failed = [f"{r.check}/{r.case}: {r.value} vs {r.threshold} {r.unit}"
+              for r in results.values() if not r.passed]
+    assert not failed
+
+
+def test_evita_metrics(evita: dict[tuple[str, str], CheckResult]) -> None:
+    assert evita["device.friction", "coarse-taxtels"].value < 0.02
+    assert evita["device.friction", "dense-grating"].value < 0.04
+    assert ("device.friction", "bipolar") not in evita  # UV-only device: no EV case
+    # Hz; the 400 Hz class threshold at 2 um is met with a thin margin (the thesis figure)
+    assert 400.0 <= evita["device.dynamics", "bandwidth"].value < 410.0
+    assert 1.0 < evita["device.dynamics", "rise-time"].value < 2.0  # ms, ~1.5 ms fast plate
+    assert evita["device.latency", "boundary-move"].value <= 2.0  # ms
+    for case in ("card-over-limit", "host-limits", "stream-extremes"):
+        result = evita["device.safety", case]
+        assert result.value == 0
+        worst = float(result.detail.split()[3])
+        assert 0.99 <= worst <= 1.0  # driven up to the limit, never past it
+    assert 100.0 < evita["device.watchdog", "host-silent"].value < 130.0  # ms, 100 ms watchdog
+    assert evita["device.watchdog", "fault-reported"].passed
+
+
+def test_coupled_metrics(coupled: dict[tuple[str, str], CheckResult]) -> None:
+    assert coupled["device.friction", "bipolar"].value < 0.04
+    assert coupled["device.dynamics", "bandwidth"].value >= 100.0  # Hz, class needs 20
+    assert 2.0 < coupled["device.dynamics", "rise-time"].value < 15.0  # ms, slow plate
+    assert coupled["device.latency", "boundary-move"].value <= 10.0
+    for case in ("card-over-limit", "host-limits", "stream-extremes"):
+        assert coupled["device.safety", case].value == 0
+    assert 100.0 < coupled["device.watchdog", "host-silent"].value < 150.0
+
+
+def test_rendered_friction_follows_the_measured_plate() -> None:
+    """The rendered friction comes from the measured amplitude: a dense grating swings with
+    the target, not at the reported target's values copied."""
+    with open_device("sim://") as driver:
+        _, card, track = dl.friction_cases(driver.info())[1]
+        m = dl.measure_friction(driver, card, track)
+    assert m.reports > 400
+    assert m.rendered.min() < 0.45 and m.rendered.max() > 0.75  # the 0.35-0.85 grating
+    assert abs(m.rendered.mean() - m.target.mean()) < 0.02
+
+
+def test_no_driver_means_no_device_results() -> None:
+    report = run_suite(Context.for_driver("reference"), levels=("device",))
+    assert report.results == []
+    assert set(report.not_applicable) >= DEVICE_CHECKS

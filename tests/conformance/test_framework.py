@@ -1,0 +1,248 @@
+"""The conformance framework: results, registry, runner, reports, CLI and pytest plugin."""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import subprocess
+import sys
+import types
+import xml.etree.ElementTree as ET
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from hcard.cli.main import cli
+from hcard.plugins import hookimpl
+from hcard.plugins.registry import PluginRegistry
+from hcard_conformance.context import Context
+from hcard_conformance.registry import Check, all_checks, builtin_checks, check
+from hcard_conformance.report import failure_message, json_bytes, junit_xml, table
+from hcard_conformance.result import CheckResult, measured
+from hcard_conformance.runner import SuiteReport, run_suite
+from hcard_conformance.vectors import load_manifest
+
+MANIFEST = load_manifest()
+
+
+def test_measured_compares_value_with_threshold() -> None:
+    assert measured("c", "renderer", "x", "A1", 0.05, 0.08).passed
+    assert not measured("c", "renderer", "x", "A1", 0.081, 0.08).passed
+    assert measured("c", "device", "x", "D1", 450.0, 400.0, higher_is_better=True).passed
+    assert not measured("c", "device", "x", "D1", 350.0, 400.0, higher_is_better=True).passed
+    assert not measured("c", "renderer", "x", "A1", math.nan, 0.08).passed
+    with pytest.raises(ValueError, match="unknown conformance level"):
+        CheckResult("c", "firmware", "x", True)
+
+
+def test_check_decorator_registers_and_refuses_duplicates() -> None:
+    mine: dict[str, Check] = {}
+
+    @check(name="vendor.one", level="device", registry=mine)
+    def one(ctx: Context) -> Iterator[CheckResult]:
+        """First line is the description."""
+        yield CheckResult("vendor.one", "device", "a", True)
+
+    assert mine == {"vendor.one": one}
+    assert one.description == "First line is the description."
+    with pytest.raises(ValueError, match="already registered"):
+        check(name="vendor.one", level="device", registry=mine)(lambda ctx: iter(()))
+    with pytest.raises(ValueError, match="unknown conformance level"):
+        check(name="vendor.two", level="wire", registry=mine)
+
+
+def test_builtin_checks_are_ordered_by_level() -> None:
+    checks = builtin_checks()
+    names = [c.name for c in checks]
+    for name in ("format.parse", "format.round_trip", "format.reject", "renderer.exact",
+                 "renderer.friction_error", "renderer.boundary"):
+        assert name in names
+    levels = [c.level for c in checks]
+    assert levels == sorted(levels, key=("format", "renderer", "device").index)
+    assert levels.count("format") == 3
+    assert [c.name for c in all_checks(("format",), plugins=False)] == [
+        "format.parse", "format.round_trip", "format.reject"]
+
+
+def test_plugin_checks_join_the_suite() -> None:
+    @check(name="acme.always", level="format", registry={})
+    def always(ctx: Context) -> Iterator[CheckResult]:
+        yield measured("acme.always", "format", "one", "acme", 1.0, 2.0)
+
+    plugin = types.ModuleType("acme_conformance")
+    plugin.hcard_conformance_checks = hookimpl(lambda: [always])
+    registry = PluginRegistry()
+    registry.register(plugin, package="acme")
+    chosen = all_checks(("format",), registry=registry)
+    assert [c.name for c in chosen][-1] == "acme.always"
+    report = run_suite(Context.for_driver("reference"), ("format",), checks=chosen)
+    assert report.passed
+    assert [r.case for r in report.results if r.check == "acme.always"] == ["one"]
+
+
+def _crashing_checks() -> list[Check]:
+    checks: dict[str, Check] = {}
+
+    @check(name="t.crash", level="format", registry=checks)
+    def crash(ctx: Context) -> Iterator[CheckResult]:
+        yield CheckResult("t.crash", "format", "first", True)
+        raise RuntimeError("boom")
+
+    @check(name="t.empty", level="format", registry=checks)
+    def empty(ctx: Context) -> Iterator[CheckResult]:
+        return iter(())
+
+    @check(name="t.bad-type", level="renderer", registry=checks)
+    def bad_type(ctx: Context) -> Iterator[CheckResult]:
+        yield 42  # type: ignore[misc]
+
+    @check(name="t.fine", level="renderer", registry=checks)
+    def fine(ctx: Context) -> Iterator[CheckResult]:
+        yield measured("t.fine", "renderer", "case", "A1", 0.01, 0.08, unit="relative friction")
+
+    @check(name="t.device", level="device", registry=checks)
+    def device(ctx: Context) -> Iterator[CheckResult]:
+        raise AssertionError("device checks must not run without a driver")
+
+    return list(checks.values())
+
+
+def test_crashing_checks_become_failed_results() -> None:
+    report = run_suite(Context.for_driver("reference"), checks=_crashing_checks())
+    cases = [(r.check, r.case, r.passed) for r in report.results]
+    assert cases == [
+        ("t.crash", "first", True),
+        ("t.crash", "(error after first)", False),
+        ("t.empty", "(none)", False),
+        ("t.bad-type", "(error)", False),
+        ("t.fine", "case", True),
+    ]
+    crash = report.results[1]
+    assert crash.metric == "error" and "RuntimeError: boom" in crash.detail
+    assert "TypeError" in report.results[3].detail
+    assert report.not_applicable == ["t.device"]
+    assert report.exit_code == 1 and len(report.failures) == 3
+    assert all(r.duration_s >= 0 for r in report.results)
+    assert set(report.check_durations_s) == {"t.crash", "t.empty", "t.bad-type", "t.fine"}
+
+
+def _sample_report() -> SuiteReport:
+    report = SuiteReport("demo", ("format", "renderer"))
+    report.results = [
+        CheckResult("format.parse", "format", "a.binary", True, "Q2", 0.0, 0.0, "errors"),
+        CheckResult("format.parse", "format", "a.json", True, "Q2", 0.0, 0.0, "errors"),
+        measured("renderer.friction_error", "renderer", "g@slow", "A1", 0.12, 0.08,
+                 unit="relative friction", detail="lag 1.0 ms"),
+        measured("renderer.exact", "renderer", "g@fast", "A0", math.inf, 1e-5,
+                 unit="relative friction", detail="frame counts differ"),
+        measured("renderer.friction_error", "renderer", "g@fast", "A1", 0.01, 0.08,
+                 unit="relative friction"),
+    ]
+    report.thresholds = {"friction_rel_jnd": 0.08}
+    report.duration_s = 1.5
+    return report
+
+
+def test_junit_xml_has_one_suite_per_level_with_failures() -> None:
+    root = ET.fromstring(junit_xml(_sample_report()))
+    assert root.tag == "testsuites"
+    assert (root.get("tests"), root.get("failures")) == ("5", "2")
+    suites = {s.get("name"): s for s in root.findall("testsuite")}
+    assert set(suites) == {"format", "renderer"}
+    assert (suites["format"].get("tests"), suites["format"].get("failures")) == ("2", "0")
+    assert (suites["renderer"].get("tests"), suites["renderer"].get("failures")) == ("3", "2")
+    cases = suites["renderer"].findall("testcase")
+    assert [(c.get("classname"), c.get("name")) for c in cases] == [
+        ("renderer.friction_error", "g@slow"), ("renderer.exact", "g@fast"),
+        ("renderer.friction_error", "g@fast")]
+    failure = cases[0].find("failure")
+    assert failure is not None
+    assert failure.get("message") == "0.12 relative friction > 0.08 relative friction (A1)"
+    assert failure.text == "lag 1.0 ms"
+    props = {p.get("name"): p.get("value") for p in cases[0].find("properties")}
+    assert props == {"metric": "A1", "value": "0.12", "threshold": "0.08",
+                     "unit": "relative friction"}
+    assert cases[2].find("failure") is None
+
+
+def test_json_report_holds_every_result_with_non_finite_as_strings() -> None:
+    data = json.loads(json_bytes(_sample_report()))
+    assert data["format"] == "hcard-conformance-report/1"
+    assert data["passed"] is False
+    assert data["totals"] == {"cases": 5, "failed": 2}
+    assert data["thresholds"] == {"friction_rel_jnd": 0.08}
+    assert len(data["results"]) == 5
+    assert data["results"][3]["value"] == "inf"
+    assert data["results"][2] | {"duration_s": 0} == {
+        "check": "renderer.friction_error", "level": "renderer", "case": "g@slow",
+        "passed": False, "metric": "A1", "value": 0.12, "threshold": 0.08,
+        "unit": "relative friction", "detail": "lag 1.0 ms", "duration_s": 0}
+
+
+def test_table_lists_failures_and_verdict() -> None:
+    text = table(_sample_report())
+    assert "DOES NOT CONFORM: 3 of 5 cases pass, 2 fail" in text
+    assert "FAIL    renderer.friction_error" in text and "lag 1.0 ms" in text
+    assert "PASS    format.parse" in text
+    assert failure_message(_sample_report().results[3]).startswith("inf relative friction >")
+
+
+@pytest.fixture
+def broken_vectors(tmp_path: Path) -> Path:
+    """spec/vectors with one invalid vector replaced by a valid card."""
+    target = tmp_path / "vectors"
+    shutil.copytree(MANIFEST.root, target)
+    manifest = load_manifest(target)
+    manifest.invalid[0].file.write_bytes(manifest.cards[0].binary.read_bytes())
+    return target
+
+
+def test_cli_writes_reports_and_exits_zero_for_the_reference(tmp_path: Path) -> None:
+    junit, report = tmp_path / "out.xml", tmp_path / "out.json"
+    result = CliRunner().invoke(cli, ["conformance", "--driver", "reference", "--level",
+                                      "format", "--junit", str(junit), "--json", str(report)])
+    assert result.exit_code == 0, result.output
+    assert "CONFORMS" in result.output
+    data = json.loads(report.read_text())
+    cases = 2 * len(MANIFEST.cards) + len(MANIFEST.cards) + len(MANIFEST.invalid)
+    assert data["totals"] == {"cases": cases, "failed": 0}
+    assert ET.parse(junit).getroot().get("tests") == str(cases)
+
+
+def test_cli_exits_one_on_a_failure(broken_vectors: Path, tmp_path: Path) -> None:
+    junit = tmp_path / "out.xml"
+    result = CliRunner().invoke(cli, ["conformance", "--driver", "reference", "--level",
+                                      "format", "--vectors", str(broken_vectors),
+                                      "--junit", str(junit)])
+    assert result.exit_code == 1, result.output
+    assert "DOES NOT CONFORM" in result.output
+    assert ET.parse(junit).getroot().get("failures") == "1"
+
+
+@pytest.mark.parametrize("args", [["--driver", "nope://x"],
+                                  ["--driver", "control:nothing"],
+                                  ["--driver", "reference", "--vectors", "/nonexistent"],
+                                  ["--driver", "reference", "--level", "device"]])
+def test_cli_usage_errors_exit_two(args: list[str]) -> None:
+    result = CliRunner().invoke(cli, ["conformance", *args])
+    assert result.exit_code == 2, result.output
+    assert "Error:" in result.output
+
+
+def test_pytest_plugin_makes_one_item_per_case(broken_vectors: Path, tmp_path: Path) -> None:
+    junit = tmp_path / "plugin.xml"
+    run = subprocess.run(
+        [sys.executable, "-m", "pytest", "-p", "hcard_conformance.pytest_plugin",
+         "--hcard-driver=reference", "--hcard-level=format", f"--hcard-vectors={broken_vectors}",
+         "-p", "no:cacheprovider", "-q", f"--junitxml={junit}", str(tmp_path)],
+        capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    cases = 3 * len(MANIFEST.cards) + len(MANIFEST.invalid)
+    assert run.returncode == 1, run.stdout + run.stderr
+    assert f"1 failed, {cases - 1} passed" in run.stdout
+    victim = MANIFEST.invalid[0].name
+    assert f"format.reject[{victim}]" in run.stdout
+    suite = ET.parse(junit).getroot().find("testsuite")
+    assert suite is not None and suite.get("tests") == str(cases)
