@@ -70,6 +70,9 @@ LATENCY_TRIALS = 10
 LATENCY_THRESHOLD_S = 0.010
 OFF_AMPLITUDE_M = 50e-9
 """Plate amplitude counted as off, m (the E-ViTa loop's 50 nm amplitude tolerance)."""
+BANDWIDTH_TOLERANCE = 0.05
+"""Measurement tolerance of D1: the swept -3 dB point may fall this fraction below the class
+bandwidth (a 6-point sweep interpolated in log f; spec/conformance.md 4.1)."""
 WATCHDOG_ALLOWANCE_S = 0.050
 """Time allowed after ``watchdog_ms`` for the 10 ms ramp and the plate's decay, s."""
 
@@ -311,7 +314,8 @@ def check_dynamics(ctx: Context) -> Iterator[CheckResult]:
         rise = measure_rise_time(driver)
     bandwidth = measure_bandwidth(ctx.open_driver)
     yield _result("device.dynamics", "bandwidth", "bandwidth_-3dB", bandwidth,
-                  dyn.min_bandwidth_hz, "Hz", dyn.why, at_most=False)
+                  dyn.min_bandwidth_hz * (1.0 - BANDWIDTH_TOLERANCE), "Hz", dyn.why,
+                  at_most=False)
     yield _result("device.dynamics", "rise-time", "rise_10_90", rise * 1e3,
                   dyn.max_rise_s * 1e3, "ms", dyn.why)
 
