@@ -1,0 +1,290 @@
+"""Residual analysis: is structure left in a fit's residual, and against what (issue 7, item 3).
+
+:func:`analyse_residuals` takes a residual (``observed - predicted``, in the output unit) and the
+regressors the data has (amplitude in m, voltage in V, speed in m/s, normal force in N, time in
+contact in s, stroke number, ...), each a 1-D array aligned with the residual, and reports per
+regressor:
+
+- the residual's mean in quantile bins of the regressor (or per distinct value, for a regressor
+  with few distinct values such as a stroke number), with a one-way ANOVA F-test of "the bin means
+  are equal" and the fraction of the residual variance the bins explain (``eta^2``);
+- the Spearman rank correlation and a flag for a monotonic trend;
+
+and, taking the residual's order as time order, its lag-1 autocorrelation, a Ljung-Box statistic
+over the first lags and, given the sample rate, the dominant frequency of its spectrum.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+from hcard.physics import PredictorError
+
+DEFAULT_BINS = 10
+"""Quantile bins per regressor."""
+
+MIN_BIN_COUNT = 3
+"""Bins with fewer samples are left out of the F-test."""
+
+
+@dataclass(frozen=True)
+class RegressorStats:
+    """Structure of the residual against one regressor.
+
+    Attributes:
+        name: the regressor's name.
+        bin_centres: median of the regressor in each bin (regressor unit).
+        bin_means: mean residual in each bin (output unit).
+        bin_counts: samples per bin.
+        f_statistic: one-way ANOVA F of the residual across bins (0 if undefined).
+        p_value: p-value of that F-test (1 if undefined, e.g. a constant regressor).
+        eta2: between-bin sum of squares over total sum of squares, in [0, 1]: the fraction
+            of the residual variance explained by the bins.
+        spearman_rho: Spearman rank correlation of the residual with the regressor.
+        spearman_p: its two-sided p-value.
+        monotonic: True when the rank correlation is significant (p < 0.01) and the bin means
+            rise or fall in step with the bins (absolute rank correlation of the bin means with
+            the bin order at least 0.9).
+    """
+
+    name: str
+    bin_centres: np.ndarray
+    bin_means: np.ndarray
+    bin_counts: np.ndarray
+    f_statistic: float
+    p_value: float
+    eta2: float
+    spearman_rho: float
+    spearman_p: float
+    monotonic: bool
+
+
+@dataclass(frozen=True)
+class TimeStats:
+    """Structure of the residual in time (sample order).
+
+    Attributes:
+        lag1_autocorrelation: correlation of the residual with itself one sample later.
+        ljung_box_q: ``n (n+2) sum_k r_k^2 / (n-k)`` over lags ``1..lags``.
+        ljung_box_p: its p-value against chi-squared with ``lags`` degrees of freedom.
+        lags: number of lags in the Ljung-Box statistic.
+        dominant_frequency_hz: frequency of the largest non-DC peak of the residual's
+            spectrum (Hz), or None without a sample rate.
+        dominant_power_fraction: share of the residual's (non-DC) spectral power at that peak,
+            or None without a sample rate.
+    """
+
+    lag1_autocorrelation: float
+    ljung_box_q: float
+    ljung_box_p: float
+    lags: int
+    dominant_frequency_hz: float | None
+    dominant_power_fraction: float | None
+
+
+@dataclass(frozen=True)
+class ResidualReport:
+    """What :func:`analyse_residuals` found.
+
+    Attributes:
+        n: number of samples.
+        rms: root-mean-square residual (output unit).
+        regressors: per-regressor statistics, in the order given.
+        time: structure in sample order.
+    """
+
+    n: int
+    rms: float
+    regressors: dict[str, RegressorStats]
+    time: TimeStats
+
+    def structured(
+        self, alpha: float = 0.01, min_eta2: float = 0.05
+    ) -> list[tuple[str, float, float]]:
+        """Regressors against which structure remains: ``(name, eta2, p)``, strongest first.
+
+        A regressor counts when its F-test p-value is below ``alpha`` *and* its bins explain at
+        least ``min_eta2`` of the residual variance (with many samples a tiny, physically
+        irrelevant structure is significant; ``min_eta2`` keeps it out).
+        """
+        found = [
+            (s.name, s.eta2, s.p_value)
+            for s in self.regressors.values()
+            if s.p_value < alpha and s.eta2 >= min_eta2
+        ]
+        return sorted(found, key=lambda item: (-item[1], item[2]))
+
+    def time_structured(self, alpha: float = 0.01) -> bool:
+        """Whether the residual is correlated in time (Ljung-Box p-value below ``alpha``)."""
+        return self.time.ljung_box_p < alpha
+
+    def table(self) -> str:
+        """A plain-text table of the statistics, one regressor a row, then the time structure."""
+        header = (
+            f"{'regressor':<20} {'eta2':>7} {'F':>10} {'p':>10} {'rho':>7} {'p(rho)':>10} "
+            f"{'trend':>6}"
+        )
+        lines = [f"residual: n = {self.n}, rms = {self.rms:.4g}", header, "-" * len(header)]
+        for s in self.regressors.values():
+            lines.append(
+                f"{s.name:<20} {s.eta2:>7.4f} {s.f_statistic:>10.4g} {s.p_value:>10.3g} "
+                f"{s.spearman_rho:>7.3f} {s.spearman_p:>10.3g} {'yes' if s.monotonic else 'no':>6}"
+            )
+        t = self.time
+        lines.append(
+            f"time: lag-1 autocorrelation {t.lag1_autocorrelation:.4f}, Ljung-Box Q = "
+            f"{t.ljung_box_q:.4g} over {t.lags} lags (p = {t.ljung_box_p:.3g})"
+        )
+        if t.dominant_frequency_hz is not None:
+            lines.append(
+                f"time: dominant frequency {t.dominant_frequency_hz:.4g} Hz "
+                f"({100 * (t.dominant_power_fraction or 0.0):.1f} % of the power)"
+            )
+        return "\n".join(lines)
+
+
+def _groups(x: np.ndarray, bins: int) -> np.ndarray:
+    """Bin label of each sample: by distinct value when there are at most ``bins`` of them,
+    else by quantile bins (ties kept together)."""
+    distinct = np.unique(x)
+    if distinct.size <= bins:
+        return np.searchsorted(distinct, x)
+    edges = np.unique(np.quantile(x, np.linspace(0.0, 1.0, bins + 1)[1:-1]))
+    return np.searchsorted(edges, x, side="right")
+
+
+def _regressor_stats(name: str, residual: np.ndarray, x: np.ndarray, bins: int) -> RegressorStats:
+    labels = _groups(x, bins)
+    present = np.unique(labels)
+    centres = np.array([np.median(x[labels == k]) for k in present])
+    means = np.array([residual[labels == k].mean() for k in present])
+    counts = np.array([np.count_nonzero(labels == k) for k in present])
+
+    used = [
+        residual[labels == k]
+        for k, c in zip(present, counts, strict=True)
+        if c >= MIN_BIN_COUNT
+    ]
+    total = float(np.sum((residual - residual.mean()) ** 2))
+    f_stat, p_value, eta2 = 0.0, 1.0, 0.0
+    if len(used) >= 2 and total > 0:
+        pooled = np.concatenate(used)
+        between = sum(g.size * (g.mean() - pooled.mean()) ** 2 for g in used)
+        within = sum(float(np.sum((g - g.mean()) ** 2)) for g in used)
+        eta2 = float(between / (between + within)) if between + within > 0 else 0.0
+        if within > 0:
+            result = stats.f_oneway(*used)
+            f_stat, p_value = float(result.statistic), float(result.pvalue)
+        elif between > 0:
+            f_stat, p_value = math.inf, 0.0
+
+    rho, rho_p = 0.0, 1.0
+    if np.ptp(x) > 0 and np.ptp(residual) > 0:
+        result = stats.spearmanr(x, residual)
+        rho, rho_p = float(result.statistic), float(result.pvalue)
+    monotonic = False
+    if rho_p < 0.01 and means.size >= 3:
+        step = stats.spearmanr(np.arange(means.size), means).statistic
+        monotonic = bool(abs(float(step)) >= 0.9)
+    return RegressorStats(
+        name=name,
+        bin_centres=centres,
+        bin_means=means,
+        bin_counts=counts,
+        f_statistic=f_stat,
+        p_value=p_value,
+        eta2=eta2,
+        spearman_rho=rho,
+        spearman_p=rho_p,
+        monotonic=monotonic,
+    )
+
+
+def _time_stats(residual: np.ndarray, sample_rate_hz: float | None) -> TimeStats:
+    centred = residual - residual.mean()
+    n = centred.size
+    denominator = float(np.dot(centred, centred))
+    lags = max(1, min(20, n // 5))
+    if denominator > 0:
+        r = np.array([np.dot(centred[:-k], centred[k:]) / denominator for k in range(1, lags + 1)])
+    else:
+        r = np.zeros(lags)
+    q = float(n * (n + 2) * np.sum(r**2 / (n - np.arange(1, lags + 1))))
+    frequency = fraction = None
+    if sample_rate_hz is not None:
+        power = np.abs(np.fft.rfft(centred)) ** 2
+        freqs = np.fft.rfftfreq(n, d=1.0 / sample_rate_hz)
+        if power.size > 1 and power[1:].sum() > 0:
+            peak = 1 + int(np.argmax(power[1:]))
+            frequency = float(freqs[peak])
+            fraction = float(power[peak] / power[1:].sum())
+    return TimeStats(
+        lag1_autocorrelation=float(r[0]),
+        ljung_box_q=q,
+        ljung_box_p=float(stats.chi2.sf(q, lags)),
+        lags=lags,
+        dominant_frequency_hz=frequency,
+        dominant_power_fraction=fraction,
+    )
+
+
+def analyse_residuals(
+    residual: np.ndarray,
+    regressors: Mapping[str, np.ndarray],
+    *,
+    sample_rate_hz: float | None = None,
+    bins: int = DEFAULT_BINS,
+) -> ResidualReport:
+    """Statistics of ``residual`` against each regressor and in time.
+
+    Args:
+        residual: 1-D array ``observed - predicted`` (output unit), in time order for the time
+            statistics.
+        regressors: name -> 1-D array aligned with ``residual``, in the regressor's SI unit.
+        sample_rate_hz: sampling rate (Hz) of a uniformly sampled residual, for the dominant
+            frequency; None leaves it out.
+        bins: quantile bins per regressor (at least 2).
+
+    Raises:
+        PredictorError: empty or non-finite residual or regressor, mismatched lengths, too few
+            samples, a bad bin count or a non-positive sample rate.
+    """
+    r = np.asarray(residual, dtype=np.float64)
+    if r.ndim != 1:
+        raise PredictorError(f"residual must be a 1-D array, got shape {r.shape}")
+    if r.size < 2 * MIN_BIN_COUNT:
+        raise PredictorError(f"residual has {r.size} sample(s); need at least {2 * MIN_BIN_COUNT}")
+    if not np.all(np.isfinite(r)):
+        raise PredictorError(
+            f"residual has {np.count_nonzero(~np.isfinite(r))} non-finite value(s) (NaN or inf)"
+        )
+    if bins < 2:
+        raise PredictorError(f"bins must be at least 2, got {bins}")
+    if sample_rate_hz is not None and not (
+        math.isfinite(sample_rate_hz) and sample_rate_hz > 0
+    ):
+        raise PredictorError(f"sample_rate_hz must be positive and finite, got {sample_rate_hz}")
+    results: dict[str, RegressorStats] = {}
+    for name, values in regressors.items():
+        x = np.asarray(values, dtype=np.float64)
+        if x.shape != r.shape:
+            raise PredictorError(
+                f"regressor {name} has shape {x.shape}, the residual has {r.shape}"
+            )
+        if not np.all(np.isfinite(x)):
+            raise PredictorError(
+                f"regressor {name} has {np.count_nonzero(~np.isfinite(x))} non-finite "
+                "value(s) (NaN or inf)"
+            )
+        results[name] = _regressor_stats(name, r, x, bins)
+    return ResidualReport(
+        n=r.size,
+        rms=float(np.sqrt(np.mean(r**2))),
+        regressors=results,
+        time=_time_stats(r, sample_rate_hz),
+    )
