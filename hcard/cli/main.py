@@ -15,10 +15,12 @@ from hcard.cli.errors import UserErrorGroup
 @click.group(cls=UserErrorGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="hcard")
 def cli() -> None:
-    """hcard: author, check, render and preview haptic cards for friction-modulation screens.
+    """hcard: the haptic-card toolkit for friction-modulation (UV/EV) touchscreens.
 
     A card (.hcard binary, or .json) describes a surface as a grid of taxtels, each playing a
-    texture of (frequency, amplitude, phase) components on the UV and EV channels.
+    texture of (frequency, amplitude, phase) components on the UV and EV channels. Author cards
+    (encode), check them (info, validate, preview), render them (render), evaluate the physics
+    (predict), drive devices (device, play) and prove an implementation (conformance).
     """
     warnings.showwarning = _show_warning
 
