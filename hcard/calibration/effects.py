@@ -1,0 +1,274 @@
+"""Calibration effects: physical effects a fitted model may lack (issue 7, item 4).
+
+An :class:`Effect` (plugin kind ``"calibration-effect"``, hook ``hcard_calibration_effects``) is a
+physical effect that a base :class:`~hcard.physics.Predictor` may lack: charge leakage through the
+stratum corneum, a load index, occlusion, the actuator's rise time, ... It names the regressors
+against which its absence leaves structure in a residual (:attr:`Effect.signature`), carries its
+own parameters (unit, default, bounds, thesis source), and changes a model by transforming the
+model's inputs before the base forward map (:meth:`Effect.transform_inputs`, e.g. the voltage
+becomes the effective voltage behind the skin's high-pass) and/or its output after it
+(:meth:`Effect.transform_output`, e.g. the force is multiplied by a load factor).
+
+:func:`augment` builds from a base predictor and a list of effects a new predictor whose
+parameters are the base's plus each effect's (named ``"<effect>.<parameter>"``), so that
+:func:`hcard.calibration.fit.fit_predictor` fits it unchanged.
+
+Regressor names used in signatures (all 1-D arrays aligned with the samples, SI units):
+
+- ``normal_force`` (N), ``speed`` (m/s), ``amplitude`` (m), ``voltage`` (V), ``pressure`` (Pa);
+- ``time`` (s): time in contact since the recording began;
+- ``stroke`` (count): the stroke number of each sample;
+- ``voltage_history`` (s): time since the voltage last changed (:func:`time_since_change`);
+- ``amplitude_history`` (m): change of the amplitude over the last few time constants
+  (:func:`recent_change`), signed.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any, ClassVar
+
+import numpy as np
+from scipy.signal import lfilter
+
+from hcard.physics import Parameter, Predictor, PredictorError, Variable
+
+KIND = "calibration-effect"
+"""Plugin kind of calibration effects."""
+
+SEPARATOR = "."
+"""Between an effect's name and its parameter's name in an augmented predictor."""
+
+
+class Effect:
+    """Base class of calibration effects.
+
+    Subclasses set the class attributes and override :meth:`transform_inputs` and/or
+    :meth:`transform_output`; both receive ``params``, the effect's own parameter values by
+    their short names (units of :attr:`parameters`). With an effect's parameters at values that
+    switch it off (documented per effect) the augmented model equals the base.
+
+    Attributes:
+        kind: ``"calibration-effect"``.
+        name: unique identifier, e.g. ``"charge-leakage"``.
+        description: one line: what the effect is and where the thesis describes it.
+        reason: one line: why a model fitted without it leaves a residual.
+        signature: regressor names (module docstring) against which its absence leaves
+            residual structure, strongest first.
+        parameters: the effect's parameters with units, defaults, bounds and sources.
+        inputs: input variables the effect needs in addition to the base's (each with a
+            default, so that the augmented model runs on the base's inputs alone).
+        requires: names of base inputs the effect transforms or reads; :func:`augment` refuses
+            a base without them.
+    """
+
+    kind: ClassVar[str] = KIND
+    name: ClassVar[str] = ""
+    description: ClassVar[str] = ""
+    reason: ClassVar[str] = ""
+    signature: ClassVar[tuple[str, ...]] = ()
+    parameters: ClassVar[tuple[Parameter, ...]] = ()
+    inputs: ClassVar[tuple[Variable, ...]] = ()
+    requires: ClassVar[tuple[str, ...]] = ()
+
+    def transform_inputs(
+        self, inputs: Mapping[str, np.ndarray], params: Mapping[str, float]
+    ) -> dict[str, np.ndarray]:
+        """The inputs the base model sees (default: unchanged). SI units in and out."""
+        return dict(inputs)
+
+    def transform_output(
+        self, output: np.ndarray, inputs: Mapping[str, np.ndarray], params: Mapping[str, float]
+    ) -> np.ndarray:
+        """The augmented output from the base output (default: unchanged), output unit."""
+        return output
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.name!r}>"
+
+
+def _check_effects(base: Predictor, effects: Sequence[Effect]) -> None:
+    names = [effect.name for effect in effects]
+    if any(not name for name in names):
+        raise PredictorError("every effect needs a non-empty name")
+    repeated = sorted({name for name in names if names.count(name) > 1})
+    if repeated:
+        raise PredictorError(f"effects repeat: {', '.join(repeated)}")
+    base_inputs = {v.name for v in base.inputs}
+    for effect in effects:
+        missing = sorted(set(effect.requires) - base_inputs)
+        if missing:
+            raise PredictorError(
+                f"effect {effect.name} needs input(s) {', '.join(missing)}, which model "
+                f"{base.name} does not have"
+            )
+        for var in effect.inputs:
+            if var.name not in base_inputs and var.default is None:
+                raise PredictorError(
+                    f"effect {effect.name}: extra input {var.name} needs a default"
+                )
+
+
+def augment(base: Predictor, effects: Sequence[Effect]) -> Predictor:
+    """A predictor: ``base`` with ``effects`` added, parameters and all, ready to fit.
+
+    The new predictor is an instance of a dynamic subclass of :class:`Predictor`:
+
+    - parameters: the base's (same names), then each effect's, named
+      ``"<effect name>.<parameter name>"``, at the base's current values and the effects'
+      defaults;
+    - inputs: the base's, then each effect's extra inputs not already present (all optional);
+    - forward: each effect's :meth:`Effect.transform_inputs` in order, the base forward map on
+      the base's inputs, then each effect's :meth:`Effect.transform_output` in order (given the
+      transformed inputs);
+    - output: the base's; name ``"<base>+<effect>+..."``.
+
+    With no effects the forward map is the base's exactly, and so is the inverse; with effects
+    the augmented model has no inverse.
+
+    Raises:
+        PredictorError: repeated or empty effect names, a base without an input an effect
+            requires, or an extra input without a default.
+    """
+    effects = tuple(effects)
+    _check_effects(base, effects)
+    base_names = tuple(p.name for p in base.parameters)
+    effect_params = tuple(
+        Parameter(
+            name=f"{effect.name}{SEPARATOR}{p.name}",
+            unit=p.unit,
+            default=p.default,
+            bounds=p.bounds,
+            source=p.source,
+            description=p.description,
+        )
+        for effect in effects
+        for p in effect.parameters
+    )
+    extra: list[Variable] = []
+    seen = {v.name for v in base.inputs}
+    for effect in effects:
+        for var in effect.inputs:
+            if var.name not in seen:
+                extra.append(var)
+                seen.add(var.name)
+    base_input_names = tuple(v.name for v in base.inputs)
+    prototype = base
+
+    class Augmented(Predictor):
+        kind: ClassVar[str] = prototype.kind
+        name: ClassVar[str] = "+".join([prototype.name, *(e.name for e in effects)])
+        description: ClassVar[str] = (
+            f"{prototype.name} with {', '.join(e.name for e in effects) or 'no effects'}"
+        )
+        parameters: ClassVar[tuple[Parameter, ...]] = (*prototype.parameters, *effect_params)
+        inputs: ClassVar[tuple[Variable, ...]] = (*prototype.inputs, *extra)
+        output: ClassVar[Variable] = prototype.output
+        inverse_input: ClassVar[str | None] = None if effects else prototype.inverse_input
+        base_predictor: ClassVar[Predictor] = prototype
+        effect_list: ClassVar[tuple[Effect, ...]] = tuple(effects)
+
+        def __init__(self, **params: float) -> None:
+            defaults = {name: prototype[name] for name in base_names}
+            super().__init__(**{**defaults, **params})
+            self._base = prototype.with_params(**{name: self._values[name] for name in base_names})
+            self._effect_values = [
+                {p.name: self._values[f"{e.name}{SEPARATOR}{p.name}"] for p in e.parameters}
+                for e in effects
+            ]
+
+        @property
+        def base(self) -> Predictor:
+            """The base predictor at this instance's base parameter values."""
+            return self._base
+
+        def _forward(self, **inputs: np.ndarray) -> np.ndarray:
+            arrays: dict[str, np.ndarray] = dict(inputs)
+            for effect, values in zip(effects, self._effect_values, strict=True):
+                arrays = effect.transform_inputs(arrays, values)
+            out = self._base.forward(**{k: arrays[k] for k in base_input_names})
+            for effect, values in zip(effects, self._effect_values, strict=True):
+                out = effect.transform_output(out, arrays, values)
+            return out
+
+        def _inverse(self, target: np.ndarray, **inputs: np.ndarray) -> np.ndarray:
+            return self._base.inverse(target, **inputs)
+
+    Augmented.__name__ = Augmented.__qualname__ = f"Augmented_{type(base).__name__}"
+    return Augmented()
+
+
+# -- helpers for effects and regressors -----------------------------------------------------
+def _series(x: Any, t: Any) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(x, t)`` as 1-D arrays of one length, or None when ``t`` gives no time axis
+    (a scalar or constant time: the steady state)."""
+    x_arr, t_arr = np.broadcast_arrays(np.asarray(x, dtype=np.float64), np.asarray(t, float))
+    if x_arr.ndim == 0 or t_arr.size < 2 or np.ptp(t_arr) == 0:
+        return None
+    if x_arr.ndim != 1:
+        raise PredictorError(f"a time series must be 1-D, got shape {x_arr.shape}")
+    if np.any(np.diff(t_arr) <= 0):
+        raise PredictorError("time must increase strictly from sample to sample")
+    return x_arr, t_arr
+
+
+def high_pass(x: Any, t: Any, tau: float) -> np.ndarray:
+    """First-order high-pass of ``x`` sampled at times ``t`` (s), time constant ``tau`` (s).
+
+    ``e_k = a_k e_{k-1} + (x_k - x_{k-1})`` with ``a_k = exp(-(t_k - t_{k-1})/tau)``: exact for
+    an input that changes in steps at the sample instants, and zero before the first sample
+    (so ``e_0 = x_0``: the drive is switched on when the recording starts). The discrete form
+    of ``tau s / (1 + tau s)`` (Eq. 3.22). Without a time axis (scalar or constant ``t``) the
+    input is returned unchanged.
+    """
+    series = _series(x, t)
+    if series is None:
+        return np.asarray(x, dtype=np.float64)
+    x_arr, t_arr = series
+    if not (math.isfinite(tau) and tau > 0):
+        raise PredictorError(f"time constant must be positive, got {tau}")
+    steps = np.diff(x_arr, prepend=0.0)
+    dt = np.diff(t_arr)
+    if np.ptp(dt) <= 1e-9 * dt[0]:  # uniform sampling: one IIR filter
+        a = math.exp(-dt[0] / tau)
+        return np.asarray(lfilter([1.0], [1.0, -a], steps), dtype=np.float64)
+    decay = np.exp(-dt / tau)
+    out = np.empty_like(x_arr)
+    out[0] = steps[0]
+    for k in range(1, out.size):
+        out[k] = decay[k - 1] * out[k - 1] + steps[k]
+    return out
+
+
+def low_pass(x: Any, t: Any, tau: float) -> np.ndarray:
+    """First-order low-pass of ``x`` at times ``t`` (s), time constant ``tau`` (s):
+    ``x - high_pass(x, t, tau)`` (zero before the first sample, so it starts from rest:
+    ``y_0 = 0``, ``y_k = a_k y_{k-1} + (1 - a_k) x_{k-1}``). Without a time axis the input is
+    returned unchanged (the steady state)."""
+    series = _series(x, t)
+    if series is None:
+        return np.asarray(x, dtype=np.float64)
+    x_arr, t_arr = series
+    return x_arr - high_pass(x_arr, t_arr, tau)
+
+
+def time_since_change(x: Any, t: Any) -> np.ndarray:
+    """Time (s) since ``x`` last changed value, per sample (since ``t_0`` before any change).
+
+    The ``voltage_history`` regressor (of the voltage) in the module docstring.
+    """
+    x_arr, t_arr = np.broadcast_arrays(np.asarray(x, float), np.asarray(t, float))
+    changed = np.ones(x_arr.size, dtype=bool)
+    changed[1:] = x_arr[1:] != x_arr[:-1]
+    last = np.maximum.accumulate(np.where(changed, np.arange(x_arr.size), 0))
+    return t_arr - t_arr[last]
+
+
+def recent_change(x: Any, t: Any, window: float) -> np.ndarray:
+    """``x(t) - x(t - window)`` per sample (unit of ``x``), with ``x`` before ``t_0`` taken as
+    zero; ``window`` in s. The ``amplitude_history`` regressor (of the amplitude)."""
+    x_arr, t_arr = np.broadcast_arrays(np.asarray(x, float), np.asarray(t, float))
+    index = np.searchsorted(t_arr, t_arr - window, side="right") - 1
+    earlier = np.where(index >= 0, x_arr[np.maximum(index, 0)], 0.0)
+    return x_arr - earlier

@@ -1,0 +1,385 @@
+"""Built-in calibration effects (issue 7, item 4), registered through the ``hcard.plugins`` entry
+point ``builtin-effects`` like any vendor's plugin.
+
+Each effect is a :class:`~hcard.calibration.effects.Effect`: what it changes, why its absence
+leaves a residual, the regressors that residual shows against, and its parameters with the thesis
+source. All quantities are SI.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import ClassVar
+
+import numpy as np
+
+from hcard.calibration.effects import Effect, high_pass, low_pass
+from hcard.physics import Parameter, Variable
+from hcard.plugins.hookspecs import hookimpl
+
+ATMOSPHERE = 101_325.0
+"""Reference ambient pressure p0 of Eq. 2.10, Pa."""
+
+REFERENCE_FORCE = 1.0
+"""Normal force at which the load factor of :class:`LoadIndex` is 1, N (Eq. 2.35: k at 1 N)."""
+
+REFERENCE_SPEED = 0.020
+"""Sliding speed at which :class:`UltrasonicSpeed` leaves the reduction unchanged, m/s
+(Figs. 2.21 and 2.24: 20 mm/s)."""
+
+SC_THICKNESS, SC_PERMITTIVITY = 200e-6, 1560.0
+"""Stratum corneum thickness (m) and relative permittivity: section 3.6.1 ([1], [88])."""
+
+INSULATOR_THICKNESS, INSULATOR_PERMITTIVITY = 90e-6, 3.35
+"""Insulating film thickness (m) and relative permittivity: section 3.6.1 (plastic film)."""
+
+AIR_PERMITTIVITY = 1.0
+"""Relative permittivity of the air layer (Table 3.2)."""
+
+ELECTRICAL_THICKNESS = SC_THICKNESS / SC_PERMITTIVITY + INSULATOR_THICKNESS / INSULATOR_PERMITTIVITY
+"""``d_sc/eps_sc + d_i/eps_i`` of the section 3.6.1 contact, m (Eq. 3.12 denominator)."""
+
+TOTAL_THICKNESS = SC_THICKNESS + INSULATOR_THICKNESS
+"""``d_sc + d_i`` of the section 3.6.1 contact, m."""
+
+TIME = Variable("time", "s", "time since the recording (and the contact) began", 0.0)
+"""The recording's time axis; its default (0, no time axis) makes time effects the identity."""
+
+
+class LoadIndex(Effect):
+    """Non-Coulomb friction: ``F = k Fn^n`` (Eq. 2.35), so the output is scaled by
+    ``(Fn / 1 N)^(n - 1)``. ``n = 1`` switches it off (Coulomb)."""
+
+    name: ClassVar[str] = "load-index"
+    description: ClassVar[str] = "Non-Coulomb load index: output * (Fn / 1 N)^(n-1) (Eq. 2.35)"
+    reason: ClassVar[str] = (
+        "skin friction grows as Fn^n with n < 1, so a Coulomb model over-predicts the friction "
+        "coefficient at high load and under-predicts it at low load"
+    )
+    signature: ClassVar[tuple[str, ...]] = ("normal_force",)
+    parameters: ClassVar[tuple[Parameter, ...]] = (
+        Parameter(
+            "load_index",
+            "",
+            0.91,
+            (0.3, 1.5),
+            "Eq. 2.35; Fig. 2.32 fit, 10th cycle (n = 0.91 +- 0.05)",
+            "frictional load index n (1: Coulomb)",
+        ),
+    )
+    inputs: ClassVar[tuple[Variable, ...]] = (
+        Variable("normal_force", "N", "normal force pressing the finger on the surface", 0.5),
+    )
+
+    def transform_output(
+        self, output: np.ndarray, inputs: Mapping[str, np.ndarray], params: Mapping[str, float]
+    ) -> np.ndarray:
+        """``output * (Fn / 1 N)^(n - 1)``."""
+        force = np.maximum(inputs["normal_force"], 1e-12) / REFERENCE_FORCE
+        return output * np.power(force, params["load_index"] - 1.0)
+
+
+class OcclusionDrift(Effect):
+    """Occlusion: friction rises with contact time to a plateau (Fig. 1.11), the output scaled by
+    ``1 + g (1 - exp(-t / tau_o))``. ``g = 0`` switches it off."""
+
+    name: ClassVar[str] = "occlusion-drift"
+    description: ClassVar[str] = (
+        "Occlusion drift: output * (1 + g (1 - exp(-t/tau_o))), sweat trapped in the contact "
+        "(Fig. 1.11)"
+    )
+    reason: ClassVar[str] = (
+        "moisture accumulates under the sliding finger and plasticises the stratum corneum, so "
+        "friction climbs over seconds of contact; a static model leaves a residual rising with time"
+    )
+    signature: ClassVar[tuple[str, ...]] = ("time",)
+    parameters: ClassVar[tuple[Parameter, ...]] = (
+        Parameter(
+            "gain",
+            "",
+            1.19,
+            (0.0, 10.0),
+            "Fig. 1.11, section 1.4.2.2 (0.36 -> 0.79, Smith and Scott [46]: g = 0.79/0.36 - 1)",
+            "relative friction rise at full occlusion",
+        ),
+        Parameter(
+            "time_constant",
+            "s",
+            20.0,
+            (1e-2, 1e4),
+            "Fig. 1.11b (Pasumarty et al. [48]); ~20 s",
+            "first-order time constant tau_o of the occlusion rise",
+        ),
+    )
+    inputs: ClassVar[tuple[Variable, ...]] = (TIME,)
+
+    def transform_output(
+        self, output: np.ndarray, inputs: Mapping[str, np.ndarray], params: Mapping[str, float]
+    ) -> np.ndarray:
+        """``output * (1 + g (1 - exp(-t / tau_o)))``, ``t`` clipped at 0."""
+        t = np.maximum(inputs["time"], 0.0)
+        return output * (1.0 + params["gain"] * -np.expm1(-t / params["time_constant"]))
+
+
+class SkinRecovery(Effect):
+    """Finite lateral recovery of the skin ridges: they do not spring back fully between
+    passes, so friction climbs with the stroke number toward a plateau, the output scaled by
+    ``1 - D exp(-k / k_r)`` for stroke ``k`` (0 for the first stroke after the finger rested).
+    ``D = 0`` switches it off. The thesis shows the mechanism over vibration cycles within one
+    contact (Figs. 2.25-2.26, recovery speed 1.5-15 mm/s); the stroke form is phenomenological."""
+
+    name: ClassVar[str] = "skin-recovery"
+    description: ClassVar[str] = (
+        "Finite lateral skin recovery: output * (1 - D exp(-k / k_r)) over stroke number k "
+        "(Figs. 2.25-2.26)"
+    )
+    reason: ClassVar[str] = (
+        "ridges still deformed from the previous pass carry less lateral load, so the first "
+        "strokes after a rest give lower friction than the steady state"
+    )
+    signature: ClassVar[tuple[str, ...]] = ("stroke",)
+    parameters: ClassVar[tuple[Parameter, ...]] = (
+        Parameter(
+            "depth",
+            "",
+            0.2,
+            (0.0, 0.95),
+            "Figs. 2.25-2.26 (mechanism); value assumed, fitted per finger",
+            "relative friction deficit D of the first stroke",
+        ),
+        Parameter(
+            "strokes",
+            "",
+            2.0,
+            (0.05, 1e3),
+            "Figs. 2.25-2.26 (mechanism); value assumed, fitted per finger",
+            "number of strokes k_r over which the deficit decays by 1/e",
+        ),
+    )
+    inputs: ClassVar[tuple[Variable, ...]] = (
+        Variable(
+            "stroke", "", "strokes since the finger last rested (inf: steady state)", math.inf
+        ),
+    )
+
+    def transform_output(
+        self, output: np.ndarray, inputs: Mapping[str, np.ndarray], params: Mapping[str, float]
+    ) -> np.ndarray:
+        """``output * (1 - D exp(-k / k_r))``, ``k`` clipped at 0."""
+        k = np.maximum(inputs["stroke"], 0.0)
+        return output * (1.0 - params["depth"] * np.exp(-k / params["strokes"]))
+
+
+class ActuatorBandwidth(Effect):
+    """The plate's own rise time: the vibration amplitude reaches its command through a
+    first-order low-pass of time constant ``tau_a`` (section 4.3: about 1.5 ms for the fast
+    stimulator, 15 ms for a plate like [86]'s; Fig. 4.5)."""
+
+    name: ClassVar[str] = "actuator-bandwidth"
+    description: ClassVar[str] = (
+        "Actuator rise time: amplitude -> first-order low-pass of time constant tau_a "
+        "(section 4.3, Fig. 4.5)"
+    )
+    reason: ClassVar[str] = (
+        "a resonant plate of finite Q cannot change its amplitude instantly, so right after an "
+        "amplitude step the friction lags the commanded value"
+    )
+    signature: ClassVar[tuple[str, ...]] = ("amplitude_history",)
+    parameters: ClassVar[tuple[Parameter, ...]] = (
+        Parameter(
+            "time_constant",
+            "s",
+            1.5e-3,
+            (1e-5, 1.0),
+            "section 4.3 (mechanical time response 1.5 ms; 15 ms for the plate of [86])",
+            "first-order time constant tau_a of the vibration envelope",
+        ),
+    )
+    inputs: ClassVar[tuple[Variable, ...]] = (TIME,)
+    requires: ClassVar[tuple[str, ...]] = ("amplitude",)
+
+    def transform_inputs(
+        self, inputs: Mapping[str, np.ndarray], params: Mapping[str, float]
+    ) -> dict[str, np.ndarray]:
+        """``amplitude`` replaced by its low-pass over ``time`` (unchanged without a time axis)."""
+        out = dict(inputs)
+        out["amplitude"] = low_pass(inputs["amplitude"], inputs["time"], params["time_constant"])
+        return out
+
+
+class ChargeLeakage(Effect):
+    """Charge leakage through the stratum corneum: the force follows the effective voltage
+    ``v_e = tau_d s / (1 + tau_d s) v`` (Eqs. 3.19-3.23), not the applied one."""
+
+    name: ClassVar[str] = "charge-leakage"
+    description: ClassVar[str] = (
+        "Charge leakage through the stratum corneum: voltage -> first-order high-pass of time "
+        "constant tau_d (Eqs. 3.19-3.23)"
+    )
+    reason: ClassVar[str] = (
+        "the resistive stratum corneum lets the bound charge leak away, so after a voltage change "
+        "the electrostatic force decays with tau_d/2; a static law leaves a residual that "
+        "depends on the time since the voltage last changed"
+    )
+    signature: ClassVar[tuple[str, ...]] = ("voltage_history",)
+    parameters: ClassVar[tuple[Parameter, ...]] = (
+        Parameter(
+            "time_constant",
+            "s",
+            7.7e-3,
+            (1e-5, 10.0),
+            "Eq. 3.22; section 3.6.3 (tau_d = 7.7 ms), Fig. 3.13",
+            "leakage time constant tau_d = (C_i + C_sc) R_sc",
+        ),
+    )
+    inputs: ClassVar[tuple[Variable, ...]] = (TIME,)
+    requires: ClassVar[tuple[str, ...]] = ("voltage",)
+
+    def transform_inputs(
+        self, inputs: Mapping[str, np.ndarray], params: Mapping[str, float]
+    ) -> dict[str, np.ndarray]:
+        """``voltage`` replaced by the effective voltage of Eq. 3.22 (unchanged without a time
+        axis)."""
+        out = dict(inputs)
+        out["voltage"] = high_pass(inputs["voltage"], inputs["time"], params["time_constant"])
+        return out
+
+
+class AirLayer(Effect):
+    """Air trapped between finger and insulator: a third dielectric in series (Eq. 3.17), so the
+    electrostatic force of a contact law without it is scaled by
+    ``d_e d / ((d_e + d_a/eps_a)(d + d_a))`` with ``d_e = d_sc/eps_sc + d_i/eps_i`` and
+    ``d = d_sc + d_i`` (the contact of section 3.6.1) and an air gap that the load flattens,
+    ``d_a = d_a1 (1 N / Fn)``. ``d_a1 = 0`` switches it off. For an electrostatic-force output."""
+
+    name: ClassVar[str] = "air-layer"
+    description: ClassVar[str] = (
+        "Air layer: EV force scaled by d_e d / ((d_e + d_a/eps_a)(d + d_a)), d_a = d_a1 (1 N/Fn) "
+        "(Eq. 3.17, Fig. 3.7)"
+    )
+    reason: ClassVar[str] = (
+        "air between the fingerprint ridges and the insulator adds a low-permittivity layer that "
+        "thins as the finger is pressed, so a contact law over-predicts the force at light load"
+    )
+    signature: ClassVar[tuple[str, ...]] = ("normal_force",)
+    parameters: ClassVar[tuple[Parameter, ...]] = (
+        Parameter(
+            "air_gap",
+            "m",
+            5e-6,
+            (0.0, 1e-3),
+            "Eq. 3.17, Fig. 3.7 (air between ridges); value assumed, fitted per finger",
+            "mean air layer thickness d_a1 at a normal force of 1 N",
+        ),
+    )
+    inputs: ClassVar[tuple[Variable, ...]] = (
+        Variable("normal_force", "N", "normal force pressing the finger on the surface", 0.5),
+    )
+
+    def transform_output(
+        self, output: np.ndarray, inputs: Mapping[str, np.ndarray], params: Mapping[str, float]
+    ) -> np.ndarray:
+        """``output * d_e d / ((d_e + d_a/eps_a)(d + d_a))`` with ``d_a = d_a1 (1 N / Fn)``."""
+        force = np.maximum(inputs["normal_force"], 1e-12) / REFERENCE_FORCE
+        gap = params["air_gap"] / force
+        return output * (
+            ELECTRICAL_THICKNESS
+            * TOTAL_THICKNESS
+            / ((ELECTRICAL_THICKNESS + gap / AIR_PERMITTIVITY) * (TOTAL_THICKNESS + gap))
+        )
+
+
+class UltrasonicSpeed(Effect):
+    """Speed dependence of the ultrasonic reduction: ``1 - mu'`` scaled by ``(U / U_ref)^a``
+    (Fig. 2.21e: the relative friction rises with sliding speed, so ``a < 0``). ``a = 0``
+    switches it off. For a relative-friction output."""
+
+    name: ClassVar[str] = "ultrasonic-speed"
+    description: ClassVar[str] = (
+        "Speed dependence of the ultrasonic reduction: 1 - mu' scaled by (U / 20 mm/s)^a "
+        "(Fig. 2.21e, section 2.5)"
+    )
+    reason: ClassVar[str] = (
+        "the lateral spring loads faster at higher sliding speed (spring-slider, section 2.5), "
+        "so the friction reduction shrinks with speed; a speed-blind model leaves a residual "
+        "trending with speed"
+    )
+    signature: ClassVar[tuple[str, ...]] = ("speed",)
+    parameters: ClassVar[tuple[Parameter, ...]] = (
+        Parameter(
+            "speed_exponent",
+            "",
+            0.0,
+            (-3.0, 3.0),
+            "Fig. 2.21e (sign: reduction falls with speed); magnitude fitted per device, start 0",
+            "exponent a of (U / 20 mm/s) on the friction reduction",
+        ),
+    )
+    inputs: ClassVar[tuple[Variable, ...]] = (
+        Variable("speed", "m/s", "finger sliding speed U", REFERENCE_SPEED),
+    )
+
+    def transform_output(
+        self, output: np.ndarray, inputs: Mapping[str, np.ndarray], params: Mapping[str, float]
+    ) -> np.ndarray:
+        """``1 - (1 - mu') (U / U_ref)^a``, the reduction capped at 1 (mu' >= 0)."""
+        speed = np.maximum(np.abs(inputs["speed"]), 1e-9) / REFERENCE_SPEED
+        reduction = (1.0 - output) * np.power(speed, params["speed_exponent"])
+        return 1.0 - np.minimum(reduction, 1.0)
+
+
+class SqueezeFilmShare(Effect):
+    """Squeeze-film share of the ultrasonic reduction: ``1 - mu'`` scaled by
+    ``gamma = 1 - s (1 - p / p0)`` (Eq. 2.10). A pure squeeze film (``s = 1``) gives
+    ``gamma = p / p0``; the measured reduction did not change at ``p0 / 2`` (Fig. 2.12), so the
+    default is ``s = 0`` (off). For a relative-friction output."""
+
+    name: ClassVar[str] = "squeeze-film-share"
+    description: ClassVar[str] = (
+        "Squeeze-film pressure share: 1 - mu' scaled by gamma = 1 - s (1 - p/p0) (Eq. 2.10)"
+    )
+    reason: ClassVar[str] = (
+        "the part of the reduction carried by an air film scales with the ambient pressure, so a "
+        "pressure-blind model leaves a residual trending with pressure"
+    )
+    signature: ClassVar[tuple[str, ...]] = ("pressure",)
+    parameters: ClassVar[tuple[Parameter, ...]] = (
+        Parameter(
+            "share",
+            "",
+            0.0,
+            (0.0, 1.0),
+            "Eq. 2.10; Fig. 2.12 (no change at p0/2: s ~ 0 for the probe)",
+            "share s of the friction reduction carried by the squeeze film",
+        ),
+    )
+    inputs: ClassVar[tuple[Variable, ...]] = (
+        Variable("pressure", "Pa", "ambient air pressure p", ATMOSPHERE),
+    )
+
+    def transform_output(
+        self, output: np.ndarray, inputs: Mapping[str, np.ndarray], params: Mapping[str, float]
+    ) -> np.ndarray:
+        """``1 - (1 - mu') (1 - s (1 - p / p0))``, ``p0`` = 101 325 Pa."""
+        gamma = 1.0 - params["share"] * (1.0 - inputs["pressure"] / ATMOSPHERE)
+        return 1.0 - (1.0 - output) * gamma
+
+
+BUILTIN_EFFECTS: tuple[type[Effect], ...] = (
+    LoadIndex,
+    OcclusionDrift,
+    ActuatorBandwidth,
+    ChargeLeakage,
+    UltrasonicSpeed,
+    AirLayer,
+    SkinRecovery,
+    SqueezeFilmShare,
+)
+"""The built-in effect classes, in the order of issue 7's list."""
+
+
+@hookimpl
+def hcard_calibration_effects() -> list[Effect]:
+    """The built-in calibration effects, one instance each."""
+    return [cls() for cls in BUILTIN_EFFECTS]

@@ -1,0 +1,263 @@
+"""Calibration effects (issue 7, item 4): each built-in effect, hidden in synthetic data, is
+explained by the augmented model and flagged by the residual analysis of the base fit."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from hcard.calibration.effects import (
+    Effect,
+    augment,
+    high_pass,
+    low_pass,
+    recent_change,
+    time_since_change,
+)
+from hcard.calibration.fit import fit_predictor
+from hcard.calibration.residuals import analyse_residuals
+from hcard.physics import Predictor, PredictorError
+from hcard_builtins.effects import (
+    ActuatorBandwidth,
+    AirLayer,
+    ChargeLeakage,
+    LoadIndex,
+    OcclusionDrift,
+    SkinRecovery,
+    SqueezeFilmShare,
+    UltrasonicSpeed,
+    hcard_calibration_effects,
+)
+from hcard_builtins.physics.electrovibration import Kaczmarek
+from hcard_builtins.physics.finger import FingerFriction
+from hcard_builtins.physics.ultrasonic import DimensionlessGroup
+
+N = 3000
+SEGMENT = 40  # samples per piecewise-constant amplitude or voltage level
+
+
+def recording(rate_hz: float, seed: int) -> dict[str, np.ndarray]:
+    """Tribometer-like inputs in SI units, in time order, sampled at ``rate_hz``."""
+    rng = np.random.default_rng(seed)
+    segments = N // SEGMENT
+    amplitude = np.repeat(rng.uniform(0.0, 3e-6, segments), SEGMENT)  # m peak-to-peak
+    polarity = np.where(np.arange(segments) % 2 == 0, 1.0, -1.0)
+    # V, square-wave drive (section 3.6.3), switching half a segment after the amplitude steps
+    voltage = np.roll(np.repeat(150.0 * polarity, SEGMENT), SEGMENT // 2)
+    return {
+        "time": np.arange(N) / rate_hz,  # s
+        "amplitude": amplitude,
+        "voltage": voltage,
+        "speed": rng.uniform(0.01, 0.1, N),  # m/s
+        "normal_force": rng.uniform(0.2, 1.5, N),  # N
+        # strokes of 0.2 s in sessions of 5, the finger resting between sessions
+        "stroke": ((np.arange(N) // 200) % 5).astype(float),
+        "pressure": np.repeat(rng.uniform(0.3, 1.0, segments), SEGMENT) * 101_325.0,  # Pa
+    }
+
+
+def regressors(data: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Every regressor the analysis sees, named as in :mod:`hcard.calibration.effects`."""
+    t = data["time"]
+    return {
+        "normal_force": data["normal_force"],
+        "speed": data["speed"],
+        "amplitude": data["amplitude"],
+        "voltage": data["voltage"],
+        "pressure": data["pressure"],
+        "stroke": data["stroke"],
+        "time": t,
+        "amplitude_history": recent_change(data["amplitude"], t, 0.01),
+        "voltage_history": time_since_change(data["voltage"], t),
+    }
+
+
+@dataclass(frozen=True)
+class Case:
+    """One effect hidden in synthetic data: base model, true effect parameters, noise."""
+
+    effect: Effect
+    base: Callable[[], Predictor]
+    base_free: tuple[str, ...]
+    truth: dict[str, float]
+    noise: float  # standard deviation of the added noise, output unit
+    rate_hz: float
+
+
+CASES = [
+    Case(
+        LoadIndex(),
+        lambda: FingerFriction(load_index=1.0),
+        ("friction_occluded",),
+        {"load_index": 0.75},
+        0.005,
+        1000.0,
+    ),
+    Case(
+        OcclusionDrift(),
+        lambda: FingerFriction(load_index=1.0),
+        ("friction_occluded",),
+        {"gain": 0.6, "time_constant": 15.0},
+        0.005,
+        50.0,
+    ),
+    Case(
+        ActuatorBandwidth(),
+        DimensionlessGroup,
+        ("psi_star",),
+        {"time_constant": 5e-3},
+        0.01,
+        1000.0,
+    ),
+    Case(ChargeLeakage(), Kaczmarek, ("area",), {"time_constant": 10e-3}, 2e-5, 1000.0),
+    Case(AirLayer(), Kaczmarek, ("area",), {"air_gap": 10e-6}, 2e-5, 1000.0),
+    Case(
+        UltrasonicSpeed(), DimensionlessGroup, ("psi_star",), {"speed_exponent": -0.8}, 0.01, 1000.0
+    ),
+    Case(
+        SqueezeFilmShare(),
+        DimensionlessGroup,
+        ("psi_star",),
+        {"share": 0.6},
+        0.01,
+        1000.0,
+    ),
+    Case(
+        SkinRecovery(),
+        lambda: FingerFriction(load_index=1.0),
+        ("friction_occluded",),
+        {"depth": 0.4, "strokes": 1.5},
+        0.005,
+        1000.0,
+    ),
+]
+
+
+def held_out(n: int) -> np.ndarray:
+    """The last fifth of the recording: a time block, never random samples."""
+    return np.arange(n) >= (4 * n) // 5
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c.effect.name for c in CASES])
+def test_effect_is_found_and_explains_the_residual(case: Case) -> None:
+    data = recording(case.rate_hz, seed=11)
+    base = case.base()
+    effect = case.effect
+    prefix = f"{effect.name}."
+    truth = augment(base, [effect]).with_params(**{prefix + k: v for k, v in case.truth.items()})
+    inputs = {k: v for k, v in data.items() if k in {var.name for var in truth.inputs}}
+    clean = truth.forward(**inputs)
+    observed = clean + np.random.default_rng(12).normal(0.0, case.noise, N)
+    test = held_out(N)
+
+    base_inputs = {k: v for k, v in inputs.items() if k in {var.name for var in base.inputs}}
+    before = fit_predictor(base, base_inputs, observed, free=case.base_free, test=test)
+    model = augment(base, [effect])
+    free = (*case.base_free, *(prefix + p.name for p in effect.parameters))
+    after = fit_predictor(model, inputs, observed, free=free, test=test)
+
+    assert before.test_rmse is not None and after.test_rmse is not None
+    assert after.test_rmse <= 0.5 * before.test_rmse
+    assert after.test_rmse == pytest.approx(case.noise, rel=0.15)
+    for name, value in case.truth.items():
+        sigma = after.uncertainties[prefix + name]
+        assert math.isfinite(sigma) and sigma > 0
+        assert abs(after.params[prefix + name] - value) < 3 * sigma
+
+    report = analyse_residuals(before.residuals, regressors(data))
+    strongest = max(report.regressors.values(), key=lambda s: s.eta2)
+    assert strongest.name == effect.signature[0]
+    assert report.structured()[0][0] == effect.signature[0]
+
+
+def test_hook_returns_every_effect_with_unique_names() -> None:
+    effects = hcard_calibration_effects()
+    names = [e.name for e in effects]
+    assert names == [
+        "load-index",
+        "occlusion-drift",
+        "actuator-bandwidth",
+        "charge-leakage",
+        "ultrasonic-speed",
+        "air-layer",
+        "skin-recovery",
+        "squeeze-film-share",
+    ]
+    assert len(set(names)) == len(names)
+    for effect in effects:
+        assert effect.kind == "calibration-effect"
+        assert effect.description and effect.reason and effect.signature
+        assert effect.parameters and all(p.source for p in effect.parameters)
+
+
+@pytest.mark.parametrize(
+    "base", [FingerFriction(), DimensionlessGroup(), Kaczmarek()], ids=lambda b: b.name
+)
+def test_augment_without_effects_is_the_base_exactly(base: Predictor) -> None:
+    data = recording(1000.0, seed=3)
+    inputs = {k: v for k, v in data.items() if k in {var.name for var in base.inputs}}
+    same = augment(base, [])
+    assert same.params == base.params
+    assert np.array_equal(same.forward(**inputs), base.forward(**inputs))
+    assert same.inverse_input == base.inverse_input
+
+
+def test_augmented_parameters_are_prefixed_and_effects_at_neutral_values_vanish() -> None:
+    base = FingerFriction(load_index=1.0)
+    model = augment(base, [LoadIndex(), OcclusionDrift()])
+    names = [p.name for p in model.parameters]
+    assert names[: len(base.parameters)] == [p.name for p in base.parameters]
+    assert names[len(base.parameters) :] == [
+        "load-index.load_index",
+        "occlusion-drift.gain",
+        "occlusion-drift.time_constant",
+    ]
+    assert [v.name for v in model.inputs] == ["normal_force", "speed", "contact_time", "time"]
+    neutral = model.with_params(**{"load-index.load_index": 1.0, "occlusion-drift.gain": 0.0})
+    force = np.array([0.2, 0.5, 1.4])
+    assert np.allclose(
+        neutral.forward(normal_force=force, time=[0.0, 5.0, 50.0]), base.forward(normal_force=force)
+    )
+    assert model.inverse_input is None
+    fitted = model.with_params(**{"load-index.load_index": 0.8})
+    assert fitted["load-index.load_index"] == 0.8
+    assert fitted.params["friction_occluded"] == base["friction_occluded"]
+
+
+def test_augment_refuses_repeated_effects_and_missing_inputs() -> None:
+    with pytest.raises(PredictorError, match="repeat"):
+        augment(FingerFriction(), [LoadIndex(), LoadIndex()])
+    with pytest.raises(PredictorError, match="needs input"):
+        augment(FingerFriction(), [ChargeLeakage()])
+
+
+def test_first_order_filters_step_response() -> None:
+    t = np.arange(100) * 1e-3  # s
+    step = np.where(np.arange(100) >= 10, 2.0, 0.0)
+    tau = 5e-3
+    e = high_pass(step, t, tau)
+    y = low_pass(step, t, tau)
+    after = t[10:] - t[10]
+    assert np.allclose(e[10:], 2.0 * np.exp(-after / tau))
+    assert np.allclose(y + e, step)
+    assert np.allclose(e[:10], 0.0)
+    # A non-uniform time axis gives the same response at the shared instants.
+    keep = np.ones(100, dtype=bool)
+    keep[[30, 31, 55]] = False
+    assert np.allclose(high_pass(step[keep], t[keep], tau), e[keep])
+    # Without a time axis the filters are the identity (steady state).
+    assert np.array_equal(high_pass(step, 0.0, tau), step)
+    assert np.array_equal(low_pass(step, 0.0, tau), step)
+    with pytest.raises(PredictorError, match="increase"):
+        high_pass(step, t[::-1], tau)
+
+
+def test_history_regressors() -> None:
+    t = np.arange(6) * 0.5
+    x = np.array([1.0, 1.0, 3.0, 3.0, 3.0, 2.0])
+    assert np.allclose(time_since_change(x, t), [0.0, 0.5, 0.0, 0.5, 1.0, 0.0])
+    assert np.allclose(recent_change(x, t, 0.5), [1.0, 0.0, 2.0, 0.0, 0.0, -1.0])
