@@ -7,8 +7,6 @@ The CSV format is normative in spec/track-format.md: a header row naming the col
 
 from __future__ import annotations
 
-import csv
-import io
 import math
 import os
 from dataclasses import dataclass
@@ -16,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hcard.csv_rows import data_rows
 from hcard.errors import TrackError
 
 DEFAULT_NORMAL_FORCE_N = 0.5
@@ -112,11 +111,7 @@ def read_track_csv(path: str | os.PathLike[str]) -> FingerTrack:
 
 def parse_track_csv(text: str, *, source: str = "track") -> FingerTrack:
     """Parse the CSV text of a track."""
-    rows = [
-        (number, row)
-        for number, row in enumerate(csv.reader(io.StringIO(text)), start=1)
-        if row and not row[0].lstrip().startswith("#") and any(cell.strip() for cell in row)
-    ]
+    rows = data_rows(text)
     if not rows:
         raise TrackError(f"{source}: empty track (no header row)")
     header_line, header = rows[0]

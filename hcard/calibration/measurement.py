@@ -8,8 +8,6 @@ never half-read: any bad cell rejects the whole recording.
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 import math
 import os
@@ -20,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from hcard.atomic import write_atomically
+from hcard.csv_rows import data_rows
 from hcard.errors import HcardError
 
 #: Accepted unit suffixes per quantity: suffix -> scale to the SI unit (rule M4).
@@ -184,11 +183,7 @@ def _read_sidecar(path: Path) -> dict[str, Any]:
 
 
 def _parse(text: str, source: str, conditions: dict[str, Any]) -> Measurement:
-    rows = [
-        (number, row)
-        for number, row in enumerate(csv.reader(io.StringIO(text)), start=1)
-        if row and not row[0].lstrip().startswith("#") and any(cell.strip() for cell in row)
-    ]
+    rows = data_rows(text)
     if not rows:
         raise MeasurementError(f"{source}: empty file (no header row)")
     header_line, header = rows[0]

@@ -399,7 +399,7 @@ def test_tier2_hung_device_times_out():
                 t0 = time.monotonic()
                 with pytest.raises(DeviceError, match=r"no answer|timed out|stopped in the middle"):
                     for _ in range(50):
-                        assert driver.read_inputs(0.05) is not None
+                        driver.read_inputs(0.05)
                         driver.counters()
                 elapsed = time.monotonic() - t0
                 assert elapsed < 0.05 + timeout_s + UNLINK_GRACE_S + 0.3, (kind, elapsed)

@@ -1,0 +1,19 @@
+"""The data rows of a CSV text with ``#`` comment lines and blank lines skipped.
+
+Shared by the finger-track reader (spec/track-format.md) and the tribometer measurement reader
+(spec/measurement-format.md), which both keep line numbers for their error messages.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+
+
+def data_rows(text: str) -> list[tuple[int, list[str]]]:
+    """``(line number, cells)`` of every row that is neither blank nor a ``#`` comment."""
+    return [
+        (number, row)
+        for number, row in enumerate(csv.reader(io.StringIO(text)), start=1)
+        if row and not row[0].lstrip().startswith("#") and any(cell.strip() for cell in row)
+    ]
