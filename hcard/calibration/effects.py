@@ -61,6 +61,8 @@ class Effect:
             default, so that the augmented model runs on the base's inputs alone).
         requires: names of base inputs the effect transforms or reads; :func:`augment` refuses
             a base without them.
+        outputs: names of base outputs the effect applies to (e.g. ``("relative_friction",)``
+            for an effect on the ultrasonic reduction); empty: any output.
     """
 
     kind: ClassVar[str] = KIND
@@ -71,6 +73,20 @@ class Effect:
     parameters: ClassVar[tuple[Parameter, ...]] = ()
     inputs: ClassVar[tuple[Variable, ...]] = ()
     requires: ClassVar[tuple[str, ...]] = ()
+    outputs: ClassVar[tuple[str, ...]] = ()
+
+    def applies_to(self, base: Predictor) -> str | None:
+        """Why the effect cannot augment ``base`` (a missing input, another output), or None."""
+        names = {v.name for v in base.inputs}
+        missing = sorted(set(self.requires) - names)
+        if missing:
+            return f"needs input(s) {', '.join(missing)}, which model {base.name} does not have"
+        if self.outputs and base.output.name not in self.outputs:
+            return (
+                f"applies to a {' or '.join(self.outputs)} output, model {base.name} outputs "
+                f"{base.output.name}"
+            )
+        return None
 
     def transform_inputs(
         self, inputs: Mapping[str, np.ndarray], params: Mapping[str, float]
@@ -97,12 +113,9 @@ def _check_effects(base: Predictor, effects: Sequence[Effect]) -> None:
         raise PredictorError(f"effects repeat: {', '.join(repeated)}")
     base_inputs = {v.name for v in base.inputs}
     for effect in effects:
-        missing = sorted(set(effect.requires) - base_inputs)
-        if missing:
-            raise PredictorError(
-                f"effect {effect.name} needs input(s) {', '.join(missing)}, which model "
-                f"{base.name} does not have"
-            )
+        why = effect.applies_to(base)
+        if why:
+            raise PredictorError(f"effect {effect.name} {why}")
         for var in effect.inputs:
             if var.name not in base_inputs and var.default is None:
                 raise PredictorError(
@@ -202,15 +215,24 @@ def augment(base: Predictor, effects: Sequence[Effect]) -> Predictor:
 # -- helpers for effects and regressors -----------------------------------------------------
 def _series(x: Any, t: Any) -> tuple[np.ndarray, np.ndarray] | None:
     """``(x, t)`` as 1-D arrays of one length, or None when ``t`` gives no time axis
-    (a scalar or constant time: the steady state)."""
+    (a scalar or constant time: the steady state).
+
+    Time must increase strictly, except that a decrease starts a new recording (several
+    recordings concatenated, each with its own time origin)."""
     x_arr, t_arr = np.broadcast_arrays(np.asarray(x, dtype=np.float64), np.asarray(t, float))
     if x_arr.ndim == 0 or t_arr.size < 2 or np.ptp(t_arr) == 0:
         return None
     if x_arr.ndim != 1:
         raise PredictorError(f"a time series must be 1-D, got shape {x_arr.shape}")
-    if np.any(np.diff(t_arr) <= 0):
-        raise PredictorError("time must increase strictly from sample to sample")
+    if np.any(np.diff(t_arr) == 0):
+        raise PredictorError("time must increase strictly from sample to sample (repeated time)")
     return x_arr, t_arr
+
+
+def _segments(t: np.ndarray) -> list[slice]:
+    """The runs of increasing time in ``t``: one per concatenated recording."""
+    starts = [0, *(np.flatnonzero(np.diff(t) < 0) + 1).tolist(), t.size]
+    return [slice(a, b) for a, b in zip(starts[:-1], starts[1:], strict=True)]
 
 
 def high_pass(x: Any, t: Any, tau: float) -> np.ndarray:
@@ -220,7 +242,7 @@ def high_pass(x: Any, t: Any, tau: float) -> np.ndarray:
     an input that changes in steps at the sample instants, and zero before the first sample
     (so ``e_0 = x_0``: the drive is switched on when the recording starts). The discrete form
     of ``tau s / (1 + tau s)`` (Eq. 3.22). Without a time axis (scalar or constant ``t``) the
-    input is returned unchanged.
+    input is returned unchanged. Where time decreases a new recording starts, from rest.
     """
     series = _series(x, t)
     if series is None:
@@ -228,6 +250,16 @@ def high_pass(x: Any, t: Any, tau: float) -> np.ndarray:
     x_arr, t_arr = series
     if not (math.isfinite(tau) and tau > 0):
         raise PredictorError(f"time constant must be positive, got {tau}")
+    parts = _segments(t_arr)
+    if len(parts) > 1:
+        return np.concatenate([_high_pass(x_arr[p], t_arr[p], tau) for p in parts])
+    return _high_pass(x_arr, t_arr, tau)
+
+
+def _high_pass(x_arr: np.ndarray, t_arr: np.ndarray, tau: float) -> np.ndarray:
+    """:func:`high_pass` of one recording (time increasing strictly)."""
+    if x_arr.size < 2:
+        return x_arr.copy()
     steps = np.diff(x_arr, prepend=0.0)
     dt = np.diff(t_arr)
     if np.ptp(dt) <= 1e-9 * dt[0]:  # uniform sampling: one IIR filter

@@ -263,6 +263,7 @@ class AirLayer(Effect):
         "thins as the finger is pressed, so a contact law over-predicts the force at light load"
     )
     signature: ClassVar[tuple[str, ...]] = ("normal_force",)
+    outputs: ClassVar[tuple[str, ...]] = ("electrostatic_force",)
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter(
             "air_gap",
@@ -306,6 +307,7 @@ class UltrasonicSpeed(Effect):
         "trending with speed"
     )
     signature: ClassVar[tuple[str, ...]] = ("speed",)
+    outputs: ClassVar[tuple[str, ...]] = ("relative_friction",)
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter(
             "speed_exponent",
@@ -344,6 +346,7 @@ class SqueezeFilmShare(Effect):
         "pressure-blind model leaves a residual trending with pressure"
     )
     signature: ClassVar[tuple[str, ...]] = ("pressure",)
+    outputs: ClassVar[tuple[str, ...]] = ("relative_friction",)
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter(
             "share",

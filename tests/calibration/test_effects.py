@@ -252,8 +252,11 @@ def test_first_order_filters_step_response() -> None:
     # Without a time axis the filters are the identity (steady state).
     assert np.array_equal(high_pass(step, 0.0, tau), step)
     assert np.array_equal(low_pass(step, 0.0, tau), step)
-    with pytest.raises(PredictorError, match="increase"):
-        high_pass(step, t[::-1], tau)
+    with pytest.raises(PredictorError, match="repeated time"):
+        high_pass(step, np.repeat(t[:50], 2), tau)
+    # Where time decreases a new recording starts, from rest.
+    twice = high_pass(np.concatenate([step, step]), np.concatenate([t, t]), tau)
+    assert np.allclose(twice, np.concatenate([e, e]))
 
 
 def test_history_regressors() -> None:
