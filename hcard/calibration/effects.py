@@ -25,6 +25,7 @@ Regressor names used in signatures (all 1-D arrays aligned with the samples, SI 
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
@@ -83,8 +84,8 @@ class Effect:
             return f"needs input(s) {', '.join(missing)}, which model {base.name} does not have"
         if self.outputs and base.output.name not in self.outputs:
             return (
-                f"applies to a {' or '.join(self.outputs)} output, model {base.name} outputs "
-                f"{base.output.name}"
+                f"applies to models whose output is {' or '.join(self.outputs)}; "
+                f"{base.name} outputs {base.output.name}"
             )
         return None
 
@@ -232,7 +233,7 @@ def _series(x: Any, t: Any) -> tuple[np.ndarray, np.ndarray] | None:
 def _segments(t: np.ndarray) -> list[slice]:
     """The runs of increasing time in ``t``: one per concatenated recording."""
     starts = [0, *(np.flatnonzero(np.diff(t) < 0) + 1).tolist(), t.size]
-    return [slice(a, b) for a, b in zip(starts[:-1], starts[1:], strict=True)]
+    return [slice(a, b) for a, b in itertools.pairwise(starts)]
 
 
 def high_pass(x: Any, t: Any, tau: float) -> np.ndarray:

@@ -86,6 +86,8 @@ class Predictor:
     output: ClassVar[Variable] = Variable("relative_friction", "", "mu / mu0")
     inverse_input: ClassVar[str | None] = None
     """Name of the input that :meth:`inverse` solves for (None: no inverse)."""
+    calibrated: ClassVar[tuple[str, ...]] = ()
+    """Parameters a calibration fits by default (the ones a lab's data identify); empty: all."""
 
     def __init__(self, **params: float) -> None:
         known = {p.name: p for p in self.parameters}

@@ -10,13 +10,16 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from functools import lru_cache
 from typing import ClassVar
 
 import numpy as np
+from scipy.interpolate import PchipInterpolator
 
 from hcard.calibration.effects import Effect, high_pass, low_pass
 from hcard.physics import Parameter, Variable
 from hcard.plugins.hookspecs import hookimpl
+from hcard_builtins.physics.electrovibration import geometry as pad_geometry
 
 ATMOSPHERE = 101_325.0
 """Reference ambient pressure p0 of Eq. 2.10, Pa."""
@@ -42,6 +45,14 @@ ELECTRICAL_THICKNESS = SC_THICKNESS / SC_PERMITTIVITY + INSULATOR_THICKNESS / IN
 
 TOTAL_THICKNESS = SC_THICKNESS + INSULATOR_THICKNESS
 """``d_sc + d_i`` of the section 3.6.1 contact, m."""
+
+FLATTENING_AT_1N = 1.75e-3
+"""Depth of the Table 3.2 pad's sag pressed flat at 1 N in :class:`FingerGeometry`, m: it
+flattens 1.03 cm^2, the contact area of section 3.6.1 (A = 1 cm^2), and is within the ~2 mm pulp
+displacement at ~1 N of Fig. 1.7."""
+
+FLATTENING_SAMPLES = 257
+"""Flattening depths at which :class:`FingerGeometry` tabulates Eq. 3.18 (once per process)."""
 
 TIME = Variable("time", "s", "time since the recording (and the contact) began", 0.0)
 """The recording's time axis; its default (0, no time axis) makes time effects the identity."""
@@ -369,6 +380,98 @@ class SqueezeFilmShare(Effect):
         return 1.0 - (1.0 - output) * gamma
 
 
+@lru_cache(maxsize=1)
+def _flattened_pad() -> tuple[float, PchipInterpolator]:
+    """Eq. 3.18 over the Table 3.2 pad (``ev-finger-geometry`` at its defaults) as a function of
+    the flattening depth ``h`` (m): ``(h_max, C)`` with ``C(h) = F_e / v^2`` (N/V^2) when every
+    point of the pad whose sag is below ``h`` is pressed flat onto the insulator (air gap
+    ``max(sag - h, 0)`` plus the intact ridge valley). ``h_max`` (m) is the sag of the pad's rim:
+    beyond it the whole pad is flat and ``C`` is constant.
+
+    The 88 000-patch sum runs once per process, at ``FLATTENING_SAMPLES`` depths spaced
+    quadratically (dense near ``h = 0``, where ``C`` rises fastest); ``C`` is then a monotone
+    cubic (PCHIP) interpolant, smooth for the optimiser.
+    """
+    pad = pad_geometry.FingerGeometry()
+    patches = pad.patches()
+    half_width = pad["finger_width"] / 2.0
+    r2 = np.minimum((patches.x**2 + patches.y**2) / half_width**2, 1.0)
+    sag = 0.5 * pad["finger_height"] * (1.0 - np.sqrt(1.0 - r2))
+    valley = np.maximum(patches.offset - sag, 0.0)
+    h_max = float(np.max(sag))
+    depths = h_max * np.linspace(0.0, 1.0, FLATTENING_SAMPLES) ** 2
+    values = np.array(
+        [
+            pad_geometry.discretised_force(
+                1.0,
+                patches.area,
+                pad["sc_thickness"],
+                np.maximum(sag - h, 0.0) + valley,
+                sc_permittivity=pad["sc_permittivity"],
+                insulator_thickness=pad["insulator_thickness"],
+                insulator_permittivity=pad["insulator_permittivity"],
+                air_permittivity=pad["air_permittivity"],
+            )
+            for h in depths
+        ]
+    )
+    return h_max, PchipInterpolator(depths, values, extrapolate=False)
+
+
+class FingerGeometry(Effect):
+    """Curved, ridged finger pad flattening under load (Eq. 3.18, Table 3.2): a flat-plate law
+    with a fixed area (Eq. 3.12) misses that the part of the pad close enough to the insulator to
+    carry the force grows as the normal force presses the pad flat. The output is scaled by
+    ``C(h(Fn)) / C(h_1)``: ``C(h)`` is Eq. 3.18 summed over the ``ev-finger-geometry`` pad with
+    its sag pressed flat to depth ``h`` (gap ``max(sag - h, 0)`` plus the ridge valleys, which
+    keep their air: the ridged epidermis is stiffer than the pulp, section 1.4.2.1), constant
+    once the whole pad is flat; the depth grows as ``h = h_1 (Fn / 1 N)^m`` with ``h_1`` =
+    1.75 mm (1 cm^2 flat at 1 N, section 3.6.1). For the near-paraboloidal pad the flat area is
+    proportional to ``h``, so ``m`` is the areal load index of Eq. 1.4 (``A = k_1 Fn^m``; Hertz,
+    Eq. 1.5: ``m = 2/3``). The base's area is the effective area at 1 N. ``m = 0`` switches it
+    off (a pad that does not flatten further: the base exactly). For an electrostatic-force
+    output."""
+
+    name: ClassVar[str] = "finger-geometry"
+    description: ClassVar[str] = (
+        "Finger-pad flattening: EV force scaled by C(h_1 (Fn/1 N)^m) / C(h_1), C Eq. 3.18 over "
+        "the Table 3.2 pad pressed flat to depth h (Eqs. 3.18, 1.4)"
+    )
+    reason: ClassVar[str] = (
+        "the pad is curved and ridged, so the area close enough to the insulator to carry the "
+        "electrostatic force grows as the finger is pressed flat; a fixed-area contact law "
+        "over-predicts the force at light load and under-predicts it at heavy load"
+    )
+    signature: ClassVar[tuple[str, ...]] = ("normal_force",)
+    outputs: ClassVar[tuple[str, ...]] = ("electrostatic_force",)
+    parameters: ClassVar[tuple[Parameter, ...]] = (
+        Parameter(
+            "area_index",
+            "",
+            2.0 / 3.0,
+            (0.0, 2.0),
+            "Eqs. 1.4-1.5 (Hertz m = 2/3; 2/3 < m < 1 for a finger, [45]); fitted per finger",
+            "areal load index m of the flattened depth h = h_1 (Fn / 1 N)^m (0: off)",
+        ),
+    )
+    inputs: ClassVar[tuple[Variable, ...]] = (
+        Variable("normal_force", "N", "normal force pressing the finger on the surface", 0.5),
+    )
+
+    def transform_output(
+        self, output: np.ndarray, inputs: Mapping[str, np.ndarray], params: Mapping[str, float]
+    ) -> np.ndarray:
+        """``output * C(h) / C(h_1)`` with ``h = h_1 (Fn / 1 N)^m`` capped at the rim sag (the
+        whole pad flat); ``m = 0``: ``output`` unchanged."""
+        index = params["area_index"]
+        if index == 0.0:
+            return output
+        h_max, coefficient = _flattened_pad()
+        force = np.maximum(inputs["normal_force"], 0.0) / REFERENCE_FORCE
+        depth = np.minimum(FLATTENING_AT_1N * np.power(force, index), h_max)
+        return output * (coefficient(depth) / coefficient(FLATTENING_AT_1N))
+
+
 BUILTIN_EFFECTS: tuple[type[Effect], ...] = (
     LoadIndex,
     OcclusionDrift,
@@ -378,6 +481,7 @@ BUILTIN_EFFECTS: tuple[type[Effect], ...] = (
     AirLayer,
     SkinRecovery,
     SqueezeFilmShare,
+    FingerGeometry,
 )
 """The built-in effect classes, in the order of issue 7's list."""
 

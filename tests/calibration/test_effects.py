@@ -25,6 +25,7 @@ from hcard_builtins.effects import (
     ActuatorBandwidth,
     AirLayer,
     ChargeLeakage,
+    FingerGeometry,
     LoadIndex,
     OcclusionDrift,
     SkinRecovery,
@@ -115,6 +116,7 @@ CASES = [
     ),
     Case(ChargeLeakage(), Kaczmarek, ("area",), {"time_constant": 10e-3}, 2e-5, 1000.0),
     Case(AirLayer(), Kaczmarek, ("area",), {"air_gap": 10e-6}, 2e-5, 1000.0),
+    Case(FingerGeometry(), Kaczmarek, ("area",), {"area_index": 0.9}, 2e-5, 1000.0),
     Case(
         UltrasonicSpeed(), DimensionlessGroup, ("psi_star",), {"speed_exponent": -0.8}, 0.01, 1000.0
     ),
@@ -186,6 +188,7 @@ def test_hook_returns_every_effect_with_unique_names() -> None:
         "air-layer",
         "skin-recovery",
         "squeeze-film-share",
+        "finger-geometry",
     ]
     assert len(set(names)) == len(names)
     for effect in effects:
@@ -226,6 +229,22 @@ def test_augmented_parameters_are_prefixed_and_effects_at_neutral_values_vanish(
     fitted = model.with_params(**{"load-index.load_index": 0.8})
     assert fitted["load-index.load_index"] == 0.8
     assert fitted.params["friction_occluded"] == base["friction_occluded"]
+
+
+def test_finger_geometry_at_neutral_value_is_the_base_exactly() -> None:
+    data = recording(1000.0, seed=5)
+    base = Kaczmarek()
+    model = augment(base, [FingerGeometry()])
+    inputs = {"voltage": data["voltage"], "normal_force": data["normal_force"]}
+    neutral = model.with_params(**{"finger-geometry.area_index": 0.0})
+    assert np.array_equal(neutral.forward(**inputs), base.forward(voltage=data["voltage"]))
+    # At 1 N the factor is 1 for any load index: the base's area is the area at 1 N.
+    at_1n = model.forward(voltage=data["voltage"], normal_force=1.0)
+    assert np.allclose(at_1n, base.forward(voltage=data["voltage"]), rtol=1e-12)
+    # The pad carries more force the harder it is pressed, up to fully flat.
+    force = np.array([0.2, 0.5, 1.0, 1.5, 20.0, 40.0])
+    factor = model.forward(voltage=100.0, normal_force=force) / base.forward(voltage=100.0)
+    assert np.all(np.diff(factor[:5]) > 0) and factor[4] == factor[5]
 
 
 def test_augment_refuses_repeated_effects_and_missing_inputs() -> None:

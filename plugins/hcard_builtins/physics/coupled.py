@@ -140,6 +140,7 @@ class Coupled(Predictor):
     """
 
     name: ClassVar[str] = "coupled"
+    calibrated: ClassVar[tuple[str, ...]] = ("uv_mu0", "uv_psi_star", "ev_area")
     description: ClassVar[str] = (
         "UV + EV coupled stimulator, F_t = mu(w)(Fn + Fe) (Eq. 4.1), as F_t / (mu0 Fn)"
     )

@@ -91,6 +91,7 @@ class FingerFriction(Predictor):
     """
 
     name: ClassVar[str] = "finger-friction"
+    calibrated: ClassVar[tuple[str, ...]] = ("friction_initial", "friction_occluded")
     description: ClassVar[str] = (
         "Bare finger friction: F_l = k Fn^n (Eq. 1.7/2.35) with occlusion (Fig. 1.11) and a "
         "speed maximum (Fig. 1.12)"

@@ -44,6 +44,7 @@ class AirLayer(Predictor):
     """
 
     name: ClassVar[str] = "ev-air-layer"
+    calibrated: ClassVar[tuple[str, ...]] = ("area",)
     description: ClassVar[str] = "Electrovibration force with an air layer in series (Eq. 3.17)"
     parameters: ClassVar[tuple[Parameter, ...]] = (
         area_parameter(30e-6, "Fig. 3.11a (best analytical fit, A = 30 mm^2)"),

@@ -114,6 +114,7 @@ class FingerGeometry(Predictor):
     """
 
     name: ClassVar[str] = "ev-finger-geometry"
+    calibrated: ClassVar[tuple[str, ...]] = ("finger_width",)
     description: ClassVar[str] = (
         "Electrovibration force summed over a curved, ridged finger pad (Eq. 3.18, Table 3.2)"
     )

@@ -140,6 +140,7 @@ class ChargeLeakage(Predictor):
     """
 
     name: ClassVar[str] = "ev-charge-leakage"
+    calibrated: ClassVar[tuple[str, ...]] = ("area", "tau_d")
     description: ClassVar[str] = (
         "Electrovibration force through the stratum corneum charge-leakage high pass "
         "(Eqs. 3.19-3.23)"

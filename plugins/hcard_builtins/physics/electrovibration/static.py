@@ -83,6 +83,7 @@ class StrongTroxel(_LayeredForce):
     """
 
     name: ClassVar[str] = "ev-strong-troxel"
+    calibrated: ClassVar[tuple[str, ...]] = ("area",)
     description: ClassVar[str] = (
         "Electrovibration force, Strong-Troxel double-dielectric law (Eq. 3.3); overestimates"
     )
@@ -103,6 +104,7 @@ class Kaczmarek(_LayeredForce):
     """
 
     name: ClassVar[str] = "ev-kaczmarek"
+    calibrated: ClassVar[tuple[str, ...]] = ("area",)
     description: ClassVar[str] = (
         "Electrovibration force, Kaczmarek double-dielectric law (Eq. 3.12)"
     )

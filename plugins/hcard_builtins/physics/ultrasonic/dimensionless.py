@@ -104,6 +104,7 @@ class DimensionlessGroup(Predictor):
     """
 
     name: ClassVar[str] = "dimensionless-group"
+    calibrated: ClassVar[tuple[str, ...]] = ("mu0", "psi_star")
     description: ClassVar[str] = (
         "UV friction from the dimensionless group Psi = U/(w f mu0 (1+nu)): "
         "mu' = 1 - exp(-Psi/Psi*) (thesis Eqs. 2.29-2.33)"

@@ -310,6 +310,7 @@ class SpringSlider(Predictor):
     """
 
     name: ClassVar[str] = "spring-slider"
+    calibrated: ClassVar[tuple[str, ...]] = ("mu0", "lateral_stiffness")
     description: ClassVar[str] = (
         "UV intermittent contact: massless spring-slider, mu' = mean(F_l)/(mu0 Fn) "
         "(thesis Eqs. 2.19-2.28)"

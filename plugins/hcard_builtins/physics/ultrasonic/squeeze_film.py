@@ -65,6 +65,7 @@ class SqueezeFilm(Predictor):
     """
 
     name: ClassVar[str] = "squeeze-film"
+    calibrated: ClassVar[tuple[str, ...]] = ("roughness",)
     description: ClassVar[str] = (
         "UV squeeze film levitation, mu' = 1 - F_s/Fn (thesis Eqs. 2.1-2.8, Table 2.1); "
         "the classic model that chapter 2's measurements contradict"

@@ -1,0 +1,271 @@
+"""Recordings made ready for the calibration loop: model inputs, observed force, regressors, splits.
+
+:func:`prepare` turns one or more :class:`~hcard.calibration.measurement.Measurement` objects
+into a :class:`CalibrationData`: the arrays a predictor (with its effects) is fitted on, the
+observed lateral force, every regressor the residual analysis looks at, and a held-out split by
+stroke or by time block (spec/measurement-format.md section 4; never by random sample).
+
+Several recordings are concatenated: the ``time`` input restarts at 0 in each (the filters of
+time-dependent effects restart where time decreases, :mod:`hcard.calibration.effects`), strokes
+are numbered per recording, and the ambient pressure of each recording's sidecar becomes the
+``pressure`` input of its samples (several recordings at different pressures make the
+squeeze-film share identifiable, Fig. 2.12).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hcard.calibration.effects import recent_change, time_since_change
+from hcard.calibration.measurement import Measurement, MeasurementError
+from hcard.calibration.splits import split_by_stroke, split_by_time_blocks, stroke_ids
+
+ATMOSPHERE_PA = 101_325.0
+"""Ambient pressure assumed for a recording whose sidecar gives none, Pa."""
+
+REST_S = 0.5
+"""A pause out of contact (or a time gap) longer than this rests the finger, s: the stroke
+count since rest (the ``stroke`` input) restarts at 0."""
+
+HISTORY_WINDOW_S = 0.01
+"""Window of the ``amplitude_history`` regressor (signed amplitude change), s."""
+
+SPLITS = ("stroke", "time")
+"""Held-out split kinds: whole strokes, or the last time block of each recording."""
+
+
+@dataclass(frozen=True)
+class CalibrationData:
+    """Samples of one or more recordings, ready for :func:`hcard.calibration.loop.calibrate`.
+
+    Only samples in contact (stroke id >= 0) are kept, in time order within each recording and
+    recordings in the order given.
+
+    Attributes:
+        inputs: model inputs by name, SI units, each shape (n,): ``normal_force`` (N),
+            ``time`` (s since the recording began), ``stroke`` (strokes since the finger last
+            rested), ``pressure`` (Pa), and when recorded ``amplitude`` (m, peak-to-peak),
+            ``voltage`` (V), ``speed`` (m/s, magnitude), ``frequency`` (Hz).
+        observed: lateral (friction) force opposing the motion, N, shape (n,): the recorded
+            force signed by the direction of the speed when there is a speed column, else
+            its magnitude.
+        regressors: arrays the residual analysis looks at (module
+            :mod:`hcard.calibration.effects` names, plus ``x``, ``y`` in m and ``recording``
+            when there are several), shape (n,) each. Regressors that do not vary are left out.
+        train: mask of the training samples, shape (n,).
+        test: mask of the held-out samples, shape (n,).
+        recording: index of each sample's recording, shape (n,).
+        sources: a label per recording (its device and file, when known).
+        sample_rate_hz: median sampling rate, Hz.
+        split: how the held-out set was drawn (text).
+        conditions: each recording's sidecar.
+        time_ordered: whether the samples are a time series (False for steady-state points,
+            e.g. a table of measurements): the loop then ignores structure in sample order.
+    """
+
+    inputs: dict[str, np.ndarray]
+    observed: np.ndarray
+    regressors: dict[str, np.ndarray]
+    train: np.ndarray
+    test: np.ndarray
+    recording: np.ndarray
+    sources: tuple[str, ...]
+    sample_rate_hz: float
+    split: str
+    conditions: tuple[dict, ...] = field(default_factory=tuple)
+    time_ordered: bool = True
+
+    def __len__(self) -> int:
+        return int(self.observed.shape[0])
+
+    def subset(self, mask: np.ndarray) -> dict[str, np.ndarray]:
+        """The inputs restricted to ``mask`` (a boolean array of length n)."""
+        return {name: values[mask] for name, values in self.inputs.items()}
+
+
+def strokes_since_rest(t: np.ndarray, ids: np.ndarray, rest_s: float = REST_S) -> np.ndarray:
+    """Per sample, the number of strokes since the finger last rested (0, 1, 2, ...).
+
+    ``ids`` are stroke ids (-1 out of contact, :func:`hcard.calibration.splits.stroke_ids`).
+    A rest is a pause longer than ``rest_s`` (s) between the last sample of one stroke and the
+    first of the next, or the start of the recording. Samples out of contact get -1.
+    """
+    out = np.full(ids.shape, -1, dtype=np.int64)
+    strokes = np.unique(ids[ids >= 0])
+    count = 0
+    last_end = -math.inf
+    for stroke in strokes:
+        where = np.flatnonzero(ids == stroke)
+        start, end = float(t[where[0]]), float(t[where[-1]])
+        count = 0 if start - last_end > rest_s else count + 1
+        out[where] = count
+        last_end = end
+    return out
+
+
+def _label(m: Measurement, index: int) -> str:
+    device = m.conditions.get("device", "?")
+    source = m.conditions.get("_source")
+    return f"{source} ({device})" if source else f"recording {index} ({device})"
+
+
+def prepare(
+    measurements: Sequence[Measurement],
+    *,
+    split: str = "stroke",
+    test_fraction: float = 0.25,
+    seed: int = 0,
+    rest_s: float = REST_S,
+) -> CalibrationData:
+    """Concatenate ``measurements`` into a :class:`CalibrationData` with a held-out split.
+
+    Args:
+        measurements: one or more recordings (every one needs ``amplitude`` or ``voltage``;
+            all must record the same actuation columns).
+        split: ``"stroke"``: hold out ``test_fraction`` of each recording's strokes (rule S3,
+            drawn with ``seed``); ``"time"``: hold out the last of ``round(1 / test_fraction)``
+            equal time blocks of each recording (rule S4).
+        test_fraction: share of strokes (or of time) held out, in (0, 1).
+        seed: random seed of the stroke draw.
+        rest_s: pause that rests the finger, s (see :func:`strokes_since_rest`).
+
+    Raises:
+        MeasurementError: no recordings, recordings with different actuation columns, a
+            recording with too few strokes to split, or no sample in contact.
+    """
+    if not measurements:
+        raise MeasurementError("no recordings to calibrate on")
+    if split not in SPLITS:
+        raise MeasurementError(f"split must be one of {', '.join(SPLITS)}, got {split!r}")
+    if not 0.0 < test_fraction < 1.0:
+        raise MeasurementError(f"test_fraction must lie in (0, 1), got {test_fraction}")
+    columns = {(m.amplitude is not None, m.voltage is not None) for m in measurements}
+    if len(columns) > 1:
+        raise MeasurementError(
+            "recordings differ in their actuation columns (amplitude, voltage); calibrate "
+            "recordings of one kind together"
+        )
+
+    parts: dict[str, list[np.ndarray]] = {}
+    train_parts: list[np.ndarray] = []
+    test_parts: list[np.ndarray] = []
+    rates: list[float] = []
+    labels: list[str] = []
+    for index, m in enumerate(measurements):
+        label = _label(m, index)
+        ids = stroke_ids(m)
+        keep = ids >= 0
+        if not keep.any():
+            raise MeasurementError(f"{label}: no sample in contact (fn >= 0.01 N)")
+        n = len(m)
+        train = np.zeros(n, dtype=bool)
+        test = np.zeros(n, dtype=bool)
+        try:
+            if split == "stroke":
+                train_idx, test_idx = split_by_stroke(m, test_fraction, seed + index)
+            else:
+                blocks = max(2, round(1.0 / test_fraction))
+                train_idx, test_idx = split_by_time_blocks(m, blocks, (blocks - 1,))
+        except MeasurementError as exc:
+            raise MeasurementError(f"{label}: {exc}") from None
+        train[train_idx] = True
+        test[test_idx] = True
+        train_parts.append(train[keep])
+        test_parts.append(test[keep])
+
+        t = m.t - m.t[0]
+        speed = None if m.speed is None else m.speed
+        force = (
+            m.lateral_force * np.where(np.sign(speed) < 0, -1.0, 1.0)
+            if speed is not None
+            else np.abs(m.lateral_force)
+        )
+        pressure = m.conditions.get("ambient_pressure_pa") or ATMOSPHERE_PA
+        frequency = m.plate_frequency
+        if frequency is None and m.conditions.get("plate_frequency_hz"):
+            frequency = np.full(n, float(m.conditions["plate_frequency_hz"]))
+        columns_of = {
+            "normal_force": m.normal_force,
+            "time": t,
+            "stroke": strokes_since_rest(m.t, ids, rest_s).astype(np.float64),
+            "pressure": np.full(n, float(pressure)),
+            "observed": force,
+            "recording": np.full(n, float(index)),
+            "amplitude": m.amplitude,
+            "voltage": m.voltage,
+            "speed": None if speed is None else np.abs(speed),
+            "frequency": frequency,
+            "x": m.x,
+            "y": m.y,
+            "amplitude_history": None
+            if m.amplitude is None
+            else recent_change(m.amplitude, m.t, HISTORY_WINDOW_S),
+            "voltage_history": None if m.voltage is None else time_since_change(m.voltage, m.t),
+        }
+        for name, values in columns_of.items():
+            if values is not None:
+                parts.setdefault(name, []).append(np.asarray(values, dtype=np.float64)[keep])
+        if n > 1:
+            rates.append(1.0 / float(np.median(np.diff(m.t))))
+        labels.append(label)
+
+    joined = {
+        name: np.concatenate(values)
+        for name, values in parts.items()
+        if len(values) == len(measurements)
+    }
+    observed = joined.pop("observed")
+    recording = joined.pop("recording").astype(np.int64)
+    input_names = (
+        "normal_force",
+        "time",
+        "stroke",
+        "pressure",
+        "amplitude",
+        "voltage",
+        "speed",
+        "frequency",
+    )
+    inputs = {name: joined[name] for name in input_names if name in joined}
+    regressor_names = (
+        "normal_force",
+        "speed",
+        "amplitude",
+        "voltage",
+        "pressure",
+        "frequency",
+        "time",
+        "stroke",
+        "amplitude_history",
+        "voltage_history",
+        "x",
+        "y",
+    )
+    regressors = {
+        name: joined[name]
+        for name in regressor_names
+        if name in joined and np.ptp(joined[name]) > 0
+    }
+    if len(measurements) > 1:
+        regressors["recording"] = recording.astype(np.float64)
+    how = (
+        f"by stroke: {test_fraction:.0%} of each recording's strokes held out (seed {seed})"
+        if split == "stroke"
+        else f"by time block: the last {test_fraction:.0%} of each recording held out"
+    )
+    return CalibrationData(
+        inputs=inputs,
+        observed=observed,
+        regressors=regressors,
+        train=np.concatenate(train_parts),
+        test=np.concatenate(test_parts),
+        recording=recording,
+        sources=tuple(labels),
+        sample_rate_hz=float(np.median(rates)) if rates else 1.0,
+        split=how,
+        conditions=tuple(dict(m.conditions) for m in measurements),
+    )
