@@ -12,7 +12,6 @@ errors (:class:`~hcard.errors.HcardError`), never tracebacks.
 from __future__ import annotations
 
 import io
-import math
 import textwrap
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -34,6 +33,7 @@ from hcard.physics.profile import (
     read_json,
 )
 from hcard.physics.sweep import Sweep, parse_sweep, quantity, split_assignment
+from hcard.physics.units import display_unit, format_value
 from hcard.plugins.registry import get_registry
 
 if TYPE_CHECKING:
@@ -48,47 +48,12 @@ TITLE_WIDTH = 90
 Y_LABEL_DESCRIPTION = 30
 """The output's description joins the y label only when at most this long."""
 
-_PREFIXES = {-12: "p", -9: "n", -6: "µ", -3: "m", 0: "", 3: "k", 6: "M", 9: "G"}
-
 
 class PredictUsageError(HcardError):
     """Options of ``hcard predict`` that do not fit together."""
 
 
 # -- units for people --------------------------------------------------------------------------
-def display_unit(unit: str, values: Any) -> tuple[float, str]:
-    """``(scale, unit)`` to show SI ``values`` readably: value / scale in the returned unit.
-
-    Lengths in um or mm, speeds in mm/s below 1 m/s, areas in mm^2; other units unchanged from
-    0.1 to 1000, else with an engineering prefix (kHz, MN/m, uA); pure numbers unchanged.
-    """
-    finite = np.abs(np.asarray(values, dtype=np.float64))
-    finite = finite[np.isfinite(finite) & (finite > 0)]
-    largest = float(finite.max()) if finite.size else 0.0
-    if not unit or largest == 0.0:
-        return 1.0, unit
-    if unit == "m/s":
-        return (1e-3, "mm/s") if largest < 1.0 else (1.0, unit)
-    if unit == "m^2":
-        return (1e-6, "mm^2") if largest < 1e-2 else (1.0, unit)
-    if "^" in unit or unit in ("rad", "1"):
-        return 1.0, unit
-    if 0.1 <= largest < 1000.0 and unit != "m":
-        return 1.0, unit
-    exponent = int(math.floor(math.log10(largest) / 3.0) * 3)
-    exponent = min(max(exponent, -12), 9)
-    if unit == "m" and exponent < -6:
-        exponent = -6
-    return 10.0**exponent, _PREFIXES[exponent] + unit
-
-
-def format_value(value: float, unit: str) -> str:
-    """``"20 mm/s"``, ``"27.5 kHz"``, ``"0.5 N"``: one value with a readable unit."""
-    scale, shown = display_unit(unit, [value])
-    text = f"{value / scale:.4g}"
-    return f"{text} {shown}" if shown else text
-
-
 def column(name: str, unit: str) -> str:
     """Column header: ``name [unit]``, ``[-]`` for a pure number."""
     return f"{name} [{unit or '-'}]"
@@ -369,8 +334,11 @@ def predictor_of_profile(path: Path, model: str | None) -> Predictor:
     if form == PROFILE_FORMAT:
         device = DeviceProfile.load(path)
         candidates = [device.predictor]
-        for part in (getattr(device.predictor, "uv", None), getattr(device.predictor, "ev", None),
-                     device.leakage):
+        for part in (
+            getattr(device.predictor, "uv", None),
+            getattr(device.predictor, "ev", None),
+            device.leakage,
+        ):
             if isinstance(part, Predictor):
                 candidates.append(part)
     elif form == PREDICTOR_PROFILE_FORMAT:
@@ -392,27 +360,63 @@ def predictor_of_profile(path: Path, model: str | None) -> Predictor:
 # -- the command -------------------------------------------------------------------------------
 @click.command("predict")
 @click.argument("model", required=False)
-@click.option("--param", "params", multiple=True, metavar="NAME=VALUE",
-              help="Set a model parameter; units accepted (normal_stiffness=3.9MN/m). "
-                   "Repeatable.")
-@click.option("--input", "inputs", multiple=True, metavar="NAME=VALUE",
-              help="Set an input of the forward map; units accepted (speed=20mm/s). Repeatable.")
-@click.option("--sweep", "sweep_text", metavar="NAME=START:STOP:COUNT[:log]",
-              help="Sweep one input or parameter over COUNT points (amplitude=0:5um:51); an "
-                   "end without a unit takes the other end's unit.")
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
-              help="Write the table as CSV (SI units, every input as a column) to this file.")
-@click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Plot the sweep to this file (.png, .pdf or .svg); needs --sweep.")
-@click.option("--profile", "profile_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Take the parameters from a device or predictor profile (JSON); --param "
-                   "overrides them. Without MODEL, use the profile's predictor.")
-@click.option("--list", "list_only", is_flag=True,
-              help="List the models (or MODEL) with inputs, output and parameters (name, unit, "
-                   "default, bounds, source).")
-def predict(model: str | None, params: tuple[str, ...], inputs: tuple[str, ...],
-            sweep_text: str | None, output: Path | None, plot_path: Path | None,
-            profile_path: Path | None, list_only: bool) -> None:
+@click.option(
+    "--param",
+    "params",
+    multiple=True,
+    metavar="NAME=VALUE",
+    help="Set a model parameter; units accepted (normal_stiffness=3.9MN/m). Repeatable.",
+)
+@click.option(
+    "--input",
+    "inputs",
+    multiple=True,
+    metavar="NAME=VALUE",
+    help="Set an input of the forward map; units accepted (speed=20mm/s). Repeatable.",
+)
+@click.option(
+    "--sweep",
+    "sweep_text",
+    metavar="NAME=START:STOP:COUNT[:log]",
+    help="Sweep one input or parameter over COUNT points (amplitude=0:5um:51); an "
+    "end without a unit takes the other end's unit.",
+)
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Write the table as CSV (SI units, every input as a column) to this file.",
+)
+@click.option(
+    "--plot",
+    "plot_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Plot the sweep to this file (.png, .pdf or .svg); needs --sweep.",
+)
+@click.option(
+    "--profile",
+    "profile_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Take the parameters from a device or predictor profile (JSON); --param "
+    "overrides them. Without MODEL, use the profile's predictor.",
+)
+@click.option(
+    "--list",
+    "list_only",
+    is_flag=True,
+    help="List the models (or MODEL) with inputs, output and parameters (name, unit, "
+    "default, bounds, source).",
+)
+def predict(
+    model: str | None,
+    params: tuple[str, ...],
+    inputs: tuple[str, ...],
+    sweep_text: str | None,
+    output: Path | None,
+    plot_path: Path | None,
+    profile_path: Path | None,
+    list_only: bool,
+) -> None:
     """Evaluate the physics predictor MODEL at a point or over a sweep.
 
     Without MODEL (or with --list), list the installed predictors. Values are SI unless a
