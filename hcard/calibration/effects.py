@@ -64,6 +64,9 @@ class Effect:
             a base without them.
         outputs: names of base outputs the effect applies to (e.g. ``("relative_friction",)``
             for an effect on the ultrasonic reduction); empty: any output.
+        neutral: parameter values (short names) that switch the effect off, or come as close
+            to it as the bounds allow (e.g. the shortest time constant of a low-pass); a fit
+            started there starts from the base model.
     """
 
     kind: ClassVar[str] = KIND
@@ -75,6 +78,7 @@ class Effect:
     inputs: ClassVar[tuple[Variable, ...]] = ()
     requires: ClassVar[tuple[str, ...]] = ()
     outputs: ClassVar[tuple[str, ...]] = ()
+    neutral: ClassVar[dict[str, float]] = {}
 
     def applies_to(self, base: Predictor) -> str | None:
         """Why the effect cannot augment ``base`` (a missing input, another output), or None."""
@@ -239,11 +243,13 @@ def _segments(t: np.ndarray) -> list[slice]:
 def high_pass(x: Any, t: Any, tau: float) -> np.ndarray:
     """First-order high-pass of ``x`` sampled at times ``t`` (s), time constant ``tau`` (s).
 
-    ``e_k = a_k e_{k-1} + (x_k - x_{k-1})`` with ``a_k = exp(-(t_k - t_{k-1})/tau)``: exact for
-    an input that changes in steps at the sample instants, and zero before the first sample
-    (so ``e_0 = x_0``: the drive is switched on when the recording starts). The discrete form
-    of ``tau s / (1 + tau s)`` (Eq. 3.22). Without a time axis (scalar or constant ``t``) the
-    input is returned unchanged. Where time decreases a new recording starts, from rest.
+    ``e_k = a_k e_{k-1} + sqrt(a_k) (x_k - x_{k-1})`` with ``a_k = exp(-(t_k - t_{k-1})/tau)``:
+    exact for an input that changes in steps midway between samples (a sampled recording only
+    says that the change happened between two samples), and zero before the first sample (so
+    ``e_0 = x_0``: the drive is switched on when the recording starts). The discrete form of
+    ``tau s / (1 + tau s)`` (Eq. 3.22); as ``tau -> 0`` it vanishes and as ``tau -> inf`` it
+    passes ``x`` unchanged. Without a time axis (scalar or constant ``t``) the input is returned
+    unchanged. Where time decreases a new recording starts, from rest.
     """
     series = _series(x, t)
     if series is None:
@@ -258,19 +264,31 @@ def high_pass(x: Any, t: Any, tau: float) -> np.ndarray:
 
 
 def _high_pass(x_arr: np.ndarray, t_arr: np.ndarray, tau: float) -> np.ndarray:
-    """:func:`high_pass` of one recording (time increasing strictly)."""
-    if x_arr.size < 2:
-        return x_arr.copy()
-    steps = np.diff(x_arr, prepend=0.0)
-    dt = np.diff(t_arr)
-    if np.ptp(dt) <= 1e-9 * dt[0]:  # uniform sampling: one IIR filter
-        a = math.exp(-dt[0] / tau)
-        return np.asarray(lfilter([1.0], [1.0, -a], steps), dtype=np.float64)
-    decay = np.exp(-dt / tau)
+    """:func:`high_pass` of one recording (time increasing strictly).
+
+    Vectorised by runs of equal sample interval (one IIR filter per run, its state carried
+    over), so that a recording with gaps (a training split without its held-out strokes)
+    costs a filter call per gap, not a Python step per sample.
+    """
     out = np.empty_like(x_arr)
-    out[0] = steps[0]
-    for k in range(1, out.size):
-        out[k] = decay[k - 1] * out[k - 1] + steps[k]
+    if x_arr.size == 0:
+        return out
+    out[0] = x_arr[0]
+    if x_arr.size == 1:
+        return out
+    dt = np.diff(t_arr)
+    decay = np.exp(-dt / tau)
+    drive = np.sqrt(decay) * np.diff(x_arr)
+    # Runs of (nearly) equal intervals: a new run where the interval changes.
+    change = np.flatnonzero(np.abs(np.diff(dt)) > 1e-9 * dt[1:]) + 1
+    starts = [0, *change.tolist()]
+    ends = [*change.tolist(), dt.size]
+    previous = out[0]
+    for a, b in zip(starts, ends, strict=True):
+        factor = decay[a]
+        run, _ = lfilter([1.0], [1.0, -factor], drive[a:b], zi=[factor * previous])
+        out[a + 1 : b + 1] = run
+        previous = run[-1]
     return out
 
 

@@ -69,6 +69,7 @@ class LoadIndex(Effect):
         "coefficient at high load and under-predicts it at low load"
     )
     signature: ClassVar[tuple[str, ...]] = ("normal_force",)
+    neutral: ClassVar[dict[str, float]] = {"load_index": 1.0}
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter(
             "load_index",
@@ -105,6 +106,7 @@ class OcclusionDrift(Effect):
         "friction climbs over seconds of contact; a static model leaves a residual rising with time"
     )
     signature: ClassVar[tuple[str, ...]] = ("time",)
+    neutral: ClassVar[dict[str, float]] = {"gain": 0.0}
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter(
             "gain",
@@ -150,6 +152,7 @@ class SkinRecovery(Effect):
         "strokes after a rest give lower friction than the steady state"
     )
     signature: ClassVar[tuple[str, ...]] = ("stroke",)
+    neutral: ClassVar[dict[str, float]] = {"depth": 0.0}
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter(
             "depth",
@@ -197,6 +200,7 @@ class ActuatorBandwidth(Effect):
         "amplitude step the friction lags the commanded value"
     )
     signature: ClassVar[tuple[str, ...]] = ("amplitude_history",)
+    neutral: ClassVar[dict[str, float]] = {"time_constant": 1e-5}
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter(
             "time_constant",
@@ -234,6 +238,7 @@ class ChargeLeakage(Effect):
         "depends on the time since the voltage last changed"
     )
     signature: ClassVar[tuple[str, ...]] = ("voltage_history",)
+    neutral: ClassVar[dict[str, float]] = {"time_constant": 10.0}
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter(
             "time_constant",
@@ -274,6 +279,7 @@ class AirLayer(Effect):
         "thins as the finger is pressed, so a contact law over-predicts the force at light load"
     )
     signature: ClassVar[tuple[str, ...]] = ("normal_force",)
+    neutral: ClassVar[dict[str, float]] = {"air_gap": 0.0}
     outputs: ClassVar[tuple[str, ...]] = ("electrostatic_force",)
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter(
@@ -318,6 +324,7 @@ class UltrasonicSpeed(Effect):
         "trending with speed"
     )
     signature: ClassVar[tuple[str, ...]] = ("speed",)
+    neutral: ClassVar[dict[str, float]] = {"speed_exponent": 0.0}
     outputs: ClassVar[tuple[str, ...]] = ("relative_friction",)
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter(
@@ -357,6 +364,7 @@ class SqueezeFilmShare(Effect):
         "pressure-blind model leaves a residual trending with pressure"
     )
     signature: ClassVar[tuple[str, ...]] = ("pressure",)
+    neutral: ClassVar[dict[str, float]] = {"share": 0.0}
     outputs: ClassVar[tuple[str, ...]] = ("relative_friction",)
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter(
@@ -443,6 +451,7 @@ class FingerGeometry(Effect):
         "over-predicts the force at light load and under-predicts it at heavy load"
     )
     signature: ClassVar[tuple[str, ...]] = ("normal_force",)
+    neutral: ClassVar[dict[str, float]] = {"area_index": 0.0}
     outputs: ClassVar[tuple[str, ...]] = ("electrostatic_force",)
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter(

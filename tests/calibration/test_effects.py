@@ -260,7 +260,7 @@ def test_first_order_filters_step_response() -> None:
     tau = 5e-3
     e = high_pass(step, t, tau)
     y = low_pass(step, t, tau)
-    after = t[10:] - t[10]
+    after = t[10:] - t[10] + 0.5e-3  # the step is taken midway between samples 9 and 10
     assert np.allclose(e[10:], 2.0 * np.exp(-after / tau))
     assert np.allclose(y + e, step)
     assert np.allclose(e[:10], 0.0)
@@ -271,6 +271,10 @@ def test_first_order_filters_step_response() -> None:
     # Without a time axis the filters are the identity (steady state).
     assert np.array_equal(high_pass(step, 0.0, tau), step)
     assert np.array_equal(low_pass(step, 0.0, tau), step)
+    # Limits: a very short time constant passes everything through the low-pass (the effect
+    # is off), a very long one everything through the high-pass.
+    assert np.allclose(low_pass(step, t, 1e-7), step)
+    assert np.allclose(high_pass(step, t, 1e7), step, atol=1e-3)
     with pytest.raises(PredictorError, match="repeated time"):
         high_pass(step, np.repeat(t[:50], 2), tau)
     # Where time decreases a new recording starts, from rest.
