@@ -1,4 +1,5 @@
-"""``hcard device serve|list`` and ``hcard play``: the reference device and its host drivers.
+"""``hcard device serve|list|synthesize`` and ``hcard play``: the reference device, its host
+drivers, and synthetic tribometer recordings.
 
 The device side lives in :mod:`hcard_device.usb`, the drivers in :mod:`hcard_device.drivers`
 (imported when a command runs, so ``hcard`` starts fast without them).
@@ -75,6 +76,110 @@ def list_devices(hosts: tuple[str, ...], timeout: float) -> None:
     width = max(len(listing.uri) for listing in listings)
     for listing in listings:
         click.echo(f"{listing.uri.ljust(width)}  {listing.driver:6s} {listing.description}")
+
+
+class SynthesizeUsageError(HcardError):
+    """A bad option of ``hcard device synthesize`` (one line, exit status 1)."""
+
+
+def _effect_assignment(text: str) -> tuple[str, str, str]:
+    """``EFFECT.PARAM=VALUE`` of ``--effect-param`` as its three texts."""
+    name, equals, value = text.partition("=")
+    effect, dot, parameter = name.strip().rpartition(".")
+    if not equals or not dot or not effect or not parameter or not value.strip():
+        raise SynthesizeUsageError(f"--effect-param {text!r}: expected EFFECT.PARAM=VALUE "
+                                   "(charge-leakage.time_constant=10ms)")
+    return effect, parameter, value.strip()
+
+
+@device.command("synthesize")
+@click.option("--device", "variant", type=click.Choice(["uv", "ev", "coupled"]), default="uv",
+              show_default=True,
+              help="uv: E-ViTa (amplitude); ev: coupled stimulator, plate off (voltage); "
+                   "coupled: both.")
+@click.option("--effect", "effect_names", multiple=True, metavar="NAME",
+              help="Switch on a hidden physical effect (repeatable; see --list-effects).")
+@click.option("--effect-param", "assignments", multiple=True, metavar="EFFECT.PARAM=VALUE",
+              help="True value of an effect's parameter, units accepted "
+                   "(charge-leakage.time_constant=10ms). Repeatable.")
+@click.option("--noise", default="2mN", show_default=True,
+              help="Standard deviation of the lateral and normal force noise.")
+@click.option("--drift", default="0N", show_default=True,
+              help="Peak-to-peak drift of the lateral force offset per recording.")
+@click.option("--duration", default="60s", show_default=True, help="Length of each recording.")
+@click.option("--pressure", "pressures", multiple=True, metavar="PRESSURE",
+              help="Ambient pressure, one recording each (repeatable; default 101325 Pa).")
+@click.option("--seed", default=0, show_default=True, type=int, help="Seed of every draw.")
+@click.option("-o", "--output", type=click.Path(file_okay=False, path_type=Path),
+              help="Directory for rec_<i>.csv and their .json sidecars.")
+@click.option("--list-effects", is_flag=True, help="List the effect names and exit.")
+def synthesize(variant: str, effect_names: tuple[str, ...], assignments: tuple[str, ...],
+               noise: str, drift: str, duration: str, pressures: tuple[str, ...], seed: int,
+               output: Path | None, list_effects: bool) -> None:
+    """Synthesize tribometer recordings of the simulated finger with hidden physical effects.
+
+    Writes one recording per pressure (OUTPUT/rec_<i>.csv plus its sidecar) in the format of
+    spec/measurement-format.md; nothing in them names the effects.
+    """
+    from hcard.calibration.measurement import write_measurement
+    from hcard.physics.units import UnitError, parse_quantity
+    from hcard_device.sim.tribometer import Protocol, available_effects, effect_parameters
+    from hcard_device.sim.tribometer import synthesize as run
+
+    known = available_effects()
+    if list_effects:
+        for name in known:
+            params = ", ".join(f"{p.name}={p.default:g}{p.unit}" for p in effect_parameters(name))
+            click.echo(f"{name}  ({params})")
+        return
+    if output is None:
+        raise SynthesizeUsageError("missing option -o/--output (the output directory)")
+
+    def quantity(text: str, unit: str, option: str) -> float:
+        try:
+            return parse_quantity(text, unit)
+        except UnitError as exc:
+            raise SynthesizeUsageError(f"{option}: {exc}") from None
+
+    for name in effect_names:
+        if name not in known:
+            raise SynthesizeUsageError(
+                f"--effect: unknown effect {name!r}; known: {', '.join(known)}"
+            )
+    effects: dict[str, dict[str, float]] = {name: {} for name in effect_names}
+    for text in assignments:
+        effect, parameter, value = _effect_assignment(text)
+        if effect not in effects:
+            raise SynthesizeUsageError(f"--effect-param {text!r}: effect {effect!r} is not "
+                                       f"switched on (add --effect {effect})")
+        units = {p.name: p.unit for p in effect_parameters(effect)}
+        if parameter not in units:
+            raise SynthesizeUsageError(f"--effect-param {text!r}: effect {effect} has no "
+                                       f"parameter {parameter!r}; its parameters: "
+                                       f"{', '.join(units)}")
+        effects[effect][parameter] = quantity(value, units[parameter], "--effect-param")
+    noise_n = quantity(noise, "N", "--noise")
+    drift_n = quantity(drift, "N", "--drift")
+    protocol_changes: dict[str, object] = {"duration_s": quantity(duration, "s", "--duration")}
+    if pressures:
+        protocol_changes["pressures_pa"] = tuple(
+            quantity(p, "Pa", "--pressure") for p in pressures
+        )
+    try:
+        protocol = Protocol(**protocol_changes)  # type: ignore[arg-type]
+        recordings = run(variant, effects, protocol=protocol, lateral_noise_n=noise_n,
+                         normal_noise_n=noise_n, drift_n=drift_n, seed=seed)
+    except ValueError as exc:
+        raise HcardError(str(exc)) from None
+    try:
+        output.mkdir(parents=True, exist_ok=True)
+        for index, recording in enumerate(recordings):
+            path = output / f"rec_{index}.csv"
+            write_measurement(recording, path)
+            click.echo(f"{path}: {len(recording)} samples, {recording.conditions['device']}, "
+                       f"{recording.conditions['ambient_pressure_pa']:g} Pa")
+    except OSError as exc:
+        raise HcardError(f"{output}: cannot write ({exc.strerror or exc})") from None
 
 
 @click.command("play")

@@ -1,0 +1,552 @@
+"""Synthetic tribometer recordings of the simulated finger, with hidden physical effects.
+
+:func:`synthesize` plays a tribometer protocol (:class:`Protocol`: back-and-forth strokes along
+x at one random speed and normal force per stroke, sessions of strokes separated by rests with
+the finger lifted, a piecewise-constant random UV amplitude and/or a square-wave EV voltage)
+on a reference device and returns one :class:`~hcard.calibration.measurement.Measurement` per
+ambient pressure, in the format of spec/measurement-format.md. The recordings say nothing about
+which effects were switched on: they are test data for calibration ("which effect explains the
+residual?").
+
+Clean physics (no effects): the device's own predictors (:func:`.models.device_profile`):
+
+- UV factor ``mu'`` = :class:`DimensionlessGroup` (Eqs. 2.30-2.33) at the device's plate
+  frequency, the finger's |speed| and normal force (``mu' = 1`` on the "ev" device, plate off);
+- EV force ``F_e`` = :class:`Kaczmarek` (Eq. 3.12) of the instantaneous voltage (0 on "uv");
+- lateral force ``F_l = mu_f Fn mu' (1 + F_e / Fn)`` (Eq. 4.1), the bare finger Coulomb:
+  ``mu_f`` = the device's ``mu0`` (load index 1, no occlusion, no speed peak).
+
+Effects (name -> true parameter values; missing values take the effect's defaults). The five
+below run the physics of their own model, not the calibration effect's formula:
+
+- ``load-index``: ``mu_f`` from :class:`FingerFriction` with ``load_index = n`` (friction
+  ``mu0`` at 1 N, no occlusion, ``speed_sensitivity = 0``);
+- ``occlusion-drift``: :class:`FingerFriction` occlusion over the time since the recording
+  began, ``friction_initial = mu0``, ``friction_occluded = mu0 (1 + gain)``,
+  ``occlusion_time = time_constant``;
+- ``charge-leakage``: the voltage acting on the finger is the exact discrete high pass of
+  :meth:`ChargeLeakage.simulate` (Eqs. 3.19-3.23) of the applied voltage, ``tau_d =
+  time_constant``; the recording's voltage column is the applied voltage;
+- ``air-layer``: ``F_e`` from :class:`AirLayer` (Eq. 3.17, with the contact layers of the
+  device's Kaczmarek model) at ``air_gap = air_gap * (1 N / Fn)``;
+- ``actuator-bandwidth``: the plate amplitude follows the commanded amplitude through a
+  first-order envelope of time constant ``tau`` (exact discrete step response, zero-order hold,
+  as the plate of :mod:`.plate`); the recording's amplitude column is the commanded amplitude.
+
+Every other registered calibration effect (``ultrasonic-speed``, ``skin-recovery``,
+``squeeze-film-share``, ``finger-geometry``, plugins' effects) is applied with the effect
+plugin's own :meth:`~hcard.calibration.effects.Effect.transform_inputs` /
+:meth:`~hcard.calibration.effects.Effect.transform_output` on the component its ``outputs``
+names: ``mu'`` for ``relative_friction``, ``F_e`` for ``electrostatic_force``, the total lateral
+force otherwise. Their inputs: ``time`` (s since the recording began), ``stroke`` (strokes since
+the finger last rested, 0 for the first stroke after a rest), ``speed`` (|speed|, m/s),
+``normal_force`` (true, N), ``pressure`` (Pa), ``amplitude`` (acting, m), ``voltage`` (acting,
+V); any other input of an effect takes its default.
+
+``surface-patch`` lies outside the effect library (for testing the "not explained" answer): a
+worn band of the plate multiplies the friction by ``1 + depth`` for finger positions x in
+``[x0, x0 + width]``, with smooth (smoothstep) 1 mm edges centred on the band's ends.
+
+Nuisances: Gaussian lateral-force noise, recorded normal force = true + Gaussian noise (the
+physics uses the true force), a smooth random drift of the lateral sensor's offset (a low-passed
+random walk scaled to a peak-to-peak size of ``drift_n`` over each recording). During rests the
+recorded normal force is noise clipped to +-9 mN and the lateral force is offset + noise.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.signal import lfilter
+
+from hcard.calibration.measurement import Measurement
+from hcard.physics import Parameter, PredictorError
+from hcard_builtins.physics.electrovibration import AirLayer, ChargeLeakage, Kaczmarek
+from hcard_builtins.physics.finger import FingerFriction
+from hcard_builtins.physics.ultrasonic import DimensionlessGroup
+from hcard_device.sim.config import DeviceConfig
+from hcard_device.sim.models import device_profile
+
+DEVICES = ("uv", "ev", "coupled")
+"""Devices: E-ViTa (UV only), the coupled stimulator with the plate off (EV only), both."""
+
+PHYSICAL_EFFECTS = (
+    "load-index",
+    "occlusion-drift",
+    "charge-leakage",
+    "air-layer",
+    "actuator-bandwidth",
+)
+"""Effects simulated with their own physical model rather than the effect plugin's formula."""
+
+SURFACE_PATCH = "surface-patch"
+"""The effect outside the effect library: a worn band of the plate."""
+
+SURFACE_PATCH_PARAMETERS: tuple[Parameter, ...] = (
+    Parameter("depth", "", 0.3, (-0.95, 10.0), "synthetic", "relative friction excess"),
+    Parameter("x0", "m", 0.01, (-1.0, 1.0), "synthetic", "start of the band along x"),
+    Parameter("width", "m", 0.008, (0.0, 1.0), "synthetic", "width of the band along x"),
+)
+"""Parameters of ``surface-patch``."""
+
+PATCH_EDGE_M = 1e-3
+"""Width of the smooth edges of the surface patch, m."""
+
+MAX_AMPLITUDE_M = 3e-6
+"""Largest commanded amplitude level of the UV protocol, m peak-to-peak."""
+
+VOLTAGE_RANGE_V = (50.0, 250.0)
+"""Range of the EV square wave's magnitude, drawn per stroke, V."""
+
+REST_NOISE_LIMIT_N = 0.009
+"""The recorded normal force during rests stays within +- this, N (below the 0.01 N contact
+threshold of rule S2)."""
+
+MIN_CONTACT_FORCE_N = 0.011
+"""The recorded normal force in contact never falls below this, N (stays a contact sample)."""
+
+X_START_M = 0.005
+"""Position where the first stroke starts, m (strokes run between here and + stroke length)."""
+
+Y_M = 0.025
+"""Constant finger position across the strokes, m."""
+
+
+@dataclass(frozen=True)
+class Protocol:
+    """What the tribometer does.
+
+    Attributes:
+        duration_s: length of each recording, s.
+        sample_rate_hz: sampling rate, Hz.
+        stroke_length_m: length of the back-and-forth strokes along x, m.
+        speed_range_m_s: (low, high) of the speed drawn uniformly per stroke, m/s.
+        force_range_n: (low, high) of the normal force drawn uniformly per stroke, N.
+        strokes_per_session: strokes before the finger lifts and rests.
+        rest_s: rest out of contact between sessions, s.
+        amplitude_segment_s: UV: the commanded amplitude takes a new random level in
+            0..3 um every segment, s.
+        voltage_segment_s: EV: the square wave's polarity flips every segment, s (its
+            magnitude, 50..250 V, is drawn per stroke).
+        pressures_pa: ambient pressures, one recording each, Pa.
+    """
+
+    duration_s: float = 60.0
+    sample_rate_hz: float = 1000.0
+    stroke_length_m: float = 0.03
+    speed_range_m_s: tuple[float, float] = (0.02, 0.15)
+    force_range_n: tuple[float, float] = (0.2, 1.5)
+    strokes_per_session: int = 5
+    rest_s: float = 1.0
+    amplitude_segment_s: float = 0.03
+    voltage_segment_s: float = 0.04
+    pressures_pa: tuple[float, ...] = (101325.0,)
+
+    def __post_init__(self) -> None:
+        positive = (
+            "duration_s",
+            "sample_rate_hz",
+            "stroke_length_m",
+            "amplitude_segment_s",
+            "voltage_segment_s",
+        )
+        for name in positive:
+            value = float(getattr(self, name))
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"Protocol.{name} must be a finite number > 0, got {value}")
+        if not (math.isfinite(self.rest_s) and self.rest_s >= 0):
+            raise ValueError(f"Protocol.rest_s must be a finite number >= 0, got {self.rest_s}")
+        for name in ("speed_range_m_s", "force_range_n"):
+            low, high = getattr(self, name)
+            if not (math.isfinite(low) and math.isfinite(high) and 0 < low <= high):
+                raise ValueError(f"Protocol.{name} must be (low, high) with 0 < low <= high")
+        if self.strokes_per_session < 1:
+            raise ValueError("Protocol.strokes_per_session must be >= 1")
+        if not self.pressures_pa or not all(math.isfinite(p) and p >= 0 for p in self.pressures_pa):
+            raise ValueError("Protocol.pressures_pa must be one or more finite pressures >= 0")
+        if round(self.duration_s * self.sample_rate_hz) < 2:
+            raise ValueError("Protocol: a recording needs at least 2 samples")
+
+
+# -- effects ----------------------------------------------------------------------------------
+def _library() -> dict[str, Any]:
+    from hcard.plugins.registry import get_registry
+
+    return dict(get_registry().calibration_effects)
+
+
+def available_effects() -> list[str]:
+    """Names :func:`synthesize` accepts: the registered calibration effects and
+    ``surface-patch``, sorted."""
+    return sorted({*_library(), SURFACE_PATCH})
+
+
+def effect_parameters(name: str) -> tuple[Parameter, ...]:
+    """The parameters (name, unit, default, bounds) of effect ``name``.
+
+    Raises:
+        ValueError: unknown effect (the message lists the known ones).
+    """
+    if name == SURFACE_PATCH:
+        return SURFACE_PATCH_PARAMETERS
+    library = _library()
+    if name not in library:
+        raise ValueError(
+            f"unknown effect {name!r}; known effects: {', '.join(available_effects())}"
+        )
+    return tuple(library[name].parameters)
+
+
+def resolve_effects(
+    effects: Mapping[str, Mapping[str, float]] | None,
+) -> dict[str, dict[str, float]]:
+    """``effects`` checked and completed with the defaults of missing parameters.
+
+    Raises:
+        ValueError: an unknown effect or parameter name (listing the known ones), or a value
+            that is not finite or outside the parameter's bounds.
+    """
+    resolved: dict[str, dict[str, float]] = {}
+    for name, values in (effects or {}).items():
+        parameters = effect_parameters(name)
+        known = {p.name: p for p in parameters}
+        unknown = sorted(set(values) - set(known))
+        if unknown:
+            raise ValueError(
+                f"effect {name}: unknown parameter(s) {', '.join(unknown)}; its parameters: "
+                f"{', '.join(known) or 'none'}"
+            )
+        out: dict[str, float] = {}
+        for parameter in parameters:
+            value = values.get(parameter.name, parameter.default)
+            try:
+                out[parameter.name] = parameter.check(value)
+            except (PredictorError, TypeError, ValueError) as exc:
+                raise ValueError(f"effect {name}: {exc}") from None
+        resolved[name] = out
+    return resolved
+
+
+class _SimulatedFinger(FingerFriction):
+    """:class:`FingerFriction` whose load index may take any value the ``load-index`` effect
+    allows (0.3..1.5) and whose friction any positive value (same physics)."""
+
+    parameters = tuple(
+        Parameter(p.name, p.unit, p.default, (0.3, 1.5), p.source, p.description)
+        if p.name == "load_index"
+        else Parameter(p.name, p.unit, p.default, (1e-6, 1e3), p.source, p.description)
+        if p.name.startswith("friction_")
+        else p
+        for p in FingerFriction.parameters
+    )
+
+
+# -- protocol -----------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class _Schedule:
+    """Per-sample kinematics and commands of one recording (true values)."""
+
+    t: np.ndarray
+    x: np.ndarray
+    speed: np.ndarray
+    normal_force: np.ndarray
+    contact: np.ndarray
+    stroke: np.ndarray  # strokes since the last rest; -1 at rest
+    amplitude: np.ndarray
+    voltage: np.ndarray
+
+
+def _schedule(protocol: Protocol, rng: np.random.Generator) -> _Schedule:
+    n = round(protocol.duration_s * protocol.sample_rate_hz)
+    t = np.arange(n) / protocol.sample_rate_hz
+    end = t[-1]
+    starts, speeds, forces, magnitudes, strokes, x_starts = [], [], [], [], [], []
+    time, x_pos, direction, magnitude = 0.0, X_START_M, 1.0, VOLTAGE_RANGE_V[0]
+    while time <= end:
+        for k in range(protocol.strokes_per_session):
+            speed = rng.uniform(*protocol.speed_range_m_s)
+            force = rng.uniform(*protocol.force_range_n)
+            magnitude = rng.uniform(*VOLTAGE_RANGE_V)
+            starts.append(time)
+            speeds.append(direction * speed)
+            forces.append(force)
+            magnitudes.append(magnitude)
+            strokes.append(k)
+            x_starts.append(x_pos)
+            time += protocol.stroke_length_m / speed
+            x_pos += direction * protocol.stroke_length_m
+            direction = -direction
+            if time > end:
+                break
+        if protocol.rest_s > 0:
+            starts.append(time)
+            speeds.append(0.0)
+            forces.append(0.0)
+            magnitudes.append(magnitude)
+            strokes.append(-1)
+            x_starts.append(x_pos)
+            time += protocol.rest_s
+    start = np.array(starts)
+    index = np.searchsorted(start, t, side="right") - 1
+    speed = np.array(speeds)[index]
+    x = np.array(x_starts)[index] + speed * (t - start[index])
+    force = np.array(forces)[index]
+    stroke = np.array(strokes, dtype=np.int64)[index]
+    levels = rng.uniform(0.0, MAX_AMPLITUDE_M, size=int(end / protocol.amplitude_segment_s) + 2)
+    amplitude = levels[_segment_index(t, protocol.amplitude_segment_s)]
+    polarity = 1.0 - 2.0 * (_segment_index(t, protocol.voltage_segment_s) % 2)
+    voltage = np.array(magnitudes)[index] * polarity
+    return _Schedule(t, x, speed, force, force > 0, stroke, amplitude, voltage)
+
+
+def _segment_index(t: np.ndarray, segment_s: float) -> np.ndarray:
+    """Index of the segment of length ``segment_s`` each time falls in (boundaries exact to
+    rounding: 0.232 s / 0.04 s is segment 5, not 4.999...)."""
+    return np.floor(np.round(t / segment_s, 9)).astype(np.int64)
+
+
+def _drift(n: int, sample_rate_hz: float, size: float, rng: np.random.Generator) -> np.ndarray:
+    """A smooth random offset: a random walk low-passed (time constant a twentieth of the
+    recording, at least 0.5 s), peak-to-peak ``size``."""
+    if size <= 0 or n < 2:
+        return np.zeros(n)
+    walk = np.cumsum(rng.normal(size=n))
+    a = math.exp(-1.0 / (max(n / sample_rate_hz / 20.0, 0.5) * sample_rate_hz))
+    smooth = lfilter([1.0 - a], [1.0, -a], walk - walk[0])
+    smooth -= smooth.mean()
+    span = float(np.ptp(smooth))
+    return smooth * (size / span) if span > 0 else np.zeros(n)
+
+
+def _patch(x: np.ndarray, x0: float, width: float) -> np.ndarray:
+    """Weight 0..1 of the worn band [x0, x0 + width] with smoothstep edges of 1 mm."""
+
+    def step(u: np.ndarray) -> np.ndarray:
+        u = np.clip(u, 0.0, 1.0)
+        return u * u * (3.0 - 2.0 * u)
+
+    rise = step((x - x0) / PATCH_EDGE_M + 0.5)
+    fall = step((x0 + width - x) / PATCH_EDGE_M + 0.5)
+    return rise * fall
+
+
+# -- synthesis --------------------------------------------------------------------------------
+def _models(device: str) -> tuple[DeviceConfig, DimensionlessGroup | None, Kaczmarek | None]:
+    if device == "uv":
+        config = DeviceConfig.evita()
+        uv = device_profile(config).predictor
+        assert isinstance(uv, DimensionlessGroup)
+        return config, uv, None
+    config = DeviceConfig.coupled()
+    coupled: Any = device_profile(config).predictor
+    return config, (coupled.uv if device == "coupled" else None), coupled.ev
+
+
+def _apply_inputs(effects: list[tuple[Any, dict[str, float]]], inputs: dict) -> dict:
+    for effect, params in effects:
+        inputs = effect.transform_inputs(inputs, params)
+    return dict(inputs)
+
+
+def _apply_output(
+    effects: list[tuple[Any, dict[str, float]]], output: np.ndarray, inputs: dict
+) -> np.ndarray:
+    for effect, params in effects:
+        output = np.asarray(effect.transform_output(output, inputs, params), dtype=np.float64)
+    return output
+
+
+def synthesize(
+    device: str,
+    effects: Mapping[str, Mapping[str, float]] | None = None,
+    *,
+    protocol: Protocol = Protocol(),
+    lateral_noise_n: float = 0.002,
+    normal_noise_n: float = 0.002,
+    drift_n: float = 0.0,
+    seed: int = 0,
+) -> list[Measurement]:
+    """Tribometer recordings of the simulated finger on ``device``, one per pressure.
+
+    Args:
+        device: ``"uv"`` (E-ViTa: amplitude column), ``"ev"`` (coupled stimulator, plate off:
+            voltage column) or ``"coupled"`` (both).
+        effects: effect name -> true parameter values (see the module documentation; missing
+            values take the effect's defaults). Nothing in the output names them.
+        protocol: what the tribometer does.
+        lateral_noise_n: standard deviation of the lateral force noise, N.
+        normal_noise_n: standard deviation of the recorded normal force's noise, N.
+        drift_n: peak-to-peak size of the lateral sensor's offset drift per recording, N.
+        seed: seed of every random draw; the protocol's draws do not depend on the effects or
+            the noise levels, so recordings with the same seed share their kinematics.
+
+    Returns:
+        One :class:`Measurement` per pressure of ``protocol``: columns t, amplitude (uv,
+        coupled), voltage (ev, coupled), x, y, speed (signed), fn, fl; no stroke column.
+
+    Raises:
+        ValueError: unknown device, effect or parameter names, bad values or noise levels.
+    """
+    if device not in DEVICES:
+        raise ValueError(f"unknown device {device!r}; devices: {', '.join(DEVICES)}")
+    for name, value in (
+        ("lateral_noise_n", lateral_noise_n),
+        ("normal_noise_n", normal_noise_n),
+        ("drift_n", drift_n),
+    ):
+        if not (math.isfinite(value) and value >= 0):
+            raise ValueError(f"{name} must be a finite number >= 0, got {value}")
+    chosen = resolve_effects(effects)
+    config, uv_model, ev_model = _models(device)
+    library = _library()
+    generic = {
+        name: (library[name], params)
+        for name, params in chosen.items()
+        if name not in PHYSICAL_EFFECTS and name != SURFACE_PATCH
+    }
+    on_uv = [e for e in generic.values() if "relative_friction" in e[0].outputs]
+    on_ev = [e for e in generic.values() if "electrostatic_force" in e[0].outputs]
+    on_total = [e for e in generic.values() if not e[0].outputs]
+    on_other = sorted(
+        name
+        for name, (effect, _) in generic.items()
+        if effect.outputs and not {"relative_friction", "electrostatic_force"} & set(effect.outputs)
+    )
+    if on_other:
+        raise ValueError(
+            f"effect(s) {', '.join(on_other)} apply to outputs the tribometer simulation does "
+            "not model"
+        )
+    finger = _finger(config.mu0, chosen)
+    uv_ok = uv_model is not None
+
+    recordings = []
+    for index, pressure in enumerate(protocol.pressures_pa):
+        streams = [np.random.default_rng([seed, index, k]) for k in range(3)]
+        s = _schedule(protocol, streams[0])
+        n = s.t.size
+        fn = np.where(s.contact, s.normal_force, 1.0)  # physics on contact samples; 1 N at rest
+        speed = np.abs(s.speed)
+
+        amplitude = s.amplitude if uv_ok else np.zeros(n)
+        if uv_ok and "actuator-bandwidth" in chosen:
+            tau = chosen["actuator-bandwidth"]["time_constant"]
+            a = math.exp(-1.0 / (protocol.sample_rate_hz * tau))
+            amplitude = lfilter([0.0, 1.0 - a], [1.0, -a], s.amplitude)
+        voltage = s.voltage if ev_model is not None else np.zeros(n)
+        if ev_model is not None and "charge-leakage" in chosen:
+            leakage = ChargeLeakage(
+                tau_d=chosen["charge-leakage"]["time_constant"],
+                **{p.name: ev_model[p.name] for p in Kaczmarek.parameters},
+            )
+            voltage = leakage.simulate(s.t, s.voltage).effective_voltage
+
+        session_stroke = np.where(s.stroke >= 0, s.stroke, 0).astype(np.float64)
+        base = {
+            "time": s.t,
+            "stroke": session_stroke,
+            "speed": speed,
+            "normal_force": fn,
+            "pressure": np.full(n, float(pressure)),
+            "amplitude": amplitude,
+            "voltage": voltage,
+        }
+        for effect, _ in generic.values():
+            for variable in effect.inputs:
+                if variable.name not in base and variable.default is not None:
+                    base[variable.name] = np.full(n, float(variable.default))
+        total_in = _apply_inputs(on_total, base)
+
+        if uv_ok:
+            uv_in = _apply_inputs(on_uv, total_in)
+            mu_uv = uv_model.forward(
+                amplitude=uv_in["amplitude"],
+                frequency=config.plate_frequency_hz,
+                speed=np.abs(uv_in["speed"]),
+                normal_force=uv_in["normal_force"],
+            )
+            mu_uv = _apply_output(on_uv, mu_uv, uv_in)
+        else:
+            mu_uv = np.ones(n)
+        if ev_model is not None:
+            ev_in = _apply_inputs(on_ev, total_in)
+            if "air-layer" in chosen:
+                air = AirLayer(**{p.name: ev_model[p.name] for p in Kaczmarek.parameters})
+                gap = chosen["air-layer"]["air_gap"] / ev_in["normal_force"]
+                force_e = air.forward(voltage=ev_in["voltage"], air_gap=gap)
+            else:
+                force_e = ev_model.forward(voltage=ev_in["voltage"])
+            force_e = _apply_output(on_ev, force_e, ev_in)
+        else:
+            force_e = np.zeros(n)
+
+        fn_phys = total_in["normal_force"]
+        if finger is None:
+            mu_f = np.full(n, config.mu0)
+        else:
+            mu_f = finger.friction_coefficient(
+                normal_force=fn_phys,
+                speed=np.abs(total_in["speed"]),
+                contact_time=np.maximum(total_in["time"], 0.0),
+            )
+        lateral = mu_f * mu_uv * (fn_phys + force_e)
+        lateral = _apply_output(on_total, lateral, total_in)
+        if SURFACE_PATCH in chosen:
+            patch = chosen[SURFACE_PATCH]
+            lateral = lateral * (1.0 + patch["depth"] * _patch(s.x, patch["x0"], patch["width"]))
+        lateral = np.where(s.contact, lateral, 0.0)
+
+        noise = streams[1]
+        fl = lateral + _drift(n, protocol.sample_rate_hz, drift_n, streams[2])
+        fl = fl + lateral_noise_n * noise.normal(size=n)
+        fn_noise = normal_noise_n * noise.normal(size=n)
+        fn_rec = np.where(
+            s.contact,
+            np.maximum(s.normal_force + fn_noise, MIN_CONTACT_FORCE_N),
+            np.clip(fn_noise, -REST_NOISE_LIMIT_N, REST_NOISE_LIMIT_N),
+        )
+        recordings.append(
+            Measurement(
+                t=s.t,
+                normal_force=fn_rec,
+                lateral_force=fl,
+                amplitude=s.amplitude.copy() if uv_ok else None,
+                voltage=s.voltage.copy() if ev_model is not None else None,
+                x=s.x,
+                y=np.full(n, Y_M),
+                speed=s.speed,
+                conditions={
+                    "device": f"hcard reference {device}",
+                    "plate_frequency_hz": config.plate_frequency_hz if uv_ok else None,
+                    "ambient_pressure_pa": float(pressure),
+                    "probe": "simulated finger",
+                    "surface": "glass",
+                    "notes": f"synthesized by hcard_device.sim.tribometer, seed {seed}",
+                },
+            )
+        )
+    return recordings
+
+
+def _finger(mu0: float, chosen: Mapping[str, Mapping[str, float]]) -> FingerFriction | None:
+    """The bare finger's :class:`FingerFriction` for the load-index and occlusion-drift
+    effects (None: Coulomb, ``mu_f = mu0``)."""
+    if "load-index" not in chosen and "occlusion-drift" not in chosen:
+        return None
+    params: dict[str, float] = {
+        "friction_initial": mu0,
+        "friction_occluded": mu0,
+        "load_index": 1.0,
+        "speed_sensitivity": 0.0,
+    }
+    if "load-index" in chosen:
+        params["load_index"] = chosen["load-index"]["load_index"]
+    if "occlusion-drift" in chosen:
+        drift = chosen["occlusion-drift"]
+        params["friction_occluded"] = mu0 * (1.0 + drift["gain"])
+        params["occlusion_time"] = drift["time_constant"]
+    return _SimulatedFinger(**params)
