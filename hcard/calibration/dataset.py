@@ -107,6 +107,28 @@ def strokes_since_rest(t: np.ndarray, ids: np.ndarray, rest_s: float = REST_S) -
     return out
 
 
+def friction_force(
+    lateral: np.ndarray, speed: np.ndarray | None, contact: np.ndarray
+) -> np.ndarray:
+    """The friction force opposing the motion, N, from the recorded lateral force.
+
+    Tribometers record the lateral force either signed by the direction of motion (with either
+    sign convention) or as a magnitude (rule M3). When the sign of the force follows the sign
+    of the speed on at least 3/4 of the contact samples (or its opposite), the force is signed
+    and is multiplied by the direction (so that a sensor offset stays an offset per direction);
+    otherwise it is a magnitude, taken with the sign of most contact samples.
+    """
+    if speed is not None:
+        direction = np.where(speed < 0, -1.0, 1.0)
+        moving = contact & (speed != 0)
+        if moving.any():
+            agreement = float(np.mean(np.sign(lateral[moving]) * direction[moving]))
+            if abs(agreement) >= 0.5:
+                return lateral * direction * math.copysign(1.0, agreement)
+    majority = float(np.mean(np.sign(lateral[contact]))) if contact.any() else 1.0
+    return lateral if majority >= 0 else -lateral
+
+
 def _label(m: Measurement, index: int) -> str:
     device = m.conditions.get("device", "?")
     source = m.conditions.get("_source")
@@ -178,12 +200,8 @@ def prepare(
         test_parts.append(test[keep])
 
         t = m.t - m.t[0]
-        speed = None if m.speed is None else m.speed
-        force = (
-            m.lateral_force * np.where(np.sign(speed) < 0, -1.0, 1.0)
-            if speed is not None
-            else np.abs(m.lateral_force)
-        )
+        speed = m.speed
+        force = friction_force(m.lateral_force, speed, keep)
         pressure = m.conditions.get("ambient_pressure_pa") or ATMOSPHERE_PA
         frequency = m.plate_frequency
         if frequency is None and m.conditions.get("plate_frequency_hz"):

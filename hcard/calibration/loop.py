@@ -382,6 +382,19 @@ def calibrate(
             test=data.test,
         )
 
+    def fit_candidate(effect: Effect, current_fit: FitResult) -> FitResult:
+        """The current model plus ``effect``, fitted from the effect's defaults; when that
+        ends worse on the training data than the current model (a local minimum), fitted
+        again from the effect's neutral values (which start at the current model) and the
+        better of the two by training error is kept. The held-out split never chooses."""
+        chosen = fit([*added, effect], current_fit.params)
+        if chosen.train_rss > current_fit.train_rss * (1.0 + 1e-9) and effect.neutral:
+            neutral = {f"{effect.name}.{k}": v for k, v in effect.neutral.items()}
+            second = fit([*added, effect], {**current_fit.params, **neutral})
+            if second.train_rss < chosen.train_rss:
+                chosen = second
+        return chosen
+
     def analyse(result: FitResult) -> ResidualReport:
         return analyse_residuals(
             result.residuals,
@@ -426,7 +439,7 @@ def calibrate(
             eta2 = _signature_eta2(effect, current.analysis, settings.alpha)
             tic = time.perf_counter()
             try:
-                result = fit([*added, effect], current.fit.params)
+                result = fit_candidate(effect, current.fit)
             except PredictorError as exc:
                 tried.append(
                     (

@@ -20,7 +20,8 @@ def cli() -> None:
     A card (.hcard binary, or .json) describes a surface as a grid of taxtels, each playing a
     texture of (frequency, amplitude, phase) components on the UV and EV channels. Author cards
     (encode), check them (info, validate, preview), render them (render), evaluate the physics
-    (predict), drive devices (device, play) and prove an implementation (conformance).
+    (predict), drive devices (device, play), prove an implementation (conformance) and fit the
+    physics to tribometer recordings (calibrate).
     """
     warnings.showwarning = _show_warning
 
@@ -32,6 +33,7 @@ def _show_warning(message: Warning | str, category: type[Warning], *_args: Any, 
 
 def _register_commands() -> None:
     from hcard.cli import (
+        calibrate_cmd,
         card_cmds,
         conformance_cmd,
         device_cmd,
@@ -43,7 +45,7 @@ def _register_commands() -> None:
     )
 
     for module in (encode_cmd, card_cmds, render_cmd, preview_cmd, predict_cmd, plugins_cmd,
-                   device_cmd, conformance_cmd):
+                   device_cmd, conformance_cmd, calibrate_cmd):
         for command in module.COMMANDS:
             cli.add_command(command)
 

@@ -1,0 +1,612 @@
+"""The calibration report: what the loop found, for people (Markdown, PNG) and programs (JSON).
+
+:func:`write_report` writes into a directory:
+
+- ``report.md``: leads with the held-out error before and after and the verdict, then the
+  effects added with their fitted parameters, the selection criterion, the data, every
+  candidate of every round, the effects skipped, the structure left, the residual analysis
+  before and after, the base and final parameters, the figures and the wall time;
+- ``report.json``: the same content, format :data:`FORMAT`, finite numbers only (NaN and
+  infinities become ``null``), with the fitted profile;
+- ``profile.json``: the fitted device profile (:mod:`hcard.calibration.profile`);
+- ``residuals.png``: one panel per regressor: the binned mean residual (mN) before (base
+  model) and after (final model) over a light scatter of the residual before;
+- ``fit.png``: observed and predicted lateral force over a stretch of held-out samples, and
+  predicted against observed (held-out samples), before and after.
+
+Figures are drawn on matplotlib's Agg canvas directly (no pyplot). Every file is written
+atomically (:func:`hcard.atomic.write_atomically`).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from hcard import __version__
+from hcard.atomic import write_atomically
+from hcard.calibration.loop import CalibrationResult, ModelFit
+from hcard.calibration.profile import parameter_table, profile_json, profile_of
+from hcard.calibration.residuals import ResidualReport
+from hcard.physics import PredictorError
+from hcard.physics.units import display_unit
+
+FORMAT = "hcard-calibration-report/1"
+"""Value of the ``format`` key of ``report.json``."""
+
+MARKDOWN = "report.md"
+JSON = "report.json"
+PROFILE = "profile.json"
+RESIDUALS_PNG = "residuals.png"
+FIT_PNG = "fit.png"
+
+DPI = 100
+"""Resolution of the figures, dots per inch."""
+PANEL_INCHES = (3.2, 2.5)
+"""Size of one regressor panel of ``residuals.png`` (width, height), inches."""
+PANEL_COLUMNS = 3
+"""Regressor panels per row."""
+FIT_INCHES = (12.0, 4.0)
+"""Size of ``fit.png``, inches."""
+MAX_SCATTER = 3000
+"""Most points of a scatter."""
+MAX_STRETCH_S = 2.0
+"""Longest stretch of held-out samples drawn over time, s."""
+
+REGRESSOR_UNITS = {
+    "normal_force": "N",
+    "speed": "m/s",
+    "amplitude": "m",
+    "voltage": "V",
+    "pressure": "Pa",
+    "frequency": "Hz",
+    "time": "s",
+    "stroke": "",
+    "amplitude_history": "m",
+    "voltage_history": "s",
+    "x": "m",
+    "y": "m",
+    "recording": "",
+}
+"""SI unit of each regressor (:mod:`hcard.calibration.effects`, :mod:`.dataset`)."""
+
+BEFORE_COLOUR = "tab:orange"
+AFTER_COLOUR = "tab:blue"
+
+
+@dataclass(frozen=True)
+class ReportFiles:
+    """The files :func:`write_report` wrote.
+
+    Attributes:
+        markdown: ``report.md``.
+        json: ``report.json``.
+        profile: ``profile.json``.
+        figures: the PNG figures (empty with ``figures=False``).
+    """
+
+    markdown: Path
+    json: Path
+    profile: Path
+    figures: list[Path] = field(default_factory=list)
+
+
+# -- numbers for people -------------------------------------------------------------------------
+def _mn(value: float | None) -> str:
+    """A force in N as mN, the way :func:`~hcard.calibration.loop.calibrate` writes it."""
+    if value is None or not math.isfinite(value):
+        return "n/a"
+    return f"{value * 1e3:.4g}"
+
+
+def _g(value: float | None, spec: str = ".3g") -> str:
+    if value is None or not math.isfinite(value):
+        return "n/a" if value is None or math.isnan(value) else ("inf" if value > 0 else "-inf")
+    return format(value, spec)
+
+
+def _with_unit(value: float, uncertainty: float | None, unit: str) -> str:
+    """``"12.3 ± 0.4 ms"``: value (and uncertainty) in a readable unit."""
+    scale, shown = display_unit(unit, [value])
+    text = f"{value / scale:.4g}"
+    if uncertainty is not None:
+        text += " ± " + (
+            f"{uncertainty / scale:.2g}" if math.isfinite(uncertainty) else "not identified"
+        )
+    return f"{text} {shown}" if shown else text
+
+
+def _cell(text: Any) -> str:
+    return str(text).replace("|", "\\|").replace("\n", " ")
+
+
+def _table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> list[str]:
+    lines = [
+        "| " + " | ".join(headers) + " |",
+        "|" + "|".join("---" for _ in headers) + "|",
+    ]
+    lines += ["| " + " | ".join(_cell(c) for c in row) + " |" for row in rows]
+    return lines
+
+
+def _uncertainty(fit_params: Mapping[str, dict[str, Any]], name: str) -> float | None:
+    entry = fit_params[name]
+    return entry["uncertainty"] if entry["fitted"] else None
+
+
+# -- JSON ---------------------------------------------------------------------------------------
+def _finite(value: Any) -> Any:
+    """``value`` with numpy types as Python ones and NaN/inf as None, recursively."""
+    if isinstance(value, Mapping):
+        return {str(k): _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return [_finite(v) for v in value.tolist()]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        value = float(value)
+        return value if math.isfinite(value) else None
+    return value
+
+
+def _analysis_dict(analysis: ResidualReport) -> dict[str, Any]:
+    return {
+        "n": analysis.n,
+        "rms_n": analysis.rms,
+        "regressors": {
+            name: {
+                "eta2": s.eta2,
+                "f_statistic": s.f_statistic,
+                "p_value": s.p_value,
+                "spearman_rho": s.spearman_rho,
+                "spearman_p": s.spearman_p,
+                "monotonic": s.monotonic,
+                "bin_centres": s.bin_centres,
+                "bin_means_n": s.bin_means,
+                "bin_counts": s.bin_counts,
+            }
+            for name, s in analysis.regressors.items()
+        },
+        "time": asdict(analysis.time),
+    }
+
+
+def _model_dict(step: ModelFit) -> dict[str, Any]:
+    fit = step.fit
+    return {
+        "effects": list(step.effects),
+        "held_out_rmse_n": step.test_rmse,
+        "train_rmse_n": step.train_rmse,
+        "score": step.score,
+        "free": list(fit.free),
+        "at_bounds": list(fit.at_bounds),
+        "condition_number": fit.condition_number,
+        "success": fit.success,
+        "parameters": parameter_table(fit),
+    }
+
+
+def report_dict(result: CalibrationResult, figures: Sequence[str] = ()) -> dict[str, Any]:
+    """The content of ``report.json`` (finite numbers only; ``figures``: relative file names)."""
+    data = result.data
+    content = {
+        "format": FORMAT,
+        "hcard_version": __version__,
+        "model": result.model,
+        "verdict": result.verdict,
+        "summary": result.summary,
+        "held_out_rmse_n": {"before": result.before.test_rmse, "after": result.after.test_rmse},
+        "train_rmse_n": {"before": result.before.train_rmse, "after": result.after.train_rmse},
+        "relative_change": -result.improvement,
+        "effects_added": [
+            {
+                "name": name,
+                "parameters": {
+                    short: {"value": v, "uncertainty": s, "unit": u}
+                    for short, (v, s, u) in result.effect_parameters(name).items()
+                },
+            }
+            for name in result.after.effects
+        ],
+        "criterion": result.settings.criterion(),
+        "settings": asdict(result.settings),
+        "data": {
+            "sources": list(data.sources),
+            "samples": len(data),
+            "training_samples": int(np.count_nonzero(data.train)),
+            "held_out_samples": int(np.count_nonzero(data.test)),
+            "split": data.split,
+            "sample_rate_hz": data.sample_rate_hz,
+            "regressors": list(data.regressors),
+        },
+        "library": list(result.library),
+        "candidates": [asdict(c) for c in result.candidates],
+        "skipped": dict(result.skipped),
+        "structure": {
+            "regressors": [
+                {"name": n, "eta2": e, "p_value": p} for n, e, p in result.structure.regressors
+            ],
+            "autocorrelation": result.structure.autocorrelation,
+            "in_time": result.structure.in_time,
+            "dominant_frequency_hz": result.structure.dominant_frequency_hz,
+            "description": result.structure.describe(),
+        },
+        "residuals": {
+            "before": _analysis_dict(result.before.analysis),
+            "after": _analysis_dict(result.after.analysis),
+        },
+        "steps": [_model_dict(step) for step in result.steps],
+        "before": _model_dict(result.before),
+        "after": _model_dict(result.after),
+        "profile": profile_of(result),
+        "figures": list(figures),
+        "seconds": result.seconds,
+    }
+    return _finite(content)
+
+
+# -- Markdown -----------------------------------------------------------------------------------
+def _parameter_rows(table: Mapping[str, dict[str, Any]]) -> list[list[str]]:
+    rows = []
+    for name, entry in table.items():
+        uncertainty = entry["uncertainty"]
+        if entry["fitted"] and uncertainty is None:
+            uncertainty = math.inf
+        rows.append(
+            [
+                name,
+                _with_unit(entry["value"], uncertainty if entry["fitted"] else None, entry["unit"]),
+                "yes" if entry["fitted"] else "no",
+            ]
+        )
+    return rows
+
+
+def _residual_rows(analysis: ResidualReport) -> list[list[str]]:
+    return [
+        [name, f"{s.eta2:.3f}", _g(s.p_value, ".2g"), f"{s.spearman_rho:+.3f}"]
+        for name, s in analysis.regressors.items()
+    ]
+
+
+def report_markdown(result: CalibrationResult, figures: Sequence[str] = ()) -> str:
+    """The text of ``report.md`` (``figures``: relative file names to embed)."""
+    before, after, data = result.before, result.after, result.data
+    change = -100.0 * result.improvement
+    lines = [
+        f"# Calibration report: {result.model}",
+        "",
+        f"**Held-out RMSE: {_mn(before.test_rmse)} mN before, {_mn(after.test_rmse)} mN after "
+        f"({change:+.1f} %).**",
+        "",
+        f"**Verdict: {result.verdict}.**",
+        "",
+    ]
+    if after.effects:
+        for name in after.effects:
+            params = result.effect_parameters(name)
+            shown = ", ".join(
+                f"{short} = {_with_unit(v, s, u)}" for short, (v, s, u) in params.items()
+            )
+            lines.append(f"- Added **{name}**: {shown or 'no parameters'}")
+    else:
+        lines.append("- No effect added.")
+    lines += ["", result.summary, ""]
+
+    lines += ["## Selection criterion", "", result.settings.criterion() + ".", ""]
+    s = result.settings
+    lines += [
+        f"Thresholds: minimum held-out improvement {s.min_improvement:.0%}, alpha {s.alpha:g}, "
+        f"structure eta² ≥ {s.min_eta2:g}, signature eta² ≥ {s.signature_eta2:g}, "
+        f"time structure at lag-1 autocorrelation ≥ {s.min_autocorrelation:g}, at most "
+        f"{s.max_effects} effects, {s.bins} bins.",
+        "",
+    ]
+
+    lines += ["## Data", ""]
+    lines += [f"- Source: {source}" for source in data.sources]
+    lines += [
+        f"- Samples: {len(data)} ({int(np.count_nonzero(data.train))} training, "
+        f"{int(np.count_nonzero(data.test))} held out)",
+        f"- Split: {data.split}",
+        f"- Sample rate: {data.sample_rate_hz:.4g} Hz",
+        f"- Regressors: {', '.join(data.regressors) or 'none'}",
+        "",
+    ]
+
+    lines += ["## Candidates", ""]
+    if result.candidates:
+        lines += _table(
+            [
+                "round",
+                "effect",
+                "held-out RMSE (mN)",
+                "change",
+                "ΔH",
+                "signature eta²",
+                "added",
+                "note",
+            ],
+            [
+                [
+                    c.round,
+                    c.effect,
+                    _mn(c.test_rmse),
+                    "n/a" if c.improvement is None else f"{-100 * c.improvement:+.1f} %",
+                    _g(c.score_change, ".1f"),
+                    f"{c.signature_eta2:.3f}",
+                    "yes" if c.accepted else "no",
+                    c.note,
+                ]
+                for c in result.candidates
+            ],
+        )
+    else:
+        lines.append("No effect could be tried.")
+    lines.append("")
+
+    lines += ["## Effects skipped", ""]
+    if result.skipped:
+        lines += [f"- {name}: {why}" for name, why in result.skipped.items()]
+    else:
+        lines.append("None.")
+    lines += [
+        "",
+        "## Structure left",
+        "",
+        f"Structure in the final residual: {result.structure.describe()}.",
+        "",
+    ]
+
+    headers = ["regressor", "eta²", "p", "Spearman rho"]
+    lines += ["## Residual analysis", "", f"### Before: {result.model}", ""]
+    lines += _table(headers, _residual_rows(before.analysis))
+    t = before.analysis.time
+    lines += ["", f"Lag-1 autocorrelation {t.lag1_autocorrelation:.3f}.", ""]
+    lines += [f"### After: {'+'.join([result.model, *after.effects])}", ""]
+    if after is before:
+        lines.append("Nothing was added: the final model is the base model above.")
+    else:
+        lines += _table(headers, _residual_rows(after.analysis))
+        t = after.analysis.time
+        lines += ["", f"Lag-1 autocorrelation {t.lag1_autocorrelation:.3f}."]
+    lines.append("")
+
+    lines += ["## Parameters", "", "Uncertainties are standard uncertainties of the fit.", ""]
+    lines += ["### Base model fit", ""]
+    lines += _table(["parameter", "value", "fitted"], _parameter_rows(parameter_table(before.fit)))
+    lines += ["", "### Final model fit", ""]
+    lines += _table(["parameter", "value", "fitted"], _parameter_rows(parameter_table(after.fit)))
+    if after.fit.at_bounds:
+        lines += ["", f"At a bound (uncertainty not meaningful): {', '.join(after.fit.at_bounds)}"]
+    lines += ["", f"The fitted profile is in [{PROFILE}]({PROFILE}).", ""]
+
+    if figures:
+        lines += ["## Figures", ""]
+        captions = {
+            RESIDUALS_PNG: "Residual against each regressor, binned means before and after",
+            FIT_PNG: "Observed and predicted lateral force, held-out samples",
+        }
+        for name in figures:
+            lines += [f"![{captions.get(name, name)}]({name})", ""]
+
+    lines += [
+        "## Wall time",
+        "",
+        f"Calibration loop: {result.seconds:.1f} s ({len(result.candidates)} candidate fits).",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+# -- figures ------------------------------------------------------------------------------------
+def _png(fig: Figure) -> bytes:
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=DPI, metadata={"Software": f"hcard {__version__}"})
+    return buffer.getvalue()
+
+
+def _subsample(indices: np.ndarray, most: int) -> np.ndarray:
+    if indices.size <= most:
+        return indices
+    pick = np.random.default_rng(0).choice(indices.size, size=most, replace=False)
+    return indices[np.sort(pick)]
+
+
+def residuals_grid(n_regressors: int) -> tuple[int, int]:
+    """(rows, columns) of the panels of ``residuals.png`` for ``n_regressors``."""
+    columns = max(1, min(PANEL_COLUMNS, n_regressors))
+    return max(1, math.ceil(n_regressors / columns)), columns
+
+
+def residuals_figure(result: CalibrationResult) -> Figure:
+    """``residuals.png`` as a figure (Agg canvas attached)."""
+    names = list(result.data.regressors)
+    rows, columns = residuals_grid(len(names))
+    fig = Figure(
+        figsize=(PANEL_INCHES[0] * columns, PANEL_INCHES[1] * rows), dpi=DPI, layout="constrained"
+    )
+    FigureCanvasAgg(fig)
+    before = result.before.fit.residuals * 1e3
+    pick = _subsample(np.arange(before.size), MAX_SCATTER)
+    low, high = np.percentile(before[pick], [1.0, 99.0]) if pick.size else (0.0, 0.0)
+    if not names:
+        ax = fig.add_subplot(1, 1, 1)
+        ax.text(0.5, 0.5, "no regressor varies in these data", ha="center", va="center")
+        ax.set_axis_off()
+        return fig
+    for k, name in enumerate(names):
+        ax = fig.add_subplot(rows, columns, k + 1)
+        x = result.data.regressors[name]
+        scale, unit = display_unit(REGRESSOR_UNITS.get(name, ""), x)
+        ax.scatter(
+            x[pick] / scale, before[pick], s=2, c="0.75", alpha=0.5, linewidths=0, rasterized=True
+        )
+        stats_b = result.before.analysis.regressors[name]
+        stats_a = result.after.analysis.regressors[name]
+        ax.plot(
+            stats_b.bin_centres / scale,
+            stats_b.bin_means * 1e3,
+            "o-",
+            color=BEFORE_COLOUR,
+            ms=3,
+            lw=1.2,
+            label="before",
+        )
+        ax.plot(
+            stats_a.bin_centres / scale,
+            stats_a.bin_means * 1e3,
+            "s-",
+            color=AFTER_COLOUR,
+            ms=3,
+            lw=1.2,
+            label="after",
+        )
+        ax.axhline(0.0, color="0.4", lw=0.6)
+        means = np.concatenate([stats_b.bin_means, stats_a.bin_means]) * 1e3
+        span_low = min(float(low), float(means.min()))
+        span_high = max(float(high), float(means.max()))
+        pad = 0.05 * (span_high - span_low) or 1.0
+        ax.set_ylim(span_low - pad, span_high + pad)
+        ax.set_title(f"{name}: eta² {stats_b.eta2:.2f} → {stats_a.eta2:.2f}", fontsize=9)
+        ax.set_xlabel(f"{name} [{unit or '-'}]", fontsize=8)
+        ax.set_ylabel("residual [mN]", fontsize=8)
+        ax.tick_params(labelsize=7)
+        if k == 0:
+            ax.legend(fontsize=7, loc="best")
+    return fig
+
+
+def _held_out_stretch(result: CalibrationResult) -> np.ndarray:
+    """Indices of the window of at most :data:`MAX_STRETCH_S` (within one recording) holding
+    the most held-out samples, starting at a held-out sample."""
+    data = result.data
+    test = data.test
+    if not test.any():
+        return np.zeros(0, dtype=np.intp)
+    width = max(1, round(MAX_STRETCH_S * data.sample_rate_hz))
+    counts = np.concatenate([[0], np.cumsum(test)])
+    starts = np.flatnonzero(test)
+    ends = np.minimum(starts + width, test.size)
+    ends = np.minimum(ends, np.searchsorted(data.recording, data.recording[starts], "right"))
+    best = int(np.argmax(counts[ends] - counts[starts]))
+    return np.arange(starts[best], ends[best])
+
+
+def fit_figure(result: CalibrationResult) -> Figure:
+    """``fit.png`` as a figure (Agg canvas attached)."""
+    data = result.data
+    observed = data.observed * 1e3
+    before = observed - result.before.fit.residuals * 1e3
+    after = observed - result.after.fit.residuals * 1e3
+    fig = Figure(figsize=FIT_INCHES, dpi=DPI, layout="constrained")
+    FigureCanvasAgg(fig)
+    grid = fig.add_gridspec(1, 3)
+    ax = fig.add_subplot(grid[0, :2])
+    window = _held_out_stretch(result)
+    if window.size:
+        t = data.inputs["time"][window]
+        held = data.test[window]
+
+        def masked(values: np.ndarray) -> np.ndarray:
+            return np.where(held, values[window], np.nan)
+
+        ax.plot(t, masked(observed), color="black", lw=0.8, label="observed")
+        ax.plot(
+            t,
+            masked(before),
+            color=BEFORE_COLOUR,
+            lw=1.0,
+            label=f"before ({_mn(result.before.test_rmse)} mN)",
+        )
+        ax.plot(
+            t,
+            masked(after),
+            color=AFTER_COLOUR,
+            lw=1.0,
+            label=f"after ({_mn(result.after.test_rmse)} mN)",
+        )
+        ax.legend(fontsize=8, loc="best")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("lateral force [mN]")
+    ax.set_title("(a) held-out strokes (gaps: training samples)", fontsize=10)
+
+    ax = fig.add_subplot(grid[0, 2])
+    pick = _subsample(np.flatnonzero(data.test), MAX_SCATTER)
+    ax.scatter(
+        observed[pick],
+        before[pick],
+        s=3,
+        c=BEFORE_COLOUR,
+        alpha=0.4,
+        linewidths=0,
+        label="before",
+        rasterized=True,
+    )
+    ax.scatter(
+        observed[pick],
+        after[pick],
+        s=3,
+        c=AFTER_COLOUR,
+        alpha=0.4,
+        linewidths=0,
+        label="after",
+        rasterized=True,
+    )
+    if pick.size:
+        values = np.concatenate([observed[pick], before[pick], after[pick]])
+        low, high = float(values.min()), float(values.max())
+        ax.plot([low, high], [low, high], color="0.3", lw=0.8, ls="--", label="identity")
+    ax.set_xlabel("observed [mN]")
+    ax.set_ylabel("predicted [mN]")
+    ax.set_title("(b) held-out: predicted vs observed", fontsize=10)
+    ax.legend(fontsize=8, loc="best", markerscale=3)
+    return fig
+
+
+# -- the report ---------------------------------------------------------------------------------
+def write_report(
+    result: CalibrationResult, directory: str | os.PathLike[str], *, figures: bool = True
+) -> ReportFiles:
+    """Write the report of ``result`` into ``directory`` (created if needed; module docstring).
+
+    Raises:
+        PredictorError: ``directory`` exists but is not a directory, or cannot be created.
+    """
+    folder = Path(directory)
+    if folder.exists() and not folder.is_dir():
+        raise PredictorError(f"{folder}: exists and is not a directory; cannot write a report")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise PredictorError(f"{folder}: cannot create the report directory ({exc})") from None
+
+    written: list[Path] = []
+    if figures:
+        for name, draw in ((RESIDUALS_PNG, residuals_figure), (FIT_PNG, fit_figure)):
+            path = folder / name
+            write_atomically(path, _png(draw(result)))
+            written.append(path)
+    names = [p.name for p in written]
+    profile = folder / PROFILE
+    write_atomically(profile, profile_json(result))
+    text = json.dumps(report_dict(result, names), indent=2, allow_nan=False, ensure_ascii=False)
+    report_json = folder / JSON
+    write_atomically(report_json, (text + "\n").encode("utf-8"))
+    markdown = folder / MARKDOWN
+    write_atomically(markdown, report_markdown(result, names).encode("utf-8"))
+    return ReportFiles(markdown=markdown, json=report_json, profile=profile, figures=written)

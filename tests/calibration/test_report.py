@@ -1,0 +1,211 @@
+"""The calibration report (Markdown, JSON, PNG) and the fitted device profile."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from matplotlib.image import imread
+
+from hcard.calibration.dataset import prepare
+from hcard.calibration.loop import calibrate
+from hcard.calibration.measurement import Measurement
+from hcard.calibration.profile import FORMAT as PROFILE_FORMAT
+from hcard.calibration.profile import load_profile, profile_of, save_profile
+from hcard.calibration.report import (
+    DPI,
+    FIT_INCHES,
+    FORMAT,
+    PANEL_INCHES,
+    residuals_grid,
+    write_report,
+)
+from hcard.physics import PredictorError
+from hcard.plugins.registry import get_registry
+
+pytest.importorskip("hcard_builtins")
+from hcard_builtins.physics.ultrasonic import DimensionlessGroup
+
+
+def _recording(n: int = 6000, fs: float = 1000.0, seed: int = 0) -> Measurement:
+    """Strokes of random speed and load over random UV amplitudes; the friction reduction
+    falls with speed (a hidden ultrasonic-speed effect, exponent -0.6)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / fs
+    stroke = np.arange(n) // 300
+    speed = np.repeat(rng.uniform(0.02, 0.15, stroke.max() + 1), 300)[:n]
+    speed = speed * np.where(stroke % 2 == 0, 1.0, -1.0)
+    fn = np.repeat(rng.uniform(0.2, 1.5, stroke.max() + 1), 300)[:n]
+    amp = np.repeat(rng.uniform(0.0, 3e-6, n // 30 + 1), 30)[:n]
+    mu = DimensionlessGroup(psi_star=1.7).forward(
+        amplitude=amp, speed=np.abs(speed), normal_force=fn, frequency=27500.0
+    )
+    mu = 1.0 - (1.0 - mu) * (np.abs(speed) / 0.02) ** -0.6
+    force = 0.5 * fn * mu + rng.normal(0.0, 0.002, n)
+    return Measurement(
+        t=t,
+        normal_force=fn,
+        lateral_force=force * np.sign(speed),
+        amplitude=amp,
+        speed=speed,
+        conditions={"device": "test", "plate_frequency_hz": 27500},
+    )
+
+
+@pytest.fixture(scope="module")
+def result():
+    data = prepare([_recording()])
+    library = list(get_registry().calibration_effects.values())
+    return calibrate(data, DimensionlessGroup(), library)
+
+
+@pytest.fixture(scope="module")
+def report(result, tmp_path_factory):
+    return write_report(result, tmp_path_factory.mktemp("report") / "new" / "dir")
+
+
+def test_result_finds_the_speed_effect(result):
+    assert "ultrasonic-speed" in result.after.effects
+
+
+def test_markdown_leads_with_errors_verdict_and_effect(result, report):
+    head = "\n".join(report.markdown.read_text(encoding="utf-8").splitlines()[:10])
+    assert f"{result.before.test_rmse * 1e3:.4g} mN" in head
+    assert f"{result.after.test_rmse * 1e3:.4g} mN" in head
+    assert result.verdict in head
+    assert "ultrasonic-speed" in head
+    value = result.effect_parameters("ultrasonic-speed")["speed_exponent"][0]
+    assert f"speed_exponent = {value:.4g}" in head
+
+
+def test_markdown_sections_and_figure_links(result, report):
+    text = report.markdown.read_text(encoding="utf-8")
+    for section in (
+        "## Selection criterion",
+        "## Data",
+        "## Candidates",
+        "## Effects skipped",
+        "## Structure left",
+        "## Residual analysis",
+        "## Parameters",
+        "## Figures",
+        "## Wall time",
+    ):
+        assert section in text
+    assert result.settings.criterion() in text
+    assert result.data.split in text
+    assert "](residuals.png)" in text and "](fit.png)" in text
+    for name in result.skipped:
+        assert f"- {name}:" in text
+
+
+def test_json_content(result, report):
+    content = json.loads(report.json.read_text(encoding="utf-8"))
+    assert content["format"] == FORMAT
+    assert content["held_out_rmse_n"]["before"] == result.before.test_rmse
+    assert content["held_out_rmse_n"]["after"] == result.after.test_rmse
+    assert content["verdict"] == result.verdict
+    assert len(content["candidates"]) == len(result.candidates)
+    assert content["profile"]["format"] == PROFILE_FORMAT
+    assert content["figures"] == ["residuals.png", "fit.png"]
+
+    def finite(value):
+        if isinstance(value, dict):
+            return all(finite(v) for v in value.values())
+        if isinstance(value, list):
+            return all(finite(v) for v in value)
+        return not isinstance(value, float) or math.isfinite(value)
+
+    assert finite(content)
+
+
+def test_figures_are_pngs_of_the_expected_size(result, report):
+    assert [p.name for p in report.figures] == ["residuals.png", "fit.png"]
+    rows, columns = residuals_grid(len(result.data.regressors))
+    expected = {
+        "residuals.png": (
+            round(PANEL_INCHES[1] * rows * DPI),
+            round(PANEL_INCHES[0] * columns * DPI),
+        ),
+        "fit.png": (round(FIT_INCHES[1] * DPI), round(FIT_INCHES[0] * DPI)),
+    }
+    for path in report.figures:
+        assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        assert imread(path).shape[:2] == expected[path.name]
+
+
+def test_no_figures(result, tmp_path):
+    files = write_report(result, tmp_path, figures=False)
+    assert files.figures == []
+    assert not (tmp_path / "residuals.png").exists()
+    assert "## Figures" not in files.markdown.read_text(encoding="utf-8")
+
+
+def test_refuses_a_file_as_directory(result, tmp_path):
+    target = tmp_path / "report"
+    target.write_text("not a directory")
+    with pytest.raises(PredictorError, match="not a directory"):
+        write_report(result, target, figures=False)
+
+
+def _forward(predictor, data):
+    names = {v.name for v in predictor.inputs}
+    return predictor.forward(**{k: v for k, v in data.inputs.items() if k in names})
+
+
+def test_profile_round_trip(result, report):
+    profile = json.loads(report.profile.read_text(encoding="utf-8"))
+    assert profile == profile_of(result)
+    assert profile["effects"] == list(result.after.effects)
+    assert profile["parameters"]["ultrasonic-speed.speed_exponent"]["fitted"] is True
+    assert profile["parameters"]["poisson_ratio"]["uncertainty"] is None
+    loaded = load_profile(report.profile)
+    expected = _forward(result.after.fit.predictor, result.data)
+    np.testing.assert_allclose(_forward(loaded, result.data), expected, rtol=0, atol=1e-12)
+
+
+def _broken(tmp_path, result, change):
+    path = tmp_path / "broken-profile.json"
+    save_profile(result, path)
+    raw = json.loads(path.read_text(encoding="utf-8"))
+    change(raw)
+    path.write_text(json.dumps(raw), encoding="utf-8")
+    return path
+
+
+def _set(raw, key, value):
+    raw[key] = value
+
+
+@pytest.mark.parametrize(
+    ("change", "field"),
+    [
+        (lambda raw: _set(raw, "model", "no-such-model"), "model"),
+        (lambda raw: _set(raw, "effects", ["no-such-effect"]), "effects[0]"),
+        (
+            lambda raw: _set(raw["parameters"], "bogus", {"value": 1.0, "unit": ""}),
+            "bogus",
+        ),
+        (lambda raw: _set(raw["parameters"]["force_offset"], "unit", "mN"), "force_offset"),
+        (lambda raw: raw["parameters"].pop("psi_star"), "psi_star"),
+        (lambda raw: _set(raw, "format", "other/1"), "format"),
+    ],
+)
+def test_profile_errors_name_file_and_field(result, tmp_path, change, field):
+    path = _broken(tmp_path, result, change)
+    with pytest.raises(PredictorError) as info:
+        load_profile(path)
+    assert path.name in str(info.value)
+    assert field in str(info.value)
+
+
+def test_profile_missing_file_and_bad_json(tmp_path):
+    missing = tmp_path / "missing-profile.json"
+    with pytest.raises(PredictorError, match=r"missing-profile\.json"):
+        load_profile(missing)
+    bad = tmp_path / "bad-profile.json"
+    bad.write_text("{not json", encoding="utf-8")
+    with pytest.raises(PredictorError, match=r"bad-profile\.json"):
+        load_profile(bad)
