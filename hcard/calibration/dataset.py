@@ -22,7 +22,12 @@ import numpy as np
 
 from hcard.calibration.effects import recent_change, time_since_change
 from hcard.calibration.measurement import Measurement, MeasurementError
-from hcard.calibration.splits import split_by_stroke, split_by_time_blocks, stroke_ids
+from hcard.calibration.splits import (
+    CONTACT_THRESHOLD_N,
+    split_by_stroke,
+    split_by_time_blocks,
+    stroke_ids,
+)
 
 ATMOSPHERE_PA = 101_325.0
 """Ambient pressure assumed for a recording whose sidecar gives none, Pa."""
@@ -42,8 +47,10 @@ SPLITS = ("stroke", "time")
 class CalibrationData:
     """Samples of one or more recordings, ready for :func:`hcard.calibration.loop.calibrate`.
 
-    Only samples in contact (stroke id >= 0) are kept, in time order within each recording and
-    recordings in the order given.
+    Every sample is kept, in time order within each recording and recordings in the order
+    given, so that effects with memory see the whole input history; only samples in contact
+    (stroke id >= 0) are in the training or held-out split, and only they are fitted and
+    analysed (:attr:`used`).
 
     Attributes:
         inputs: model inputs by name, SI units, each shape (n,): ``normal_force`` (N),
@@ -65,6 +72,8 @@ class CalibrationData:
         conditions: each recording's sidecar.
         time_ordered: whether the samples are a time series (False for steady-state points,
             e.g. a table of measurements): the loop then ignores structure in sample order.
+        zeroing: per recording re-zeroed, ``(lifts, drift)``: the number of lifts at which the
+            lateral-force zero was measured and the peak-to-peak of that zero, N.
     """
 
     inputs: dict[str, np.ndarray]
@@ -78,9 +87,15 @@ class CalibrationData:
     split: str
     conditions: tuple[dict, ...] = field(default_factory=tuple)
     time_ordered: bool = True
+    zeroing: tuple[tuple[int, float], ...] = ()
 
     def __len__(self) -> int:
         return int(self.observed.shape[0])
+
+    @property
+    def used(self) -> np.ndarray:
+        """Mask of the samples fitted or held out (in contact), shape (n,)."""
+        return self.train | self.test
 
     def subset(self, mask: np.ndarray) -> dict[str, np.ndarray]:
         """The inputs restricted to ``mask`` (a boolean array of length n)."""
@@ -105,6 +120,42 @@ def strokes_since_rest(t: np.ndarray, ids: np.ndarray, rest_s: float = REST_S) -
         out[where] = count
         last_end = end
     return out
+
+
+MIN_LIFT_SAMPLES = 3
+"""Out-of-contact samples a lift needs for its zero to count."""
+
+
+def sensor_zero(
+    t: np.ndarray, lateral: np.ndarray, contact: np.ndarray
+) -> tuple[np.ndarray, int]:
+    """The lateral-force sensor's zero over a recording, N, and the number of lifts used.
+
+    While the finger is lifted the sensor reads its own zero (offset plus drift). The zero of
+    each lift (a run of at least :data:`MIN_LIFT_SAMPLES` out-of-contact samples) is the median
+    of its samples, placed at the run's mean time; between lifts it is interpolated linearly in
+    time, and before the first (after the last) lift it continues the line through the first
+    (last) two lifts; with one lift it is constant. A recording without a lift gets a zero of 0
+    (the fitted ``force_offset`` then takes a constant zero).
+    """
+    off = ~contact
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], off.astype(np.int8), [0]])))
+    times: list[float] = []
+    values: list[float] = []
+    for start, end in zip(edges[::2], edges[1::2], strict=True):
+        if end - start >= MIN_LIFT_SAMPLES:
+            times.append(float(np.mean(t[start:end])))
+            values.append(float(np.median(lateral[start:end])))
+    if not times:
+        return np.zeros_like(lateral), 0
+    zero = np.interp(t, times, values)
+    if len(times) >= 2:  # continue the nearest two lifts' trend before the first, after the last
+        for (t0, z0), (t1, z1), outside in (
+            ((times[0], values[0]), (times[1], values[1]), t < times[0]),
+            ((times[-2], values[-2]), (times[-1], values[-1]), t > times[-1]),
+        ):
+            zero[outside] = z0 + (z1 - z0) * (t[outside] - t0) / (t1 - t0)
+    return zero, len(times)
 
 
 def friction_force(
@@ -142,6 +193,7 @@ def prepare(
     test_fraction: float = 0.25,
     seed: int = 0,
     rest_s: float = REST_S,
+    rezero: bool = True,
 ) -> CalibrationData:
     """Concatenate ``measurements`` into a :class:`CalibrationData` with a held-out split.
 
@@ -154,6 +206,8 @@ def prepare(
         test_fraction: share of strokes (or of time) held out, in (0, 1).
         seed: random seed of the stroke draw.
         rest_s: pause that rests the finger, s (see :func:`strokes_since_rest`).
+        rezero: subtract the lateral-force sensor's zero, measured at every lift
+            (:func:`sensor_zero`), so that its drift is not taken for friction.
 
     Raises:
         MeasurementError: no recordings, recordings with different actuation columns, a
@@ -177,6 +231,7 @@ def prepare(
     test_parts: list[np.ndarray] = []
     rates: list[float] = []
     labels: list[str] = []
+    zeroing: list[tuple[int, float]] = []
     for index, m in enumerate(measurements):
         label = _label(m, index)
         ids = stroke_ids(m)
@@ -196,18 +251,27 @@ def prepare(
             raise MeasurementError(f"{label}: {exc}") from None
         train[train_idx] = True
         test[test_idx] = True
-        train_parts.append(train[keep])
-        test_parts.append(test[keep])
+        train &= keep
+        test &= keep
+        train_parts.append(train)
+        test_parts.append(test)
 
         t = m.t - m.t[0]
         speed = m.speed
-        force = friction_force(m.lateral_force, speed, keep)
+        lateral = m.lateral_force
+        if rezero:
+            zero, lifts = sensor_zero(m.t, lateral, keep)
+            lateral = lateral - zero
+            zeroing.append((lifts, float(np.ptp(zero))))
+        force = friction_force(lateral, speed, keep)
         pressure = m.conditions.get("ambient_pressure_pa") or ATMOSPHERE_PA
         frequency = m.plate_frequency
         if frequency is None and m.conditions.get("plate_frequency_hz"):
             frequency = np.full(n, float(m.conditions["plate_frequency_hz"]))
         columns_of = {
-            "normal_force": m.normal_force,
+            # Out of contact the recorded force is sensor noise around 0, which some models
+            # refuse (Eq. 4.1 divides by Fn): those samples, never fitted, take the threshold.
+            "normal_force": np.maximum(m.normal_force, CONTACT_THRESHOLD_N),
             "time": t,
             "stroke": strokes_since_rest(m.t, ids, rest_s).astype(np.float64),
             "pressure": np.full(n, float(pressure)),
@@ -226,7 +290,7 @@ def prepare(
         }
         for name, values in columns_of.items():
             if values is not None:
-                parts.setdefault(name, []).append(np.asarray(values, dtype=np.float64)[keep])
+                parts.setdefault(name, []).append(np.asarray(values, dtype=np.float64))
         if n > 1:
             rates.append(1.0 / float(np.median(np.diff(m.t))))
         labels.append(label)
@@ -286,4 +350,5 @@ def prepare(
         sample_rate_hz=float(np.median(rates)) if rates else 1.0,
         split=how,
         conditions=tuple(dict(m.conditions) for m in measurements),
+        zeroing=tuple(zeroing),
     )

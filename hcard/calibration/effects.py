@@ -240,16 +240,19 @@ def _segments(t: np.ndarray) -> list[slice]:
     return [slice(a, b) for a, b in itertools.pairwise(starts)]
 
 
-def high_pass(x: Any, t: Any, tau: float) -> np.ndarray:
+def high_pass(x: Any, t: Any, tau: float, step_offset: float = 0.5) -> np.ndarray:
     """First-order high-pass of ``x`` sampled at times ``t`` (s), time constant ``tau`` (s).
 
-    ``e_k = a_k e_{k-1} + sqrt(a_k) (x_k - x_{k-1})`` with ``a_k = exp(-(t_k - t_{k-1})/tau)``:
-    exact for an input that changes in steps midway between samples (a sampled recording only
-    says that the change happened between two samples), and zero before the first sample (so
+    ``e_k = a_k e_{k-1} + a_k^theta (x_k - x_{k-1})`` with ``a_k = exp(-(t_k - t_{k-1})/tau)``
+    and ``theta = step_offset``: exact for an input that changes in steps a fraction ``theta``
+    of the sample interval before the sample that first shows the new value. The default 1/2
+    (midway) suits a measured input, of which a recording only says that it changed between
+    two samples; 0 suits a command logged at the instant it changes (the response is then zero
+    at that sample). The recording starts from rest (so``
     ``e_0 = x_0``: the drive is switched on when the recording starts). The discrete form of
-    ``tau s / (1 + tau s)`` (Eq. 3.22); as ``tau -> 0`` it vanishes and as ``tau -> inf`` it
-    passes ``x`` unchanged. Without a time axis (scalar or constant ``t``) the input is returned
-    unchanged. Where time decreases a new recording starts, from rest.
+    ``tau s / (1 + tau s)`` (Eq. 3.22); as ``tau -> inf`` it passes ``x`` unchanged, and as
+    ``tau -> 0`` it vanishes when ``theta > 0``. Without a time axis (scalar or constant ``t``)
+    the input is returned unchanged. Where time decreases a new recording starts, from rest.
     """
     series = _series(x, t)
     if series is None:
@@ -257,14 +260,14 @@ def high_pass(x: Any, t: Any, tau: float) -> np.ndarray:
     x_arr, t_arr = series
     if not (math.isfinite(tau) and tau > 0):
         raise PredictorError(f"time constant must be positive, got {tau}")
+    if not 0.0 <= step_offset <= 1.0:
+        raise PredictorError(f"step offset must lie in [0, 1], got {step_offset}")
     parts = _segments(t_arr)
-    if len(parts) > 1:
-        return np.concatenate([_high_pass(x_arr[p], t_arr[p], tau) for p in parts])
-    return _high_pass(x_arr, t_arr, tau)
+    return np.concatenate([_high_pass(x_arr[p], t_arr[p], tau, step_offset) for p in parts])
 
 
-def _high_pass(x_arr: np.ndarray, t_arr: np.ndarray, tau: float) -> np.ndarray:
-    """:func:`high_pass` of one recording (time increasing strictly).
+def _high_pass(x_arr: np.ndarray, t_arr: np.ndarray, tau: float, theta: float) -> np.ndarray:
+    """:func:`high_pass` of one recording (time increasing strictly), step offset ``theta``.
 
     Vectorised by runs of equal sample interval (one IIR filter per run, its state carried
     over), so that a recording with gaps (a training split without its held-out strokes)
@@ -278,7 +281,7 @@ def _high_pass(x_arr: np.ndarray, t_arr: np.ndarray, tau: float) -> np.ndarray:
         return out
     dt = np.diff(t_arr)
     decay = np.exp(-dt / tau)
-    drive = np.sqrt(decay) * np.diff(x_arr)
+    drive = np.power(decay, theta) * np.diff(x_arr)
     # Runs of (nearly) equal intervals: a new run where the interval changes.
     change = np.flatnonzero(np.abs(np.diff(dt)) > 1e-9 * dt[1:]) + 1
     starts = [0, *change.tolist()]
@@ -292,16 +295,17 @@ def _high_pass(x_arr: np.ndarray, t_arr: np.ndarray, tau: float) -> np.ndarray:
     return out
 
 
-def low_pass(x: Any, t: Any, tau: float) -> np.ndarray:
+def low_pass(x: Any, t: Any, tau: float, step_offset: float = 0.5) -> np.ndarray:
     """First-order low-pass of ``x`` at times ``t`` (s), time constant ``tau`` (s):
-    ``x - high_pass(x, t, tau)`` (zero before the first sample, so it starts from rest:
-    ``y_0 = 0``, ``y_k = a_k y_{k-1} + (1 - a_k) x_{k-1}``). Without a time axis the input is
-    returned unchanged (the steady state)."""
+    ``x - high_pass(x, t, tau, step_offset)``, starting from rest (``y_0 = 0``). With
+    ``step_offset = 0`` (steps at the sample instants) this is
+    ``y_k = a_k y_{k-1} + (1 - a_k) x_{k-1}``. Without a time axis the input is returned
+    unchanged (the steady state)."""
     series = _series(x, t)
     if series is None:
         return np.asarray(x, dtype=np.float64)
     x_arr, t_arr = series
-    return x_arr - high_pass(x_arr, t_arr, tau)
+    return x_arr - high_pass(x_arr, t_arr, tau, step_offset)
 
 
 def time_since_change(x: Any, t: Any) -> np.ndarray:

@@ -179,6 +179,7 @@ def fit_predictor(
     free: Sequence[str] | None = None,
     train: np.ndarray | None = None,
     test: np.ndarray | None = None,
+    dynamic: bool = False,
 ) -> FitResult:
     """Fit ``predictor``'s free parameters to ``observed`` by bounded least squares.
 
@@ -194,6 +195,11 @@ def fit_predictor(
             ``test``).
         test: boolean mask or indices of the held-out samples (default: every sample not in
             ``train``; none when neither is given).
+        dynamic: evaluate the model on every sample, in the order given, and compare it with
+            the training samples only. Needed for a model with memory (a filter over time),
+            whose state at a training sample depends on the inputs of the samples between
+            (held-out strokes, rests); those samples' inputs are used, never their observed
+            outputs. Default: evaluate on the training samples alone (faster).
 
     Returns:
         A :class:`FitResult`.
@@ -276,7 +282,10 @@ def fit_predictor(
         return np.broadcast_to(np.asarray(out, dtype=np.float64), (size,))
 
     def residual(x: np.ndarray) -> np.ndarray:
-        r = model(x, train_inputs, n_train) - y_train
+        if dynamic:
+            r = model(x, arrays, n)[train_mask] - y_train
+        else:
+            r = model(x, train_inputs, n_train) - y_train
         if not np.all(np.isfinite(r)):
             shown = ", ".join(f"{k}={v:.6g}" for k, v in physical(x).items())
             raise PredictorError(f"fit failed: model gives non-finite output at {shown}")

@@ -77,7 +77,8 @@ class LoopSettings:
         min_improvement: relative fall of the held-out RMSE an added effect must bring.
         alpha: significance level of the residual F-tests.
         min_eta2: share of residual variance a regressor must explain for the final residual to
-            count as structured.
+            count as structured (10 %: samples of one stroke share its speed and force, so a
+            slow sensor drift left per stroke already explains a few percent by chance).
         signature_eta2: share an effect's signature regressor must explain in the current
             residual for the effect to be credited.
         min_autocorrelation: lag-1 autocorrelation of the final residual above which it counts
@@ -88,7 +89,7 @@ class LoopSettings:
 
     min_improvement: float = 0.05
     alpha: float = 0.01
-    min_eta2: float = 0.05
+    min_eta2: float = 0.10
     signature_eta2: float = 0.01
     min_autocorrelation: float = 0.5
     max_effects: int = 4
@@ -380,6 +381,7 @@ def calibrate(
             free=_free(model, base_free, effects),
             train=data.train,
             test=data.test,
+            dynamic="time" in wanted,
         )
 
     def fit_candidate(effect: Effect, current_fit: FitResult) -> FitResult:
@@ -397,12 +399,13 @@ def calibrate(
 
     def analyse(result: FitResult) -> ResidualReport:
         return analyse_residuals(
-            result.residuals,
-            data.regressors,
+            result.residuals[used],
+            {name: values[used] for name, values in data.regressors.items()},
             sample_rate_hz=data.sample_rate_hz,
             bins=settings.bins,
         )
 
+    used = data.used
     skipped: dict[str, str] = {}
     usable: list[Effect] = []
     for effect in library:

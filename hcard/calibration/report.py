@@ -320,7 +320,8 @@ def report_markdown(result: CalibrationResult, figures: Sequence[str] = ()) -> s
     lines += ["## Data", ""]
     lines += [f"- Source: {source}" for source in data.sources]
     lines += [
-        f"- Samples: {len(data)} ({int(np.count_nonzero(data.train))} training, "
+        f"- Samples: {len(data)}, {int(np.count_nonzero(data.used))} in contact "
+        f"({int(np.count_nonzero(data.train))} training, "
         f"{int(np.count_nonzero(data.test))} held out)",
         f"- Split: {data.split}",
         f"- Sample rate: {data.sample_rate_hz:.4g} Hz",
@@ -442,7 +443,7 @@ def residuals_figure(result: CalibrationResult) -> Figure:
     )
     FigureCanvasAgg(fig)
     before = result.before.fit.residuals * 1e3
-    pick = _subsample(np.arange(before.size), MAX_SCATTER)
+    pick = _subsample(np.flatnonzero(result.data.used), MAX_SCATTER)
     low, high = np.percentile(before[pick], [1.0, 99.0]) if pick.size else (0.0, 0.0)
     if not names:
         ax = fig.add_subplot(1, 1, 1)

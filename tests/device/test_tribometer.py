@@ -85,7 +85,7 @@ def test_clean_coupled_and_ev_follow_eq_4_1():
     on = _contact(e)
     excess = e.lateral_force[on] / MU0 - e.normal_force[on]
     np.testing.assert_allclose(excess, kacz.forward(voltage=e.voltage[on]), rtol=1e-9)
-    assert np.all(np.abs(e.voltage) >= 50) and np.all(np.abs(e.voltage) <= 250)
+    assert np.all(np.abs(e.voltage) >= 200) and np.all(np.abs(e.voltage) <= 1500)
 
 
 def test_protocol_kinematics_and_commands():

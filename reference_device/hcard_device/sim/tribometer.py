@@ -99,8 +99,10 @@ PATCH_EDGE_M = 1e-3
 MAX_AMPLITUDE_M = 3e-6
 """Largest commanded amplitude level of the UV protocol, m peak-to-peak."""
 
-VOLTAGE_RANGE_V = (50.0, 250.0)
-"""Range of the EV square wave's magnitude, drawn per stroke, V."""
+VOLTAGE_RANGE_V = (200.0, 1500.0)
+"""Default range of the EV square wave's magnitude, drawn per stroke, V: within the coupled
+stimulator's 2 kV amplifier, and the 1.4-2 kV of the thesis's force measurements (Table 3.4),
+which a 90 um insulator needs for an electrostatic force comparable to the normal force."""
 
 REST_NOISE_LIMIT_N = 0.009
 """The recorded normal force during rests stays within +- this, N (below the 0.01 N contact
@@ -130,8 +132,9 @@ class Protocol:
         rest_s: rest out of contact between sessions, s.
         amplitude_segment_s: UV: the commanded amplitude takes a new random level in
             0..3 um every segment, s.
-        voltage_segment_s: EV: the square wave's polarity flips every segment, s (its
-            magnitude, 50..250 V, is drawn per stroke).
+        voltage_segment_s: EV: the square wave's polarity flips every segment, s.
+        voltage_range_v: (low, high) of the square wave's magnitude, drawn uniformly per
+            stroke, V.
         pressures_pa: ambient pressures, one recording each, Pa.
     """
 
@@ -144,6 +147,7 @@ class Protocol:
     rest_s: float = 1.0
     amplitude_segment_s: float = 0.03
     voltage_segment_s: float = 0.04
+    voltage_range_v: tuple[float, float] = VOLTAGE_RANGE_V
     pressures_pa: tuple[float, ...] = (101325.0,)
 
     def __post_init__(self) -> None:
@@ -160,7 +164,7 @@ class Protocol:
                 raise ValueError(f"Protocol.{name} must be a finite number > 0, got {value}")
         if not (math.isfinite(self.rest_s) and self.rest_s >= 0):
             raise ValueError(f"Protocol.rest_s must be a finite number >= 0, got {self.rest_s}")
-        for name in ("speed_range_m_s", "force_range_n"):
+        for name in ("speed_range_m_s", "force_range_n", "voltage_range_v"):
             low, high = getattr(self, name)
             if not (math.isfinite(low) and math.isfinite(high) and 0 < low <= high):
                 raise ValueError(f"Protocol.{name} must be (low, high) with 0 < low <= high")
@@ -265,12 +269,12 @@ def _schedule(protocol: Protocol, rng: np.random.Generator) -> _Schedule:
     t = np.arange(n) / protocol.sample_rate_hz
     end = t[-1]
     starts, speeds, forces, magnitudes, strokes, x_starts = [], [], [], [], [], []
-    time, x_pos, direction, magnitude = 0.0, X_START_M, 1.0, VOLTAGE_RANGE_V[0]
+    time, x_pos, direction, magnitude = 0.0, X_START_M, 1.0, protocol.voltage_range_v[0]
     while time <= end:
         for k in range(protocol.strokes_per_session):
             speed = rng.uniform(*protocol.speed_range_m_s)
             force = rng.uniform(*protocol.force_range_n)
-            magnitude = rng.uniform(*VOLTAGE_RANGE_V)
+            magnitude = rng.uniform(*protocol.voltage_range_v)
             starts.append(time)
             speeds.append(direction * speed)
             forces.append(force)
