@@ -188,7 +188,10 @@ class SkinRecovery(Effect):
 class ActuatorBandwidth(Effect):
     """The plate's own rise time: the vibration amplitude reaches its command through a
     first-order low-pass of time constant ``tau_a`` (section 4.3: about 1.5 ms for the fast
-    stimulator, 15 ms for a plate like [86]'s; Fig. 4.5)."""
+    stimulator, 15 ms for a plate like [86]'s; Fig. 4.5). The amplitude column is the command,
+    which changes at sample instants, so the step is taken at the sample that first shows it
+    (no response there yet: ``step_offset = 0`` of :func:`~hcard.calibration.effects.low_pass`).
+    """
 
     name: ClassVar[str] = "actuator-bandwidth"
     description: ClassVar[str] = (
@@ -219,7 +222,9 @@ class ActuatorBandwidth(Effect):
     ) -> dict[str, np.ndarray]:
         """``amplitude`` replaced by its low-pass over ``time`` (unchanged without a time axis)."""
         out = dict(inputs)
-        out["amplitude"] = low_pass(inputs["amplitude"], inputs["time"], params["time_constant"])
+        out["amplitude"] = low_pass(
+            inputs["amplitude"], inputs["time"], params["time_constant"], step_offset=0.0
+        )
         return out
 
 
