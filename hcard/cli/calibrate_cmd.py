@@ -111,7 +111,13 @@ def _fraction(text: str, what: str) -> float:
     show_default=True,
     help="Held-out RMSE fall an added effect must bring.",
 )
-@click.option("--max-effects", default=4, show_default=True, help="Most effects added.")
+@click.option(
+    "--max-effects",
+    default=4,
+    show_default=True,
+    type=click.IntRange(min=0),
+    help="Most effects added.",
+)
 @click.option(
     "--output",
     "-o",
@@ -152,6 +158,11 @@ def calibrate_command(
     the answer. The report leads with the held-out error before and after.
     """
     started = time.perf_counter()
+    held_out = _fraction(test_fraction, "--test-fraction")
+    settings = LoopSettings(
+        min_improvement=_fraction(min_improvement, "--min-improvement"),
+        max_effects=max_effects,
+    )
     registry = get_registry()
     base = registry.get("predictor", model_name)  # the error lists the installed models
     library = registry.calibration_effects
@@ -198,12 +209,8 @@ def calibrate_command(
     prepared = prepare(
         measurements,
         split=split,
-        test_fraction=_fraction(test_fraction, "--test-fraction"),
+        test_fraction=held_out,
         seed=seed,
-    )
-    settings = LoopSettings(
-        min_improvement=_fraction(min_improvement, "--min-improvement"),
-        max_effects=max_effects,
     )
     result = calibrate(prepared, base, candidates, free=free, settings=settings, progress=say)
     say("writing the report")

@@ -1,0 +1,140 @@
+"""``hcard calibrate``: the loop from the command line, its report, profile and user errors."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from hcard.calibration.dataset import prepare
+from hcard.calibration.measurement import read_measurement
+from hcard.calibration.profile import load_profile
+from hcard.cli.main import cli
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 20 s UV recording with a hidden speed dependence, written by the synthesize command."""
+    out = tmp_path_factory.mktemp("recordings")
+    result = CliRunner().invoke(
+        cli,
+        [
+            "device",
+            "synthesize",
+            "--device",
+            "uv",
+            "--effect",
+            "ultrasonic-speed",
+            "--effect-param",
+            "ultrasonic-speed.speed_exponent=-0.6",
+            "--duration",
+            "20s",
+            "--noise",
+            "1.5mN",
+            "--drift",
+            "2mN",
+            "--seed",
+            "4",
+            "-o",
+            str(out),
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def test_calibrate_writes_a_report_that_leads_with_the_held_out_error(
+    recorded: Path, tmp_path: Path
+) -> None:
+    out = tmp_path / "report"
+    result = CliRunner().invoke(
+        cli, ["calibrate", str(recorded), "--model", "dimensionless-group", "-o", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    lines = result.stdout.splitlines()
+    assert lines[0].startswith("held-out RMSE ") and "Added to dimensionless-group" in lines[0]
+    assert lines[1].strip().startswith("ultrasonic-speed: speed_exponent = -0.6")
+    assert "round 1: ultrasonic-speed" in result.stderr  # progress, one line per fit
+    report = json.loads((out / "report.json").read_text())
+    before, after = report["held_out_rmse_n"]["before"], report["held_out_rmse_n"]["after"]
+    assert after < 0.5 * before
+    assert (
+        (out / "report.md")
+        .read_text()
+        .splitlines()[2]
+        .startswith(f"**Held-out RMSE: {before * 1e3:.4g} mN before, {after * 1e3:.4g} mN after")
+    )
+    for figure in ("residuals.png", "fit.png"):
+        assert (out / figure).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # The fitted profile loads back into the same model.
+    model = load_profile(out / "profile.json")
+    data = prepare([read_measurement(p) for p in sorted(recorded.glob("*.csv"))])
+    inputs = {k: v for k, v in data.inputs.items() if k in {var.name for var in model.inputs}}
+    residual = data.observed - model.forward(**inputs)
+    assert np.sqrt(np.mean(residual[data.test] ** 2)) == pytest.approx(after, rel=1e-9)
+
+
+def test_calibrate_strict_exits_2_when_structure_is_left(recorded: Path, tmp_path: Path) -> None:
+    # Without the speed effect among the candidates the structure cannot be explained.
+    result = CliRunner().invoke(
+        cli,
+        [
+            "calibrate",
+            str(recorded),
+            "-m",
+            "dimensionless-group",
+            "--exclude",
+            "ultrasonic-speed",
+            "--strict",
+            "--quiet",
+            "--no-figures",
+            "-o",
+            str(tmp_path),
+        ],
+    )
+    assert result.exit_code == 2, result.output
+    assert "Structured residual not explained by any known effect: against speed" in result.stdout
+    assert result.stderr == ""
+    assert not (tmp_path / "fit.png").exists()
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--model", "no-such-model"], "no-such-model"),
+        (["--model", "dimensionless-group", "--effect", "magic"], "unknown effect(s) magic"),
+        (
+            ["--model", "dimensionless-group", "--free", "psi_star,wrong"],
+            "unknown parameter(s) wrong",
+        ),
+        (["--model", "dimensionless-group", "--param", "mu0=abc"], "--param mu0"),
+        (["--model", "dimensionless-group", "--test-fraction", "150%"], "between 0 and 1"),
+    ],
+)
+def test_calibrate_user_errors_are_one_line(
+    recorded: Path, tmp_path: Path, args: list[str], message: str
+) -> None:
+    result = CliRunner().invoke(cli, ["calibrate", str(recorded), *args, "-o", str(tmp_path)])
+    assert result.exit_code == 1
+    assert message in result.output
+    assert "Traceback" not in result.output
+    assert len(result.output.strip().splitlines()) == 1
+    assert not any(tmp_path.iterdir())  # nothing written
+
+
+def test_calibrate_names_the_bad_file(tmp_path: Path) -> None:
+    bad = tmp_path / "rec.csv"
+    bad.write_text("t_s,fn_n,fl_n,amplitude_um\n0,0.5,0.2,1\n0,0.5,0.2,1\n")
+    (tmp_path / "rec.csv.json").write_text('{"device": "x"}')
+    result = CliRunner().invoke(cli, ["calibrate", str(bad), "-m", "dimensionless-group"])
+    assert result.exit_code == 1
+    assert "rec.csv:3" in result.output and "time" in result.output
+    missing = CliRunner().invoke(cli, ["calibrate", str(tmp_path / "nope.csv"), "-m", "coupled"])
+    assert missing.exit_code == 1 and "no such file" in missing.output
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    none = CliRunner().invoke(cli, ["calibrate", str(empty), "-m", "coupled"])
+    assert none.exit_code == 1 and "no .csv recordings" in none.output
