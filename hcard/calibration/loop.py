@@ -209,6 +209,7 @@ class CalibrationResult:
         seconds: wall time of the loop, s.
         effects_added: names of the effects added, in order.
         unit: unit of the observed quantity and of the errors (``"N"`` for a lateral force).
+        observation: what the data's observed values are (:data:`OBSERVATIONS`).
     """
 
     model: str
@@ -226,6 +227,7 @@ class CalibrationResult:
     seconds: float = 0.0
     effects_added: tuple[str, ...] = field(default=())
     unit: str = "N"
+    observation: str = "lateral_force"
 
     @property
     def improvement(self) -> float:
@@ -569,6 +571,7 @@ def calibrate(
         seconds=time.perf_counter() - started,
         effects_added=names,
         unit=unit,
+        observation=observation,
     )
 
 

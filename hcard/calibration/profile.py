@@ -6,6 +6,7 @@ dict (format :data:`FORMAT`)::
     {"format": "hcard-calibrated-profile/1",
      "model": "dimensionless-group",             # the base predictor's registered name
      "effects": ["ultrasonic-speed"],            # in the order the loop added them
+     "observation": "lateral_force",             # or "output": the model's own output
      "parameters": {"psi_star": {"value": 1.7, "unit": "", "uncertainty": 7e-4,
                                  "fitted": true}, ...},
      "held_out_rmse_n": 0.002, "train_rmse_n": 0.002,
@@ -74,6 +75,7 @@ def profile_of(result: CalibrationResult) -> dict[str, Any]:
         "format": FORMAT,
         "model": result.model,
         "effects": list(after.effects),
+        "observation": result.observation,
         "parameters": parameter_table(after.fit),
         "held_out_rmse_n": _finite(after.test_rmse),
         "train_rmse_n": _finite(after.train_rmse),
@@ -111,7 +113,8 @@ def _field(raw: dict[str, Any], key: str, kind: type | tuple[type, ...], file: P
 
 def load_profile(path: str | os.PathLike[str], registry: PluginRegistry | None = None) -> Predictor:
     """The predictor a calibrated profile describes: ``lateral_force_model(augment(base,
-    effects)).with_params(**values)``, base and effects taken from ``registry`` (default: the
+    effects)).with_params(**values)`` (without the lateral-force wrapping when the profile's
+    ``observation`` is ``"output"``), base and effects taken from ``registry`` (default: the
     installed plugins, :func:`hcard.plugins.registry.get_registry`).
 
     Every parameter of the model must be in the profile, in the model's unit; nothing else may.
@@ -150,8 +153,15 @@ def load_profile(path: str | os.PathLike[str], registry: PluginRegistry | None =
                 f"available: {available}"
             )
         effects.append(effect)
+    observation = raw.get("observation", "lateral_force")
+    if observation not in ("lateral_force", "output"):
+        raise ProfileError(
+            f"{file}: field 'observation' is {observation!r}, expected 'lateral_force' or 'output'"
+        )
     try:
-        model = lateral_force_model(augment(base, effects))
+        model = augment(base, effects)
+        if observation == "lateral_force":
+            model = lateral_force_model(model)
     except PredictorError as exc:
         raise ProfileError(f"{file}: fields 'model'/'effects': {exc}") from None
 

@@ -519,8 +519,9 @@ def fit_figure(result: CalibrationResult) -> Figure:
     grid = fig.add_gridspec(1, 3)
     ax = fig.add_subplot(grid[0, :2])
     window = _held_out_stretch(result)
+    timed = data.time_ordered and "time" in data.inputs
     if window.size:
-        t = data.inputs["time"][window]
+        t = data.inputs["time"][window] if timed else window.astype(np.float64)
         held = data.test[window]
 
         def masked(values: np.ndarray) -> np.ndarray:
@@ -542,8 +543,9 @@ def fit_figure(result: CalibrationResult) -> Figure:
             label=f"after ({_mn(result.after.test_rmse)} mN)",
         )
         ax.legend(fontsize=8, loc="best")
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("lateral force [mN]")
+    ax.set_xlabel("time [s]" if timed else "sample")
+    quantity = "lateral force" if result.observation == "lateral_force" else "force"
+    ax.set_ylabel(f"{quantity} [mN]")
     ax.set_title("(a) held-out strokes (gaps: training samples)", fontsize=10)
 
     ax = fig.add_subplot(grid[0, 2])

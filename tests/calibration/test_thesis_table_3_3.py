@@ -56,3 +56,17 @@ def test_with_the_voltage_labels_swapped_the_residual_points_at_finger_size() ->
     area = swapped.after.fit.params["area"]
     assert 5e-6 < area < 1e-4
     assert np.isfinite(swapped.after.fit.uncertainties["area"])
+
+
+def test_the_report_and_profile_of_a_direct_force_calibration(tmp_path) -> None:
+    from hcard.calibration.profile import load_profile
+    from hcard.calibration.report import write_report
+
+    result = table.run(swap_voltages=True)
+    files = write_report(result, tmp_path)
+    text = files.markdown.read_text()
+    assert f"{result.before.test_rmse * 1e3:.4g} mN before" in text
+    model = load_profile(files.profile)  # the air-layer law itself, not a lateral force
+    assert model.output.name == "electrostatic_force"
+    predicted = model.forward(**result.data.inputs)
+    assert np.allclose(result.data.observed - predicted, result.after.fit.residuals, atol=1e-15)
