@@ -25,9 +25,9 @@ from hcard.calibration.measurement import Measurement, MeasurementError
 from hcard.calibration.splits import (
     CONTACT_THRESHOLD_N,
     split_by_stroke,
-    split_by_time_blocks,
     stroke_ids,
 )
+from hcard.physics import Predictor
 
 ATMOSPHERE_PA = 101_325.0
 """Ambient pressure assumed for a recording whose sidecar gives none, Pa."""
@@ -56,7 +56,9 @@ class CalibrationData:
         inputs: model inputs by name, SI units, each shape (n,): ``normal_force`` (N),
             ``time`` (s since the recording began), ``stroke`` (strokes since the finger last
             rested), ``pressure`` (Pa), and when recorded ``amplitude`` (m, peak-to-peak),
-            ``voltage`` (V), ``speed`` (m/s, magnitude), ``frequency`` (Hz).
+            ``voltage`` (V), ``speed`` (m/s, magnitude), ``plate_frequency`` (Hz: the plate's
+            vibration frequency, from the ``frequency`` column or the sidecar; a model's
+            ``frequency`` input when the model takes an ``amplitude``).
         observed: lateral (friction) force opposing the motion, N, shape (n,): the recorded
             force signed by the direction of the speed when there is a speed column, else
             its magnitude.
@@ -92,6 +94,16 @@ class CalibrationData:
     def __len__(self) -> int:
         return int(self.observed.shape[0])
 
+    def inputs_for(self, model: Predictor) -> dict[str, np.ndarray]:
+        """The inputs ``model`` declares, by its names: the plate frequency becomes the
+        ``frequency`` input of a model that takes an ``amplitude`` (a UV model; an EV model's
+        ``frequency`` is its voltage's, which a recording does not give)."""
+        available = dict(self.inputs)
+        names = {v.name for v in model.inputs}
+        if "plate_frequency" in available and "amplitude" in names:
+            available["frequency"] = available["plate_frequency"]
+        return {name: values for name, values in available.items() if name in names}
+
     @property
     def used(self) -> np.ndarray:
         """Mask of the samples fitted or held out (in contact), shape (n,)."""
@@ -125,6 +137,9 @@ def strokes_since_rest(t: np.ndarray, ids: np.ndarray, rest_s: float = REST_S) -
 MIN_LIFT_SAMPLES = 3
 """Out-of-contact samples a lift needs for its zero to count."""
 
+MIN_LIFTS_FOR_TREND = 3
+"""Lifts needed before the zero's trend is continued past the first and last lift."""
+
 
 def sensor_zero(
     t: np.ndarray, lateral: np.ndarray, contact: np.ndarray
@@ -134,27 +149,31 @@ def sensor_zero(
     While the finger is lifted the sensor reads its own zero (offset plus drift). The zero of
     each lift (a run of at least :data:`MIN_LIFT_SAMPLES` out-of-contact samples) is the median
     of its samples, placed at the run's mean time; between lifts it is interpolated linearly in
-    time, and before the first (after the last) lift it continues the line through the first
-    (last) two lifts; with one lift it is constant. A recording without a lift gets a zero of 0
-    (the fitted ``force_offset`` then takes a constant zero).
+    time; before the first (after the last) lift it continues with the slope of a least-squares
+    line through all lifts (weighted by their length) when there are at least
+    :data:`MIN_LIFTS_FOR_TREND`, else it is held constant. A recording without a lift gets a
+    zero of 0 (the fitted ``force_offset`` then takes a constant zero).
     """
     off = ~contact
     edges = np.flatnonzero(np.diff(np.concatenate([[0], off.astype(np.int8), [0]])))
     times: list[float] = []
     values: list[float] = []
+    weights: list[float] = []
     for start, end in zip(edges[::2], edges[1::2], strict=True):
         if end - start >= MIN_LIFT_SAMPLES:
             times.append(float(np.mean(t[start:end])))
             values.append(float(np.median(lateral[start:end])))
+            weights.append(float(end - start))
     if not times:
         return np.zeros_like(lateral), 0
     zero = np.interp(t, times, values)
-    if len(times) >= 2:  # continue the nearest two lifts' trend before the first, after the last
-        for (t0, z0), (t1, z1), outside in (
-            ((times[0], values[0]), (times[1], values[1]), t < times[0]),
-            ((times[-2], values[-2]), (times[-1], values[-1]), t > times[-1]),
-        ):
-            zero[outside] = z0 + (z1 - z0) * (t[outside] - t0) / (t1 - t0)
+    if len(times) >= MIN_LIFTS_FOR_TREND:
+        # Before the first and after the last lift: the trend of all lifts (least squares,
+        # weighted by their length), from the end lift's zero.
+        slope = float(np.polyfit(times, values, 1, w=np.sqrt(weights))[0])
+        before, after = t < times[0], t > times[-1]
+        zero[before] = values[0] + slope * (t[before] - times[0])
+        zero[after] = values[-1] + slope * (t[after] - times[-1])
     return zero, len(times)
 
 
@@ -180,6 +199,16 @@ def friction_force(
     return lateral if majority >= 0 else -lateral
 
 
+def split_by_time_fraction(m: Measurement, test_fraction: float) -> tuple[np.ndarray, np.ndarray]:
+    """Sample indices ``(train_idx, test_idx)``: the last ``test_fraction`` of the recording's
+    duration is held out (one time block, rule S4), the rest trains."""
+    span = float(m.t[-1] - m.t[0])
+    test = m.t >= m.t[0] + (1.0 - test_fraction) * span
+    if span <= 0 or test.all() or not test.any():
+        raise MeasurementError("a split by time needs a recording longer than one sample")
+    return np.flatnonzero(~test), np.flatnonzero(test)
+
+
 def _label(m: Measurement, index: int) -> str:
     device = m.conditions.get("device", "?")
     source = m.conditions.get("_source")
@@ -201,8 +230,8 @@ def prepare(
         measurements: one or more recordings (every one needs ``amplitude`` or ``voltage``;
             all must record the same actuation columns).
         split: ``"stroke"``: hold out ``test_fraction`` of each recording's strokes (rule S3,
-            drawn with ``seed``); ``"time"``: hold out the last of ``round(1 / test_fraction)``
-            equal time blocks of each recording (rule S4).
+            drawn with ``seed``); ``"time"``: hold out the last ``test_fraction`` of each
+            recording's duration (a time block, rule S4).
         test_fraction: share of strokes (or of time) held out, in (0, 1).
         seed: random seed of the stroke draw.
         rest_s: pause that rests the finger, s (see :func:`strokes_since_rest`).
@@ -226,6 +255,26 @@ def prepare(
             "recordings of one kind together"
         )
 
+    for column in ("speed", "x", "y", "stroke"):
+        have = [getattr(m, column) is not None for m in measurements]
+        if any(have) and not all(have):
+            lacking = ", ".join(
+                _label(m, i) for i, m in enumerate(measurements) if getattr(m, column) is None
+            )
+            raise MeasurementError(
+                f"column {column} is in some recordings but not in {lacking}; calibrate "
+                "recordings with the same columns together"
+            )
+    plate = [
+        m.plate_frequency is not None or bool(m.conditions.get("plate_frequency_hz"))
+        for m in measurements
+    ]
+    if any(plate) and not all(plate):
+        raise MeasurementError(
+            "the plate frequency (column frequency or sidecar plate_frequency_hz) is given for "
+            "some recordings but not all"
+        )
+
     parts: dict[str, list[np.ndarray]] = {}
     train_parts: list[np.ndarray] = []
     test_parts: list[np.ndarray] = []
@@ -245,8 +294,7 @@ def prepare(
             if split == "stroke":
                 train_idx, test_idx = split_by_stroke(m, test_fraction, seed + index)
             else:
-                blocks = max(2, round(1.0 / test_fraction))
-                train_idx, test_idx = split_by_time_blocks(m, blocks, (blocks - 1,))
+                train_idx, test_idx = split_by_time_fraction(m, test_fraction)
         except MeasurementError as exc:
             raise MeasurementError(f"{label}: {exc}") from None
         train[train_idx] = True
@@ -280,7 +328,7 @@ def prepare(
             "amplitude": m.amplitude,
             "voltage": m.voltage,
             "speed": None if speed is None else np.abs(speed),
-            "frequency": frequency,
+            "plate_frequency": frequency,
             "x": m.x,
             "y": m.y,
             "amplitude_history": None
@@ -310,7 +358,7 @@ def prepare(
         "amplitude",
         "voltage",
         "speed",
-        "frequency",
+        "plate_frequency",
     )
     inputs = {name: joined[name] for name in input_names if name in joined}
     regressor_names = (
@@ -319,7 +367,7 @@ def prepare(
         "amplitude",
         "voltage",
         "pressure",
-        "frequency",
+        "plate_frequency",
         "time",
         "stroke",
         "amplitude_history",
@@ -337,7 +385,7 @@ def prepare(
     how = (
         f"by stroke: {test_fraction:.0%} of each recording's strokes held out (seed {seed})"
         if split == "stroke"
-        else f"by time block: the last {test_fraction:.0%} of each recording held out"
+        else f"by time block: the last {test_fraction:.0%} of each recording's duration held out"
     )
     return CalibrationData(
         inputs=inputs,

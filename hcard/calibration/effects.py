@@ -16,7 +16,7 @@ parameters are the base's plus each effect's (named ``"<effect>.<parameter>"``),
 Regressor names used in signatures (all 1-D arrays aligned with the samples, SI units):
 
 - ``normal_force`` (N), ``speed`` (m/s), ``amplitude`` (m), ``voltage`` (V), ``pressure`` (Pa);
-- ``time`` (s): time in contact since the recording began;
+- ``time`` (s): time since the recording began (lifts included);
 - ``stroke`` (count): the stroke number of each sample;
 - ``voltage_history`` (s): time since the voltage last changed (:func:`time_since_change`);
 - ``amplitude_history`` (m): change of the amplitude over the last few time constants
@@ -248,9 +248,9 @@ def high_pass(x: Any, t: Any, tau: float, step_offset: float = 0.5) -> np.ndarra
     of the sample interval before the sample that first shows the new value. The default 1/2
     (midway) suits a measured input, of which a recording only says that it changed between
     two samples; 0 suits a command logged at the instant it changes (the response is then zero
-    at that sample). The recording starts from rest (so``
-    ``e_0 = x_0``: the drive is switched on when the recording starts). The discrete form of
-    ``tau s / (1 + tau s)`` (Eq. 3.22); as ``tau -> inf`` it passes ``x`` unchanged, and as
+    at that sample). The recording starts from rest, the drive switched on the same ``theta``
+    of the first interval before the first sample (``e_0 = a_1^theta x_0``). The discrete form
+    of ``tau s / (1 + tau s)`` (Eq. 3.22); as ``tau -> inf`` it passes ``x`` unchanged, and as
     ``tau -> 0`` it vanishes when ``theta > 0``. Without a time axis (scalar or constant ``t``)
     the input is returned unchanged. Where time decreases a new recording starts, from rest.
     """
@@ -276,11 +276,12 @@ def _high_pass(x_arr: np.ndarray, t_arr: np.ndarray, tau: float, theta: float) -
     out = np.empty_like(x_arr)
     if x_arr.size == 0:
         return out
-    out[0] = x_arr[0]
-    if x_arr.size == 1:
-        return out
     dt = np.diff(t_arr)
     decay = np.exp(-dt / tau)
+    # The drive is switched on theta of the first interval before the first sample.
+    out[0] = x_arr[0] * (decay[0] ** theta if dt.size else 1.0)
+    if x_arr.size == 1:
+        return out
     drive = np.power(decay, theta) * np.diff(x_arr)
     # Runs of (nearly) equal intervals: a new run where the interval changes.
     change = np.flatnonzero(np.abs(np.diff(dt)) > 1e-9 * dt[1:]) + 1

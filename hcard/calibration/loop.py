@@ -372,10 +372,18 @@ def calibrate(
             f"{', '.join(p.name for p in base.parameters)}"
         )
 
+    given = data.inputs_for(base)
+    missing = sorted(v.name for v in base.inputs if v.default is None and v.name not in given)
+    if missing:
+        raise PredictorError(
+            f"model {base.name} needs input(s) {', '.join(missing)}, which these recordings "
+            f"do not provide (they give {', '.join(sorted(data.inputs))})"
+        )
+
     def fit(effects: Sequence[Effect], start: Mapping[str, float]) -> FitResult:
         model = _model(base, effects, start, observation)
         wanted = {v.name for v in model.inputs}
-        inputs = {k: v for k, v in data.inputs.items() if k in wanted}
+        inputs = data.inputs_for(model)
         return fit_predictor(
             model,
             inputs,
@@ -405,6 +413,8 @@ def calibrate(
             {name: values[used] for name, values in data.regressors.items()},
             sample_rate_hz=data.sample_rate_hz,
             bins=settings.bins,
+            # in time: the residual on the recording's own sample grid, 0 where not fitted
+            series=np.where(used, result.residuals, 0.0),
         )
 
     used = data.used
@@ -489,33 +499,39 @@ def calibrate(
                 f"round {round_number}: {effect.name}: held-out RMSE {format_error(rmse, unit)} "
                 f"({-100 * gain:+.1f} %)"
             )
-        best = min(
-            (item for item in tried if item[1] is not None),
-            key=lambda item: item[0].score_change,
-            default=None,
-        )
-        accepted_name = None
-        if best is not None:
-            cand, result = best
+        fitted = [item for item in tried if item[1] is not None]
+
+        def failure(cand: Candidate) -> str:
+            """Why ``cand`` cannot be added (empty: it passes every check of the criterion)."""
             if cand.score_change >= 0:
-                reason = "does not lower the held-out criterion"
-            elif cand.improvement < settings.min_improvement:
-                reason = (
+                return "does not lower the held-out criterion"
+            if cand.improvement < settings.min_improvement:
+                return (
                     f"cuts the held-out RMSE by {cand.improvement:.1%}, less than "
                     f"{settings.min_improvement:.0%}"
                 )
-            elif cand.signature_eta2 < settings.signature_eta2:
-                reason = "the residual shows no structure against its signature"
-            else:
-                reason = ""
-                accepted_name = cand.effect
+            if cand.signature_eta2 < settings.signature_eta2:
+                return "the residual shows no structure against its signature"
+            return ""
+
+        passing = [item for item in fitted if not failure(item[0])]
+        best = min(fitted, key=lambda item: item[0].score_change, default=None)
+        chosen = min(passing, key=lambda item: item[0].score_change, default=None)
+        accepted_name = chosen[0].effect if chosen is not None else None
+        reason = failure(best[0]) if best is not None else ""
         for cand, _fit in tried:
             if cand.effect == accepted_name:
-                note = "added: best held-out criterion"
+                note = (
+                    "added: best held-out criterion"
+                    if best is not None and cand is best[0]
+                    else "added: best held-out criterion of the candidates that pass every check"
+                )
             elif cand.test_rmse is None:
                 note = cand.note
-            elif best is not None and cand is best[0]:
+            elif accepted_name is None and best is not None and cand is best[0]:
                 note = f"best of the round, not added: {reason}"
+            elif failure(cand):
+                note = f"not added: {failure(cand)}"
             else:
                 note = "a better candidate in this round"
             candidates.append(
@@ -554,6 +570,11 @@ def calibrate(
     else:
         verdict = NO_EFFECT
     summary = _summary(base.name, verdict, before, current, names, structure, unit)
+    if not usable:
+        summary += (
+            f" No effect of the library could be tried on {base.name} with these data"
+            " (see the skipped effects)."
+        )
     say(summary)
     return CalibrationResult(
         model=base.name,

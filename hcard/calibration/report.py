@@ -231,6 +231,10 @@ def report_dict(result: CalibrationResult, figures: Sequence[str] = ()) -> dict[
             "held_out_samples": int(np.count_nonzero(data.test)),
             "split": data.split,
             "sample_rate_hz": data.sample_rate_hz,
+            "sensor_zero": [
+                {"source": source, "lifts": lifts, "drift_n": _finite(drift)}
+                for source, (lifts, drift) in zip(data.sources, data.zeroing, strict=False)
+            ],
             "regressors": list(data.regressors),
         },
         "library": list(result.library),
@@ -324,6 +328,15 @@ def report_markdown(result: CalibrationResult, figures: Sequence[str] = ()) -> s
         f"({int(np.count_nonzero(data.train))} training, "
         f"{int(np.count_nonzero(data.test))} held out)",
         f"- Split: {data.split}",
+        *(
+            f"- Lateral-force zero of {source}: "
+            + (
+                f"measured at {lifts} lifts, drift {drift * 1e3:.3g} mN peak to peak, removed"
+                if lifts
+                else "no lift to measure it (a constant offset is fitted)"
+            )
+            for source, (lifts, drift) in zip(data.sources, data.zeroing, strict=False)
+        ),
         f"- Sample rate: {data.sample_rate_hz:.4g} Hz",
         f"- Regressors: {', '.join(data.regressors) or 'none'}",
         "",

@@ -239,6 +239,7 @@ def analyse_residuals(
     *,
     sample_rate_hz: float | None = None,
     bins: int = DEFAULT_BINS,
+    series: np.ndarray | None = None,
 ) -> ResidualReport:
     """Statistics of ``residual`` against each regressor and in time.
 
@@ -249,6 +250,9 @@ def analyse_residuals(
         sample_rate_hz: sampling rate (Hz) of a uniformly sampled residual, for the dominant
             frequency; None leaves it out.
         bins: quantile bins per regressor (at least 2).
+        series: the residual as a uniformly sampled time series for the time statistics
+            (e.g. with samples out of the fit, such as lifts, set to 0), when ``residual``
+            leaves samples out; default ``residual`` itself.
 
     Raises:
         PredictorError: empty or non-finite residual or regressor, mismatched lengths, too few
@@ -286,5 +290,5 @@ def analyse_residuals(
         n=r.size,
         rms=float(np.sqrt(np.mean(r**2))),
         regressors=results,
-        time=_time_stats(r, sample_rate_hz),
+        time=_time_stats(r if series is None else np.asarray(series, float), sample_rate_hz),
     )

@@ -128,6 +128,11 @@ def _fraction(text: str, what: str) -> float:
 )
 @click.option("--no-figures", is_flag=True, help="Skip the PNG figures.")
 @click.option(
+    "--no-rezero",
+    is_flag=True,
+    help="Do not re-measure the lateral-force zero at each lift (spec/calibration.md K4).",
+)
+@click.option(
     "--strict",
     is_flag=True,
     help="Exit with status 2 when structure is left that no effect explains.",
@@ -147,6 +152,7 @@ def calibrate_command(
     max_effects: int,
     output: Path,
     no_figures: bool,
+    no_rezero: bool,
     strict: bool,
     quiet: bool,
 ) -> None:
@@ -211,6 +217,7 @@ def calibrate_command(
         split=split,
         test_fraction=held_out,
         seed=seed,
+        rezero=not no_rezero,
     )
     result = calibrate(prepared, base, candidates, free=free, settings=settings, progress=say)
     say("writing the report")

@@ -188,10 +188,11 @@ class SkinRecovery(Effect):
 class ActuatorBandwidth(Effect):
     """The plate's own rise time: the vibration amplitude reaches its command through a
     first-order low-pass of time constant ``tau_a`` (section 4.3: about 1.5 ms for the fast
-    stimulator, 15 ms for a plate like [86]'s; Fig. 4.5). The amplitude column is the command,
-    which changes at sample instants, so the step is taken at the sample that first shows it
-    (no response there yet: ``step_offset = 0`` of :func:`~hcard.calibration.effects.low_pass`).
-    """
+    stimulator, 15 ms for a plate like [86]'s; Fig. 4.5). The amplitude column is the command;
+    when it changes relative to the force sampling is a second parameter, the step offset
+    ``theta`` of :func:`~hcard.calibration.effects.low_pass`: 0 when the command steps at the
+    sample that first shows it (no response there yet, the default), up to 1 a full sample
+    earlier. ``tau_a -> 0`` with ``theta = 1`` is the base model exactly (the neutral values)."""
 
     name: ClassVar[str] = "actuator-bandwidth"
     description: ClassVar[str] = (
@@ -203,7 +204,7 @@ class ActuatorBandwidth(Effect):
         "amplitude step the friction lags the commanded value"
     )
     signature: ClassVar[tuple[str, ...]] = ("amplitude_history",)
-    neutral: ClassVar[dict[str, float]] = {"time_constant": 1e-5}
+    neutral: ClassVar[dict[str, float]] = {"time_constant": 1e-5, "step_offset": 1.0}
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter(
             "time_constant",
@@ -212,6 +213,15 @@ class ActuatorBandwidth(Effect):
             (1e-5, 1.0),
             "section 4.3 (mechanical time response 1.5 ms; 15 ms for the plate of [86])",
             "first-order time constant tau_a of the vibration envelope",
+        ),
+        Parameter(
+            "step_offset",
+            "",
+            0.0,
+            (0.0, 1.0),
+            "sampling (not from the thesis): 0 = command steps at a sample instant",
+            "how long before the sample that first shows a new command it took effect, in "
+            "sample intervals",
         ),
     )
     inputs: ClassVar[tuple[Variable, ...]] = (TIME,)
@@ -223,7 +233,10 @@ class ActuatorBandwidth(Effect):
         """``amplitude`` replaced by its low-pass over ``time`` (unchanged without a time axis)."""
         out = dict(inputs)
         out["amplitude"] = low_pass(
-            inputs["amplitude"], inputs["time"], params["time_constant"], step_offset=0.0
+            inputs["amplitude"],
+            inputs["time"],
+            params["time_constant"],
+            step_offset=params["step_offset"],
         )
         return out
 

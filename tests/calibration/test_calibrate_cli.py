@@ -67,13 +67,14 @@ def test_calibrate_writes_a_report_that_leads_with_the_held_out_error(
         .splitlines()[2]
         .startswith(f"**Held-out RMSE: {before * 1e3:.4g} mN before, {after * 1e3:.4g} mN after")
     )
+    assert "measured at" in (out / "report.md").read_text()  # the sensor zero, rule K4
+    assert report["data"]["sensor_zero"][0]["lifts"] >= 3
     for figure in ("residuals.png", "fit.png"):
         assert (out / figure).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # The fitted profile loads back into the same model.
     model = load_profile(out / "profile.json")
     data = prepare([read_measurement(p) for p in sorted(recorded.glob("*.csv"))])
-    inputs = {k: v for k, v in data.inputs.items() if k in {var.name for var in model.inputs}}
-    residual = data.observed - model.forward(**inputs)
+    residual = data.observed - model.forward(**data.inputs_for(model))
     assert np.sqrt(np.mean(residual[data.test] ** 2)) == pytest.approx(after, rel=1e-9)
 
 
@@ -99,6 +100,7 @@ def test_calibrate_strict_exits_2_when_structure_is_left(recorded: Path, tmp_pat
     assert "Structured residual not explained by any known effect: against speed" in result.stdout
     assert result.stderr == ""
     assert not (tmp_path / "fit.png").exists()
+    assert "measured at" not in (tmp_path / "report.md").read_text()
 
 
 @pytest.mark.parametrize(

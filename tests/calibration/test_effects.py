@@ -287,3 +287,20 @@ def test_history_regressors() -> None:
     x = np.array([1.0, 1.0, 3.0, 3.0, 3.0, 2.0])
     assert np.allclose(time_since_change(x, t), [0.0, 0.5, 0.0, 0.5, 1.0, 0.0])
     assert np.allclose(recent_change(x, t, 0.5), [1.0, 0.0, 2.0, 0.0, 0.0, -1.0])
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c.effect.name for c in CASES])
+def test_an_effect_at_its_neutral_values_is_the_base(case: Case) -> None:
+    """The loop restarts a candidate fit from the neutral values, so they must give the base
+    (charge leakage within its bounds only approaches it: a 10 s time constant)."""
+    effect = case.effect
+    assert set(effect.neutral) <= {p.name for p in effect.parameters}
+    data = recording(case.rate_hz, seed=5)
+    base = case.base()
+    model = augment(base, [effect]).with_params(
+        **{f"{effect.name}.{k}": v for k, v in effect.neutral.items()}
+    )
+    inputs = {k: v for k, v in data.items() if k in {var.name for var in model.inputs}}
+    base_inputs = {k: v for k, v in inputs.items() if k in {var.name for var in base.inputs}}
+    tolerance = 2e-2 if effect.name == "charge-leakage" else 1e-9  # 1.2 % over 3 s
+    assert np.allclose(model.forward(**inputs), base.forward(**base_inputs), rtol=tolerance)

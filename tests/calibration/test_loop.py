@@ -249,3 +249,44 @@ def test_prepare_keeps_every_sample_and_splits_only_contact() -> None:
     )
     with pytest.raises(MeasurementError, match="no sample in contact"):
         prepare([lifted])
+
+
+def test_recordings_with_different_columns_are_refused_by_name() -> None:
+    first, second = recordings("uv", {}), recordings("uv", {}, seed=3)
+    second[0].speed = None
+    with pytest.raises(MeasurementError, match="column speed is in some recordings"):
+        prepare([first[0], second[0]])
+
+
+def test_a_split_by_time_holds_out_the_stated_share() -> None:
+    data = prepare(recordings("uv", {}), split="time", test_fraction=0.3)
+    t = data.inputs["time"]
+    assert t[data.test].min() >= 0.7 * t.max() - 1e-9
+    assert t[data.train].max() < 0.7 * t.max()
+    assert "the last 30% of each recording's duration" in data.split
+
+
+def test_a_model_input_the_recordings_lack_is_named() -> None:
+    registry = get_registry()
+    data = prepare(recordings("ev", {}))  # a voltage, but no voltage frequency
+    with pytest.raises(PredictorError, match=r"needs input.*frequency.*do not provide"):
+        calibrate(data, registry.get("predictor", "ev-charge-leakage"), [])
+
+
+def test_the_plate_frequency_is_a_uv_models_frequency_input() -> None:
+    (m,) = recordings("uv", {})
+    data = prepare([m])
+    uv = get_registry().get("predictor", UV)
+    given = data.inputs_for(uv)
+    assert np.all(given["frequency"] == m.conditions["plate_frequency_hz"])
+    assert "frequency" not in data.inputs_for(get_registry().get("predictor", EV))
+
+
+def test_no_applicable_candidate_is_said_plainly() -> None:
+    registry = get_registry()
+    data = prepare(recordings("uv", {"load-index": {"load_index": 0.75}}))
+    only = [registry.calibration_effects["charge-leakage"]]  # needs a voltage
+    result = calibrate(data, registry.get("predictor", UV), only)
+    assert result.candidates == ()
+    assert "No effect of the library could be tried" in result.summary
+    assert result.verdict == NOT_EXPLAINED

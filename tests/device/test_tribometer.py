@@ -22,6 +22,11 @@ CLEAN = {"lateral_noise_n": 0.0, "normal_noise_n": 0.0}
 SHORT = Protocol(duration_s=10.0)
 
 
+
+def friction(m):
+    """The recorded lateral force with the direction of motion taken out (rule M3: signed)."""
+    return m.lateral_force * np.where(m.speed < 0, -1.0, 1.0)
+
 def _uv_model(device: str = "uv") -> tuple[DimensionlessGroup, float]:
     config = DeviceConfig.evita() if device == "uv" else DeviceConfig.coupled()
     return DimensionlessGroup(mu0=config.mu0, psi_star=config.psi_star), config.plate_frequency_hz
@@ -59,7 +64,7 @@ def test_clean_uv_is_coulomb_times_dimensionless_group():
             normal_force=m.normal_force,
         )
     )
-    np.testing.assert_allclose(m.lateral_force[on], expected[on], rtol=1e-12, atol=0)
+    np.testing.assert_allclose(friction(m)[on], expected[on], rtol=1e-12, atol=0)
     assert np.all(m.lateral_force[~on] == 0.0)
     assert 0.05 < on.mean() < 0.95
     assert np.all(m.y == m.y[0])
@@ -78,12 +83,12 @@ def test_clean_coupled_and_ev_follow_eq_4_1():
         normal_force=m.normal_force,
     )
     expected = MU0 * uv * (m.normal_force + kacz.forward(voltage=m.voltage))
-    np.testing.assert_allclose(m.lateral_force[on], expected[on], rtol=1e-12)
+    np.testing.assert_allclose(friction(m)[on], expected[on], rtol=1e-12)
     (e,) = synthesize("ev", **CLEAN)
     assert e.amplitude is None and e.voltage is not None
     assert e.conditions["plate_frequency_hz"] is None
     on = _contact(e)
-    excess = e.lateral_force[on] / MU0 - e.normal_force[on]
+    excess = friction(e)[on] / MU0 - e.normal_force[on]
     np.testing.assert_allclose(excess, kacz.forward(voltage=e.voltage[on]), rtol=1e-9)
     assert np.all(np.abs(e.voltage) >= 200) and np.all(np.abs(e.voltage) <= 1500)
 
@@ -136,7 +141,7 @@ def test_charge_leakage_force_decays_with_half_tau_d():
     (m,) = synthesize("ev", {"charge-leakage": {"time_constant": tau}}, **CLEAN)
     on = _contact(m)
     ids = stroke_ids(m)
-    excess = m.lateral_force / MU0 - m.normal_force  # F_e (mu' = 1 on the ev device)
+    excess = friction(m) / MU0 - m.normal_force  # F_e (mu' = 1 on the ev device)
     flips = np.flatnonzero(np.sign(m.voltage[1:]) != np.sign(m.voltage[:-1])) + 1
     fitted = []
     for k in flips:
@@ -157,7 +162,7 @@ def test_actuator_bandwidth_friction_lags_the_commanded_amplitude():
     dg, frequency = _uv_model()
     on = _contact(m)
     ids = stroke_ids(m)
-    mu = m.lateral_force / (MU0 * np.where(on, m.normal_force, 1.0))
+    mu = friction(m) / (MU0 * np.where(on, m.normal_force, 1.0))
     steps = np.flatnonzero(np.diff(m.amplitude) != 0) + 1
     amplitude_t63, friction_t63 = [], []
     for k in steps:
@@ -186,7 +191,7 @@ def test_air_layer_force_ratio_matches_ev_air_layer():
         protocol = Protocol(duration_s=5.0, force_range_n=(force, force))
         (m,) = synthesize("ev", {"air-layer": {"air_gap": gap}}, protocol=protocol, **CLEAN)
         on = _contact(m)
-        fe = m.lateral_force[on] / MU0 - m.normal_force[on]
+        fe = friction(m)[on] / MU0 - m.normal_force[on]
         ratios[force] = fe / np.square(m.voltage[on])
     kacz = Kaczmarek()
     air = AirLayer(**{p.name: kacz[p.name] for p in Kaczmarek.parameters})

@@ -505,7 +505,9 @@ def synthesize(
         lateral = np.where(s.contact, lateral, 0.0)
 
         noise = streams[1]
-        fl = lateral + _drift(n, protocol.sample_rate_hz, drift_n, streams[2])
+        # Signed with the direction of motion (rule M3), the sensor's drifting zero added.
+        direction = np.where(s.speed < 0, -1.0, 1.0)
+        fl = direction * lateral + _drift(n, protocol.sample_rate_hz, drift_n, streams[2])
         fl = fl + lateral_noise_n * noise.normal(size=n)
         fn_noise = normal_noise_n * noise.normal(size=n)
         fn_rec = np.where(
