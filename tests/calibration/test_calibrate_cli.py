@@ -92,6 +92,7 @@ def test_calibrate_strict_exits_2_when_structure_is_left(recorded: Path, tmp_pat
             "--strict",
             "--quiet",
             "--no-figures",
+            "--no-rezero",
             "-o",
             str(tmp_path),
         ],
