@@ -159,7 +159,10 @@ def test_unread_input_reports_are_dropped_not_queued_without_bound(loopback):
     recent = [decode_input(link.read_in(T)) for _ in range(5)]
     gap = (recent[0].sequence - first.sequence) % 65536
     assert gap >= 150  # what follows is recent, not a backlog
-    assert all((b.sequence - a.sequence) % 65536 == 1 for a, b in itertools.pairwise(recent))
+    # Fresh reports in order; a reader slowed by a loaded machine may miss one or two of the
+    # 1 kHz stream between reads (dropped, never queued), but never gets a stale one.
+    steps = [(b.sequence - a.sequence) % 65536 for a, b in itertools.pairwise(recent)]
+    assert all(1 <= step <= 10 for step in steps), steps
 
 
 def test_firmware_runs_in_real_time_at_the_input_rate():
