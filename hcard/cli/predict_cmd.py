@@ -22,6 +22,8 @@ import click
 import numpy as np
 
 from hcard.atomic import write_atomically
+from hcard.calibration.profile import FORMAT as CALIBRATED_FORMAT
+from hcard.calibration.profile import load_profile as load_calibrated
 from hcard.errors import HcardError
 from hcard.physics.predictor import Parameter, Predictor, PredictorError, Variable
 from hcard.physics.profile import (
@@ -326,8 +328,9 @@ def predictor_of_profile(path: Path, model: str | None) -> Predictor:
 
     A device profile (``hcard-device-profile/1``) offers its predictor, the UV and EV models
     of a coupled predictor, and its leakage model; a predictor profile
-    (``hcard-predictor-profile/1``) offers its one model. ``model`` None takes the profile's
-    main predictor.
+    (``hcard-predictor-profile/1``) offers its one model, and so does a calibrated profile
+    (``hcard-calibrated-profile/1``: the fitted model of ``hcard calibrate``, by its base
+    model's name). ``model`` None takes the profile's main predictor.
     """
     raw = read_json(path)
     form = raw.get("format") if isinstance(raw, Mapping) else None
@@ -343,10 +346,12 @@ def predictor_of_profile(path: Path, model: str | None) -> Predictor:
                 candidates.append(part)
     elif form == PREDICTOR_PROFILE_FORMAT:
         candidates = [predictor_from_profile(raw, source=str(path))]
+    elif form == CALIBRATED_FORMAT:
+        candidates = [load_calibrated(path)]
     else:
         raise ProfileError(
-            f"{path}: format: expected {PROFILE_FORMAT!r} or {PREDICTOR_PROFILE_FORMAT!r}, "
-            f"got {form!r}"
+            f"{path}: format: expected {PROFILE_FORMAT!r}, {PREDICTOR_PROFILE_FORMAT!r} or "
+            f"{CALIBRATED_FORMAT!r}, got {form!r}"
         )
     if model is None:
         return candidates[0]

@@ -75,6 +75,27 @@ def test_calibrate_writes_a_report_that_leads_with_the_held_out_error(
     model = load_profile(out / "profile.json")
     data = prepare([read_measurement(p) for p in sorted(recorded.glob("*.csv"))])
     residual = data.observed - model.forward(**data.inputs_for(model))
+    # `hcard predict` evaluates the calibrated model like any other profile.
+    point = CliRunner().invoke(
+        cli,
+        [
+            "predict",
+            "--profile",
+            str(out / "profile.json"),
+            "--input",
+            "amplitude=1um",
+            "--input",
+            "speed=50mm/s",
+            "--input",
+            "normal_force=0.5N",
+            "-o",
+            str(tmp_path / "p.csv"),
+        ],
+    )
+    assert point.exit_code == 0, point.output
+    row = (tmp_path / "p.csv").read_text().splitlines()[-1].split(",")
+    expected = model.forward(amplitude=1e-6, speed=0.05, normal_force=0.5)
+    assert float(row[-1]) == pytest.approx(float(expected), rel=1e-9)
     assert np.sqrt(np.mean(residual[data.test] ** 2)) == pytest.approx(after, rel=1e-9)
 
 
