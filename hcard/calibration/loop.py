@@ -410,7 +410,7 @@ def calibrate(
     def analyse(result: FitResult) -> ResidualReport:
         return analyse_residuals(
             result.residuals[used],
-            {name: values[used] for name, values in data.regressors.items()},
+            used_regressors,
             sample_rate_hz=data.sample_rate_hz,
             bins=settings.bins,
             # in time: the residual on the recording's own sample grid, 0 where not fitted
@@ -418,6 +418,7 @@ def calibrate(
         )
 
     used = data.used
+    used_regressors = {name: values[used] for name, values in data.regressors.items()}
     skipped: dict[str, str] = {}
     usable: list[Effect] = []
     for effect in library:
