@@ -54,7 +54,7 @@ from hcard.calibration.observation import (
     FRICTION_COEFFICIENT,
     lateral_force_model,
 )
-from hcard.calibration.residuals import ResidualReport, analyse_residuals
+from hcard.calibration.residuals import ResidualReport, analyse_residuals, effective_samples
 from hcard.physics import Predictor, PredictorError
 
 NO_EFFECT = "no effect needed"
@@ -292,16 +292,6 @@ def _free(model: Predictor, base_free: Sequence[str], effects: Sequence[Effect])
     return list(dict.fromkeys(free))
 
 
-def _effective_samples(residual: np.ndarray) -> float:
-    """``n (1 - rho) / (1 + rho)`` for the lag-1 autocorrelation ``rho``, in [1, n]."""
-    n = residual.size
-    centred = residual - residual.mean()
-    denominator = float(np.dot(centred, centred))
-    rho = float(np.dot(centred[:-1], centred[1:]) / denominator) if denominator > 0 else 0.0
-    rho = min(max(rho, 0.0), 0.999)
-    return float(min(max(n * (1.0 - rho) / (1.0 + rho), 1.0), n))
-
-
 def _score(fit: FitResult, n_eff: float) -> float:
     mse = float(np.mean(fit.residuals[fit.test] ** 2))
     return n_eff * math.log(max(mse, np.finfo(float).tiny)) + 2 * fit.n_free
@@ -415,6 +405,7 @@ def calibrate(
             bins=settings.bins,
             # in time: the residual on the recording's own sample grid, 0 where not fitted
             series=np.where(used, result.residuals, 0.0),
+            time_ordered=data.time_ordered,
         )
 
     used = data.used
@@ -435,7 +426,7 @@ def calibrate(
 
     say(f"fitting {base.name} on {int(data.train.sum())} training samples")
     first = fit([], {})
-    n_eff = _effective_samples(first.residuals[first.test])
+    n_eff = effective_samples(first.residuals[first.test])
     current = ModelFit((), first, analyse(first), _score(first, n_eff))
     say(
         f"base: held-out RMSE {format_error(current.test_rmse, unit)}, training RMSE "
@@ -448,7 +439,7 @@ def calibrate(
         remaining = [e for e in usable if e not in added]
         if not remaining:
             break
-        n_eff = _effective_samples(current.fit.residuals[current.fit.test])
+        n_eff = effective_samples(current.fit.residuals[current.fit.test])
         current_score = _score(current.fit, n_eff)
         tried: list[tuple[Candidate, FitResult | None]] = []
         for effect in remaining:

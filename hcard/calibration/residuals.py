@@ -42,11 +42,12 @@ class RegressorStats:
         bin_means: mean residual in each bin (output unit).
         bin_counts: samples per bin.
         f_statistic: one-way ANOVA F of the residual across bins (0 if undefined).
-        p_value: p-value of that F-test (1 if undefined, e.g. a constant regressor).
+        p_value: p-value of that F-test, corrected for the residual's autocorrelation
+            (:func:`_corrected_f_p`; 1 if undefined, e.g. a constant regressor).
         eta2: between-bin sum of squares over total sum of squares, in [0, 1]: the fraction
             of the residual variance explained by the bins.
         spearman_rho: Spearman rank correlation of the residual with the regressor.
-        spearman_p: its two-sided p-value.
+        spearman_p: its two-sided p-value, for the effective sample count.
         monotonic: True when the rank correlation is significant (p < 0.01) and the bin means
             rise or fall in step with the bins (absolute rank correlation of the bin means with
             the bin order at least 0.9).
@@ -96,12 +97,16 @@ class ResidualReport:
         rms: root-mean-square residual (output unit).
         regressors: per-regressor statistics, in the order given.
         time: structure in sample order.
+        effective_samples: how many of the ``n`` samples are effectively independent, given
+            the residual's lag-1 autocorrelation (:func:`effective_samples`); the F-test and
+            Spearman p-values are computed for that many.
     """
 
     n: int
     rms: float
     regressors: dict[str, RegressorStats]
     time: TimeStats
+    effective_samples: float = math.nan
 
     def structured(
         self, alpha: float = 0.01, min_eta2: float = 0.05
@@ -158,7 +163,9 @@ def _groups(x: np.ndarray, bins: int) -> np.ndarray:
     return np.searchsorted(edges, x, side="right")
 
 
-def _regressor_stats(name: str, residual: np.ndarray, x: np.ndarray, bins: int) -> RegressorStats:
+def _regressor_stats(
+    name: str, residual: np.ndarray, x: np.ndarray, bins: int, n_eff: float
+) -> RegressorStats:
     labels = _groups(x, bins)
     present = np.unique(labels)
     centres = np.array([np.median(x[labels == k]) for k in present])
@@ -178,15 +185,17 @@ def _regressor_stats(name: str, residual: np.ndarray, x: np.ndarray, bins: int) 
         within = sum(float(np.sum((g - g.mean()) ** 2)) for g in used)
         eta2 = float(between / (between + within)) if between + within > 0 else 0.0
         if within > 0:
-            result = stats.f_oneway(*used)
-            f_stat, p_value = float(result.statistic), float(result.pvalue)
+            f_stat = float(stats.f_oneway(*used).statistic)
+            p_value = _corrected_f_p(f_stat, len(used), pooled.size, n_eff)
         elif between > 0:
             f_stat, p_value = math.inf, 0.0
 
     rho, rho_p = 0.0, 1.0
     if np.ptp(x) > 0 and np.ptp(residual) > 0:
-        result = stats.spearmanr(x, residual)
-        rho, rho_p = float(result.statistic), float(result.pvalue)
+        rho = float(stats.spearmanr(x, residual).statistic)
+        dof = max(n_eff - 2.0, 1.0)
+        t = rho * math.sqrt(dof / max(1.0 - rho * rho, 1e-300))
+        rho_p = float(2.0 * stats.t.sf(abs(t), dof))
     monotonic = False
     if rho_p < 0.01 and means.size >= 3:
         step = stats.spearmanr(np.arange(means.size), means).statistic
@@ -203,6 +212,27 @@ def _regressor_stats(name: str, residual: np.ndarray, x: np.ndarray, bins: int) 
         spearman_p=rho_p,
         monotonic=monotonic,
     )
+
+
+def _corrected_f_p(f_stat: float, groups: int, n: int, n_eff: float) -> float:
+    """p-value of a one-way ANOVA F over ``groups`` groups of ``n`` samples of which only
+    ``n_eff`` are effectively independent: the sums of squares carry ``n_eff / n`` of the
+    information, so ``F`` is scaled by that and tested on ``n_eff - groups`` degrees of freedom
+    (the usual design-effect correction for autocorrelated samples)."""
+    scale = min(n_eff / n, 1.0)
+    dof = max(n_eff - groups, 1.0)
+    return float(stats.f.sf(f_stat * scale, groups - 1, dof))
+
+
+def effective_samples(series: np.ndarray) -> float:
+    """``n (1 - rho) / (1 + rho)`` for the lag-1 autocorrelation ``rho`` (clipped to [0, 0.999])
+    of ``series``: the number of effectively independent samples, in [1, n]."""
+    n = series.size
+    centred = series - series.mean()
+    denominator = float(np.dot(centred, centred))
+    rho = float(np.dot(centred[:-1], centred[1:]) / denominator) if denominator > 0 else 0.0
+    rho = min(max(rho, 0.0), 0.999)
+    return float(min(max(n * (1.0 - rho) / (1.0 + rho), 1.0), n))
 
 
 def _time_stats(residual: np.ndarray, sample_rate_hz: float | None) -> TimeStats:
@@ -240,6 +270,7 @@ def analyse_residuals(
     sample_rate_hz: float | None = None,
     bins: int = DEFAULT_BINS,
     series: np.ndarray | None = None,
+    time_ordered: bool = True,
 ) -> ResidualReport:
     """Statistics of ``residual`` against each regressor and in time.
 
@@ -253,6 +284,8 @@ def analyse_residuals(
         series: the residual as a uniformly sampled time series for the time statistics
             (e.g. with samples out of the fit, such as lifts, set to 0), when ``residual``
             leaves samples out; default ``residual`` itself.
+        time_ordered: whether the sample order is time order. When it is not (a table of
+            steady-state points) the samples count as independent for the p-values.
 
     Raises:
         PredictorError: empty or non-finite residual or regressor, mismatched lengths, too few
@@ -273,6 +306,8 @@ def analyse_residuals(
         math.isfinite(sample_rate_hz) and sample_rate_hz > 0
     ):
         raise PredictorError(f"sample_rate_hz must be positive and finite, got {sample_rate_hz}")
+    in_time = r if series is None else np.asarray(series, dtype=np.float64)
+    n_eff = effective_samples(in_time) * r.size / in_time.size if time_ordered else float(r.size)
     results: dict[str, RegressorStats] = {}
     for name, values in regressors.items():
         x = np.asarray(values, dtype=np.float64)
@@ -285,10 +320,11 @@ def analyse_residuals(
                 f"regressor {name} has {np.count_nonzero(~np.isfinite(x))} non-finite "
                 "value(s) (NaN or inf)"
             )
-        results[name] = _regressor_stats(name, r, x, bins)
+        results[name] = _regressor_stats(name, r, x, bins, n_eff)
     return ResidualReport(
         n=r.size,
         rms=float(np.sqrt(np.mean(r**2))),
         regressors=results,
-        time=_time_stats(r if series is None else np.asarray(series, float), sample_rate_hz),
+        time=_time_stats(in_time, sample_rate_hz),
+        effective_samples=n_eff,
     )

@@ -223,3 +223,25 @@ def test_degenerate_parameters_are_reported_unidentifiable() -> None:
     assert result.train_rmse == pytest.approx(NOISE, rel=0.1)
     single = fit_predictor(DimensionlessGroup(), model_inputs(data), observed, free=["psi_star"])
     assert single.identifiable and single.condition_number == 1.0
+
+
+def test_p_values_count_autocorrelated_samples_once() -> None:
+    """An AR(1) residual (rho 0.9) has no relation to time, yet a plain F-test over 20,000
+    samples calls its wander across time bins significant (p ~ 1e-16). Corrected to the
+    ~1,050 effectively independent samples (n (1 - rho) / (1 + rho)) it is not."""
+    from scipy import signal, stats
+
+    rng = np.random.default_rng(0)
+    residual = signal.lfilter([1.0], [1.0, -0.9], rng.normal(size=20_000))
+    time = np.arange(20_000.0)
+    report = analyse_residuals(residual, {"time": time})
+    assert report.effective_samples == pytest.approx(20_000 * 0.1 / 1.9, rel=0.05)
+    assert stats.f_oneway(*np.array_split(residual, 10)).pvalue < 1e-10
+    assert report.regressors["time"].p_value > 0.5
+    assert report.structured() == []
+    # A real trend of the same size as the wander stays significant after the correction.
+    trended = residual + 2.0 * np.sin(2 * np.pi * time / 20_000)
+    assert analyse_residuals(trended, {"time": time}).regressors["time"].p_value < 1e-6
+    # Samples that are not a time series (a table) count as independent.
+    table = analyse_residuals(residual, {"time": time}, time_ordered=False)
+    assert table.effective_samples == 20_000

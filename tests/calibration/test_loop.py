@@ -24,11 +24,11 @@ from hcard.calibration.loop import (
     NO_EFFECT,
     NOT_EXPLAINED,
     LoopSettings,
-    _effective_samples,
     calibrate,
 )
 from hcard.calibration.measurement import Measurement, MeasurementError
 from hcard.calibration.observation import lateral_force_model
+from hcard.calibration.residuals import effective_samples
 from hcard.physics import Predictor, PredictorError, Variable
 from hcard.plugins.registry import get_registry
 from hcard_device.sim.tribometer import Protocol, synthesize
@@ -168,11 +168,11 @@ def test_effects_that_cannot_apply_are_skipped_with_the_reason() -> None:
 def test_effective_sample_count_follows_the_lag_one_autocorrelation() -> None:
     rng = np.random.default_rng(0)
     white = rng.normal(size=20_000)
-    assert _effective_samples(white) == pytest.approx(20_000, rel=0.05)
+    assert effective_samples(white) == pytest.approx(20_000, rel=0.05)
     ar = np.zeros(20_000)
     for k in range(1, ar.size):
         ar[k] = 0.9 * ar[k - 1] + white[k]
-    assert _effective_samples(ar) == pytest.approx(20_000 * 0.1 / 1.9, rel=0.1)
+    assert effective_samples(ar) == pytest.approx(20_000 * 0.1 / 1.9, rel=0.1)
 
 
 class PhaseShift(Predictor):
