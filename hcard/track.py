@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hcard.csv_rows import data_rows
+from hcard.csv_rows import data_rows, read_csv_text
 from hcard.errors import TrackError
 
 DEFAULT_NORMAL_FORCE_N = 0.5
@@ -99,14 +99,7 @@ def make_track(
 
 def read_track_csv(path: str | os.PathLike[str]) -> FingerTrack:
     """Read a track CSV (spec/track-format.md); raise :class:`TrackError` naming file and line."""
-    file = Path(path)
-    try:
-        text = file.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise TrackError(f"{file}: no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise TrackError(f"{file}: cannot read ({exc})") from None
-    return parse_track_csv(text, source=str(file))
+    return parse_track_csv(read_csv_text(path, TrackError), source=str(Path(path)))
 
 
 def parse_track_csv(text: str, *, source: str = "track") -> FingerTrack:

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from hcard.atomic import write_atomically
-from hcard.csv_rows import data_rows
+from hcard.csv_rows import data_rows, read_csv_text
 from hcard.errors import HcardError
 
 #: Accepted unit suffixes per quantity: suffix -> scale to the SI unit (rule M4).
@@ -137,15 +137,9 @@ def read_measurement(path: str | os.PathLike[str]) -> Measurement:
             time does not increase strictly, or the sidecar is not a valid JSON object.
     """
     file = Path(path)
-    source = str(file)
-    try:
-        text = file.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise MeasurementError(f"{source}: no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise MeasurementError(f"{source}: cannot read ({exc})") from None
+    text = read_csv_text(file, MeasurementError)
     conditions = _read_sidecar(sidecar_path(file))
-    return _parse(text, source, conditions)
+    return _parse(text, str(file), conditions)
 
 
 def _read_sidecar(path: Path) -> dict[str, Any]:

@@ -563,26 +563,20 @@ def fit_figure(result: CalibrationResult) -> Figure:
 
     ax = fig.add_subplot(grid[0, 2])
     pick = _subsample(np.flatnonzero(data.test), MAX_SCATTER)
-    ax.scatter(
-        observed[pick],
-        before[pick],
-        s=3,
-        c=BEFORE_COLOUR,
-        alpha=0.4,
-        linewidths=0,
-        label="before",
-        rasterized=True,
-    )
-    ax.scatter(
-        observed[pick],
-        after[pick],
-        s=3,
-        c=AFTER_COLOUR,
-        alpha=0.4,
-        linewidths=0,
-        label="after",
-        rasterized=True,
-    )
+    for predicted, colour, label in (
+        (before, BEFORE_COLOUR, "before"),
+        (after, AFTER_COLOUR, "after"),
+    ):
+        ax.scatter(
+            observed[pick],
+            predicted[pick],
+            s=3,
+            c=colour,
+            alpha=0.4,
+            linewidths=0,
+            label=label,
+            rasterized=True,
+        )
     if pick.size:
         values = np.concatenate([observed[pick], before[pick], after[pick]])
         low, high = float(values.min()), float(values.max())
