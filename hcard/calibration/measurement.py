@@ -32,24 +32,51 @@ UNITS: dict[str, dict[str, float]] = {
     "fn": {"n": 1.0, "mn": 1e-3},
     "fl": {"n": 1.0, "mn": 1e-3},
     "frequency": {"hz": 1.0, "khz": 1e3},
+    # device columns (rule M12)
+    "current": {"a": 1.0, "ma": 1e-3, "ua": 1e-6},
+    "f_tl": {"n": 1.0, "mn": 1e-3},
+    "f_tr": {"n": 1.0, "mn": 1e-3},
+    "f_bl": {"n": 1.0, "mn": 1e-3},
+    "f_br": {"n": 1.0, "mn": 1e-3},
+    "echo": {"s": 1.0, "ms": 1e-3, "us": 1e-6},
 }
 #: The SI unit suffix each quantity is written in by :func:`write_measurement`.
-SI_SUFFIX = {
-    "t": "s", "amplitude": "m", "voltage": "v", "x": "m", "y": "m", "speed": "m_s",
-    "fn": "n", "fl": "n", "frequency": "hz",
+SI_SUFFIX = {quantity: next(s for s, scale in units.items() if scale == 1.0)
+             for quantity, units in UNITS.items()}
+#: Columns without a unit, named exactly (rules M3, M12): name -> integer values only.
+UNITLESS: dict[str, bool] = {
+    "stroke": True,
+    "contact": True,
+    "sequence": True,
+    "texture": True,
+    "faults": True,
+    "flags": True,
+    "target_uv": False,
+    "target_ev": False,
 }
-#: Column quantity -> :class:`Measurement` attribute.
+#: Column quantity -> :class:`Measurement` attribute (the others go to ``Measurement.device``).
 ATTRIBUTE = {
     "t": "t", "amplitude": "amplitude", "voltage": "voltage", "x": "x", "y": "y",
     "speed": "speed", "fn": "normal_force", "fl": "lateral_force", "stroke": "stroke",
-    "frequency": "plate_frequency",
+    "frequency": "plate_frequency", "contact": "contact",
 }
+#: Device columns (rule M12), kept by quantity name in ``Measurement.device``, in writing order.
+DEVICE_COLUMNS = (
+    "sequence", "f_tl", "f_tr", "f_bl", "f_br", "current", "target_uv", "target_ev", "texture",
+    "faults", "flags", "echo",
+)
 REQUIRED = ("t", "fn", "fl")
+CONTACT_THRESHOLD_N = 0.01
+"""Samples whose normal force is below this are out of contact, N (rule S2)."""
 ACTUATION = ("amplitude", "voltage")
 #: Sidecar keys with a checked type; other keys are kept as they are (rule M9).
-SIDECAR_STRINGS = ("device", "surface", "participant", "probe", "notes")
+SIDECAR_STRINGS = ("device", "surface", "participant", "probe", "notes", "voltage_form")
 SIDECAR_NUMBERS = ("plate_frequency_hz", "ambient_pressure_pa", "temperature_c",
-                   "relative_humidity")
+                   "relative_humidity", "carrier_frequency_hz")
+SIDECAR_OBJECTS = ("limits", "card", "profile", "session", "firmware")
+VOLTAGE_FORMS = ("instantaneous", "envelope")
+"""Values of the sidecar key ``voltage_form``: the voltage column is the instantaneous voltage
+(the default) or the peak envelope of a sinusoidal carrier at ``carrier_frequency_hz``."""
 
 
 class MeasurementError(HcardError):
@@ -70,6 +97,10 @@ class Measurement:
         speed: finger speed along the stroke (signed), m/s, or None.
         stroke: integer stroke number per sample, or None.
         plate_frequency: plate vibration frequency, Hz, or None.
+        contact: True where a finger touches the surface (the device's own contact sensing,
+            column ``contact``), or None (contact is then read from the normal force, S2).
+        device: the device columns of rule M12 by quantity name (``sequence``, ``faults``,
+            ``target_uv``, ``current``, ``f_tl``, ``echo``, ...), SI units, each shape (M,).
         conditions: the JSON sidecar (device, plate frequency, surface, ...).
     """
 
@@ -83,6 +114,8 @@ class Measurement:
     speed: np.ndarray | None = None
     stroke: np.ndarray | None = None
     plate_frequency: np.ndarray | None = None
+    contact: np.ndarray | None = None
+    device: dict[str, np.ndarray] = field(default_factory=dict)
     conditions: dict[str, Any] = field(default_factory=dict)
 
     def __len__(self) -> int:
@@ -92,7 +125,8 @@ class Measurement:
         """The named arrays present (SI units), in column order; absent optional ones omitted.
 
         Keys: ``t`` (s), ``amplitude`` (m), ``voltage`` (V), ``x``, ``y`` (m), ``speed`` (m/s),
-        ``normal_force``, ``lateral_force`` (N), ``stroke`` (-), ``plate_frequency`` (Hz).
+        ``normal_force``, ``lateral_force`` (N), ``stroke`` (-), ``plate_frequency`` (Hz),
+        ``contact`` (0 or 1).
         """
         out: dict[str, np.ndarray] = {}
         for quantity in ATTRIBUTE:
@@ -100,6 +134,28 @@ class Measurement:
             if value is not None:
                 out[ATTRIBUTE[quantity]] = value
         return out
+
+    def column(self, quantity: str) -> np.ndarray | None:
+        """A column by its quantity name (rules M3, M12: ``fn``, ``fl``, ``amplitude``,
+        ``faults``, ``target_uv``, ...), SI units; None when the recording has none."""
+        if quantity in ATTRIBUTE:
+            return getattr(self, ATTRIBUTE[quantity])
+        if quantity in DEVICE_COLUMNS:
+            return self.device.get(quantity)
+        raise KeyError(f"{quantity!r} is not a quantity of the measurement format")
+
+    @property
+    def in_contact(self) -> np.ndarray:
+        """Per sample, a finger touches (rule S2): the ``contact`` column where there is one,
+        and a normal force of at least :data:`CONTACT_THRESHOLD_N`."""
+        pressing = self.normal_force >= CONTACT_THRESHOLD_N
+        return pressing if self.contact is None else pressing & self.contact
+
+    @property
+    def voltage_form(self) -> str:
+        """``"envelope"`` when the voltage column is the peak envelope of a carrier (sidecar
+        ``voltage_form``), else ``"instantaneous"``."""
+        return str(self.conditions.get("voltage_form", "instantaneous"))
 
 
 def sidecar_path(path: str | os.PathLike[str]) -> Path:
@@ -110,8 +166,8 @@ def sidecar_path(path: str | os.PathLike[str]) -> Path:
 
 def _split_header(name: str, source: str, line: int) -> tuple[str, float]:
     """The quantity of a header name and its scale to SI, or raise for an unknown unit."""
-    if name == "stroke":
-        return "stroke", 1.0
+    if name in UNITLESS:
+        return name, 1.0
     for quantity in sorted(UNITS, key=len, reverse=True):
         if name.startswith(quantity + "_"):
             unit = name[len(quantity) + 1:]
@@ -124,8 +180,13 @@ def _split_header(name: str, source: str, line: int) -> tuple[str, float]:
             return quantity, UNITS[quantity][unit]
     raise MeasurementError(
         f"{source}:{line}: column {name!r} is not a known quantity "
-        f"(known: {', '.join(ATTRIBUTE)})"
+        f"(known: {', '.join(_known_names())})"
     )
+
+
+def _known_names() -> list[str]:
+    """The quantities of rules M3 and M12, for error messages."""
+    return [*ATTRIBUTE, *DEVICE_COLUMNS]
 
 
 def read_measurement(path: str | os.PathLike[str]) -> Measurement:
@@ -173,6 +234,21 @@ def _read_sidecar(path: Path) -> dict[str, Any]:
             raise MeasurementError(
                 f"{source}: bad sidecar JSON (key {key!r} must be a finite number or null)"
             )
+    for key in SIDECAR_OBJECTS:
+        if key in data and data[key] is not None and not isinstance(data[key], dict):
+            raise MeasurementError(
+                f"{source}: bad sidecar JSON (key {key!r} must be an object or null)"
+            )
+    form = data.get("voltage_form", "instantaneous")
+    if form not in VOLTAGE_FORMS:
+        raise MeasurementError(
+            f"{source}: bad sidecar JSON (key 'voltage_form' is {form!r}; expected "
+            f"{' or '.join(repr(f) for f in VOLTAGE_FORMS)})"
+        )
+    if form == "envelope" and not data.get("carrier_frequency_hz"):
+        raise MeasurementError(
+            f"{source}: bad sidecar JSON (an 'envelope' voltage needs 'carrier_frequency_hz')"
+        )
     return data
 
 
@@ -206,27 +282,26 @@ def _parse(text: str, source: str, conditions: dict[str, Any]) -> Measurement:
     if not body:
         raise MeasurementError(f"{source}: no samples after the header")
     lines = np.array([number for number, _ in body])
+    for number, row in body:
+        if len(row) != len(names):
+            raise MeasurementError(
+                f"{source}:{number}: row has {len(row)} fields, the header has {len(names)}"
+            )
     values: dict[str, np.ndarray] = {}
     for quantity, (position, scale, name) in columns.items():
-        raw = np.empty(len(body))
-        for i, (number, row) in enumerate(body):
-            if len(row) != len(names):
-                raise MeasurementError(
-                    f"{source}:{number}: row has {len(row)} fields, the header has {len(names)}"
-                )
-            cell = row[position].strip()
-            try:
-                raw[i] = float(cell) if cell else math.nan
-            except ValueError:
-                raise MeasurementError(
-                    f"{source}:{number}: column {name}: {cell!r} is not a number"
-                ) from None
+        raw = _column_values([row[position] for _, row in body], lines, name, source)
         _check_finite(raw, lines, name, source)
-        if quantity == "stroke":
-            if not np.all(raw == np.round(raw)):
-                i = int(np.flatnonzero(raw != np.round(raw))[0])
+        if UNITLESS.get(quantity, False):
+            fractional = np.flatnonzero(raw != np.round(raw))
+            if fractional.size:
+                i = int(fractional[0])
                 raise MeasurementError(
-                    f"{source}:{lines[i]}: column stroke: {float(raw[i])!r} is not an integer"
+                    f"{source}:{lines[i]}: column {name}: {float(raw[i])!r} is not an integer"
+                )
+            if quantity == "contact" and np.any((raw != 0) & (raw != 1)):
+                i = int(np.flatnonzero((raw != 0) & (raw != 1))[0])
+                raise MeasurementError(
+                    f"{source}:{lines[i]}: column contact: {float(raw[i])!r} is neither 0 nor 1"
                 )
             values[quantity] = raw.astype(np.int64)
         else:
@@ -239,8 +314,30 @@ def _parse(text: str, source: str, conditions: dict[str, Any]) -> Measurement:
             f"{source}:{lines[i]}: column {columns['t'][2]}: non-monotonic time, "
             f"{float(values['t'][i])!r} s follows {float(values['t'][i - 1])!r} s"
         )
-    kwargs = {ATTRIBUTE[q]: v for q, v in values.items()}
-    return Measurement(conditions=conditions, **kwargs)
+    kwargs: dict[str, Any] = {ATTRIBUTE[q]: v for q, v in values.items() if q in ATTRIBUTE}
+    if "contact" in kwargs:
+        kwargs["contact"] = kwargs["contact"].astype(bool)
+    device = {q: values[q] for q in DEVICE_COLUMNS if q in values}
+    return Measurement(conditions=conditions, device=device, **kwargs)
+
+
+def _column_values(cells: list[str], lines: np.ndarray, name: str, source: str) -> np.ndarray:
+    """The cells of one column as floats (an empty cell or ``nan`` is NaN, rule M6); a cell
+    that is not a number is an error naming its line."""
+    try:
+        return np.asarray(cells, dtype=np.float64)
+    except ValueError:
+        pass  # an empty or malformed cell: find it, one cell at a time
+    raw = np.empty(len(cells))
+    for i, cell in enumerate(cells):
+        text = cell.strip()
+        try:
+            raw[i] = float(text) if text else math.nan
+        except ValueError:
+            raise MeasurementError(
+                f"{source}:{lines[i]}: column {name}: {text!r} is not a number"
+            ) from None
+    return raw
 
 
 def _check_finite(raw: np.ndarray, lines: np.ndarray, name: str, source: str) -> None:
@@ -265,15 +362,21 @@ def _check_finite(raw: np.ndarray, lines: np.ndarray, name: str, source: str) ->
 
 
 def measurement_to_csv(m: Measurement) -> str:
-    """The CSV text of ``m`` in SI column units (``t_s``, ``amplitude_m``, ...), full precision."""
-    present = [(q, getattr(m, ATTRIBUTE[q])) for q in ATTRIBUTE
-               if getattr(m, ATTRIBUTE[q]) is not None]
-    names = ["stroke" if q == "stroke" else f"{q}_{SI_SUFFIX[q]}" for q, _ in present]
-    lines = [",".join(names)]
-    for i in range(len(m)):
-        lines.append(",".join(
-            str(int(arr[i])) if q == "stroke" else repr(float(arr[i])) for q, arr in present
-        ))
+    """The CSV text of ``m`` in SI column units (``t_s``, ``amplitude_m``, ...), full precision;
+    the columns of rule M3 first, then the device columns of rule M12."""
+    present: list[tuple[str, np.ndarray]] = [
+        (q, getattr(m, ATTRIBUTE[q])) for q in ATTRIBUTE if getattr(m, ATTRIBUTE[q]) is not None
+    ]
+    present += [(q, m.device[q]) for q in DEVICE_COLUMNS if q in m.device]
+    names = [q if q in UNITLESS else f"{q}_{SI_SUFFIX[q]}" for q, _ in present]
+    columns = []
+    for q, values in present:
+        array = np.asarray(values)
+        if UNITLESS.get(q, False):
+            columns.append([str(int(v)) for v in array.astype(np.int64)])
+        else:
+            columns.append([repr(float(v)) for v in array.astype(np.float64)])
+    lines = [",".join(names), *(",".join(row) for row in zip(*columns, strict=True))]
     return "\n".join(lines) + "\n"
 
 

@@ -12,12 +12,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from hcard.calibration.measurement import Measurement, MeasurementError
+from hcard.calibration.measurement import CONTACT_THRESHOLD_N, Measurement, MeasurementError
 
 #: A new stroke starts after a time gap longer than this many median sample intervals.
 GAP_FACTOR = 5.0
-#: Samples whose normal force is below this are out of contact, N.
-CONTACT_THRESHOLD_N = 0.01
 
 
 def stroke_ids(
@@ -30,7 +28,8 @@ def stroke_ids(
 
     With a ``stroke`` column its values are returned as they are (no sample is -1 unless the
     file says so). Without one, strokes are derived (rule S2): a sample is out of contact when
-    ``normal_force < contact_threshold_n`` (N) and gets -1; a new stroke starts at the first
+    ``normal_force < contact_threshold_n`` (N) or, with a ``contact`` column, where that column
+    is 0, and gets -1; a new stroke starts at the first
     contact sample after a lift, after a time gap longer than ``gap_factor`` times the median
     sample interval (s), and, when a ``speed`` column exists, where the sign of the speed
     changes (a back-and-forth stroke reverses; zero speeds carry the previous sign). Strokes
@@ -40,6 +39,8 @@ def stroke_ids(
         return np.asarray(m.stroke, dtype=np.int64).copy()
     n = len(m)
     contact = m.normal_force >= contact_threshold_n
+    if m.contact is not None:
+        contact &= m.contact
     start = np.zeros(n, dtype=bool)
     if n:
         start[0] = True

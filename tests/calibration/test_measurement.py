@@ -279,3 +279,82 @@ def test_spec_example_reads(tmp_path: Path) -> None:
     np.testing.assert_array_equal(stroke_ids(m), [0, 0, 0, 1, 1])
     m.stroke = None  # derived strokes: the time gap and the speed reversal both split here
     np.testing.assert_array_equal(stroke_ids(m), [0, 0, 0, 1, 1])
+
+
+# -- device columns (rule M12) -------------------------------------------------------------
+DEVICE_TEXT = """t_s,x_m,y_m,speed_m_s,fn_n,fl_n,amplitude_m,voltage_v,contact,sequence,f_tl_mn,\
+f_tr_n,f_bl_n,f_br_n,current_ua,target_uv,target_ev,texture,faults,flags,echo_ms
+0.000,0.01,0.02,0.05,0.50,0.24,1e-6,0,1,65534,125,0.125,0.125,0.125,0,0.8,1.0,2,0,15,10
+0.001,0.01,0.02,0.05,0.50,0.23,1e-6,0,1,65535,125,0.125,0.125,0.125,0,0.8,1.0,2,1,15,10
+0.002,0.01,0.02,0.00,0.00,0.00,0,0,0,0,0,0,0,0,0,1.0,1.0,-1,0,2,20
+"""
+
+
+def test_device_columns_are_read_by_name_in_si_units(tmp_path: Path) -> None:
+    m = read_measurement(write(tmp_path, DEVICE_TEXT))
+    np.testing.assert_array_equal(m.contact, [True, True, False])
+    np.testing.assert_array_equal(m.column("sequence"), [65534, 65535, 0])
+    np.testing.assert_allclose(m.column("f_tl"), [0.125, 0.125, 0.0], rtol=1e-15)
+    np.testing.assert_allclose(m.column("echo"), [0.010, 0.010, 0.020], rtol=1e-15)
+    np.testing.assert_array_equal(m.column("texture"), [2, 2, -1])
+    np.testing.assert_array_equal(m.column("target_uv"), [0.8, 0.8, 1.0])
+    assert m.column("faults").dtype == np.int64
+    assert m.column("fl") is m.lateral_force
+    with pytest.raises(KeyError, match="lateral_n"):
+        m.column("lateral_n")
+    # contact: the device's own sensing, and at least 10 mN (rule S2)
+    np.testing.assert_array_equal(m.in_contact, [True, True, False])
+    np.testing.assert_array_equal(stroke_ids(m), [0, 0, -1])
+
+
+def test_device_columns_round_trip_exactly(tmp_path: Path) -> None:
+    m = read_measurement(write(tmp_path, DEVICE_TEXT))
+    write_measurement(m, tmp_path / "again.csv")
+    back = read_measurement(tmp_path / "again.csv")
+    assert set(back.device) == set(m.device)
+    for name, values in m.device.items():
+        np.testing.assert_array_equal(back.device[name], values, err_msg=name)
+    np.testing.assert_array_equal(back.contact, m.contact)
+    header = (tmp_path / "again.csv").read_text().splitlines()[0]
+    assert header.endswith("contact,sequence,f_tl_n,f_tr_n,f_bl_n,f_br_n,current_a,target_uv,"
+                           "target_ev,texture,faults,flags,echo_s")
+
+
+@pytest.mark.parametrize(
+    ("header", "row", "message"),
+    [
+        ("t_s,fn_n,fl_n,voltage_v,lateral_n", "0,0.5,0.2,0,0.2",
+         "rec.csv:1: column 'lateral_n' is not a known quantity"),
+        ("t_s,fn_n,fl_n,voltage_v,contact", "0,0.5,0.2,0,2",
+         "rec.csv:2: column contact: 2.0 is neither 0 nor 1"),
+        ("t_s,fn_n,fl_n,voltage_v,faults", "0,0.5,0.2,0,1.5",
+         "rec.csv:2: column faults: 1.5 is not an integer"),
+        ("t_s,fn_n,fl_n,voltage_v,current_kv", "0,0.5,0.2,0,1",
+         "column 'current_kv': unknown unit 'kv' for current"),
+    ],
+)
+def test_bad_device_columns_are_named(tmp_path: Path, header: str, row: str,
+                                      message: str) -> None:
+    with pytest.raises(MeasurementError, match=message.replace(".", r"\.")):
+        read_measurement(write(tmp_path, f"{header}\n{row}\n"))
+
+
+@pytest.mark.parametrize(
+    ("conditions", "message"),
+    [
+        ({"device": "d", "voltage_form": "rms"}, "key 'voltage_form' is 'rms'"),
+        ({"device": "d", "voltage_form": "envelope"}, "needs 'carrier_frequency_hz'"),
+        ({"device": "d", "profile": "default"}, "key 'profile' must be an object"),
+        ({"device": "d", "carrier_frequency_hz": "440 Hz"}, "'carrier_frequency_hz' must be"),
+    ],
+)
+def test_bad_device_sidecar_keys(tmp_path: Path, conditions: dict, message: str) -> None:
+    with pytest.raises(MeasurementError, match=message):
+        read_measurement(write(tmp_path, "t_s,fn_n,fl_n,voltage_v\n0,0.5,0.2,0\n", conditions))
+
+
+def test_envelope_voltage_is_declared_in_the_sidecar(tmp_path: Path) -> None:
+    conditions = {"device": "d", "voltage_form": "envelope", "carrier_frequency_hz": 440}
+    m = read_measurement(write(tmp_path, "t_s,fn_n,fl_n,voltage_v\n0,0.5,0.2,0\n", conditions))
+    assert m.voltage_form == "envelope"
+    assert read_measurement(write(tmp_path, GOOD, name="b.csv")).voltage_form == "instantaneous"
