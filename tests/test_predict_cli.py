@@ -135,9 +135,9 @@ def test_coupled_with_a_device_profile(tmp_path):
     )
 
 
-def test_predictor_profile(tmp_path):
+def test_uv_device_profile(tmp_path):
     path = tmp_path / "dimensionless.json"
-    DimensionlessGroup(mu0=1.0).save_profile(path)
+    DeviceProfile(DimensionlessGroup(mu0=1.0), None).save(path)
     result = run(DIMENSIONLESS, "--profile", path, "--input", "amplitude=1um")
     assert result.exit_code == 0, result.output
     assert float(result.output.split()[-1]) == pytest.approx(
@@ -246,7 +246,7 @@ def test_bad_input_is_a_one_line_error(tmp_path, monkeypatch, args, fragments):
 
 def test_profile_errors_are_one_line(tmp_path):
     wrong_model = tmp_path / "kaczmarek.json"
-    get_registry().get("predictor", "ev-kaczmarek").save_profile(wrong_model)
+    DeviceProfile(get_registry().get("predictor", "ev-kaczmarek"), None).save(wrong_model)
     one_line_error(run(DIMENSIONLESS, "--profile", wrong_model, "--input", "amplitude=1um"),
                    "holds no parameters for model", "ev-kaczmarek")
     bad = tmp_path / "bad.json"
@@ -257,6 +257,19 @@ def test_profile_errors_are_one_line(tmp_path):
     unknown = tmp_path / "unknown.json"
     unknown.write_text(json.dumps({"format": "something/1"}))
     one_line_error(run("--profile", unknown), "format: expected")
+
+
+@pytest.mark.parametrize(("form", "advice"), [
+    ("hcard-device-profile/1", "version 2 adds the effects"),
+    ("hcard-calibrated-profile/1", "run 'hcard calibrate' on the recordings again"),
+    ("hcard-predictor-profile/1", "now holds under 'predictor'"),
+])
+def test_old_profile_formats_are_a_clear_error(tmp_path, form, advice):
+    old = tmp_path / "old.json"
+    old.write_text(json.dumps({"format": form, "model": "dimensionless-group",
+                               "parameters": {}}))
+    one_line_error(run(DIMENSIONLESS, "--profile", old, "--input", "amplitude=1um"),
+                   f"{old}: format: '{form}' is", advice)
 
 
 def test_unwritable_output_is_a_one_line_error(tmp_path):

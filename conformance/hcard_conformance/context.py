@@ -54,7 +54,7 @@ def reported_frames(states: list[State], track: FingerTrack) -> Frames:
     judged by the device level's latency check, not here. Reports before the first applied
     sample are left out.
     """
-    from hcard_device.drivers.play import unwrapped_times
+    from hcard_device.drivers.recording import unwrapped_times
 
     device_t = unwrapped_times(states)
     echo = np.array([s.host_time_echo_us for s in states], dtype=np.int64)

@@ -51,7 +51,8 @@ from hcard_conformance.context import Context, reported_frames
 from hcard_conformance.registry import check
 from hcard_conformance.result import CheckResult
 from hcard_device.drivers.base import Driver
-from hcard_device.drivers.play import play, unwrapped_times
+from hcard_device.drivers.play import play
+from hcard_device.drivers.recording import unwrapped_times
 from hcard_device.protocol import Capability, DeviceInfo, DeviceKind, FaultBits, State
 from hcard_device.sim import DeviceConfig
 from hcard_device.sim.models import device_profile

@@ -54,7 +54,8 @@ class CalibrationData:
 
     Attributes:
         inputs: model inputs by name, SI units, each shape (n,): ``normal_force`` (N),
-            ``time`` (s since the recording began), ``stroke`` (strokes since the finger last
+            ``time`` (s since the recording began), ``contact_time`` (s since the finger last
+            touched down, 0 out of contact), ``stroke`` (strokes since the finger last
             rested), ``pressure`` (Pa), and when recorded ``amplitude`` (m, peak-to-peak),
             ``voltage`` (V), ``speed`` (m/s, magnitude), ``plate_frequency`` (Hz: the plate's
             vibration frequency, from the ``frequency`` column or the sidecar; a model's
@@ -316,11 +317,18 @@ def prepare(
         frequency = m.plate_frequency
         if frequency is None and m.conditions.get("plate_frequency_hz"):
             frequency = np.full(n, float(m.conditions["plate_frequency_hz"]))
+        contact = m.in_contact
+        starts = np.flatnonzero(np.diff(contact.astype(np.int8), prepend=0) == 1)
+        began = np.zeros(n, dtype=np.int64)
+        began[starts] = starts
+        began = np.maximum.accumulate(began)
+        contact_time = np.where(contact, m.t - m.t[began], 0.0)
         columns_of = {
             # Out of contact the recorded force is sensor noise around 0, which some models
             # refuse (Eq. 4.1 divides by Fn): those samples, never fitted, take the threshold.
             "normal_force": np.maximum(m.normal_force, CONTACT_THRESHOLD_N),
             "time": t,
+            "contact_time": contact_time,
             "stroke": strokes_since_rest(m.t, ids, rest_s).astype(np.float64),
             "pressure": np.full(n, float(pressure)),
             "observed": force,
@@ -353,6 +361,7 @@ def prepare(
     input_names = (
         "normal_force",
         "time",
+        "contact_time",
         "stroke",
         "pressure",
         "amplitude",

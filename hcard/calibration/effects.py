@@ -64,6 +64,8 @@ class Effect:
             a base without them.
         outputs: names of base outputs the effect applies to (e.g. ``("relative_friction",)``
             for an effect on the ultrasonic reduction); empty: any output.
+        instantaneous: inputs it needs as instantaneous values rather than a carrier's
+            envelope (e.g. ``("voltage",)`` for a high-pass of the voltage).
         neutral: parameter values (short names) that switch the effect off, or come as close
             to it as the bounds allow (e.g. the shortest time constant of a low-pass); a fit
             started there starts from the base model.
@@ -79,9 +81,14 @@ class Effect:
     requires: ClassVar[tuple[str, ...]] = ()
     outputs: ClassVar[tuple[str, ...]] = ()
     neutral: ClassVar[dict[str, float]] = {}
+    instantaneous: ClassVar[tuple[str, ...]] = ()
+    """Inputs the effect needs as instantaneous values, not as the envelope of a carrier (a
+    time-domain filter of the voltage): a model whose voltage is an envelope refuses it."""
 
     def applies_to(self, base: Predictor) -> str | None:
         """Why the effect cannot augment ``base`` (a missing input, another output), or None."""
+        if isinstance(base, EffectHost):
+            return base.refuses(self)
         names = {v.name for v in base.inputs}
         missing = sorted(set(self.requires) - names)
         if missing:
@@ -107,6 +114,19 @@ class Effect:
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name!r}>"
+
+
+class EffectHost(Predictor):
+    """A predictor made of parts (the channels of a device profile) that places each effect on
+    the part it acts on, instead of wrapping the whole (:func:`augment` defers to it)."""
+
+    def refuses(self, effect: Effect) -> str | None:
+        """Why ``effect`` cannot be added, or None."""
+        raise NotImplementedError
+
+    def with_effects(self, effects: Sequence[Effect]) -> Predictor:
+        """This model with ``effects`` added (parameters ``"<effect>.<parameter>"``)."""
+        raise NotImplementedError
 
 
 def _check_effects(base: Predictor, effects: Sequence[Effect]) -> None:
@@ -151,6 +171,8 @@ def augment(base: Predictor, effects: Sequence[Effect]) -> Predictor:
     """
     effects = tuple(effects)
     _check_effects(base, effects)
+    if isinstance(base, EffectHost):
+        return base.with_effects(effects)
     base_names = tuple(p.name for p in base.parameters)
     effect_params = tuple(
         Parameter(

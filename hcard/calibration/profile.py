@@ -1,49 +1,44 @@
-"""The fitted device profile: a calibration's final model as a JSON file, and back.
+"""A calibration's final model as a device profile, and a profile as the model it was fitted as.
 
-:func:`profile_of` turns a :class:`~hcard.calibration.loop.CalibrationResult` into a JSON-ready
-dict (format :data:`FORMAT`)::
+``hcard calibrate`` writes one profile format, the device profile of spec/device-profile.md
+(``hcard-device-profile/2``): :func:`profile_of` turns a
+:class:`~hcard.calibration.loop.CalibrationResult` into a
+:class:`~hcard.physics.profile.DeviceProfile` holding
 
-    {"format": "hcard-calibrated-profile/1",
-     "model": "dimensionless-group",             # the base predictor's registered name
-     "effects": ["ultrasonic-speed"],            # in the order the loop added them
-     "observation": "lateral_force",             # or "output": the model's own output
-     "parameters": {"psi_star": {"value": 1.7, "unit": "", "uncertainty": 7e-4,
-                                 "fitted": true}, ...},
-     "held_out_rmse_n": 0.002, "train_rmse_n": 0.002,
-     "data": ["recording 0 (smoke)"]}
+- ``predictor``: the base predictor at its fitted values (for a calibration of a device's own
+  profile, that profile's predictor; its leakage and limits are kept);
+- ``effects``: the effects added, in order, with their fitted values and uncertainties;
+- ``observation``: ``output`` (``"lateral_force"`` or ``"output"``) and the observation's own
+  fitted parameters (``friction_coefficient`` when it was added, ``force_offset``);
+- ``calibration``: the base it started from, every fitted parameter with its uncertainty, the
+  held-out errors before and after, the verdict, the split and the recordings with their
+  conditions (each sidecar, without the profile it embeds).
 
-``parameters`` holds every parameter of the final lateral-force model
-(:func:`~hcard.calibration.observation.lateral_force_model` of the base augmented with the
-effects): the base's, the effects' (``"<effect>.<parameter>"``) and the observation's
-(``friction_coefficient`` when added, ``force_offset``), SI units. ``uncertainty`` is the
-standard uncertainty of a fitted parameter, ``null`` when the parameter was not fitted or the
-data do not identify it.
-
-:func:`load_profile` rebuilds that predictor from the plugin registry; its output is the
-lateral force in N, exactly as the fitted model's.
+:func:`fitted_model` rebuilds, from such a profile, the predictor exactly as it was fitted (the
+profile's total relative friction, or the bare predictor with its effects, wrapped to the lateral
+force when that was observed), which ``hcard predict --profile`` evaluates.
 """
 
 from __future__ import annotations
 
-import json
 import math
-import os
-from pathlib import Path
+from datetime import datetime, timezone
 from typing import TYPE_CHECKING, Any
 
-from hcard.atomic import write_atomically
-from hcard.calibration.effects import augment
+from hcard.calibration.device_model import FINGER_PREFIX, fitted_profile, profile_model
 from hcard.calibration.fit import FitResult
-from hcard.calibration.observation import lateral_force_model
+from hcard.calibration.observation import FORCE_OFFSET, FRICTION_COEFFICIENT, lateral_force_model
 from hcard.physics import Predictor, PredictorError
-from hcard.physics.profile import ProfileError, read_json
+from hcard.physics.profile import DeviceProfile, ProfileError, predictor_from_profile
+from hcard.physics.profile_effects import FittedEffect, with_effects
 
 if TYPE_CHECKING:
     from hcard.calibration.loop import CalibrationResult
-    from hcard.plugins.registry import PluginRegistry
 
-FORMAT = "hcard-calibrated-profile/1"
-"""Value of the ``format`` key of a calibrated profile."""
+BASE_PROFILE = "profile"
+"""``calibration.base.kind`` of a calibration of a device profile (:mod:`.device_model`)."""
+BASE_PREDICTOR = "predictor"
+"""``calibration.base.kind`` of a calibration of a bare predictor (``--model NAME``)."""
 
 
 def _finite(value: float | None) -> float | None:
@@ -68,132 +63,136 @@ def parameter_table(fit: FitResult) -> dict[str, dict[str, Any]]:
     return table
 
 
-def profile_of(result: CalibrationResult) -> dict[str, Any]:
-    """The final model of ``result`` as a JSON-ready profile dict (module docstring)."""
-    after = result.after
-    return {
-        "format": FORMAT,
-        "model": result.model,
-        "effects": list(after.effects),
-        "observation": result.observation,
-        "parameters": parameter_table(after.fit),
-        "held_out_rmse_n": _finite(after.test_rmse),
-        "train_rmse_n": _finite(after.train_rmse),
-        "data": list(result.data.sources),
+def _without_profiles(conditions: dict[str, Any]) -> dict[str, Any]:
+    """A sidecar without the profile content it may embed (the profile is named, by name and
+    SHA-256, not nested)."""
+    out = dict(conditions)
+    out.pop("_source", None)
+    if isinstance(out.get("profile"), dict):
+        out["profile"] = {k: v for k, v in out["profile"].items() if k != "content"}
+    return out
+
+
+def profile_of(result: CalibrationResult, base: DeviceProfile | None = None, *,
+               voltage_form: str = "envelope") -> DeviceProfile:
+    """The final model of ``result`` as a device profile (module docstring).
+
+    Args:
+        result: what the loop found.
+        base: the device profile that was calibrated (None: a bare predictor was).
+        voltage_form: what the voltage input was (``"envelope"`` or ``"instantaneous"``).
+    """
+    fit = result.after.fit
+    table = parameter_table(fit)
+    model = fit.predictor
+    inner = model.inner if result.observation == "lateral_force" else model  # type: ignore[attr-defined]
+    finger = None
+    if base is not None:
+        fitted = fitted_profile(inner)
+        predictor, effects = fitted.predictor, fitted.effects
+        finger = _finger_of(inner)
+    else:
+        added = getattr(inner, "effect_list", ())
+        predictor = inner.base if added else inner
+        effects = tuple(
+            FittedEffect(e, {p.name: table[f"{e.name}.{p.name}"]["value"] for p in e.parameters})
+            for e in added
+        )
+    effects = tuple(
+        FittedEffect(f.effect, f.values,
+                     {p.name: table[f"{f.name}.{p.name}"]["uncertainty"]
+                      for p in f.effect.parameters})
+        for f in effects
+    )
+    observation_parameters = {name: table[name] for name in (FRICTION_COEFFICIENT, FORCE_OFFSET)
+                              if name in table}
+    observation: dict[str, Any] = {"output": result.observation,
+                                   "parameters": observation_parameters}
+    if finger is not None:
+        observation["finger"] = {
+            **finger.to_profile(),
+            "uncertainties": {p.name: table[f"{FINGER_PREFIX}{p.name}"]["uncertainty"]
+                              for p in finger.parameters},
+        }
+    base_names = {p.name for p in predictor.parameters}
+    calibration = {
+        "base": {
+            "kind": BASE_PREDICTOR if base is None else BASE_PROFILE,
+            "name": result.model if base is None else base.name,
+            "voltage_form": voltage_form,
+        },
+        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "verdict": result.verdict,
+        "summary": result.summary,
+        "held_out_rmse_before": _finite(result.before.test_rmse),
+        "held_out_rmse_after": _finite(result.after.test_rmse),
+        "train_rmse_after": _finite(result.after.train_rmse),
+        "unit": result.unit,
+        "parameters": {name: entry for name, entry in table.items() if name in base_names},
+        "split": result.data.split,
+        "recordings": list(result.data.sources),
+        "conditions": [_without_profiles(c) for c in result.data.conditions],
     }
+    name = f"{base.name if base is not None else result.model} (calibrated)"
+    description = (f"{result.verdict}; held-out error "
+                   f"{_finite(result.before.test_rmse)} -> {_finite(result.after.test_rmse)} "
+                   f"{result.unit}")
+    values = {
+        "predictor": predictor,
+        "effects": effects,
+        "observation": observation,
+        "calibration": calibration,
+        "name": name,
+        "description": description,
+    }
+    if base is not None:
+        return base.replace(**values)
+    return DeviceProfile(limits=None, **values)
 
 
-def profile_json(result: CalibrationResult) -> bytes:
-    """:func:`profile_of` as UTF-8 JSON text (indented, finite numbers only)."""
-    text = json.dumps(profile_of(result), indent=2, allow_nan=False, ensure_ascii=False)
-    return (text + "\n").encode("utf-8")
+def _finger_of(model: Predictor) -> Predictor | None:
+    """The finger model inside a fitted profile model (None without one)."""
+    return getattr(model, "finger", None)
 
 
-def save_profile(result: CalibrationResult, path: str | os.PathLike[str]) -> Path:
-    """Write :func:`profile_of` ``result`` to ``path`` (atomically) and return the path."""
-    target = Path(path)
-    write_atomically(target, profile_json(result))
-    return target
-
-
-def _plugin(objects: dict[str, Any], name: str) -> Any | None:
-    """The registered object ``name`` (an instance; a registered class is instantiated)."""
-    obj = objects.get(name)
-    return obj() if isinstance(obj, type) else obj
-
-
-def _field(raw: dict[str, Any], key: str, kind: type | tuple[type, ...], file: Path) -> Any:
-    if key not in raw:
-        raise ProfileError(f"{file}: field {key!r} is missing")
-    value = raw[key]
-    if not isinstance(value, kind) or isinstance(value, bool):
-        raise ProfileError(f"{file}: field {key!r} has the wrong type ({type(value).__name__})")
-    return value
-
-
-def load_profile(path: str | os.PathLike[str], registry: PluginRegistry | None = None) -> Predictor:
-    """The predictor a calibrated profile describes: ``lateral_force_model(augment(base,
-    effects)).with_params(**values)`` (without the lateral-force wrapping when the profile's
-    ``observation`` is ``"output"``), base and effects taken from ``registry`` (default: the
-    installed plugins, :func:`hcard.plugins.registry.get_registry`).
-
-    Every parameter of the model must be in the profile, in the model's unit; nothing else may.
+def fitted_model(profile: DeviceProfile) -> Predictor:
+    """The predictor ``profile`` describes, as a calibration fitted it (module docstring): a
+    profile with a UV or EV channel as its total relative friction, a bare predictor with its
+    effects; wrapped to the lateral force (with the fitted coefficient and offset) when that is
+    what was observed.
 
     Raises:
-        PredictorError: (a :class:`~hcard.physics.profile.ProfileError`) a missing or unreadable
-            file, bad JSON, another format, an unknown model or effect, an unknown, missing or
-            non-finite parameter, a wrong unit, or a value the model refuses; the message names
-            the file and the field.
+        ProfileError: the model cannot be built from the profile.
     """
-    file = Path(path)
-    raw = read_json(file)
-    if not isinstance(raw, dict):
-        raise ProfileError(f"{file}: not a calibrated profile (a JSON object is expected)")
-    if raw.get("format") != FORMAT:
-        raise ProfileError(f"{file}: field 'format' is {raw.get('format')!r}, expected {FORMAT!r}")
-    if registry is None:
-        from hcard.plugins.registry import get_registry
-
-        registry = get_registry()
-    model_name = _field(raw, "model", str, file)
-    base = _plugin(registry.predictors, model_name)
-    if not isinstance(base, Predictor):
-        available = ", ".join(sorted(registry.predictors)) or "none installed"
-        raise ProfileError(
-            f"{file}: field 'model': unknown predictor {model_name!r}; available: {available}"
-        )
-    effect_names = _field(raw, "effects", list, file)
-    effects = []
-    for index, name in enumerate(effect_names):
-        effect = _plugin(registry.calibration_effects, name) if isinstance(name, str) else None
-        if effect is None:
-            available = ", ".join(sorted(registry.calibration_effects)) or "none installed"
-            raise ProfileError(
-                f"{file}: field 'effects[{index}]': unknown calibration effect {name!r}; "
-                f"available: {available}"
-            )
-        effects.append(effect)
-    observation = raw.get("observation", "lateral_force")
-    if observation not in ("lateral_force", "output"):
-        raise ProfileError(
-            f"{file}: field 'observation' is {observation!r}, expected 'lateral_force' or 'output'"
-        )
+    base = (profile.calibration or {}).get("base", {})
+    renders = profile.uv_model is not None or profile.ev_model is not None
+    kind = base.get("kind") if isinstance(base, dict) else None
+    kind = kind or (BASE_PROFILE if renders else BASE_PREDICTOR)
     try:
-        model = augment(base, effects)
-        if observation == "lateral_force":
+        if kind == BASE_PROFILE:
+            envelope = base.get("voltage_form", "envelope") == "envelope"
+            finger = (profile.observation or {}).get("finger")
+            finger_model = None
+            if finger is not None:
+                finger_model = predictor_from_profile(
+                    {k: v for k, v in finger.items() if k != "uncertainties"},
+                    source="observation.finger")
+            model = profile_model(profile, envelope=envelope, finger=finger_model)
+        else:
+            model = with_effects(profile.predictor, profile.effects)
+        observation = profile.observation or {}
+        if observation.get("output", "lateral_force") == "lateral_force":
             model = lateral_force_model(model)
-    except PredictorError as exc:
-        raise ProfileError(f"{file}: fields 'model'/'effects': {exc}") from None
-
-    parameters = _field(raw, "parameters", dict, file)
-    known = {p.name: p for p in model.parameters}
-    unknown = sorted(set(parameters) - set(known))
-    if unknown:
-        raise ProfileError(
-            f"{file}: field 'parameters': unknown parameter(s) {', '.join(unknown)} for "
-            f"{model.name}; parameters: {', '.join(known)}"
-        )
-    missing = [name for name in known if name not in parameters]
-    if missing:
-        raise ProfileError(f"{file}: field 'parameters': missing parameter(s) {', '.join(missing)}")
-    values: dict[str, float] = {}
-    for name, p in known.items():
-        where = f"{file}: field 'parameters.{name}'"
-        entry = parameters[name]
-        if not isinstance(entry, dict):
-            raise ProfileError(f"{where}: expected an object with 'value' and 'unit'")
-        value = entry.get("value")
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ProfileError(f"{where}.value: expected a number, got {value!r}")
-        if not math.isfinite(value):
-            raise ProfileError(f"{where}.value: must be finite, got {value}")
-        unit = entry.get("unit")
-        if unit != p.unit:
-            raise ProfileError(
-                f"{where}.unit: {unit!r}, but the model's unit is {p.unit!r} (values are SI)"
-            )
-        values[name] = float(value)
-    try:
-        return model.with_params(**values)
-    except PredictorError as exc:
-        raise ProfileError(f"{file}: field 'parameters': {exc}") from None
+            values = {name: float(entry["value"])
+                      for name, entry in observation.get("parameters", {}).items()}
+            known = {p.name for p in model.parameters}
+            unknown = sorted(set(values) - known)
+            if unknown:
+                raise ProfileError(f"observation.parameters: unknown parameter(s) "
+                                   f"{', '.join(unknown)}; the model has {', '.join(known)}")
+            model = model.with_params(**values)
+    except ProfileError:
+        raise
+    except PredictorError as exc:  # an effect that cannot act on this model, a bad value
+        raise ProfileError(f"profile {profile.name!r}: {exc}") from None
+    return model

@@ -36,9 +36,10 @@ from matplotlib.figure import Figure
 from hcard import __version__
 from hcard.atomic import write_atomically
 from hcard.calibration.loop import CalibrationResult, ModelFit
-from hcard.calibration.profile import parameter_table, profile_json, profile_of
+from hcard.calibration.profile import parameter_table, profile_of
 from hcard.calibration.residuals import ResidualReport
 from hcard.physics import PredictorError
+from hcard.physics.profile import DeviceProfile
 from hcard.physics.units import display_unit
 
 FORMAT = "hcard-calibration-report/1"
@@ -200,7 +201,13 @@ def _model_dict(step: ModelFit) -> dict[str, Any]:
     }
 
 
-def report_dict(result: CalibrationResult, figures: Sequence[str] = ()) -> dict[str, Any]:
+def report_dict(
+    result: CalibrationResult,
+    figures: Sequence[str] = (),
+    *,
+    profile: DeviceProfile | None = None,
+    rendering: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
     """The content of ``report.json`` (finite numbers only; ``figures``: relative file names)."""
     data = result.data
     content = {
@@ -256,7 +263,8 @@ def report_dict(result: CalibrationResult, figures: Sequence[str] = ()) -> dict[
         "steps": [_model_dict(step) for step in result.steps],
         "before": _model_dict(result.before),
         "after": _model_dict(result.after),
-        "profile": profile_of(result),
+        "profile": (profile if profile is not None else profile_of(result)).to_dict(),
+        "rendering": None if rendering is None else dict(rendering),
         "figures": list(figures),
         "seconds": result.seconds,
     }
@@ -287,8 +295,14 @@ def _residual_rows(analysis: ResidualReport) -> list[list[str]]:
     ]
 
 
-def report_markdown(result: CalibrationResult, figures: Sequence[str] = ()) -> str:
-    """The text of ``report.md`` (``figures``: relative file names to embed)."""
+def report_markdown(
+    result: CalibrationResult,
+    figures: Sequence[str] = (),
+    *,
+    rendering: Mapping[str, Any] | None = None,
+) -> str:
+    """The text of ``report.md`` (``figures``: relative file names to embed; ``rendering``: the
+    verification on a device, :func:`hcard.calibration.verify.verification_dict`)."""
     before, after, data = result.before, result.after, result.data
     change = -100.0 * result.improvement
     lines = [
@@ -297,6 +311,10 @@ def report_markdown(result: CalibrationResult, figures: Sequence[str] = ()) -> s
         f"**Held-out RMSE: {_mn(before.test_rmse)} mN before, {_mn(after.test_rmse)} mN after "
         f"({change:+.1f} %).**",
         "",
+    ]
+    if rendering is not None:
+        lines += [f"**Rendered friction error on the device: {rendering['text']}.**", ""]
+    lines += [
         f"**Verdict: {result.verdict}.**",
         "",
     ]
@@ -590,9 +608,18 @@ def fit_figure(result: CalibrationResult) -> Figure:
 
 # -- the report ---------------------------------------------------------------------------------
 def write_report(
-    result: CalibrationResult, directory: str | os.PathLike[str], *, figures: bool = True
+    result: CalibrationResult,
+    directory: str | os.PathLike[str],
+    *,
+    figures: bool = True,
+    profile: DeviceProfile | None = None,
+    rendering: Mapping[str, Any] | None = None,
 ) -> ReportFiles:
     """Write the report of ``result`` into ``directory`` (created if needed; module docstring).
+
+    ``profile``: the fitted device profile (default: :func:`~hcard.calibration.profile.
+    profile_of` the result, for a bare predictor); ``rendering``: the rendering errors measured
+    on a device without and with it, when they were.
 
     Raises:
         PredictorError: ``directory`` exists but is not a directory, or cannot be created.
@@ -604,6 +631,7 @@ def write_report(
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise PredictorError(f"{folder}: cannot create the report directory ({exc})") from None
+    profile = profile if profile is not None else profile_of(result)
 
     written: list[Path] = []
     if figures:
@@ -612,11 +640,13 @@ def write_report(
             write_atomically(path, _png(draw(result)))
             written.append(path)
     names = [p.name for p in written]
-    profile = folder / PROFILE
-    write_atomically(profile, profile_json(result))
-    text = json.dumps(report_dict(result, names), indent=2, allow_nan=False, ensure_ascii=False)
+    profile_path = folder / PROFILE
+    write_atomically(profile_path, profile.to_json())
+    content = report_dict(result, names, profile=profile, rendering=rendering)
+    text = json.dumps(content, indent=2, allow_nan=False, ensure_ascii=False)
     report_json = folder / JSON
     write_atomically(report_json, (text + "\n").encode("utf-8"))
     markdown = folder / MARKDOWN
-    write_atomically(markdown, report_markdown(result, names).encode("utf-8"))
-    return ReportFiles(markdown=markdown, json=report_json, profile=profile, figures=written)
+    write_atomically(markdown, report_markdown(result, names, rendering=rendering).encode("utf-8"))
+    return ReportFiles(markdown=markdown, json=report_json, profile=profile_path,
+                       figures=written)

@@ -1,26 +1,44 @@
-"""``hcard calibrate``: fit a model to tribometer recordings, find the effects it lacks, report.
+"""``hcard calibrate``: the calibration protocol, and the loop that fits a device's model to
+recordings, finds the effects it lacks, and verifies the fitted profile on the device.
 
-    hcard calibrate rec_0.csv rec_1.csv --model dimensionless-group -o calib/
-    hcard calibrate recordings/ --model ev-kaczmarek --effect charge-leakage --effect air-layer
+    hcard calibrate plan --device ev -o plan/          # protocol + verification cards and tracks
+    hcard play plan/protocol.hcard --track plan/protocol.csv --device URI -o rec.csv
+    hcard calibrate rec.csv -o calib/ --verify URI     # fit, report, play held-out textures
 
-DATA are measurement CSV files (each with its ``.json`` sidecar, spec/measurement-format.md) or
-directories of them. The loop (:mod:`hcard.calibration.loop`) prints one line per fit; the
-report (Markdown, JSON, PNG figures) and the fitted profile go to the output directory.
+DATA are measurement CSV files (each with its ``.json`` sidecar, spec/measurement-format.md)
+or directories of them; ``hcard play`` writes such recordings. The base model is the device
+profile the recordings name (sidecar ``profile``), a profile file (``--profile``) or a bare
+predictor (``--model``). The loop (:mod:`hcard.calibration.loop`) prints one line per fit; the
+report (Markdown, JSON, PNG figures) and the fitted device profile go to the output directory.
 """
 
 from __future__ import annotations
 
+import json
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import click
 
 from hcard.calibration.dataset import SPLITS, prepare
 from hcard.calibration.loop import NOT_EXPLAINED, LoopSettings, calibrate
-from hcard.calibration.measurement import MeasurementError, read_measurement
+from hcard.calibration.measurement import Measurement, MeasurementError, read_measurement
+from hcard.calibration.plan import (
+    DEFAULT_DURATION_S,
+    DEFAULT_VERIFY_DURATION_S,
+    DEVICE_CLASSES,
+    Plan,
+    protocol,
+    verification,
+)
+from hcard.calibration.profile import profile_of
 from hcard.calibration.report import write_report
+from hcard.cli.errors import UserErrorGroup
 from hcard.errors import HcardError
+from hcard.physics import Predictor
+from hcard.physics.profile import DeviceProfile
 from hcard.physics.sweep import quantity, split_assignment
 from hcard.plugins.registry import get_registry
 
@@ -58,89 +76,215 @@ def _fraction(text: str, what: str) -> float:
     return value
 
 
-@click.command("calibrate")
+class DefaultCommandGroup(UserErrorGroup):
+    """A group whose first argument, when it names no subcommand, goes to its default
+    subcommand: ``hcard calibrate rec.csv`` is ``hcard calibrate run rec.csv``."""
+
+    default_command = "run"
+
+    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        if args and args[0] not in self.commands and args[0] not in ctx.help_option_names:
+            args = [self.default_command, *args]
+        return super().parse_args(ctx, args)
+
+
+@click.group("calibrate", cls=DefaultCommandGroup)
+def calibrate_group() -> None:
+    """Fit a device's model to recordings, find the effects it lacks, verify the profile.
+
+    \b
+    hcard calibrate plan --device uv|ev|coupled -o DIR   the protocol (card + track) and the
+                                                           held-out verification textures
+    hcard calibrate [run] RECORDINGS... [-o DIR] [--verify URI]
+                                                           the loop; `run` may be left out
+    """
+
+
+# -- plan ---------------------------------------------------------------------------------------
+PROTOCOL_CARD, PROTOCOL_TRACK = "protocol.hcard", "protocol.csv"
+VERIFY_CARD, VERIFY_TRACK = "verify.hcard", "verify.csv"
+PLAN_JSON = "plan.json"
+
+
+def write_plan(directory: Path, device: str, plan: Plan, check: Plan) -> list[Path]:
+    """Write the protocol and verification cards and tracks and ``plan.json`` into
+    ``directory`` (each file atomically); the paths written."""
+    from hcard.atomic import write_atomically
+    from hcard.card_io import save
+    from hcard.track import track_to_csv
+
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise HcardError(f"{directory}: cannot create ({exc.strerror or exc})") from None
+    written = []
+    for card_name, track_name, part in ((PROTOCOL_CARD, PROTOCOL_TRACK, plan),
+                                        (VERIFY_CARD, VERIFY_TRACK, check)):
+        save(part.card, directory / card_name)
+        write_atomically(directory / track_name, track_to_csv(part.track).encode())
+        written += [directory / card_name, directory / track_name]
+    description = {
+        "device": device,
+        "protocol": {"card": PROTOCOL_CARD, "track": PROTOCOL_TRACK, "lanes": list(plan.lanes),
+                     "duration_s": float(plan.track.t[-1] - plan.track.t[0]),
+                     "sessions": [{"lane": lane, "force_n": force, "speeds_mm_s": list(speeds)}
+                                  for lane, force, speeds in plan.sessions]},
+        "verification": {"card": VERIFY_CARD, "track": VERIFY_TRACK, "lanes": list(check.lanes),
+                         "duration_s": float(check.track.t[-1] - check.track.t[0]),
+                         "sessions": [{"lane": lane, "force_n": force,
+                                       "speeds_mm_s": list(speeds)}
+                                      for lane, force, speeds in check.sessions]},
+        "spec": "spec/calibration.md section 8",
+    }
+    write_atomically(directory / PLAN_JSON, (json.dumps(description, indent=2) + "\n").encode())
+    return [*written, directory / PLAN_JSON]
+
+
+@calibrate_group.command("plan")
+@click.option("--device", "device", type=click.Choice(DEVICE_CLASSES), required=True,
+              help="What the device renders: uv (E-ViTa), ev (the coupled stimulator with its "
+                   "plate off) or coupled (both).")
+@click.option("-o", "--output", type=click.Path(file_okay=False, path_type=Path),
+              required=True, help="Directory for the cards, tracks and plan.json.")
+@click.option("--duration", default=f"{DEFAULT_DURATION_S:g}s", show_default=True,
+              help="Length of the protocol track (the last session plays to its end).")
+@click.option("--verify-duration", default=f"{DEFAULT_VERIFY_DURATION_S:g}s",
+              show_default=True, help="Length of the verification track.")
+@click.option("--seed", default=0, show_default=True, type=int,
+              help="Seed of the order of forces and speeds.")
+def plan_command(device: str, output: Path, duration: str, verify_duration: str,
+                 seed: int) -> None:
+    """Write the calibration protocol for a device class, and the held-out verification.
+
+    The protocol card holds lanes of target levels (an amplitude staircase, UV steps, a voltage
+    staircase and square wave, bipolar steps, by device class); its track strokes each lane
+    there and back at several speeds and normal forces, with lifts and rests between (the
+    thesis's protocols, chapters 2-4). Play it with `hcard play`, calibrate the recording, and
+    verify the profile on the held-out textures (other levels, forces and speeds) with
+    `hcard calibrate ... --verify URI` (spec/calibration.md section 8).
+    """
+    seconds = quantity(duration, "s", "--duration")
+    verify_seconds = quantity(verify_duration, "s", "--verify-duration")
+    plan = protocol(device, duration_s=seconds, seed=seed)
+    check = verification(device, duration_s=verify_seconds, seed=seed + 1)
+    for path in write_plan(output, device, plan, check):
+        click.echo(str(path))
+    click.echo(f"protocol: {len(plan.sessions)} sessions over lanes {', '.join(plan.lanes)}, "
+               f"{plan.track.t[-1]:.1f} s; verification: {len(check.sessions)} sessions, "
+               f"{check.track.t[-1]:.1f} s")
+    click.echo(f"next: hcard play {output / PROTOCOL_CARD} --track {output / PROTOCOL_TRACK} "
+               f"--device URI -o rec.csv")
+
+
+# -- the loop -----------------------------------------------------------------------------------
+def _base_of(measurements: list[Measurement], model_name: str | None,
+             profile_path: Path | None, finger_name: str = "finger-friction"
+             ) -> tuple[Predictor, DeviceProfile | None, str]:
+    """The base to calibrate: a bare predictor (``--model``), a profile file (``--profile``),
+    or the profile the recordings name in their sidecars, with the finger model
+    ``finger_name`` (``"none"``: a constant friction coefficient); and the voltage form of the
+    data."""
+    from hcard.calibration.device_model import profile_model
+
+    forms = {m.voltage_form for m in measurements}
+    if len(forms) > 1:
+        raise MeasurementError("recordings differ in their voltage_form (envelope and "
+                               "instantaneous); calibrate them apart")
+    form = forms.pop()
+    if model_name is not None and profile_path is not None:
+        raise CalibrateUsageError("give --model or --profile, not both")
+    if model_name is not None:
+        return get_registry().get("predictor", model_name), None, form
+    if profile_path is not None:
+        profile = DeviceProfile.load(profile_path)
+    else:
+        contents = [m.conditions.get("profile", {}) or {} for m in measurements]
+        named = [c.get("content") for c in contents]
+        if not all(isinstance(c, dict) for c in named):
+            raise CalibrateUsageError(
+                "the recordings name no device profile (sidecar 'profile.content'); give "
+                "--model NAME (a predictor) or --profile FILE (a device profile)")
+        if any(c != named[0] for c in named[1:]):
+            raise CalibrateUsageError(
+                "the recordings were made with different device profiles; calibrate them "
+                "apart, or give --profile")
+        source = measurements[0].conditions.get("_source", "recording")
+        profile = DeviceProfile.from_dict(named[0], source=f"{source}.json: profile.content")
+    finger = None if finger_name == "none" else get_registry().get("predictor", finger_name)
+    return profile_model(profile, envelope=form == "envelope", finger=finger), profile, form
+
+
+def _verification_files(measurements: list[Measurement], card: Path | None,
+                        track: Path | None) -> tuple[Path, Path]:
+    """The held-out card and track: as given, else ``verify.hcard``/``verify.csv`` next to the
+    card the recordings played (sidecar ``card.path``)."""
+    if card is not None and track is not None:
+        return card, track
+    played = (measurements[0].conditions.get("card") or {}).get("path")
+    if played:
+        folder = Path(played).parent
+        card = card or folder / VERIFY_CARD
+        track = track or folder / VERIFY_TRACK
+        if card.exists() and track.exists():
+            return card, track
+    raise CalibrateUsageError(
+        "--verify needs the held-out card and track: give --verify-card and --verify-track "
+        "(hcard calibrate plan writes verify.hcard and verify.csv)")
+
+
+@calibrate_group.command("run")
 @click.argument("data", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option(
-    "--model",
-    "-m",
-    "model_name",
-    required=True,
-    help="The predictor to calibrate (see `hcard predict --list`).",
-)
-@click.option(
-    "--effect",
-    "effects",
-    multiple=True,
-    metavar="NAME",
-    help="Candidate effect (repeatable); default: every installed calibration effect.",
-)
-@click.option(
-    "--exclude",
-    "excluded",
-    multiple=True,
-    metavar="NAME",
-    help="Leave this effect out of the candidates (repeatable).",
-)
-@click.option(
-    "--free",
-    "free_text",
-    metavar="P1,P2",
-    help="Base parameters to fit (default: the model's calibrated parameters).",
-)
-@click.option(
-    "--param",
-    "params",
-    multiple=True,
-    metavar="NAME=VALUE",
-    help="Start or fixed value of a base parameter, with unit (repeatable).",
-)
-@click.option(
-    "--split",
-    type=click.Choice(SPLITS),
-    default="stroke",
-    show_default=True,
-    help="Hold out whole strokes, or the last time block of each recording.",
-)
-@click.option(
-    "--test-fraction", default="25%", show_default=True, help="Share of strokes (or time) held out."
-)
+@click.option("--model", "-m", "model_name",
+              help="Calibrate this bare predictor (see `hcard predict --list`) instead of the "
+                   "recordings' device profile.")
+@click.option("--profile", "profile_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Calibrate this device profile (default: the one the recordings' sidecars "
+                   "name).")
+@click.option("--finger", "finger_name", default="finger-friction", show_default=True,
+              metavar="MODEL",
+              help="With a device profile: the bare finger's friction model that the relative "
+                   "friction multiplies (fitted with it); 'none': a constant coefficient.")
+@click.option("--effect", "effects", multiple=True, metavar="NAME",
+              help="Candidate effect (repeatable); default: every installed calibration effect.")
+@click.option("--exclude", "excluded", multiple=True, metavar="NAME",
+              help="Leave this effect out of the candidates (repeatable).")
+@click.option("--free", "free_text", metavar="P1,P2",
+              help="Base parameters to fit (default: the model's calibrated parameters).")
+@click.option("--param", "params", multiple=True, metavar="NAME=VALUE",
+              help="Start or fixed value of a base parameter, with unit (repeatable).")
+@click.option("--split", type=click.Choice(SPLITS), default="stroke", show_default=True,
+              help="Hold out whole strokes, or the last time block of each recording.")
+@click.option("--test-fraction", default="25%", show_default=True,
+              help="Share of strokes (or time) held out.")
 @click.option("--seed", default=0, show_default=True, help="Seed of the stroke draw.")
-@click.option(
-    "--min-improvement",
-    default="5%",
-    show_default=True,
-    help="Held-out RMSE fall an added effect must bring.",
-)
-@click.option(
-    "--max-effects",
-    default=4,
-    show_default=True,
-    type=click.IntRange(min=0),
-    help="Most effects added.",
-)
-@click.option(
-    "--output",
-    "-o",
-    type=click.Path(file_okay=False, path_type=Path),
-    default=Path("calibration"),
-    show_default=True,
-    help="Directory for report.md, report.json, profile.json and the figures.",
-)
+@click.option("--min-improvement", default="5%", show_default=True,
+              help="Held-out RMSE fall an added effect must bring.")
+@click.option("--max-effects", default=4, show_default=True, type=click.IntRange(min=0),
+              help="Most effects added.")
+@click.option("--output", "-o", type=click.Path(file_okay=False, path_type=Path),
+              default=Path("calibration"), show_default=True,
+              help="Directory for report.md, report.json, profile.json and the figures.")
+@click.option("--verify", "verify_uri", metavar="URI",
+              help="Play the held-out textures on this device without and with the fitted "
+                   "profile and report the rendered friction error of each.")
+@click.option("--verify-card", type=click.Path(dir_okay=False, path_type=Path),
+              help="Held-out card for --verify (default: verify.hcard next to the played card).")
+@click.option("--verify-track", type=click.Path(dir_okay=False, path_type=Path),
+              help="Its finger track (default: verify.csv next to it).")
+@click.option("--timeout", default=1.0, show_default=True, type=click.FloatRange(min=0.001),
+              help="--verify: longest wait for any answer from the device, s.")
 @click.option("--no-figures", is_flag=True, help="Skip the PNG figures.")
-@click.option(
-    "--no-rezero",
-    is_flag=True,
-    help="Do not re-measure the lateral-force zero at each lift (spec/calibration.md K4).",
-)
-@click.option(
-    "--strict",
-    is_flag=True,
-    help="Exit with status 2 when structure is left that no effect explains.",
-)
+@click.option("--no-rezero", is_flag=True,
+              help="Do not re-measure the lateral-force zero at each lift (spec/calibration.md "
+                   "K4).")
+@click.option("--strict", is_flag=True,
+              help="Exit with status 2 when structure is left that no effect explains.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress lines, only the summary.")
 def calibrate_command(
     data: tuple[Path, ...],
-    model_name: str,
+    model_name: str | None,
+    profile_path: Path | None,
+    finger_name: str,
     effects: tuple[str, ...],
     excluded: tuple[str, ...],
     free_text: str | None,
@@ -151,17 +295,23 @@ def calibrate_command(
     min_improvement: str,
     max_effects: int,
     output: Path,
+    verify_uri: str | None,
+    verify_card: Path | None,
+    verify_track: Path | None,
+    timeout: float,
     no_figures: bool,
     no_rezero: bool,
     strict: bool,
     quiet: bool,
 ) -> None:
-    """Fit MODEL to the tribometer recordings DATA, add the effects it lacks, report.
+    """Fit the device's model to the recordings DATA, add the effects it lacks, report.
 
-    The loop fits MODEL on the training strokes, tries each candidate effect, keeps the one
-    with the best held-out criterion while it cuts the held-out error significantly, and says
-    "no effect needed" or "structured residual not explained by any known effect" when that is
-    the answer. The report leads with the held-out error before and after.
+    The loop fits the base model on the training strokes, tries each candidate effect, keeps
+    the one with the best held-out criterion while it cuts the held-out error significantly,
+    and says "no effect needed" or "structured residual not explained by any known effect"
+    when that is the answer. The report leads with the held-out model error before and after;
+    with --verify it also gives the friction the device rendered on held-out textures without
+    and with the fitted profile, measured by its force sensor.
     """
     started = time.perf_counter()
     held_out = _fraction(test_fraction, "--test-fraction")
@@ -170,7 +320,6 @@ def calibrate_command(
         max_effects=max_effects,
     )
     registry = get_registry()
-    base = registry.get("predictor", model_name)  # the error lists the installed models
     library = registry.calibration_effects
     names = list(effects) or list(library)
     unknown = sorted((set(names) | set(excluded)) - set(library))
@@ -178,28 +327,16 @@ def calibrate_command(
         raise CalibrateUsageError(
             f"unknown effect(s) {', '.join(unknown)}; installed: {', '.join(library) or 'none'}"
         )
+    if model_name is not None:
+        registry.get("predictor", model_name)  # the error lists the installed models
+    if finger_name != "none":
+        registry.get("predictor", finger_name)
+    if profile_path is not None and model_name is not None:
+        raise CalibrateUsageError("give --model or --profile, not both")
+    if verify_uri is not None and model_name is not None:
+        raise CalibrateUsageError("--verify plays a device profile; it needs the recordings' "
+                                  "profile or --profile, not --model")
     candidates = [library[name] for name in names if name not in set(excluded)]
-
-    known = {p.name: p for p in base.parameters}
-    start: dict[str, float] = {}
-    for text in params:
-        name, value = split_assignment(text, "--param")
-        if name not in known:
-            raise CalibrateUsageError(
-                f"--param {text!r}: {model_name} has no parameter {name!r}; parameters: "
-                f"{', '.join(known)}"
-            )
-        start[name] = quantity(value, known[name].unit, f"--param {name}")
-    base = base.with_params(**start)
-    free = None
-    if free_text is not None:
-        free = [name.strip() for name in free_text.split(",") if name.strip()]
-        wrong = sorted(set(free) - set(known))
-        if wrong or not free:
-            raise CalibrateUsageError(
-                f"--free {free_text!r}: unknown parameter(s) {', '.join(wrong) or '(none given)'}"
-                f"; parameters of {model_name}: {', '.join(known)}"
-            )
 
     def say(text: str) -> None:
         if not quiet:
@@ -211,17 +348,28 @@ def calibrate_command(
         measurement = read_measurement(path)
         measurement.conditions.setdefault("_source", str(path))
         measurements.append(measurement)
-    say(f"read {len(paths)} recording(s), {sum(len(m) for m in measurements)} samples")
-    prepared = prepare(
-        measurements,
-        split=split,
-        test_fraction=held_out,
-        seed=seed,
-        rezero=not no_rezero,
-    )
+    base, base_profile, voltage_form = _base_of(measurements, model_name, profile_path,
+                                                finger_name)
+    if verify_uri is not None:
+        verify_files = _verification_files(measurements, verify_card, verify_track)
+    base = _with_start(base, params)
+    free = _free_parameters(base, free_text)
+    say(f"read {len(paths)} recording(s), {sum(len(m) for m in measurements)} samples; base "
+        f"{'profile ' + base_profile.name if base_profile else 'model ' + base.name}")
+    prepared = prepare(measurements, split=split, test_fraction=held_out, seed=seed,
+                       rezero=not no_rezero)
     result = calibrate(prepared, base, candidates, free=free, settings=settings, progress=say)
+    profile = profile_of(result, base_profile, voltage_form=voltage_form)
+    rendering: dict[str, Any] | None = None
+    if verify_uri is not None:
+        say(f"verifying on {verify_uri}: held-out textures without and with the fitted profile")
+        verified = _verify(verify_uri, verify_files, profile, timeout, output)
+        rendering = verified.to_dict()
+        profile = profile.replace(calibration={**(profile.calibration or {}),
+                                               "rendering": rendering})
     say("writing the report")
-    files = write_report(result, output, figures=not no_figures)
+    files = write_report(result, output, figures=not no_figures, profile=profile,
+                         rendering=rendering)
     click.echo(result.summary)
     for name in result.effects_added:
         fitted = ", ".join(
@@ -229,6 +377,10 @@ def calibrate_command(
             for short, (value, sigma, unit) in result.effect_parameters(name).items()
         )
         click.echo(f"  {name}: {fitted}")
+    click.echo(f"held-out model error: {_error(result.before.test_rmse, result.unit)} before, "
+               f"{_error(result.after.test_rmse, result.unit)} after")
+    if rendering is not None:
+        click.echo(f"rendered friction error on held-out textures: {rendering['text']}")
     click.echo(
         f"report: {files.markdown}  (also {files.json.name}, {files.profile.name}"
         f"{', ' + ', '.join(p.name for p in files.figures) if files.figures else ''})"
@@ -237,4 +389,60 @@ def calibrate_command(
         sys.exit(2)
 
 
-COMMANDS = [calibrate_command]
+def _error(value: float, unit: str) -> str:
+    from hcard.calibration.loop import format_error
+
+    return format_error(value, unit)
+
+
+def _with_start(base: Predictor, params: tuple[str, ...]) -> Predictor:
+    """``base`` with the ``--param`` start values."""
+    known = {p.name: p for p in base.parameters}
+    start: dict[str, float] = {}
+    for text in params:
+        name, value = split_assignment(text, "--param")
+        if name not in known:
+            raise CalibrateUsageError(
+                f"--param {text!r}: {base.name} has no parameter {name!r}; parameters: "
+                f"{', '.join(known)}"
+            )
+        start[name] = quantity(value, known[name].unit, f"--param {name}")
+    return base.with_params(**start)
+
+
+def _free_parameters(base: Predictor, free_text: str | None) -> list[str] | None:
+    """The ``--free`` parameter names, checked (None: the model's calibrated ones)."""
+    if free_text is None:
+        return None
+    known = {p.name for p in base.parameters}
+    free = [name.strip() for name in free_text.split(",") if name.strip()]
+    wrong = sorted(set(free) - known)
+    if wrong or not free:
+        raise CalibrateUsageError(
+            f"--free {free_text!r}: unknown parameter(s) {', '.join(wrong) or '(none given)'}"
+            f"; parameters of {base.name}: {', '.join(sorted(known))}"
+        )
+    return free
+
+
+def _verify(uri: str, files: tuple[Path, Path], profile: DeviceProfile, timeout: float,
+            output: Path) -> Any:
+    """Play the held-out card along its track without and with ``profile``; the recordings
+    go to ``output`` as ``verify-before.csv`` and ``verify-after.csv``."""
+    from hcard.calibration.measurement import write_measurement
+    from hcard.card_io import load
+    from hcard.track import read_track_csv
+    from hcard_device.drivers.verify import verify
+
+    card_path, track_path = files
+    card, track = load(card_path), read_track_csv(track_path)
+    verified = verify(uri, card, track, profile.to_json(), timeout_s=timeout,
+                      track_path=str(track_path), card_path=str(card_path))
+    output.mkdir(parents=True, exist_ok=True)
+    for name, recorded in zip(("verify-before.csv", "verify-after.csv"), verified.recordings,
+                              strict=True):
+        write_measurement(recorded, output / name)
+    return verified
+
+
+COMMANDS = [calibrate_group]

@@ -11,7 +11,6 @@ from pathlib import Path
 
 import click
 
-from hcard.atomic import write_atomically
 from hcard.card_io import load
 from hcard.errors import HcardError
 from hcard.track import read_track_csv
@@ -48,14 +47,36 @@ def device() -> None:
               show_default=True, help="E-ViTa (UV) or the coupled UV+EV stimulator.")
 @click.option("--seed", default=0, show_default=True, type=int,
               help="Seed of the simulation's noise.")
-def serve(host: str, port: int, variant: str, seed: int) -> None:
+@click.option("--effect", "effect_names", multiple=True, metavar="NAME",
+              help="Hide a physical effect in the hardware (repeatable; see --list-effects). "
+                   "Nothing the device reports names it.")
+@click.option("--effect-param", "assignments", multiple=True, metavar="EFFECT.PARAM=VALUE",
+              help="True value of a hidden effect's parameter, units accepted "
+                   "(air-layer.air_gap=8um). Repeatable.")
+@click.option("--list-effects", is_flag=True, help="List the effects a device can hide and exit.")
+def serve(host: str, port: int, variant: str, seed: int, effect_names: tuple[str, ...],
+          assignments: tuple[str, ...], list_effects: bool) -> None:
     """Serve a simulated device as USB-HID over USB/IP until Ctrl-C or SIGTERM.
 
     On any Linux host, `usbip attach -r HOST -b 1-1` turns it into a /dev/hidraw device.
+    With --effect the hardware hides a physical effect from its own profile, for a calibration
+    to find from recordings alone (sim://...?effect=NAME does the same in process).
     """
+    from hcard_device.sim.hidden import HIDDEN_EFFECTS, HiddenEffectError, parse_assignments
     from hcard_device.usb.server import serve as serve_device
 
-    status = serve_device(variant, host, port, seed,
+    if list_effects:
+        for effect in HIDDEN_EFFECTS.values():
+            params = ", ".join(f"{p.name}={p.default:g} {p.unit}".rstrip()
+                               for p in effect.parameters)
+            click.echo(f"{effect.name} ({'/'.join(effect.devices)}; {params}): "
+                       f"{effect.description}")
+        return
+    try:
+        effects = parse_assignments(effect_names, assignments)
+    except HiddenEffectError as exc:
+        raise HcardError(f"--effect: {exc}") from None
+    status = serve_device(variant, host, port, seed, effects=effects,
                           echo=lambda message, error: click.echo(message, err=error))
     if status:
         raise SystemExit(status)
@@ -191,34 +212,62 @@ def synthesize(variant: str, effect_names: tuple[str, ...], assignments: tuple[s
               type=click.Path(dir_okay=False, path_type=Path),
               help="Finger track CSV (t_s, x_mm, y_mm[, fn_n, contact]).")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
-              help="Recording of the device's input reports (.csv).")
+              help="Recording (.csv, plus its .csv.json sidecar), in the measurement format.")
+@click.option("--profile", "profile_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Device profile to render with (hcard-device-profile/2, e.g. the "
+                   "profile.json of `hcard calibrate`); default: the device's own.")
 @click.option("--timeout", default=1.0, show_default=True, type=click.FloatRange(min=0.001),
               help="Longest wait for any answer from the device, s.")
-def play(card: Path, uri: str, track_path: Path, output: Path, timeout: float) -> None:
+def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Path | None,
+         timeout: float) -> None:
     """Upload CARD to a device, drive the finger track, record what the device reports.
 
     The track is played in real time on hardware and USB/IP devices, as fast as possible on
-    sim://. The recording has one row per input report (columns: t_s, sequence, contact, x_mm,
-    y_mm, fn_n, f_tl_n, f_tr_n, f_bl_n, f_br_n, lateral_n, amplitude_m, voltage_v, current_a,
-    target_uv, target_ev, texture, faults, flags, echo_s; SI units, relative friction).
+    sim://. The recording is a measurement file (spec/measurement-format.md): one row per
+    input report with the device's columns (measured forces, amplitude, voltage, targets,
+    faults; SI units) and a sidecar with the conditions the device knows, so `hcard calibrate`
+    reads it as it is. The summary ends with the rendered friction error against the card's
+    target, from the measured lateral force.
     """
+    from hcard.calibration.measurement import write_measurement
+    from hcard.physics.profile import DeviceProfile
     from hcard_device.drivers import open_device
     from hcard_device.drivers.play import play as play_track
-    from hcard_device.drivers.play import recording_csv, summary
+    from hcard_device.drivers.play import summary
+    from hcard_device.drivers.recording import recording
 
     if output.suffix.lower() != ".csv":
         raise click.BadParameter("the recording must end in .csv", param_hint="--output")
     loaded = load(card)
     track = read_track_csv(track_path)
+    profile_bytes = None
+    if profile_path is not None:
+        profile_bytes = read_profile_bytes(profile_path)
+        DeviceProfile.from_json(profile_bytes, source=str(profile_path))  # checked before use
     with open_device(uri, timeout_s=timeout) as driver:
-        result = play_track(driver, loaded, track)
+        result = play_track(driver, loaded, track, profile=profile_bytes)
     try:
-        write_atomically(output, recording_csv(result.states))
+        write_measurement(recording(result, track_path=str(track_path), card_path=str(card)),
+                          output)
+    except ValueError as exc:
+        raise HcardError(f"{output}: {exc}") from None
     except OSError as exc:
         raise HcardError(f"{output}: cannot write ({exc.strerror or exc})") from None
     click.echo(f"{output}: {len(result.states)} reports from {uri}")
     for line in summary(result):
         click.echo(f"  {line}")
+
+
+def read_profile_bytes(path: Path) -> bytes:
+    """The bytes of a profile file; a missing or unreadable file is a one-line error."""
+    from hcard.physics.profile import ProfileError
+
+    try:
+        return path.read_bytes()
+    except FileNotFoundError:
+        raise ProfileError(f"{path}: no such file") from None
+    except OSError as exc:
+        raise ProfileError(f"{path}: cannot read ({exc.strerror or exc})") from None
 
 
 COMMANDS = [device, play]

@@ -22,18 +22,9 @@ import click
 import numpy as np
 
 from hcard.atomic import write_atomically
-from hcard.calibration.profile import FORMAT as CALIBRATED_FORMAT
-from hcard.calibration.profile import load_profile as load_calibrated
 from hcard.errors import HcardError
 from hcard.physics.predictor import Parameter, Predictor, PredictorError, Variable
-from hcard.physics.profile import (
-    PREDICTOR_PROFILE_FORMAT,
-    PROFILE_FORMAT,
-    DeviceProfile,
-    ProfileError,
-    predictor_from_profile,
-    read_json,
-)
+from hcard.physics.profile import DeviceProfile, ProfileError
 from hcard.physics.sweep import Sweep, parse_sweep, quantity, split_assignment
 from hcard.physics.units import display_unit, format_value
 from hcard.plugins.registry import get_registry
@@ -324,35 +315,28 @@ def list_models(predictors: Mapping[str, Predictor]) -> str:
 
 # -- profiles ----------------------------------------------------------------------------------
 def predictor_of_profile(path: Path, model: str | None) -> Predictor:
-    """The predictor ``model`` with the parameters stored in the profile file ``path``.
+    """The predictor ``model`` with the parameters stored in the device profile file ``path``
+    (spec/device-profile.md).
 
-    A device profile (``hcard-device-profile/1``) offers its predictor, the UV and EV models
-    of a coupled predictor, and its leakage model; a predictor profile
-    (``hcard-predictor-profile/1``) offers its one model, and so does a calibrated profile
-    (``hcard-calibrated-profile/1``: the fitted model of ``hcard calibrate``, by its base
-    model's name). ``model`` None takes the profile's main predictor.
+    A profile offers, in this order: the model a calibration fitted (its base with the effects
+    it added, as a lateral force when that was observed; only in a calibrated profile), its
+    predictor, the UV and EV models of a coupled predictor, and its leakage model. ``model``
+    None takes the first.
     """
-    raw = read_json(path)
-    form = raw.get("format") if isinstance(raw, Mapping) else None
-    if form == PROFILE_FORMAT:
-        device = DeviceProfile.load(path)
-        candidates = [device.predictor]
-        for part in (
-            getattr(device.predictor, "uv", None),
-            getattr(device.predictor, "ev", None),
-            device.leakage,
-        ):
-            if isinstance(part, Predictor):
-                candidates.append(part)
-    elif form == PREDICTOR_PROFILE_FORMAT:
-        candidates = [predictor_from_profile(raw, source=str(path))]
-    elif form == CALIBRATED_FORMAT:
-        candidates = [load_calibrated(path)]
-    else:
-        raise ProfileError(
-            f"{path}: format: expected {PROFILE_FORMAT!r}, {PREDICTOR_PROFILE_FORMAT!r} or "
-            f"{CALIBRATED_FORMAT!r}, got {form!r}"
-        )
+    from hcard.calibration.profile import fitted_model
+
+    device = DeviceProfile.load(path)
+    candidates: list[Predictor] = []
+    if device.observation is not None:
+        candidates.append(fitted_model(device))
+    candidates.append(device.predictor)
+    for part in (
+        getattr(device.predictor, "uv", None),
+        getattr(device.predictor, "ev", None),
+        device.leakage,
+    ):
+        if isinstance(part, Predictor):
+            candidates.append(part)
     if model is None:
         return candidates[0]
     for candidate in candidates:
@@ -402,8 +386,9 @@ def predictor_of_profile(path: Path, model: str | None) -> Predictor:
     "--profile",
     "profile_path",
     type=click.Path(dir_okay=False, path_type=Path),
-    help="Take the parameters from a device or predictor profile (JSON); --param "
-    "overrides them. Without MODEL, use the profile's predictor.",
+    help="Take the parameters from a device profile (hcard-device-profile/2, e.g. the "
+    "profile.json of hcard calibrate); --param overrides them. Without MODEL, use the "
+    "profile's fitted model (a calibrated profile) or its predictor.",
 )
 @click.option(
     "--list",

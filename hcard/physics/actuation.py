@@ -193,7 +193,13 @@ def actuate(
     if not (math.isfinite(speed_floor) and speed_floor > 0):
         raise PredictorError(f"speed_floor: must be a finite number > 0 m/s, got {speed_floor}")
     uv_t, ev_t, speed_a, fn_a = _checked_targets(uv, ev, speed, normal_force)
-    limits = profile.limits
+    limits = profile.rendering_limits()
+    if profile.uv_model is None and profile.ev_model is None:
+        raise PredictorError(
+            f"profile {profile.name!r}: model {profile.predictor.name!r} renders neither "
+            "channel; a device profile needs a UV relative-friction model with an amplitude "
+            "inverse, an EV force model (N) with a voltage inverse, or 'coupled'"
+        )
     state_speed = np.maximum(speed_a, speed_floor)
     frames = int(uv_t.size)
 
@@ -227,7 +233,7 @@ def actuate(
     force = (ev_t - 1.0) * fn_a
     if profile.ev_model is not None:
         v_limit, ev_limit_name = profile.voltage_limit
-        raw_v = profile.voltage_for(force)
+        raw_v = profile.voltage_for(force, fn_a)
         ev_clipped = raw_v > v_limit * (1.0 + _CLIP_SLACK)
         voltage = np.minimum(raw_v, v_limit)
     else:

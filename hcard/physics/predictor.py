@@ -8,17 +8,13 @@ can be saved, reloaded and checked.
 
 from __future__ import annotations
 
-import json
 import math
-import os
 from collections.abc import Mapping
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
 
-from hcard.atomic import write_atomically
 from hcard.errors import HcardError
 
 
@@ -153,19 +149,14 @@ class Predictor:
 
     # -- profiles --------------------------------------------------------------------------
     def to_profile(self) -> dict[str, Any]:
-        """A JSON-ready description: model name and parameters with units."""
+        """A JSON-ready description: model name and parameters with units (the ``predictor``
+        object of a device profile, spec/device-profile.md)."""
         return {
-            "format": "hcard-predictor-profile/1",
             "model": self.name,
             "parameters": {
                 p.name: {"value": self._values[p.name], "unit": p.unit} for p in self.parameters
             },
         }
-
-    def save_profile(self, path: str | os.PathLike[str]) -> None:
-        """Write :meth:`to_profile` as JSON, atomically."""
-        text = json.dumps(self.to_profile(), indent=2) + "\n"
-        write_atomically(path, text.encode())
 
     @classmethod
     def from_profile(cls, profile: Mapping[str, Any], *, source: str = "profile") -> Predictor:
@@ -195,16 +186,3 @@ class Predictor:
         except PredictorError as exc:
             raise PredictorError(f"{source}: {exc}") from None
 
-    @classmethod
-    def load_profile(cls, path: str | os.PathLike[str]) -> Predictor:
-        """Read a profile file written by :meth:`save_profile`."""
-        file = Path(path)
-        try:
-            profile = json.loads(file.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise PredictorError(f"{file}: no such file") from None
-        except (OSError, ValueError) as exc:
-            raise PredictorError(f"{file}: not a readable JSON profile ({exc})") from None
-        if not isinstance(profile, Mapping):
-            raise PredictorError(f"{file}: a profile must be a JSON object")
-        return cls.from_profile(profile, source=str(file))

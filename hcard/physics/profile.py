@@ -1,4 +1,4 @@
-"""Device profiles: a fitted predictor plus the limits of one device (DESIGN.md sections 2, 5).
+"""Device profiles: a fitted predictor, its effects and the limits of one device.
 
 A device profile is to friction what an ICC profile is to colour: it maps the device-independent
 target of a card (relative friction per channel, ``Frames.uv`` in [0, 1] and ``Frames.ev`` in
@@ -11,10 +11,14 @@ render. It bundles
   gives the voltage (output in N, ``inverse_input == "voltage"``, e.g. ``"ev-kaczmarek"``);
 - optionally a charge-leakage model (Eqs. 3.19-3.23) whose gain at the EV carrier frequency
   scales the voltage that acts on the finger;
-- the device limits (:class:`DeviceLimits`).
+- the device limits (:class:`DeviceLimits`);
+- the effects a calibration added (``hcard calibrate`` writes device profiles), each on the UV
+  channel, the EV channel or the bare finger (:mod:`hcard.physics.profile_effects`), with what
+  the profile was fitted on.
 
-Profiles are JSON files (format ``hcard-device-profile/1``), written atomically; every loading
-error names the file and the field. :mod:`hcard.physics.actuation` does the rendering.
+Profiles are JSON files (format ``hcard-device-profile/2``, spec/device-profile.md), written
+atomically; every loading error names the file and the field, and files of earlier formats get
+an error that says what to do. :mod:`hcard.physics.actuation` does the rendering.
 """
 
 from __future__ import annotations
@@ -32,17 +36,43 @@ import numpy as np
 from hcard.atomic import write_atomically
 from hcard.errors import HcardError
 from hcard.physics.predictor import Predictor, PredictorError
+from hcard.physics.profile_effects import (
+    EffectError,
+    FittedEffect,
+    solve_decreasing,
+    with_effects,
+)
 from hcard.physics.units import UnitError, parse_quantity, parse_unit
 
 if TYPE_CHECKING:
     from hcard.physics.actuation import ActuatorCommands
     from hcard.plugins.registry import PluginRegistry
 
-PROFILE_FORMAT = "hcard-device-profile/1"
-"""Value of the ``format`` field of a device profile file."""
+PROFILE_FORMAT = "hcard-device-profile/2"
+"""Value of the ``format`` field of a device profile file (spec/device-profile.md)."""
 
-PREDICTOR_PROFILE_FORMAT = "hcard-predictor-profile/1"
-"""Format of a bare predictor profile (:meth:`Predictor.to_profile`)."""
+OLD_FORMATS = {
+    "hcard-device-profile/1": (
+        "a version-1 device profile; version 2 adds the effects and the calibration: move its "
+        "fields into a version-2 file (spec/device-profile.md) or write it again with hcard"
+    ),
+    "hcard-calibrated-profile/1": (
+        "the fitted model of an earlier 'hcard calibrate', which now writes device profiles: "
+        "run 'hcard calibrate' on the recordings again"
+    ),
+    "hcard-predictor-profile/1": (
+        "a bare predictor's parameters, which a device profile (hcard-device-profile/2) now "
+        "holds under 'predictor'"
+    ),
+}
+"""Formats of earlier versions, each with what to do instead."""
+
+AMPLITUDE_SEARCH_FACTOR = 8.0
+"""The numerical UV inverse searches amplitudes up to this many times the amplitude limit
+(the raw command is then clipped to the limit and the shortfall reported)."""
+
+REFERENCE_VOLTAGE = 1000.0
+"""Envelope at which the EV channel's force is evaluated to scale the inverse, V."""
 
 EPSILON_0 = 8.8541878128e-12
 """Vacuum permittivity, F/m."""
@@ -223,44 +253,70 @@ def predictor_from_profile(
 
 @dataclass(frozen=True)
 class DeviceProfile:
-    """A predictor with fitted parameters and the limits of one device.
+    """A predictor with fitted parameters, the effects a calibration added, and the limits of
+    one device (spec/device-profile.md).
 
     Attributes:
-        predictor: ``coupled`` (UV and EV), a UV relative-friction model with an amplitude
-            inverse, or an EV force model (N) with a voltage inverse.
-        limits: the device limits.
+        predictor: the base model: ``coupled`` (UV and EV), a UV relative-friction model with an
+            amplitude inverse, an EV force model (N) with a voltage inverse, or (for a profile
+            that describes a model but cannot render, e.g. a calibration of the bare finger)
+            any predictor.
+        limits: the device limits (None: not known; the profile then cannot render).
         leakage: optional charge-leakage model (Eqs. 3.19-3.23) with a
             ``frequency_response(f)`` method; its gain at the carrier frequency scales the EV
             voltage that acts on the finger.
         name: a short identifier of the device.
         description: one line.
+        effects: the effects a calibration added, in the order added
+            (:class:`~hcard.physics.profile_effects.FittedEffect`); each acts on the UV channel,
+            the EV channel or the bare finger (:func:`~hcard.physics.profile_effects.channel_of`).
+        observation: how the model was compared with a force sensor (``output``: ``"lateral_force"``
+            or ``"output"``; ``parameters``: the fitted ``friction_coefficient`` and
+            ``force_offset`` with units and uncertainties), or None.
+        calibration: what the profile was fitted on and how well (recordings, their conditions,
+            held-out errors, verdict, rendering errors), free-form JSON, or None.
     """
 
     predictor: Predictor
-    limits: DeviceLimits
+    limits: DeviceLimits | None
     leakage: Predictor | None = None
     name: str = "device"
     description: str = ""
+    effects: tuple[FittedEffect, ...] = ()
+    observation: Mapping[str, Any] | None = None
+    calibration: Mapping[str, Any] | None = None
     _uv: Predictor | None = field(default=None, init=False, repr=False, compare=False)
     _ev: Predictor | None = field(default=None, init=False, repr=False, compare=False)
+    _uv_channel: Predictor | None = field(default=None, init=False, repr=False, compare=False)
+    _ev_channel: Predictor | None = field(default=None, init=False, repr=False, compare=False)
     _carrier_gain: float = field(default=1.0, init=False, repr=False, compare=False)
     _capacitance: float | None = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.predictor, Predictor):
             raise ProfileError(f"predictor: expected a Predictor, got {type(self.predictor)}")
-        if not isinstance(self.limits, DeviceLimits):
+        if self.limits is not None and not isinstance(self.limits, DeviceLimits):
             raise ProfileError(f"limits: expected DeviceLimits, got {type(self.limits)}")
-        uv, ev = _channels(self.predictor)
-        if uv is None and ev is None:
+        object.__setattr__(self, "effects", tuple(self.effects))
+        for index, fitted in enumerate(self.effects):
+            if not isinstance(fitted, FittedEffect):
+                raise ProfileError(f"effects[{index}]: expected a FittedEffect")
+        names = [fitted.name for fitted in self.effects]
+        repeated = sorted({name for name in names if names.count(name) > 1})
+        if repeated:
+            raise ProfileError(f"effects: {', '.join(repeated)} appear(s) twice")
+        uv, ev = channels_of(self.predictor)
+        if uv is None and ev is None and self.limits is not None:
             raise ProfileError(
                 f"predictor: model {self.predictor.name!r} can render neither channel; a profile "
-                "needs a UV relative-friction model with an amplitude inverse, an EV force "
-                "model (N) with a voltage inverse, or 'coupled'"
+                "with limits needs a UV relative-friction model with an amplitude inverse, an EV "
+                "force model (N) with a voltage inverse, or 'coupled'"
             )
-        if ev is not None:
+        uv_channel = self._channel_with_effects("uv", uv)
+        ev_channel = self._channel_with_effects("ev", ev)
+        if ev is not None and self.limits is not None:
             frequency = self.limits.carrier_frequency
-            _check_quadratic(ev, frequency)
+            _check_quadratic(ev_channel or ev, frequency)
             if self.leakage is not None and "frequency" in {v.name for v in ev.inputs}:
                 raise ProfileError(
                     f"leakage: the EV model {ev.name!r} already depends on the carrier "
@@ -273,7 +329,7 @@ class DeviceProfile:
                 f"leakage: model {self.leakage.name!r} has no frequency_response(f) method"
             )
         capacitance = self._derive_capacitance(ev)
-        if ev is not None and capacitance is None:
+        if ev is not None and self.limits is not None and capacitance is None:
             raise ProfileError(
                 f"limits.load_capacitance: missing, and the EV model {ev.name!r} has no "
                 "area and layers to derive it from (Eq. 3.8); give it in F so that "
@@ -282,19 +338,56 @@ class DeviceProfile:
         # Frozen dataclass: the derived values are set once, here.
         object.__setattr__(self, "_uv", uv)
         object.__setattr__(self, "_ev", ev)
+        object.__setattr__(self, "_uv_channel", uv_channel)
+        object.__setattr__(self, "_ev_channel", ev_channel)
         object.__setattr__(self, "_carrier_gain", self._leakage_gain())
         object.__setattr__(self, "_capacitance", capacitance)
+
+    def _channel_with_effects(self, channel: str, model: Predictor | None) -> Predictor | None:
+        """The channel's model with the profile's effects on it; refuses effects on a channel
+        the predictor does not render."""
+        mine = self.effects_on(channel)
+        if not mine:
+            return model
+        if model is None:
+            raise ProfileError(
+                f"effects: {', '.join(f.name for f in mine)} act(s) on the {channel.upper()} "
+                f"channel, which model {self.predictor.name!r} does not render"
+            )
+        try:
+            return with_effects(model, mine)
+        except PredictorError as exc:
+            raise ProfileError(f"effects: {exc}") from None
+
+    def effects_on(self, channel: str) -> tuple[FittedEffect, ...]:
+        """The effects acting on ``channel`` (``"uv"``, ``"ev"`` or ``"finger"``), in order."""
+        return tuple(fitted for fitted in self.effects if fitted.channel == channel)
+
+    def replace(self, **changes: Any) -> DeviceProfile:
+        """A copy with some fields changed (``limits``, ``effects``, ``name``, ...)."""
+        values = {f.name: getattr(self, f.name) for f in fields(self) if f.init}
+        return DeviceProfile(**{**values, **changes})
 
     # -- channels --------------------------------------------------------------------------
     @property
     def uv_model(self) -> Predictor | None:
-        """The relative-friction model of the UV channel (``None``: no UV channel)."""
+        """The base relative-friction model of the UV channel (``None``: no UV channel)."""
         return self._uv
 
     @property
     def ev_model(self) -> Predictor | None:
-        """The electrostatic-force model of the EV channel, N (``None``: no EV channel)."""
+        """The base electrostatic-force model of the EV channel, N (``None``: no EV channel)."""
         return self._ev
+
+    @property
+    def uv_channel(self) -> Predictor | None:
+        """The UV channel's model with the profile's UV effects (the base without any)."""
+        return self._uv_channel
+
+    @property
+    def ev_channel(self) -> Predictor | None:
+        """The EV channel's model with the profile's EV effects (the base without any)."""
+        return self._ev_channel
 
     @property
     def carrier_gain(self) -> float:
@@ -306,6 +399,15 @@ class DeviceProfile:
         """Capacitance the EV amplifier drives, F (given in the limits, or from Eq. 3.8)."""
         return self._capacitance
 
+    def rendering_limits(self) -> DeviceLimits:
+        """The limits, or :class:`ProfileError` for a profile without them (it cannot render)."""
+        if self.limits is None:
+            raise ProfileError(
+                f"profile {self.name!r} has no limits (it was fitted without a device's "
+                "conditions), so it cannot render; give it the device's limits"
+            )
+        return self.limits
+
     @property
     def voltage_limit(self) -> tuple[float, str]:
         """The binding peak-voltage limit, V, and its name (``max_voltage`` or ``max_current``).
@@ -314,18 +416,17 @@ class DeviceProfile:
         into :attr:`load_capacitance` would draw more than ``max_current`` (``I = 2 pi f C V``,
         the envelope taken as slow against the carrier).
         """
+        limits = self.rendering_limits()
         capacitance = self.load_capacitance
         if capacitance is None:  # no EV channel: nothing draws current
-            return self.limits.max_voltage, "max_voltage"
-        by_current = self.limits.max_current / (
-            2.0 * math.pi * self.limits.carrier_frequency * capacitance
-        )
-        if by_current < self.limits.max_voltage:
+            return limits.max_voltage, "max_voltage"
+        by_current = limits.max_current / (2.0 * math.pi * limits.carrier_frequency * capacitance)
+        if by_current < limits.max_voltage:
             return by_current, "max_current"
-        return self.limits.max_voltage, "max_voltage"
+        return limits.max_voltage, "max_voltage"
 
     def _leakage_gain(self) -> float:
-        if self.leakage is None:
+        if self.leakage is None or self.limits is None:
             return 1.0
         frequency = self.limits.carrier_frequency
         try:
@@ -344,7 +445,7 @@ class DeviceProfile:
         """The limits' load capacitance, else Eq. 3.8 from the EV model's layer parameters
         (``area``, ``sc_thickness``, ``sc_permittivity``, ``insulator_thickness``,
         ``insulator_permittivity``), else None (the current limit cannot be checked)."""
-        if self.limits.load_capacitance is not None:
+        if self.limits is not None and self.limits.load_capacitance is not None:
             return self.limits.load_capacitance
         if ev is None or not set(_LAYER_PARAMETERS) <= set(ev.params):
             return None
@@ -372,11 +473,13 @@ class DeviceProfile:
             normal_force: finger normal force, N (> 0 where EV acts).
 
         Returns:
-            ``(uv, ev)``: ``uv = mu(w)/mu0`` from the UV model at the plate frequency, and
+            ``(uv, ev)``: ``uv = mu(w)/mu0`` from the UV channel at the plate frequency, and
             ``ev = 1 + <F_e>/F_n`` with ``<F_e>`` the carrier average of the EV force, which for
             a force going as ``v^2`` is ``F_e(g V / sqrt 2)`` (mean of ``sin^2`` = 1/2, ``g``
             the leakage gain at the carrier). ``ev = 1`` where ``F_n = 0``. Their product is
-            the total relative friction ``F_t / (mu0 F_n)``.
+            the total relative friction ``F_t / (mu0 F_n)``. Each channel includes the
+            profile's effects on it in their steady state (effects on the bare finger scale
+            the friction with and without modulation alike, so they are not in these ratios).
         """
         amplitude, voltage, speed, normal_force = np.broadcast_arrays(
             *(np.asarray(a, dtype=np.float64) for a in (amplitude, voltage, speed, normal_force))
@@ -386,23 +489,24 @@ class DeviceProfile:
             uv = np.broadcast_to(self.uv_for(amplitude, speed, normal_force), uv.shape)
         ev = np.ones(amplitude.shape)
         if self.ev_model is not None:
-            force = self.force_for(voltage)
+            force = self.force_for(voltage, normal_force)
             with np.errstate(divide="ignore", invalid="ignore"):
                 ev = np.where(normal_force > 0, 1.0 + force / normal_force, 1.0)
         return np.array(uv, dtype=np.float64), np.array(ev, dtype=np.float64)
 
-    def _uv_inputs(self, speed: np.ndarray, normal_force: np.ndarray) -> dict[str, Any]:
-        """Inputs of the UV model: finger state and the plate frequency (those it takes)."""
+    def _plate_frequency(self) -> float | None:
+        return None if self.limits is None else self.limits.plate_frequency
+
+    def _uv_inputs(self, speed: Any, normal_force: Any) -> dict[str, Any]:
+        """Inputs of the UV channel: finger state and the plate frequency (those it takes)."""
         names = {v.name for v in self._channel("uv").inputs}
-        given: dict[str, Any] = {
-            "speed": speed,
-            "normal_force": normal_force,
-            "frequency": self.limits.plate_frequency,
-        }
+        given: dict[str, Any] = {"speed": speed, "normal_force": normal_force}
+        if self._plate_frequency() is not None:
+            given["frequency"] = self._plate_frequency()
         return {k: v for k, v in given.items() if k in names}
 
     def _channel(self, channel: str) -> Predictor:
-        model = self._uv if channel == "uv" else self._ev
+        model = self._uv_channel if channel == "uv" else self._ev_channel
         if model is None:
             raise ProfileError(f"profile {self.name!r} has no {channel.upper()} channel")
         return model
@@ -415,31 +519,57 @@ class DeviceProfile:
 
     def amplitude_for(self, uv: Any, speed: Any, normal_force: Any) -> np.ndarray:
         """Peak-to-peak plate amplitude (m) giving UV relative friction ``uv`` at the finger
-        speed (m/s) and normal force (N): the UV model's inverse, not clipped."""
-        model = self._channel("uv")
-        return model.inverse(uv, **self._uv_inputs(speed, normal_force))
+        speed (m/s) and normal force (N): the UV model's inverse, not clipped. With effects on
+        the UV channel the forward map is inverted numerically (it falls with the amplitude)
+        over ``[0, AMPLITUDE_SEARCH_FACTOR * max_amplitude]``."""
+        if not self.effects_on("uv"):
+            model = self._channel("uv")
+            return model.inverse(uv, **self._uv_inputs(speed, normal_force))
+        target, speed_a, force_a = np.broadcast_arrays(
+            *(np.asarray(a, dtype=np.float64) for a in (uv, speed, normal_force))
+        )
+        high = AMPLITUDE_SEARCH_FACTOR * self.rendering_limits().max_amplitude
+        return solve_decreasing(lambda w: self.uv_for(w, speed_a, force_a), target, high)
 
-    def _ev_inputs(self) -> dict[str, Any]:
-        """Extra inputs of the EV model: the carrier frequency when it takes ``frequency``."""
+    def _ev_inputs(self, normal_force: Any) -> dict[str, Any]:
+        """Extra inputs of the EV channel: the carrier frequency when it takes ``frequency``,
+        the normal force when an effect needs it."""
         names = {v.name for v in self._channel("ev").inputs}
-        return {"frequency": self.limits.carrier_frequency} if "frequency" in names else {}
+        given: dict[str, Any] = {}
+        if "frequency" in names:
+            given["frequency"] = self.rendering_limits().carrier_frequency
+        if "normal_force" in names and normal_force is not None:
+            given["normal_force"] = normal_force
+        return given
 
-    def force_for(self, voltage: Any) -> np.ndarray:
-        """Carrier-averaged EV force, N, for a peak envelope ``voltage`` (V).
+    def force_for(self, voltage: Any, normal_force: Any = None) -> np.ndarray:
+        """Carrier-averaged EV force, N, for a peak envelope ``voltage`` (V) on a finger
+        pressing with ``normal_force`` (N; used by effects that depend on it).
 
         ``<F(g V sin)> = F(g V / sqrt 2)`` for a force going as ``v^2`` (mean of ``sin^2`` is
         1/2; ``g`` the leakage gain at the carrier, Eq. 3.22).
         """
         model = self._channel("ev")
         effective = self.carrier_gain * np.asarray(voltage, dtype=np.float64) / math.sqrt(2.0)
-        return np.asarray(model.forward(voltage=effective, **self._ev_inputs()), dtype=np.float64)
+        return np.asarray(
+            model.forward(voltage=effective, **self._ev_inputs(normal_force)), dtype=np.float64
+        )
 
-    def voltage_for(self, force: Any) -> np.ndarray:
+    def voltage_for(self, force: Any, normal_force: Any = None) -> np.ndarray:
         """Peak envelope voltage, V, whose carrier-averaged EV force is ``force`` (N): the
-        inverse of :meth:`force_for`, not clipped."""
-        model = self._channel("ev")
-        effective = np.asarray(model.inverse(force, **self._ev_inputs()), dtype=np.float64)
-        return effective * math.sqrt(2.0) / self.carrier_gain
+        inverse of :meth:`force_for`, not clipped. With effects on the EV channel the force
+        still goes as ``v^2`` (checked when the profile is built), so the voltage is that of a
+        reference force scaled by ``sqrt(force / F(V_ref))``."""
+        if not self.effects_on("ev"):
+            model = self._channel("ev")
+            effective = np.asarray(model.inverse(force, **self._ev_inputs(None)),
+                                   dtype=np.float64)
+            return effective * math.sqrt(2.0) / self.carrier_gain
+        force_a = np.asarray(force, dtype=np.float64)
+        reference = self.force_for(np.full(force_a.shape, REFERENCE_VOLTAGE), normal_force)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(reference > 0, np.maximum(force_a, 0.0) / reference, np.inf)
+        return REFERENCE_VOLTAGE * np.sqrt(ratio)
 
     def actuate(
         self, uv: Any, ev: Any, speed: Any, normal_force: Any, **options: Any
@@ -452,21 +582,32 @@ class DeviceProfile:
 
     # -- files -----------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
-        """The JSON-ready profile (format :data:`PROFILE_FORMAT`)."""
+        """The JSON-ready profile (format :data:`PROFILE_FORMAT`, spec/device-profile.md)."""
         return {
             "format": PROFILE_FORMAT,
             "name": self.name,
             "description": self.description,
             "predictor": self.predictor.to_profile(),
             "leakage": None if self.leakage is None else self.leakage.to_profile(),
-            "limits": self.limits.to_dict(),
+            "limits": None if self.limits is None else self.limits.to_dict(),
+            "effects": [fitted.to_dict() for fitted in self.effects],
+            "observation": None if self.observation is None else dict(self.observation),
+            "calibration": None if self.calibration is None else dict(self.calibration),
         }
+
+    def to_json(self) -> bytes:
+        """:meth:`to_dict` as UTF-8 JSON text (indented, finite numbers only)."""
+        try:
+            text = json.dumps(self.to_dict(), indent=2, allow_nan=False, ensure_ascii=False)
+        except ValueError as exc:
+            raise ProfileError(f"profile {self.name!r}: {exc}") from None
+        return (text + "\n").encode("utf-8")
 
     def save(self, path: str | os.PathLike[str]) -> None:
         """Write the profile as JSON, atomically (readers see the old file or the new one)."""
-        text = json.dumps(self.to_dict(), indent=2) + "\n"
+        data = self.to_json()
         try:
-            write_atomically(path, text.encode())
+            write_atomically(path, data)
         except OSError as exc:
             raise ProfileError(f"{path}: cannot write ({exc.strerror or exc})") from None
 
@@ -481,21 +622,22 @@ class DeviceProfile:
         """A profile from its JSON object; errors name ``source`` and the field."""
         if not isinstance(raw, Mapping):
             raise ProfileError(f"{source}: a device profile must be a JSON object")
-        if raw.get("format") != PROFILE_FORMAT:
-            raise ProfileError(
-                f"{source}: format: expected {PROFILE_FORMAT!r}, got {raw.get('format')!r}"
-            )
-        known = {"format", "name", "description", "predictor", "leakage", "limits"}
-        unknown = sorted(set(raw) - known)
+        form = raw.get("format")
+        if form != PROFILE_FORMAT:
+            why = OLD_FORMATS.get(form) if isinstance(form, str) else None
+            if why:
+                raise ProfileError(f"{source}: format: {form!r} is {why}")
+            raise ProfileError(f"{source}: format: expected {PROFILE_FORMAT!r}, got {form!r}")
+        unknown = sorted(set(raw) - set(PROFILE_FIELDS))
         if unknown:
-            raise ProfileError(f"{source}: {unknown[0]}: unknown field")
+            raise ProfileError(f"{source}: {unknown[0]}: unknown field; fields: "
+                               f"{', '.join(PROFILE_FIELDS)}")
         for text_field in ("name", "description"):
             if not isinstance(raw.get(text_field, ""), str):
                 raise ProfileError(f"{source}: {text_field}: must be a string")
         if "predictor" not in raw:
             raise ProfileError(f"{source}: predictor: missing")
-        if "limits" not in raw:
-            raise ProfileError(f"{source}: limits: missing")
+        registry = _registry(registry)
         predictor = predictor_from_profile(
             raw["predictor"], source=f"{source}: predictor", registry=registry
         )
@@ -504,7 +646,27 @@ class DeviceProfile:
             leakage = predictor_from_profile(
                 raw["leakage"], source=f"{source}: leakage", registry=registry
             )
-        limits = DeviceLimits.from_dict(raw["limits"], source=source)
+        limits = None
+        if raw.get("limits") is not None:
+            limits = DeviceLimits.from_dict(raw["limits"], source=source)
+        effects_raw = raw.get("effects", [])
+        if not isinstance(effects_raw, list):
+            raise ProfileError(f"{source}: effects: must be a list")
+        try:
+            effects = tuple(
+                FittedEffect.from_dict(entry, source=f"{source}: effects[{index}]",
+                                       registry=registry)
+                for index, entry in enumerate(effects_raw)
+            )
+        except EffectError as exc:
+            raise ProfileError(str(exc)) from None
+        extras: dict[str, Mapping[str, Any] | None] = {}
+        for key in ("observation", "calibration"):
+            value = raw.get(key)
+            if value is not None and not isinstance(value, Mapping):
+                raise ProfileError(f"{source}: {key}: must be an object or null")
+            extras[key] = value
+        _check_observation(extras["observation"], source)
         try:
             return cls(
                 predictor=predictor,
@@ -512,9 +674,25 @@ class DeviceProfile:
                 leakage=leakage,
                 name=raw.get("name", "device"),
                 description=raw.get("description", ""),
+                effects=effects,
+                observation=extras["observation"],
+                calibration=extras["calibration"],
             )
         except ProfileError as exc:
             raise ProfileError(f"{source}: {exc}") from None
+
+    @classmethod
+    def from_json(
+        cls, data: bytes, *, source: str = "profile", registry: PluginRegistry | None = None
+    ) -> DeviceProfile:
+        """A profile from the bytes of a profile file (UTF-8 JSON)."""
+        try:
+            raw = json.loads(data.decode("utf-8"))
+        except UnicodeDecodeError:
+            raise ProfileError(f"{source}: not a text (UTF-8) file") from None
+        except json.JSONDecodeError as exc:
+            raise ProfileError(f"{source}: not valid JSON ({exc.msg}, line {exc.lineno})") from None
+        return cls.from_dict(raw, source=source, registry=registry)
 
     @classmethod
     def load(
@@ -552,6 +730,34 @@ class DeviceProfile:
         )
 
 
+PROFILE_FIELDS = ("format", "name", "description", "predictor", "leakage", "limits", "effects",
+                  "observation", "calibration")
+"""The fields of a profile file (spec/device-profile.md, rule DP1)."""
+
+OBSERVATION_OUTPUTS = ("lateral_force", "output")
+"""``observation.output``: the model was fitted to a lateral force, or to its own output."""
+
+
+def _check_observation(raw: Mapping[str, Any] | None, source: str) -> None:
+    """The ``observation`` object: ``output`` one of :data:`OBSERVATION_OUTPUTS`, and
+    ``parameters`` an object of ``{"value": number, "unit": str, ...}`` entries."""
+    if raw is None:
+        return
+    output = raw.get("output")
+    if output not in OBSERVATION_OUTPUTS:
+        raise ProfileError(f"{source}: observation.output: {output!r}, expected one of "
+                           f"{', '.join(OBSERVATION_OUTPUTS)}")
+    parameters = raw.get("parameters", {})
+    if not isinstance(parameters, Mapping):
+        raise ProfileError(f"{source}: observation.parameters: must be an object")
+    for name, entry in parameters.items():
+        value = entry.get("value") if isinstance(entry, Mapping) else None
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(
+                value):
+            raise ProfileError(f"{source}: observation.parameters.{name}.value: expected a "
+                               "finite number")
+
+
 def read_json(file: Path) -> Any:
     """The JSON content of ``file``; :class:`ProfileError` naming the file otherwise."""
     try:
@@ -568,7 +774,7 @@ def read_json(file: Path) -> Any:
         raise ProfileError(f"{file}: cannot read ({exc.strerror or exc})") from None
 
 
-def _channels(predictor: Predictor) -> tuple[Predictor | None, Predictor | None]:
+def channels_of(predictor: Predictor) -> tuple[Predictor | None, Predictor | None]:
     """(UV relative-friction model, EV force model) rendered by ``predictor``."""
     uv = getattr(predictor, "uv", None)
     ev = getattr(predictor, "ev", None)

@@ -269,6 +269,7 @@ class ChargeLeakage(Effect):
     )
     inputs: ClassVar[tuple[Variable, ...]] = (TIME,)
     requires: ClassVar[tuple[str, ...]] = ("voltage",)
+    instantaneous: ClassVar[tuple[str, ...]] = ("voltage",)
 
     def transform_inputs(
         self, inputs: Mapping[str, np.ndarray], params: Mapping[str, float]

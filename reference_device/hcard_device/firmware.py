@@ -27,6 +27,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from hcard.physics.profile import DeviceProfile
 from hcard.track import FingerTrack, make_track
 from hcard.v1 import card_pb2 as pb
 from hcard_device.protocol import (
@@ -86,8 +87,9 @@ device falls behind the wall clock rather than stalling the USB threads."""
 _CONTACT, _RUNNING, _CARD_LOADED = (
     int(StateFlags.CONTACT), int(StateFlags.RUNNING), int(StateFlags.CARD_LOADED)
 )
-_HOST_FINGER, _STREAMING, _UPLOADING = (
-    int(StateFlags.HOST_FINGER), int(StateFlags.STREAMING), int(StateFlags.UPLOADING)
+_HOST_FINGER, _STREAMING, _UPLOADING, _HOST_PROFILE = (
+    int(StateFlags.HOST_FINGER), int(StateFlags.STREAMING), int(StateFlags.UPLOADING),
+    int(StateFlags.HOST_PROFILE),
 )
 _I16 = (-0x8000, 0x7FFF)
 _U16 = 0xFFFF
@@ -351,6 +353,8 @@ class Firmware:
         assert isinstance(report, UploadEnd)
         if report.action == UploadAction.ABORT:
             return self.upload.abort(now)
+        if report.action == UploadAction.COMMIT_PROFILE:
+            return self.upload.commit_profile(self._load_profile, now)
         committed = self.upload.commit(self._load_card, now)
         if committed:
             self._clip_index = 0
@@ -360,6 +364,14 @@ class Firmware:
         """The loader of a COMMIT: the card goes into force between two frames."""
         self.sim.load_card(card)
         self._streaming = False
+
+    def _load_profile(self, data: bytes) -> None:
+        """The loader of a COMMIT_PROFILE (rule PU9): the bytes are a device profile
+        (spec/device-profile.md) that renders the device's channels; it goes into force
+        between two frames, under the device's own limits. Raises ProfileError otherwise."""
+        profile = DeviceProfile.from_json(data, source="profile")
+        self.sim.set_profile(profile)
+        self._clip_index = 0
 
     def _feature_report(self, cls: type[Report]) -> Report:
         if cls is DeviceInfo:
@@ -389,6 +401,7 @@ class Firmware:
             | Capability.DIRECT_STREAMING
             | Capability.CORNER_FORCES
             | Capability.LATERAL_FORCE
+            | Capability.PROFILE
         )
         if cfg.has_uv:
             caps |= Capability.UV
@@ -507,6 +520,10 @@ class Firmware:
             self.latched_faults = 0
             self._stream_dropped_base = self.sim.stream_overruns
             return True
+        if command == Command.DEVICE_PROFILE:
+            self.sim.set_profile(None)
+            self._clip_index = 0
+            return True
         if command == Command.PLAY_CARD:
             if self.upload.active is None:
                 return False
@@ -592,6 +609,8 @@ class Firmware:
             flags |= _STREAMING
         if self.upload.state == UploadState.RECEIVING:
             flags |= _UPLOADING
+        if self.sim.host_profile:
+            flags |= _HOST_PROFILE
         return flags
 
     def _faults(self, sim_faults: int) -> int:

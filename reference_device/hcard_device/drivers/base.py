@@ -31,6 +31,7 @@ from hcard_device.drivers.errors import DeviceError, DeviceStall
 from hcard_device.drivers.uri import DeviceUri
 from hcard_device.protocol import (
     PROTOCOL_MAJOR,
+    Capability,
     ClipReport,
     Command,
     Control,
@@ -84,15 +85,18 @@ class UploadOutcome:
     reports_sent: int
 
 
-def upload_error(status: UploadStatus) -> str:
-    """A one-line reason for a failed upload, from its UPLOAD_STATUS."""
+def upload_error(status: UploadStatus, what: str = "card") -> str:
+    """A one-line reason for a failed upload of a ``what`` (card or profile), from its
+    UPLOAD_STATUS."""
     try:
         result = UploadResult(status.result).name
     except ValueError:
         result = f"result {status.result}"
     detail = f" at {status.detail}" if status.detail else ""
-    return (f"card upload failed: {result}{detail} ({status.received} of "
-            f"{status.total_length} bytes received); the previous card stays active")
+    if status.result == UploadResult.INVALID_PROFILE and status.detail:
+        detail = f": {status.detail}"
+    return (f"{what} upload failed: {result}{detail} ({status.received} of "
+            f"{status.total_length} bytes received); the previous {what} stays in force")
 
 
 class Driver(abc.ABC):
@@ -246,8 +250,32 @@ class Driver(abc.ABC):
         the device rejects the upload (CRC, invalid card, ...): the previous card stays active.
         """
         data = card if isinstance(card, bytes) else to_bytes(card)
+        reports = self._upload(data, UploadAction.COMMIT, commit_timeout_s)
+        status = self.upload_status()
+        return UploadOutcome(status, self.clip_report(), len(data), reports)
+
+    def upload_profile(self, data: bytes, *,
+                       commit_timeout_s: float = COMMIT_TIMEOUT_S) -> UploadStatus:
+        """Upload a device profile (the bytes of a profile file, spec/device-profile.md) and
+        put it in force (UPLOAD_END COMMIT_PROFILE, protocol 1.1). Raises
+        :class:`DeviceError` when the device does not take profiles or refuses this one (the
+        reason and field from UPLOAD_STATUS); the profile in force stays."""
+        if not self.info().capabilities & Capability.PROFILE:
+            raise DeviceError(f"{self.uri}: the device does not take profiles (capability "
+                              "PROFILE is not set; protocol 1.1)")
+        self._upload(data, UploadAction.COMMIT_PROFILE, commit_timeout_s)
+        return self.upload_status()
+
+    def use_device_profile(self) -> None:
+        """Render with the device's own profile again (CONTROL DEVICE_PROFILE)."""
+        self.command(Command.DEVICE_PROFILE)
+
+    def _upload(self, data: bytes, action: UploadAction, commit_timeout_s: float) -> int:
+        """Send ``data`` in chunks, commit it with ``action``, wait for COMMITTED; the number
+        of reports sent. DeviceError naming the failure otherwise."""
+        what = "profile" if action == UploadAction.COMMIT_PROFILE else "card"
         try:
-            reports = upload_reports(data)
+            reports = upload_reports(data, action)
         except ProtocolError as exc:
             raise DeviceError(f"{self.uri}: {exc}") from None
         for report in reports:
@@ -257,26 +285,26 @@ class Driver(abc.ABC):
             except DeviceStall:
                 status = self.upload_status()
                 if status.state == UploadState.FAILED:
-                    raise DeviceError(f"{self.uri}: {upload_error(status)}") from None
+                    raise DeviceError(f"{self.uri}: {upload_error(status, what)}") from None
                 raise
-        status = self._wait_committed(commit_timeout_s)
-        return UploadOutcome(status, self.clip_report(), len(data), len(reports))
+        self._wait_committed(commit_timeout_s, what)
+        return len(reports)
 
     def abort_upload(self) -> None:
         """Abort an upload in progress (the previous card stays active)."""
         self.set_report(UploadEnd(UploadAction.ABORT))
 
-    def _wait_committed(self, timeout_s: float) -> UploadStatus:
+    def _wait_committed(self, timeout_s: float, what: str = "card") -> UploadStatus:
         deadline = self.clock() + timeout_s
         while True:
             status = self.upload_status()
             if status.state == UploadState.COMMITTED:
                 return status
             if status.state == UploadState.FAILED:
-                raise DeviceError(f"{self.uri}: {upload_error(status)}")
+                raise DeviceError(f"{self.uri}: {upload_error(status, what)}")
             if self.clock() >= deadline:
                 raise DeviceError(
-                    f"{self.uri}: the device did not commit the card within {timeout_s:g} s"
+                    f"{self.uri}: the device did not commit the {what} within {timeout_s:g} s"
                 )
             self._idle(0.005)
 

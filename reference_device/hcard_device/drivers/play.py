@@ -1,40 +1,31 @@
 """Play a card on a device along a finger track, and record what the device reports.
 
-:func:`play` uploads the card, takes the finger state from the host (FINGER reports at the
-track's sample times: on the wall clock for real and USB/IP devices, on the simulation's clock
-for ``sim://``), starts rendering, collects every STATE report, and stops. :func:`recording_csv`
-writes the reports as CSV, one row per report, SI units:
-
-==================  ==========================================================================
-``t_s``             device time stamp, unwrapped, relative to the first report, s
-``sequence``        report sequence number (u16, wrapping)
-``contact``         1 while a finger touches the surface
-``x_mm``, ``y_mm``  finger position, mm
-``fn_n``            normal force, sum of the four corner sensors, N
-``f_tl_n`` ...      corner forces top-left, top-right, bottom-left, bottom-right, N
-``lateral_n``       lateral (friction) force, N
-``amplitude_m``     measured plate vibration amplitude, peak-to-peak, m
-``voltage_v``       measured EV voltage envelope, V
-``current_a``       measured EV current, A
-``target_uv``       UV target relative friction being rendered, [0, 1]
-``target_ev``       EV target relative friction being rendered, [1, 4]
-``texture``         active palette index, -1 for none
-``faults``          fault bits (``hcard_device.protocol.FaultBits``), integer
-``flags``           state bits (``hcard_device.protocol.StateFlags``), integer
-``echo_s``          host time of the last FINGER report applied, s (wrapping at 4295 s)
-==================  ==========================================================================
+:func:`play` sets the device profile (the host's, uploaded, or the device's own), uploads the
+card, takes the finger state from the host (FINGER reports at the track's sample times: on the
+wall clock for real and USB/IP devices, on the simulation's clock for ``sim://``), starts
+rendering, collects every STATE report, and stops. :func:`hcard_device.drivers.recording.recording`
+turns the result into a recording in the measurement format (spec/measurement-format.md, device
+columns of rule M12), which ``hcard calibrate`` reads unchanged; :func:`summary` says what
+happened, the rendered friction error against the card's target included
+(:func:`hcard.calibration.rendering.rendering_error`).
 """
 
 from __future__ import annotations
 
-import io
-from dataclasses import dataclass
+import hashlib
+import json
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from typing import Any
 
-import numpy as np
-
+from hcard.calibration.measurement import MeasurementError
+from hcard.calibration.rendering import RenderingError, rendering_error
+from hcard.card_io import to_bytes
 from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb
 from hcard_device.drivers.base import Driver, UploadOutcome
+from hcard_device.drivers.errors import DeviceError
+from hcard_device.drivers.recording import recording
 from hcard_device.protocol import (
     FRICTION_SCALE,
     Capability,
@@ -42,42 +33,12 @@ from hcard_device.protocol import (
     Counters,
     DeviceInfo,
     FaultBits,
+    Limits,
     State,
 )
 
-RECORDING_COLUMNS = (
-    "t_s", "sequence", "contact", "x_mm", "y_mm", "fn_n", "f_tl_n", "f_tr_n", "f_bl_n", "f_br_n",
-    "lateral_n", "amplitude_m", "voltage_v", "current_a", "target_uv", "target_ev", "texture",
-    "faults", "flags", "echo_s",
-)
-"""Columns of :func:`recording_csv`, in order."""
 TAIL_S = 0.05
 """Reports collected after the last track sample before STOP, s."""
-MIN_NORMAL_FORCE_N = 0.05
-"""Reports with less normal force are left out of the friction comparison, N."""
-MIN_REFERENCE_REPORTS = 20
-"""Unmodulated reports needed to estimate the finger's friction coefficient."""
-
-
-@dataclass(frozen=True)
-class FrictionError:
-    """Measured relative friction against the target, over the reports in contact.
-
-    The finger's friction coefficient without modulation, ``mu0``, is the median of
-    lateral / normal force over the reports whose target is 1 (no modulation); measured
-    relative friction is then (lateral / normal) / mu0, compared with ``target_uv * target_ev``.
-
-    Attributes:
-        mean_abs: mean absolute error, relative friction.
-        rms: root mean square error, relative friction.
-        reports: reports compared.
-        mu0: the estimated unmodulated friction coefficient.
-    """
-
-    mean_abs: float
-    rms: float
-    reports: int
-    mu0: float
 
 
 @dataclass(frozen=True)
@@ -92,6 +53,14 @@ class PlayResult:
         counters: COUNTERS read at the end.
         reports_lost: reports missed (sequence gaps), host side.
         malformed: input reports that could not be decoded.
+        track: the finger track played.
+        card_bytes: the card as uploaded (binary form).
+        card_title: the card's title.
+        limits: the device's limits in force during the session.
+        profile: the profile record of the recording's sidecar (``source``, ``name``,
+            ``sha256``, ``content``; spec/measurement-format.md rule M9).
+        uri: the device URI.
+        started: when the session started, ISO 8601 UTC.
     """
 
     states: list[State]
@@ -101,6 +70,13 @@ class PlayResult:
     counters: Counters
     reports_lost: int
     malformed: int
+    track: FingerTrack
+    card_bytes: bytes = b""
+    card_title: str = ""
+    limits: Limits = field(default_factory=lambda: Limits(0, 0, 0))
+    profile: dict[str, Any] = field(default_factory=dict)
+    uri: str = ""
+    started: str = ""
 
     @property
     def faults(self) -> FaultBits:
@@ -111,24 +87,57 @@ class PlayResult:
         return FaultBits(bits)
 
 
-def play(driver: Driver, card: pb.Card, track: FingerTrack, *,
-         tail_s: float = TAIL_S) -> PlayResult:
-    """Upload ``card``, drive ``track`` as the host's finger, record, stop.
+def _profile_record(driver: Driver, info: DeviceInfo, profile: bytes | None) -> dict[str, Any]:
+    """Put the profile in force on the device and describe it for the sidecar.
 
-    Finger reports go out at the track's sample times (relative to its first sample), on the
-    driver's clock. Between samples the driver collects STATE reports; a KEEPALIVE is sent when
-    samples are further apart than half the device's watchdog time.
+    ``profile``: the bytes of a profile file (spec/device-profile.md) to upload; None: the
+    device's own profile (a device that takes profiles is told to go back to it).
+    """
+    takes_profiles = bool(info.capabilities & Capability.PROFILE)
+    if profile is None:
+        if takes_profiles:
+            driver.use_device_profile()
+        from hcard_device.profiles import reference_profile_dict
+
+        content = reference_profile_dict(info)
+        return {"source": "device", "name": content.get("name") if content else None,
+                "sha256": None, "content": content}
+    if not takes_profiles:
+        raise DeviceError(f"{driver.uri}: the device does not take profiles "
+                          "(DEVICE_INFO capability PROFILE is not set)")
+    driver.upload_profile(profile)
+    try:
+        content = json.loads(profile.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        content = None
+    name = content.get("name") if isinstance(content, dict) else None
+    return {"source": "host", "name": name, "sha256": hashlib.sha256(profile).hexdigest(),
+            "content": content if isinstance(content, dict) else None}
+
+
+def play(driver: Driver, card: pb.Card, track: FingerTrack, *, profile: bytes | None = None,
+         tail_s: float = TAIL_S) -> PlayResult:
+    """Set the profile, upload ``card``, drive ``track`` as the host's finger, record, stop.
+
+    ``profile``: the bytes of a device profile file to upload first (None: the device's own
+    profile). Finger reports go out at the track's sample times (relative to its first sample),
+    on the driver's clock. Between samples the driver collects STATE reports; a KEEPALIVE is
+    sent when samples are further apart than half the device's watchdog time.
 
     Raises:
-        DeviceError: the device is missing, refuses the card or vanishes.
+        DeviceError: the device is missing, refuses the card or the profile, or vanishes.
     """
     info = driver.info()
-    upload = driver.upload_card(card)
+    profile_record = _profile_record(driver, info, profile)
+    card_bytes = to_bytes(card)
+    upload = driver.upload_card(card_bytes)
+    limits = driver.limits()
     driver.clear_counters()
     if info.capabilities & Capability.HOST_FINGER:
         driver.set_touch_source(host=True)
     keepalive_s = max(info.watchdog_ms / 2000.0, 0.005)
     states: list[State] = []
+    started = datetime.now(timezone.utc).isoformat(timespec="seconds")
     driver.start()
     start = driver.clock()
     t_first = float(track.t[0])
@@ -148,60 +157,8 @@ def play(driver: Driver, card: pb.Card, track: FingerTrack, *,
     driver.stop()
     counters = driver.counters()
     return PlayResult(states, duration, upload, info, counters, driver.reports_lost,
-                      driver.malformed_inputs)
-
-
-def unwrapped_times(states: list[State]) -> np.ndarray:
-    """Device time stamps of ``states`` unwrapped (u32 microseconds), from the first, s."""
-    if not states:
-        return np.zeros(0)
-    stamps = np.array([s.timestamp_us for s in states], dtype=np.int64)
-    steps = np.diff(stamps) % (1 << 32)
-    return np.concatenate(([0], np.cumsum(steps))) * 1e-6
-
-
-def recording_table(states: list[State]) -> np.ndarray:
-    """The recording as a float array, one row per report, :data:`RECORDING_COLUMNS`."""
-    table = np.zeros((len(states), len(RECORDING_COLUMNS)))
-    table[:, 0] = unwrapped_times(states)
-    for i, s in enumerate(states):
-        table[i, 1:] = (
-            s.sequence, s.contact, s.x_mm, s.y_mm, s.normal_force_n, *s.corner_forces_n,
-            s.lateral_force_n, s.amplitude_m, s.voltage_v, s.current_a, s.target_uv,
-            s.target_ev, s.texture, s.faults, s.flags, s.host_time_echo_us * 1e-6,
-        )
-    return table
-
-
-def recording_csv(states: list[State]) -> bytes:
-    """CSV bytes of the recording (header row, :data:`RECORDING_COLUMNS`)."""
-    buffer = io.StringIO()
-    buffer.write(",".join(RECORDING_COLUMNS) + "\n")
-    formats = ["%.6f", "%d", "%d", "%.2f", "%.2f", "%.3f", "%.3f", "%.3f", "%.3f", "%.3f",
-               "%.3f", "%.9g", "%.1f", "%.8g", "%.4f", "%.4f", "%d", "%d", "%d", "%.6f"]
-    np.savetxt(buffer, recording_table(states), delimiter=",", fmt=formats)
-    return buffer.getvalue().encode()
-
-
-def friction_error(states: list[State]) -> FrictionError | None:
-    """Measured against target relative friction (see :class:`FrictionError`); None when
-    there are too few unmodulated reports in contact to estimate the finger's mu0."""
-    if not states:
-        return None
-    table = recording_table(states)
-    fn, lateral = table[:, 5], np.abs(table[:, 10])
-    target = table[:, 14] * table[:, 15]
-    usable = (table[:, 2] > 0) & (fn > MIN_NORMAL_FORCE_N)
-    mu = np.divide(lateral, fn, out=np.zeros_like(fn), where=fn > 0)
-    reference = usable & (np.abs(target - 1.0) < 1e-3)
-    if np.count_nonzero(reference) < MIN_REFERENCE_REPORTS:
-        return None
-    mu0 = float(np.median(mu[reference]))
-    if mu0 <= 0:
-        return None
-    error = mu[usable] / mu0 - target[usable]
-    return FrictionError(float(np.mean(np.abs(error))), float(np.sqrt(np.mean(error**2))),
-                         int(np.count_nonzero(usable)), mu0)
+                      driver.malformed_inputs, track, card_bytes, card.metadata.title, limits,
+                      profile_record, str(driver.uri), started)
 
 
 def clip_text(clip: ClipReport) -> str:
@@ -215,26 +172,39 @@ def clip_text(clip: ClipReport) -> str:
             f" gets {clip.achievable_x1e4 / FRICTION_SCALE:.3f}")
 
 
+def result_rendering_error(result: PlayResult) -> RenderingError | str:
+    """The rendered friction error of ``result``, or why there is none (a phrase)."""
+    try:
+        return rendering_error(recording(result))
+    except (MeasurementError, ValueError) as exc:
+        return str(exc)
+
+
 def summary(result: PlayResult) -> list[str]:
-    """Summary lines: duration, reports received and dropped, faults, friction error."""
+    """Summary lines: duration, reports received and dropped, faults, profile, friction error."""
     states = result.states
     dropped = result.counters.input_dropped
     faults = result.faults
     fault_names = ", ".join(f.name or str(int(f)) for f in FaultBits if f in faults) or "none"
+    profile = result.profile
+    name = profile.get("name") or "unnamed"
+    if profile.get("source") == "host":
+        profile_text = f"{name} (uploaded, sha256 {str(profile.get('sha256'))[:12]})"
+    else:
+        profile_text = f"the device's own ({name})"
     lines = [
         f"played {result.duration_s:.3f} s: {len(states)} reports received, "
         f"{result.reports_lost} lost in transit (sequence gaps), {dropped} dropped by the device, "
         f"{result.malformed} malformed",
         f"card: {result.upload.bytes_sent} bytes in {result.upload.reports_sent} reports, "
         f"generation {result.upload.status.card_generation}; {clip_text(result.upload.clip)}",
+        f"profile: {profile_text}",
         f"faults: {fault_names}",
     ]
-    error = friction_error(states)
-    if error is None:
-        lines.append("friction error vs target: n/a (too few unmodulated reports in contact "
-                     "to estimate the finger's friction coefficient)")
+    error = result_rendering_error(result)
+    if isinstance(error, str):
+        lines.append(f"rendered friction error vs target: n/a ({error})")
     else:
-        lines.append(f"friction error vs target: mean {error.mean_abs:.3f}, rms {error.rms:.3f} "
-                     f"(relative friction, {error.reports} reports in contact, "
-                     f"mu0 {error.mu0:.3f})")
+        lines.append(f"rendered friction error vs target: {error.text()}")
     return lines
+

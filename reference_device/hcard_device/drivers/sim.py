@@ -51,7 +51,8 @@ class SimDriver(Driver):
     @classmethod
     def open(cls, uri: DeviceUri | str, *, timeout_s: float = DEFAULT_TIMEOUT_S) -> SimDriver:
         uri = parse_uri(uri) if isinstance(uri, str) else uri
-        return cls(uri, make_firmware(uri.variant, uri.seed), timeout_s=timeout_s)
+        return cls(uri, make_firmware(uri.variant, uri.seed, uri.effects),
+                   timeout_s=timeout_s)
 
     @classmethod
     def enumerate(cls, hosts: Sequence[tuple[str, int]] = (),

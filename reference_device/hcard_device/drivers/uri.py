@@ -10,8 +10,11 @@
 ``hid:///dev/hidraw0``                 hidapi: the device at this path
 =====================================  ===========================================================
 
-``device`` (``evita`` or ``coupled``) and ``seed`` (integer) apply to ``sim://`` and
-``loopback``. Parsing never touches a device.
+``device`` (``evita`` or ``coupled``), ``seed`` (integer) and hidden physical effects apply to
+``sim://`` and ``loopback``: ``effect=NAME[,NAME]`` switches effects on and ``NAME.PARAM=VALUE``
+sets a parameter (units accepted; it switches its effect on too), as ``hcard device serve
+--effect`` does: ``sim://coupled?effect=air-layer&air-layer.air_gap=8um``
+(:mod:`hcard_device.sim.hidden`). Parsing never touches a device.
 """
 
 from __future__ import annotations
@@ -53,6 +56,7 @@ class DeviceUri:
         vid, pid: USB IDs to look for (``hid://VID:PID``).
         variant: device model served in-process (``sim``, ``loopback``): evita or coupled.
         seed: random seed of the in-process simulation.
+        effects: physical effects hidden in the in-process device: name -> parameter values.
         options: every query option, as given.
     """
 
@@ -66,6 +70,7 @@ class DeviceUri:
     pid: int = PID
     variant: str = DEFAULT_VARIANT
     seed: int = 0
+    effects: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
     options: Mapping[str, str] = field(default_factory=dict)
 
     @property
@@ -112,17 +117,25 @@ def parse_uri(text: str, *, schemes: tuple[str, ...] = SCHEMES) -> DeviceUri:
 
 
 def _with_model(uri: DeviceUri, text: str, variant: str, options: dict[str, str]) -> DeviceUri:
-    unknown = sorted(set(options) - {"device", "seed"})
+    from hcard_device.sim.hidden import HiddenEffectError, parse_assignments, resolve
+
+    assignments = [f"{key}={value}" for key, value in options.items() if "." in key]
+    unknown = sorted(set(options) - {"device", "seed", "effect"} - {k for k in options if "." in k})
     if unknown:
         raise _error(text, uri.scheme, f"unknown option(s) {', '.join(unknown)} "
-                     "(known: device, seed)")
+                     "(known: device, seed, effect, EFFECT.PARAM)")
     if variant not in PRODUCTS:
         raise _error(text, uri.scheme, f"unknown device {variant!r} (known: {', '.join(PRODUCTS)})")
     seed_text = options.get("seed", "0")
     if not re.fullmatch(r"[0-9]+", seed_text):
         raise _error(text, uri.scheme, f"seed {seed_text!r} is not a non-negative integer")
+    names = [name.strip() for name in options.get("effect", "").split(",") if name.strip()]
+    try:
+        effects = resolve(variant, parse_assignments(names, assignments))
+    except HiddenEffectError as exc:
+        raise _error(text, uri.scheme, str(exc)) from None
     return DeviceUri(uri.text, uri.scheme, host=uri.host, port=uri.port, busid=uri.busid,
-                     variant=variant, seed=int(seed_text), options=options)
+                     variant=variant, seed=int(seed_text), effects=effects, options=options)
 
 
 def _parse_usbip(text: str, scheme: str, netloc: str, path: str,

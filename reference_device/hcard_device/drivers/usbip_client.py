@@ -30,7 +30,8 @@ CLASS_INTERFACE_OUT, CLASS_INTERFACE_IN = 0x21, 0xA1
 
 def loopback_server(uri: DeviceUri) -> DeviceServer:
     """Start the device of a ``loopback`` URI in this process (stopped by the driver)."""
-    server = DeviceServer(variant=uri.variant, seed=uri.seed, loopback=True)
+    server = DeviceServer(variant=uri.variant, seed=uri.seed, loopback=True,
+                          effects=uri.effects)
     server.start()
     return server
 

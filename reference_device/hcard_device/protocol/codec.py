@@ -91,16 +91,17 @@ def crc32(data: bytes) -> int:
     return zlib.crc32(data) & 0xFFFF_FFFF
 
 
-def upload_reports(card_bytes: bytes) -> list[bytes]:
-    """The feature reports (SET_REPORT, in order) that upload and commit ``card_bytes``:
-    UPLOAD_BEGIN, UPLOAD_DATA chunks of 58 bytes, UPLOAD_END(COMMIT)."""
-    if not card_bytes:
-        raise ProtocolError("cannot upload an empty card")
-    out = [UploadBegin(len(card_bytes), crc32(card_bytes)).encode()]
-    for offset in range(0, len(card_bytes), UPLOAD_CHUNK_BYTES):
-        chunk = bytes(card_bytes[offset : offset + UPLOAD_CHUNK_BYTES])
+def upload_reports(data: bytes, action: UploadAction = UploadAction.COMMIT) -> list[bytes]:
+    """The feature reports (SET_REPORT, in order) that upload and commit ``data``:
+    UPLOAD_BEGIN, UPLOAD_DATA chunks of 58 bytes, UPLOAD_END(``action``: COMMIT for a card,
+    COMMIT_PROFILE for a device profile)."""
+    if not data:
+        raise ProtocolError("cannot upload an empty file")
+    out = [UploadBegin(len(data), crc32(data)).encode()]
+    for offset in range(0, len(data), UPLOAD_CHUNK_BYTES):
+        chunk = bytes(data[offset : offset + UPLOAD_CHUNK_BYTES])
         out.append(UploadData(offset, chunk).encode())
-    out.append(UploadEnd(UploadAction.COMMIT).encode())
+    out.append(UploadEnd(action).encode())
     return out
 
 

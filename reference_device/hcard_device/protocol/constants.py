@@ -11,7 +11,7 @@ from enum import IntEnum, IntFlag
 
 PROTOCOL_MAJOR = 1
 """Major protocol version (incompatible changes). A host MUST refuse another major (rule P3)."""
-PROTOCOL_MINOR = 0
+PROTOCOL_MINOR = 1
 """Minor protocol version (compatible additions)."""
 
 MAX_REPORT_BYTES = 64
@@ -112,6 +112,9 @@ class Capability(IntFlag):
     """Four corner force sensors (STATE.corner_forces_mn)."""
     LATERAL_FORCE = 1 << 6
     """Lateral (friction) force sensor (STATE.lateral_force_mn)."""
+    PROFILE = 1 << 7
+    """Takes a device profile from the host (UPLOAD_END COMMIT_PROFILE, CONTROL DEVICE_PROFILE;
+    protocol 1.1)."""
 
 
 class StateFlags(IntFlag):
@@ -129,6 +132,8 @@ class StateFlags(IntFlag):
     """Frames come from the stream queue (direct streaming), not from the card."""
     UPLOADING = 1 << 5
     """A card upload is in progress (UPLOAD_STATUS.state RECEIVING)."""
+    HOST_PROFILE = 1 << 6
+    """The device renders with a profile the host uploaded, not its own (protocol 1.1)."""
 
 
 class FaultBits(IntFlag):
@@ -169,6 +174,8 @@ class Command(IntEnum):
     """argument 0: internal touch sensor; 1: host (FINGER reports)."""
     PLAY_CARD = 5
     """Leave direct streaming and render the active card again (from its initial state)."""
+    DEVICE_PROFILE = 6
+    """Render with the device's own profile again (protocol 1.1; capability PROFILE)."""
 
 
 class TouchSource(IntEnum):
@@ -184,6 +191,8 @@ class UploadAction(IntEnum):
     NONE = 0
     COMMIT = 1
     ABORT = 2
+    COMMIT_PROFILE = 3
+    """Commit the staged bytes as the device profile, not a card (protocol 1.1)."""
 
 
 class UploadState(IntEnum):
@@ -221,6 +230,9 @@ class UploadResult(IntEnum):
     """BEGIN announced a length of 0."""
     TIMEOUT = 9
     """No upload traffic for UPLOAD_TIMEOUT_S while receiving."""
+    INVALID_PROFILE = 10
+    """COMMIT_PROFILE: the bytes are not a device profile this device can render with (detail:
+    the field and the reason; protocol 1.1)."""
 
 
 class ClipReason(IntEnum):

@@ -121,15 +121,9 @@ class UploadStore:
         """UPLOAD_END COMMIT (rule PU3): check length, CRC and card, then ``loader(card)``
         (which puts the card in force; a HcardError from it fails the upload) and swap.
         Returns True when the new card is active."""
-        if self.poll(now_s):
+        data = self._staged(now_s)
+        if data is None:
             return False
-        if self.state != UploadState.RECEIVING:
-            return self._not_started()
-        if self.received != self.total_length:
-            return self._fail(UploadResult.SHORT)
-        data = bytes(self._staging)
-        if crc32(data) != self.expected_crc:
-            return self._fail(UploadResult.CRC_MISMATCH)
         try:
             card = parse_card(data, source="upload")
             loader(card)
@@ -137,6 +131,40 @@ class UploadStore:
             return self._fail(UploadResult.INVALID_CARD, failure_detail(exc))
         self._generation = self._generation % 0xFFFF + 1
         self.active = ActiveCard(card, data, self.expected_crc, self._generation)
+        return self._committed()
+
+    def commit_profile(self, loader: Callable[[bytes], None], now_s: float) -> bool:
+        """UPLOAD_END COMMIT_PROFILE (rule PU9): check length and CRC, then ``loader(bytes)``
+        (which parses the profile and puts it in force; a HcardError from it fails the upload
+        with INVALID_PROFILE). The active card stays. Returns True when the profile is in
+        force."""
+        data = self._staged(now_s)
+        if data is None:
+            return False
+        try:
+            loader(data)
+        except HcardError as exc:
+            return self._fail(UploadResult.INVALID_PROFILE, str(exc))
+        return self._committed()
+
+    def _staged(self, now_s: float) -> bytes | None:
+        """The staged bytes when a COMMIT may go ahead (receiving, complete, CRC right); None
+        after failing the upload with the reason otherwise."""
+        if self.poll(now_s):
+            return None
+        if self.state != UploadState.RECEIVING:
+            self._not_started()
+            return None
+        if self.received != self.total_length:
+            self._fail(UploadResult.SHORT)
+            return None
+        data = bytes(self._staging)
+        if crc32(data) != self.expected_crc:
+            self._fail(UploadResult.CRC_MISMATCH)
+            return None
+        return data
+
+    def _committed(self) -> bool:
         self._reset_staging()
         self.state = UploadState.COMMITTED
         self.result = UploadResult.OK

@@ -118,7 +118,7 @@ def clip_report(
     """The clip report of ``card`` on the device ``profile`` (its limits included)."""
     used = sorted({int(i) for i in card.grid.texture_index if 0 <= i < len(card.textures)})
     items: list[ClipItem] = []
-    limits = profile.limits
+    limits = profile.rendering_limits()
     for index in used:
         texture = card.textures[index]
         uv_min, ev_max = texture_extremes(texture)
@@ -142,10 +142,10 @@ def clip_report(
             if profile.ev_model is None or voltage_limit <= 0:
                 items.append(ClipItem(index, texture.name, "ev", "no EV channel", ev_max, 1.0))
             else:
-                force = float(profile.force_for(voltage_limit))
+                force = float(profile.force_for(voltage_limit, force_n))
                 best = 1.0 + force / force_n
                 if best < ev_max - _TOLERANCE:
-                    needed = float(profile.voltage_for((ev_max - 1.0) * force_n))
+                    needed = float(profile.voltage_for((ev_max - 1.0) * force_n, force_n))
                     items.append(ClipItem(
                         index, texture.name, "ev",
                         f"needs {needed:.0f} V > {limit_name} bound {voltage_limit:.0f} V",

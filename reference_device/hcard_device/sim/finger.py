@@ -29,6 +29,7 @@ import numpy as np
 from hcard.physics.profile import DeviceProfile
 from hcard.track import FingerTrack
 from hcard_builtins.physics.finger import FingerFriction
+from hcard_device.sim.hidden import HiddenPhysics
 
 MM = 1e-3
 """Metres per millimetre."""
@@ -160,6 +161,7 @@ class FingerPhysics:
         lateral_noise_n: standard deviation of the tribometer, N.
         rng: random generator of the tribometer noise.
         finger: the bare finger's friction model (default :class:`FingerFriction`).
+        hidden: physical effects the hardware hides (:mod:`.hidden`), or None.
     """
 
     def __init__(
@@ -168,11 +170,13 @@ class FingerPhysics:
         lateral_noise_n: float,
         rng: np.random.Generator,
         finger: FingerFriction | None = None,
+        hidden: HiddenPhysics | None = None,
     ) -> None:
         self.profile = profile
         self.lateral_noise_n = lateral_noise_n
         self.rng = rng
         self.finger = finger if finger is not None else FingerFriction()
+        self.hidden = hidden
 
     def friction(
         self, amplitude_m: np.ndarray, voltage_v: np.ndarray, truth: FingerTruth
@@ -181,6 +185,10 @@ class FingerPhysics:
         if not truth.contact.any():
             return np.ones(truth.contact.shape[0])
         uv, ev = self.profile.forward(amplitude_m, voltage_v, truth.speed_m_s, truth.fn_n)
+        hidden = self.hidden.ev_force(voltage_v, truth.fn_n) if self.hidden else None
+        if hidden is not None:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ev = np.where(truth.fn_n > 0, 1.0 + hidden / truth.fn_n, 1.0)
         return np.where(truth.contact, uv * ev, 1.0)
 
     def lateral_force(self, friction: np.ndarray, truth: FingerTruth) -> np.ndarray:

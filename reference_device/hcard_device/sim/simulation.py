@@ -41,7 +41,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from hcard.physics.actuation import actuate
-from hcard.physics.profile import DeviceProfile
+from hcard.physics.profile import DeviceProfile, ProfileError
 from hcard.render import Renderer, RenderOptions, RenderStream
 from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb
@@ -50,6 +50,7 @@ from hcard_device.sim.clip import ClipReport, clip_report
 from hcard_device.sim.config import DeviceConfig
 from hcard_device.sim.faults import Faults
 from hcard_device.sim.finger import FingerPhysics, FingerTruth, HostFinger, TrackFinger
+from hcard_device.sim.hidden import HiddenPhysics
 from hcard_device.sim.models import device_profile, finger_capacitance
 from hcard_device.sim.plate import PIGains, PlateLoop, PlateModel
 from hcard_device.sim.sensors import (
@@ -162,9 +163,12 @@ class DeviceSimulation:
     Args:
         config: the device (:meth:`DeviceConfig.evita` or :meth:`DeviceConfig.coupled`).
         seed: seed of the noise generators.
+        hidden: physical effects the hardware hides from its own profile (:mod:`.hidden`:
+            effect name -> parameter values, checked against the device), or None.
     """
 
-    def __init__(self, config: DeviceConfig, seed: int = 0) -> None:
+    def __init__(self, config: DeviceConfig, seed: int = 0,
+                 hidden: HiddenPhysics | None = None) -> None:
         self.config = config
         touch_rng, force_rng, lateral_rng = (
             np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(3)
@@ -173,6 +177,7 @@ class DeviceSimulation:
             config.max_amplitude_m, config.max_voltage_v, config.max_current_a
         )
         self._limits = self.hardware_limits
+        self._host_profile: DeviceProfile | None = None
         self._profile = device_profile(config)
         plate = PlateModel(
             config.plate_frequency_hz,
@@ -202,7 +207,7 @@ class DeviceSimulation:
         width, height = config.surface_mm
         self.force_sensors = CornerForceSensors(width, height, config.force_noise_n, force_rng)
         self.finger_physics = FingerPhysics(
-            device_profile(config), config.lateral_force_noise_n, lateral_rng
+            device_profile(config), config.lateral_force_noise_n, lateral_rng, hidden=hidden
         )
         self._options = RenderOptions(frame_rate_hz=config.frame_rate_hz)
         self._frame = 0
@@ -329,12 +334,7 @@ class DeviceSimulation:
                 continue
             values.append(min(number, getattr(hardware, name)))
         self._limits = Limits(*values)
-        self._profile = device_profile(
-            self.config,
-            max_amplitude_m=self._limits.max_amplitude_m,
-            max_voltage_v=self._limits.max_voltage_v,
-            max_current_a=self._limits.max_current_a,
-        )
+        self._profile = self._profile_in_force()
         self.plate.limit_m = self._limits.max_amplitude_m
         if self.amplifier is not None:
             self.amplifier.max_voltage_v = self._limits.max_voltage_v
@@ -342,6 +342,54 @@ class DeviceSimulation:
         if self._renderer is not None:
             self._card_report = clip_report(self._renderer.card, self._profile)
         return self._limits
+
+    def set_profile(self, profile: DeviceProfile | None) -> ClipReport:
+        """Render with ``profile`` (a host's device profile) from now on, or with the device's
+        own model again (None). The limits in force stay the device's: the profile's own limits
+        are replaced by them, so no profile can raise what the device does. Returns the clip
+        report of the active card under the new profile.
+
+        Raises:
+            ProfileError: the profile does not render a channel the device has, or renders one
+                it lacks.
+        """
+        if profile is not None:
+            for channel, present, model in (
+                ("UV", self.config.has_uv, profile.uv_model),
+                ("EV", self.config.has_ev, profile.ev_model),
+            ):
+                if present and model is None:
+                    raise ProfileError(
+                        f"predictor: the device has a {channel} channel that model "
+                        f"{profile.predictor.name!r} does not render"
+                    )
+                if not present and model is not None:
+                    raise ProfileError(
+                        f"predictor: model {profile.predictor.name!r} renders a {channel} "
+                        f"channel this device does not have"
+                    )
+        self._host_profile = profile
+        self._profile = self._profile_in_force()
+        if self._renderer is not None:
+            self._card_report = clip_report(self._renderer.card, self._profile)
+        return self._card_report
+
+    @property
+    def host_profile(self) -> bool:
+        """A host's profile is in force (:meth:`set_profile`)."""
+        return self._host_profile is not None
+
+    def _profile_in_force(self) -> DeviceProfile:
+        """The device's own profile at the limits in force, or the host's with those limits."""
+        own = device_profile(
+            self.config,
+            max_amplitude_m=self._limits.max_amplitude_m,
+            max_voltage_v=self._limits.max_voltage_v,
+            max_current_a=self._limits.max_current_a,
+        )
+        if self._host_profile is None:
+            return own
+        return self._host_profile.replace(limits=own.limits)
 
     def start(self) -> None:
         """Enable the outputs (the watchdog, if armed, counts from now)."""

@@ -19,7 +19,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from types import FrameType, TracebackType
 from typing import Any, ClassVar
 
@@ -36,15 +36,25 @@ JOIN_TIMEOUT_S = 2.0
 """Longest wait for a thread to end on stop, s."""
 
 
-def make_firmware(variant: str, seed: int = 0) -> Any:
-    """A :class:`~hcard_device.firmware.Firmware` on a fresh simulation of ``variant``."""
+def make_firmware(variant: str, seed: int = 0,
+                  effects: Mapping[str, Mapping[str, float]] | None = None) -> Any:
+    """A :class:`~hcard_device.firmware.Firmware` on a fresh simulation of ``variant``, with
+    the physical ``effects`` hidden in its hardware (:mod:`hcard_device.sim.hidden`).
+
+    Raises:
+        ValueError: an unknown variant, or an effect it cannot have
+            (:class:`~hcard_device.sim.hidden.HiddenEffectError`).
+    """
     from hcard_device.firmware import Firmware
     from hcard_device.sim import DeviceConfig, DeviceSimulation
+    from hcard_device.sim.hidden import HiddenPhysics, resolve
+    from hcard_device.sim.models import device_profile
 
     if variant not in PRODUCTS:
         raise ValueError(f"unknown device {variant!r}; known: {', '.join(PRODUCTS)}")
     config = DeviceConfig.evita() if variant == "evita" else DeviceConfig.coupled()
-    return Firmware(DeviceSimulation(config, seed=seed))
+    hidden = HiddenPhysics(device_profile(config), resolve(variant, effects))
+    return Firmware(DeviceSimulation(config, seed=seed, hidden=hidden))
 
 
 class DeviceServer:
@@ -57,6 +67,8 @@ class DeviceServer:
         loopback: serve on an in-process socket pair (:class:`usbip.Loopback`) instead of TCP.
         nodelay: ``TCP_NODELAY`` on the served sockets (benchmarks turn it off).
         in_queue: STATE reports the IN endpoint holds before dropping the oldest.
+        effects: physical effects hidden in the hardware (:mod:`hcard_device.sim.hidden`:
+            name -> parameter values), checked here.
     """
 
     _running: ClassVar[set[DeviceServer]] = set()
@@ -64,9 +76,13 @@ class DeviceServer:
 
     def __init__(self, variant: str = "evita", *, host: str = DEFAULT_HOST,
                  port: int = DEFAULT_PORT, seed: int = 0, loopback: bool = False,
-                 nodelay: bool = True, in_queue: int = DEFAULT_IN_QUEUE) -> None:
+                 nodelay: bool = True, in_queue: int = DEFAULT_IN_QUEUE,
+                 effects: Mapping[str, Mapping[str, float]] | None = None) -> None:
+        from hcard_device.sim.hidden import resolve
+
         if variant not in PRODUCTS:
             raise ValueError(f"unknown device {variant!r}; known: {', '.join(PRODUCTS)}")
+        self.effects = resolve(variant, effects)
         self.variant = variant
         self.host = host
         self.seed = seed
@@ -105,7 +121,7 @@ class DeviceServer:
         Raises:
             OSError: the address cannot be bound.
         """
-        self.firmware = make_firmware(self.variant, self.seed)
+        self.firmware = make_firmware(self.variant, self.seed, self.effects)
         self.usb_device, self.interface = build_usb_device(self.firmware, self.variant,
                                                            in_queue=self.in_queue)
         self.usb_device.plug(via=self.transport)
@@ -173,15 +189,21 @@ def _print(message: str, error: bool = False) -> None:
 
 
 def serve(variant: str = "evita", host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
-          seed: int = 0, *, echo: Callable[[str, bool], None] = _print) -> int:
+          seed: int = 0, *, echo: Callable[[str, bool], None] = _print,
+          effects: Mapping[str, Mapping[str, float]] | None = None) -> int:
     """Serve until SIGINT or SIGTERM; returns the exit status (0 on a clean stop).
 
-    ``echo(message, error)`` prints a line (to stderr when ``error``), flushed at once.
+    ``echo(message, error)`` prints a line (to stderr when ``error``), flushed at once;
+    ``effects`` are hidden in the hardware and never named on the wire or in the banner.
     """
     # The firmware thread computes for up to a millisecond at a time; with the default 5 ms
     # GIL switch interval the USB/IP threads would wait that long to answer a URB.
     sys.setswitchinterval(SWITCH_INTERVAL_S)
-    server = DeviceServer(variant, host=host, port=port, seed=seed)
+    try:
+        server = DeviceServer(variant, host=host, port=port, seed=seed, effects=effects)
+    except ValueError as exc:
+        echo(f"error: {exc}", True)
+        return 1
     try:
         server.start()
     except OSError as exc:
@@ -218,8 +240,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--port", type=int, default=DEFAULT_PORT, help="TCP port (0: any)")
     parser.add_argument("--device", choices=sorted(PRODUCTS), default="evita")
     parser.add_argument("--seed", type=int, default=0, help="seed of the simulation noise")
+    parser.add_argument("--effect", action="append", default=[], metavar="NAME",
+                        help="hide a physical effect in the hardware (repeatable)")
+    parser.add_argument("--effect-param", action="append", default=[],
+                        metavar="EFFECT.PARAM=VALUE", help="a hidden effect's parameter")
     args = parser.parse_args(argv)
-    return serve(args.device, args.host, args.port, args.seed)
+    from hcard_device.sim.hidden import HiddenEffectError, parse_assignments
+
+    try:
+        effects = parse_assignments(args.effect, args.effect_param)
+    except HiddenEffectError as exc:
+        parser.error(str(exc))
+    return serve(args.device, args.host, args.port, args.seed, effects=effects)
 
 
 if __name__ == "__main__":
