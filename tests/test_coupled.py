@@ -3,10 +3,9 @@ predictors through the entry point (issue 4, items 1 and 5)."""
 
 from __future__ import annotations
 
-import json
-
 import importlib
 import inspect
+import json
 import math
 import sys
 import warnings

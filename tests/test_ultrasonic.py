@@ -4,9 +4,7 @@ group. Numbers are those of issue 4 and the thesis, with the tolerances stated t
 from __future__ import annotations
 
 import json
-
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest

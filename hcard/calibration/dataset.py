@@ -135,6 +135,36 @@ def strokes_since_rest(t: np.ndarray, ids: np.ndarray, rest_s: float = REST_S) -
     return out
 
 
+NORMAL_FORCE_WINDOW_S = 0.01
+"""The normal force a model sees is the recorded one averaged over this window, s, within each
+contact (spec/calibration.md K17): a force sensor's noise is white while the finger's load
+changes over tens of milliseconds, and a model fed the raw force carries the noise into its
+prediction, where it correlates with the recorded force (errors in the variables) and shows as
+residual structure against the normal force."""
+
+
+def smoothed_within(values: np.ndarray, t: np.ndarray, runs: np.ndarray,
+                    window_s: float) -> np.ndarray:
+    """``values`` averaged over a centred window of ``window_s`` (s) of samples, separately
+    inside each run of ``runs`` (True samples; the others are returned as they are)."""
+    out = np.asarray(values, dtype=np.float64).copy()
+    if out.size < 3 or window_s <= 0:
+        return out
+    step = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+    half = int(round(window_s / step / 2)) if step > 0 else 0
+    if half < 1:
+        return out
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], runs.astype(np.int8), [0]])))
+    for start, end in zip(edges[::2], edges[1::2], strict=True):
+        segment = out[start:end]
+        cumulative = np.concatenate([[0.0], np.cumsum(segment)])
+        index = np.arange(segment.size)
+        low = np.maximum(index - half, 0)
+        high = np.minimum(index + half + 1, segment.size)
+        out[start:end] = (cumulative[high] - cumulative[low]) / (high - low)
+    return out
+
+
 MIN_LIFT_SAMPLES = 3
 """Out-of-contact samples a lift needs for its zero to count."""
 
@@ -326,7 +356,11 @@ def prepare(
         columns_of = {
             # Out of contact the recorded force is sensor noise around 0, which some models
             # refuse (Eq. 4.1 divides by Fn): those samples, never fitted, take the threshold.
-            "normal_force": np.maximum(m.normal_force, CONTACT_THRESHOLD_N),
+            # In contact it is the recorded force smoothed over NORMAL_FORCE_WINDOW_S (K17).
+            "normal_force": np.maximum(
+                smoothed_within(m.normal_force, m.t, contact, NORMAL_FORCE_WINDOW_S),
+                CONTACT_THRESHOLD_N,
+            ),
             "time": t,
             "contact_time": contact_time,
             "stroke": strokes_since_rest(m.t, ids, rest_s).astype(np.float64),

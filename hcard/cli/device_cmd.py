@@ -103,104 +103,97 @@ class SynthesizeUsageError(HcardError):
     """A bad option of ``hcard device synthesize`` (one line, exit status 1)."""
 
 
-def _effect_assignment(text: str) -> tuple[str, str, str]:
-    """``EFFECT.PARAM=VALUE`` of ``--effect-param`` as its three texts."""
-    name, equals, value = text.partition("=")
-    effect, dot, parameter = name.strip().rpartition(".")
-    if not equals or not dot or not effect or not parameter or not value.strip():
-        raise SynthesizeUsageError(f"--effect-param {text!r}: expected EFFECT.PARAM=VALUE "
-                                   "(charge-leakage.time_constant=10ms)")
-    return effect, parameter, value.strip()
+VARIANT_OF_CLASS = {"uv": "evita", "ev": "coupled", "coupled": "coupled"}
+"""The reference device that plays each device class's protocol."""
+RECORDING = "recording.csv"
+"""File name of the recording ``hcard device synthesize`` writes."""
 
 
 @device.command("synthesize")
-@click.option("--device", "variant", type=click.Choice(["uv", "ev", "coupled"]), default="uv",
-              show_default=True,
+@click.option("--device", "device_class", type=click.Choice(["uv", "ev", "coupled"]),
+              default="uv", show_default=True,
               help="uv: E-ViTa (amplitude); ev: coupled stimulator, plate off (voltage); "
                    "coupled: both.")
+@click.option("--uri", metavar="URI",
+              help="Device to play on (default: sim://evita or sim://coupled in this process, "
+                   "with the hidden effects); any device URI, e.g. a served device.")
 @click.option("--effect", "effect_names", multiple=True, metavar="NAME",
-              help="Switch on a hidden physical effect (repeatable; see --list-effects).")
+              help="Hide a physical effect in the simulated hardware (repeatable; sim:// only; "
+                   "see --list-effects).")
 @click.option("--effect-param", "assignments", multiple=True, metavar="EFFECT.PARAM=VALUE",
-              help="True value of an effect's parameter, units accepted "
-                   "(charge-leakage.time_constant=10ms). Repeatable.")
-@click.option("--noise", default="2mN", show_default=True,
-              help="Standard deviation of the lateral and normal force noise.")
-@click.option("--drift", default="0N", show_default=True,
-              help="Peak-to-peak drift of the lateral force offset per recording.")
-@click.option("--duration", default="60s", show_default=True, help="Length of each recording.")
-@click.option("--pressure", "pressures", multiple=True, metavar="PRESSURE",
-              help="Ambient pressure, one recording each (repeatable; default 101325 Pa).")
-@click.option("--seed", default=0, show_default=True, type=int, help="Seed of every draw.")
+              help="True value of a hidden effect's parameter, units accepted "
+                   "(air-layer.air_gap=8um). Repeatable.")
+@click.option("--duration", default="60s", show_default=True, help="Length of the protocol.")
+@click.option("--seed", default=0, show_default=True, type=int,
+              help="Seed of the protocol's order and of the simulation's noise.")
 @click.option("-o", "--output", type=click.Path(file_okay=False, path_type=Path),
-              help="Directory for rec_<i>.csv and their .json sidecars.")
-@click.option("--list-effects", is_flag=True, help="List the effect names and exit.")
-def synthesize(variant: str, effect_names: tuple[str, ...], assignments: tuple[str, ...],
-               noise: str, drift: str, duration: str, pressures: tuple[str, ...], seed: int,
-               output: Path | None, list_effects: bool) -> None:
-    """Synthesize tribometer recordings of the simulated finger with hidden physical effects.
+              help="Directory for the plan and recording.csv (with its .json sidecar).")
+@click.option("--timeout", default=1.0, show_default=True, type=click.FloatRange(min=0.001),
+              help="Longest wait for any answer from the device, s.")
+@click.option("--list-effects", is_flag=True, help="List the effects a device can hide and exit.")
+def synthesize(device_class: str, uri: str | None, effect_names: tuple[str, ...],
+               assignments: tuple[str, ...], duration: str, seed: int, output: Path | None,
+               timeout: float, list_effects: bool) -> None:
+    """Record the calibration protocol played on a device: synthetic calibration data that
+    went through the firmware, the plate loop, the amplifier and the protocol.
 
-    Writes one recording per pressure (OUTPUT/rec_<i>.csv plus its sidecar) in the format of
-    spec/measurement-format.md; nothing in them names the effects.
+    Writes the plan of `hcard calibrate plan` (protocol and verification cards and tracks)
+    and OUTPUT/recording.csv with its sidecar, in the measurement format. Nothing in them
+    names the hidden effects.
     """
-    from hcard.calibration.measurement import write_measurement
-    from hcard.physics.units import UnitError, parse_quantity
-    from hcard_device.sim.tribometer import Protocol, available_effects, effect_parameters
-    from hcard_device.sim.tribometer import synthesize as run
+    from urllib.parse import urlencode
 
-    known = available_effects()
+    from hcard.calibration.measurement import write_measurement
+    from hcard.calibration.plan import protocol, verification
+    from hcard.cli.calibrate_cmd import write_plan
+    from hcard.physics.units import UnitError, parse_quantity
+    from hcard_device.drivers import open_device
+    from hcard_device.drivers.play import play as play_track
+    from hcard_device.drivers.play import summary
+    from hcard_device.drivers.recording import recording
+    from hcard_device.sim.hidden import HIDDEN_EFFECTS, HiddenEffectError, parse_assignments
+
     if list_effects:
-        for name in known:
-            params = ", ".join(f"{p.name}={p.default:g}{p.unit}" for p in effect_parameters(name))
-            click.echo(f"{name}  ({params})")
+        for effect in HIDDEN_EFFECTS.values():
+            click.echo(f"{effect.name} ({'/'.join(effect.devices)}): {effect.description}")
         return
     if output is None:
         raise SynthesizeUsageError("missing option -o/--output (the output directory)")
-
-    def quantity(text: str, unit: str, option: str) -> float:
-        try:
-            return parse_quantity(text, unit)
-        except UnitError as exc:
-            raise SynthesizeUsageError(f"{option}: {exc}") from None
-
-    for name in effect_names:
-        if name not in known:
-            raise SynthesizeUsageError(
-                f"--effect: unknown effect {name!r}; known: {', '.join(known)}"
-            )
-    effects: dict[str, dict[str, float]] = {name: {} for name in effect_names}
-    for text in assignments:
-        effect, parameter, value = _effect_assignment(text)
-        if effect not in effects:
-            raise SynthesizeUsageError(f"--effect-param {text!r}: effect {effect!r} is not "
-                                       f"switched on (add --effect {effect})")
-        units = {p.name: p.unit for p in effect_parameters(effect)}
-        if parameter not in units:
-            raise SynthesizeUsageError(f"--effect-param {text!r}: effect {effect} has no "
-                                       f"parameter {parameter!r}; its parameters: "
-                                       f"{', '.join(units)}")
-        effects[effect][parameter] = quantity(value, units[parameter], "--effect-param")
-    noise_n = quantity(noise, "N", "--noise")
-    drift_n = quantity(drift, "N", "--drift")
-    protocol_changes: dict[str, object] = {"duration_s": quantity(duration, "s", "--duration")}
-    if pressures:
-        protocol_changes["pressures_pa"] = tuple(
-            quantity(p, "Pa", "--pressure") for p in pressures
-        )
     try:
-        protocol = Protocol(**protocol_changes)  # type: ignore[arg-type]
-        recordings = run(variant, effects, protocol=protocol, lateral_noise_n=noise_n,
-                         normal_noise_n=noise_n, drift_n=drift_n, seed=seed)
-    except ValueError as exc:
-        raise HcardError(str(exc)) from None
+        effects = parse_assignments(effect_names, assignments)
+    except HiddenEffectError as exc:
+        raise SynthesizeUsageError(f"--effect: {exc}") from None
+    if uri is not None and effects:
+        raise SynthesizeUsageError(
+            "--effect hides an effect in the simulated device of sim://; to hide one in a "
+            "served device, start it with `hcard device serve --effect NAME`")
+    if uri is None:
+        query = {"seed": str(seed)}
+        if effects:
+            query["effect"] = ",".join(effects)
+            query.update({f"{name}.{key}": repr(value) for name, values in effects.items()
+                          for key, value in values.items()})
+        uri = f"sim://{VARIANT_OF_CLASS[device_class]}?{urlencode(query)}"
     try:
-        output.mkdir(parents=True, exist_ok=True)
-        for index, recording in enumerate(recordings):
-            path = output / f"rec_{index}.csv"
-            write_measurement(recording, path)
-            click.echo(f"{path}: {len(recording)} samples, {recording.conditions['device']}, "
-                       f"{recording.conditions['ambient_pressure_pa']:g} Pa")
+        seconds = parse_quantity(duration, "s")
+    except UnitError as exc:
+        raise SynthesizeUsageError(f"--duration: {exc}") from None
+    plan = protocol(device_class, duration_s=seconds, seed=seed)
+    check = verification(device_class, seed=seed + 1)
+    write_plan(output, device_class, plan, check)
+    click.echo(f"playing the {device_class} protocol ({plan.track.t[-1]:.1f} s, "
+               f"{len(plan.sessions)} sessions) on {uri}")
+    with open_device(uri, timeout_s=timeout) as driver:
+        result = play_track(driver, plan.card, plan.track)
+    path = output / RECORDING
+    try:
+        write_measurement(recording(result, track_path=str(output / "protocol.csv"),
+                                    card_path=str(output / "protocol.hcard")), path)
     except OSError as exc:
-        raise HcardError(f"{output}: cannot write ({exc.strerror or exc})") from None
+        raise HcardError(f"{path}: cannot write ({exc.strerror or exc})") from None
+    click.echo(f"{path}: {len(result.states)} reports")
+    for line in summary(result):
+        click.echo(f"  {line}")
 
 
 @click.command("play")

@@ -10,39 +10,28 @@ import pytest
 from click.testing import CliRunner
 
 from hcard.calibration.dataset import prepare
-from hcard.calibration.measurement import read_measurement
-from hcard.calibration.profile import load_profile
+from hcard.calibration.measurement import read_measurement, write_measurement
+from hcard.calibration.profile import fitted_model
 from hcard.cli.main import cli
+from hcard.physics.profile import DeviceProfile
+from hcard_device.sim.tribometer import Protocol, synthesize
 
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A 20 s UV recording with a hidden speed dependence, written by the synthesize command."""
+    """A 20 s UV tribometer recording with a hidden speed dependence (the tribometer
+    simulation of :mod:`hcard_device.sim.tribometer`, independent of the calibration code)."""
     out = tmp_path_factory.mktemp("recordings")
-    result = CliRunner().invoke(
-        cli,
-        [
-            "device",
-            "synthesize",
-            "--device",
-            "uv",
-            "--effect",
-            "ultrasonic-speed",
-            "--effect-param",
-            "ultrasonic-speed.speed_exponent=-0.6",
-            "--duration",
-            "20s",
-            "--noise",
-            "1.5mN",
-            "--drift",
-            "2mN",
-            "--seed",
-            "4",
-            "-o",
-            str(out),
-        ],
+    (recording,) = synthesize(
+        "uv",
+        {"ultrasonic-speed": {"speed_exponent": -0.6}},
+        protocol=Protocol(duration_s=20.0),
+        lateral_noise_n=1.5e-3,
+        normal_noise_n=1.5e-3,
+        drift_n=2e-3,
+        seed=4,
     )
-    assert result.exit_code == 0, result.output
+    write_measurement(recording, out / "rec_0.csv")
     return out
 
 
@@ -72,7 +61,10 @@ def test_calibrate_writes_a_report_that_leads_with_the_held_out_error(
     for figure in ("residuals.png", "fit.png"):
         assert (out / figure).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # The fitted profile loads back into the same model.
-    model = load_profile(out / "profile.json")
+    profile = DeviceProfile.load(out / "profile.json")
+    assert profile.to_dict()["format"] == "hcard-device-profile/2"
+    assert [f.name for f in profile.effects] == ["ultrasonic-speed"]
+    model = fitted_model(profile)
     data = prepare([read_measurement(p) for p in sorted(recorded.glob("*.csv"))])
     residual = data.observed - model.forward(**data.inputs_for(model))
     # `hcard predict` evaluates the calibrated model like any other profile.

@@ -12,8 +12,7 @@ from matplotlib.image import imread
 from hcard.calibration.dataset import prepare
 from hcard.calibration.loop import calibrate
 from hcard.calibration.measurement import Measurement
-from hcard.calibration.profile import FORMAT as PROFILE_FORMAT
-from hcard.calibration.profile import load_profile, profile_of, save_profile
+from hcard.calibration.profile import fitted_model, profile_of
 from hcard.calibration.report import (
     DPI,
     FIT_INCHES,
@@ -23,6 +22,7 @@ from hcard.calibration.report import (
     write_report,
 )
 from hcard.physics import PredictorError
+from hcard.physics.profile import PROFILE_FORMAT, DeviceProfile
 from hcard.plugins.registry import get_registry
 
 pytest.importorskip("hcard_builtins")
@@ -157,18 +157,26 @@ def _forward(predictor, data):
 
 def test_profile_round_trip(result, report):
     profile = json.loads(report.profile.read_text(encoding="utf-8"))
-    assert profile == profile_of(result)
-    assert profile["effects"] == list(result.after.effects)
-    assert profile["parameters"]["ultrasonic-speed.speed_exponent"]["fitted"] is True
-    assert profile["parameters"]["poisson_ratio"]["uncertainty"] is None
-    loaded = load_profile(report.profile)
+    expected_profile = profile_of(result).to_dict()
+    for raw in (profile, expected_profile):
+        raw["calibration"].pop("created")
+    assert profile == json.loads(json.dumps(expected_profile))
+    assert profile["format"] == "hcard-device-profile/2"
+    assert [e["name"] for e in profile["effects"]] == list(result.after.effects)
+    speed = profile["effects"][0]["parameters"]["speed_exponent"]
+    assert speed["uncertainty"] == pytest.approx(
+        result.after.fit.uncertainties["ultrasonic-speed.speed_exponent"])
+    assert profile["calibration"]["parameters"]["poisson_ratio"]["uncertainty"] is None
+    assert profile["calibration"]["parameters"]["psi_star"]["fitted"] is True
+    assert profile["calibration"]["held_out_rmse_after"] == pytest.approx(result.after.test_rmse)
+    loaded = fitted_model(DeviceProfile.load(report.profile))
     expected = _forward(result.after.fit.predictor, result.data)
     np.testing.assert_allclose(_forward(loaded, result.data), expected, rtol=0, atol=1e-12)
 
 
 def _broken(tmp_path, result, change):
     path = tmp_path / "broken-profile.json"
-    save_profile(result, path)
+    profile_of(result).save(path)
     raw = json.loads(path.read_text(encoding="utf-8"))
     change(raw)
     path.write_text(json.dumps(raw), encoding="utf-8")
@@ -182,21 +190,27 @@ def _set(raw, key, value):
 @pytest.mark.parametrize(
     ("change", "field"),
     [
-        (lambda raw: _set(raw, "model", "no-such-model"), "model"),
-        (lambda raw: _set(raw, "effects", ["no-such-effect"]), "effects[0]"),
+        (lambda raw: _set(raw["predictor"], "model", "no-such-model"), "predictor.model"),
+        (lambda raw: _set(raw["effects"][0], "name", "no-such-effect"), "effects[0].name"),
         (
-            lambda raw: _set(raw["parameters"], "bogus", {"value": 1.0, "unit": ""}),
+            lambda raw: _set(raw["effects"][0]["parameters"], "bogus",
+                             {"value": 1.0, "unit": ""}),
             "bogus",
         ),
-        (lambda raw: _set(raw["parameters"]["force_offset"], "unit", "mN"), "force_offset"),
-        (lambda raw: raw["parameters"].pop("psi_star"), "psi_star"),
+        (
+            lambda raw: _set(raw["effects"][0]["parameters"]["speed_exponent"], "unit", "mN"),
+            "speed_exponent.unit",
+        ),
+        (lambda raw: _set(raw["predictor"]["parameters"], "psi_star", {"value": "x"}),
+         "psi_star"),
+        (lambda raw: _set(raw["observation"], "output", "force"), "observation.output"),
         (lambda raw: _set(raw, "format", "other/1"), "format"),
     ],
 )
 def test_profile_errors_name_file_and_field(result, tmp_path, change, field):
     path = _broken(tmp_path, result, change)
     with pytest.raises(PredictorError) as info:
-        load_profile(path)
+        DeviceProfile.load(path)
     assert path.name in str(info.value)
     assert field in str(info.value)
 
@@ -204,8 +218,8 @@ def test_profile_errors_name_file_and_field(result, tmp_path, change, field):
 def test_profile_missing_file_and_bad_json(tmp_path):
     missing = tmp_path / "missing-profile.json"
     with pytest.raises(PredictorError, match=r"missing-profile\.json"):
-        load_profile(missing)
+        DeviceProfile.load(missing)
     bad = tmp_path / "bad-profile.json"
     bad.write_text("{not json", encoding="utf-8")
     with pytest.raises(PredictorError, match=r"bad-profile\.json"):
-        load_profile(bad)
+        DeviceProfile.load(bad)

@@ -59,14 +59,15 @@ def test_with_the_voltage_labels_swapped_the_residual_points_at_finger_size() ->
 
 
 def test_the_report_and_profile_of_a_direct_force_calibration(tmp_path) -> None:
-    from hcard.calibration.profile import load_profile
+    from hcard.calibration.profile import fitted_model
     from hcard.calibration.report import write_report
+    from hcard.physics.profile import DeviceProfile
 
     result = table.run(swap_voltages=True)
     files = write_report(result, tmp_path)
     text = files.markdown.read_text()
     assert f"{result.before.test_rmse * 1e3:.4g} mN before" in text
-    model = load_profile(files.profile)  # the air-layer law itself, not a lateral force
+    model = fitted_model(DeviceProfile.load(files.profile))  # the air-layer law itself
     assert model.output.name == "electrostatic_force"
     predicted = model.forward(**result.data.inputs)
     assert np.allclose(result.data.observed - predicted, result.after.fit.residuals, atol=1e-15)

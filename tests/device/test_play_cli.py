@@ -10,10 +10,10 @@ from click.testing import CliRunner
 from served_device import served_device
 
 from hcard import build
+from hcard.calibration.measurement import Measurement, read_measurement
 from hcard.card_io import save
 from hcard.cli.main import cli
 from hcard.track import straight_stroke, track_to_csv
-from hcard.calibration.measurement import Measurement, read_measurement
 from hcard_device.drivers.play import TAIL_S
 from hcard_device.protocol import FaultBits
 

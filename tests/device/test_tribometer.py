@@ -7,11 +7,9 @@ import time
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from hcard.calibration.measurement import read_measurement, write_measurement
 from hcard.calibration.splits import stroke_ids
-from hcard.cli.main import cli
 from hcard_builtins.physics.electrovibration import AirLayer, Kaczmarek
 from hcard_builtins.physics.ultrasonic import DimensionlessGroup
 from hcard_device.sim.config import DeviceConfig
@@ -22,10 +20,10 @@ CLEAN = {"lateral_noise_n": 0.0, "normal_noise_n": 0.0}
 SHORT = Protocol(duration_s=10.0)
 
 
-
 def friction(m):
     """The recorded lateral force with the direction of motion taken out (rule M3: signed)."""
     return m.lateral_force * np.where(m.speed < 0, -1.0, 1.0)
+
 
 def _uv_model(device: str = "uv") -> tuple[DimensionlessGroup, float]:
     config = DeviceConfig.evita() if device == "uv" else DeviceConfig.coupled()
@@ -278,67 +276,3 @@ def test_bad_names_raise_value_error():
         synthesize("ultrasound")
     with pytest.raises(ValueError, match="outside its bounds"):
         synthesize("uv", {"load-index": {"load_index": 5.0}})
-
-
-def test_cli_writes_recordings(tmp_path):
-    out = tmp_path / "out"
-    result = CliRunner().invoke(
-        cli,
-        [
-            "device",
-            "synthesize",
-            "--device",
-            "coupled",
-            "--effect",
-            "charge-leakage",
-            "--effect-param",
-            "charge-leakage.time_constant=10ms",
-            "--noise",
-            "2mN",
-            "--drift",
-            "1mN",
-            "--duration",
-            "2s",
-            "--pressure",
-            "101325",
-            "--pressure",
-            "50kPa",
-            "--seed",
-            "1",
-            "-o",
-            str(out),
-        ],
-    )
-    assert result.exit_code == 0, result.output
-    assert sorted(p.name for p in out.iterdir()) == [
-        "rec_0.csv",
-        "rec_0.csv.json",
-        "rec_1.csv",
-        "rec_1.csv.json",
-    ]
-    second = read_measurement(out / "rec_1.csv")
-    assert len(second) == 2000
-    assert second.conditions["ambient_pressure_pa"] == 50000.0
-    assert "rec_1.csv" in result.output
-    listing = CliRunner().invoke(cli, ["device", "synthesize", "--list-effects"])
-    assert listing.exit_code == 0 and "surface-patch" in listing.output
-
-
-@pytest.mark.parametrize(
-    "args, message",
-    [
-        (["--effect", "nope"], "unknown effect 'nope'"),
-        (
-            ["--effect", "charge-leakage", "--effect-param", "charge-leakage.tau=1ms"],
-            "no parameter 'tau'",
-        ),
-        (["--effect-param", "air-layer.air_gap=1um"], "not switched on"),
-        (["--noise", "3mm"], "--noise"),
-    ],
-)
-def test_cli_rejects_bad_names(tmp_path, args, message):
-    result = CliRunner().invoke(cli, ["device", "synthesize", *args, "-o", str(tmp_path)])
-    assert result.exit_code != 0
-    lines = result.output.strip().splitlines()
-    assert len(lines) == 1 and message in lines[0]
-    assert not list(tmp_path.iterdir())
