@@ -49,3 +49,14 @@ def test_render_output_example_is_what_hcard_render_writes():
     written = frames_to_csv(render(parse_card(card_text.encode()), track)).decode()
     expected = example.strip().splitlines()
     assert written.splitlines()[: len(expected)] == expected
+
+
+def test_device_profile_example_loads_and_renders():
+    from hcard.physics.profile import DeviceProfile
+
+    (text,) = blocks(SPEC / "device-profile.md", "json")
+    profile = DeviceProfile.from_json(text.encode(), source="device-profile.md")
+    assert [(f.name, f.channel) for f in profile.effects] == [("air-layer", "ev")]
+    # the air layer lowers the EV force at 0.5 N against the profile's own contact law
+    plain = profile.replace(effects=())
+    assert 0.3 < profile.force_for(1000.0, 0.5) / plain.force_for(1000.0, 0.5) < 0.9

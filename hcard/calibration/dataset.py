@@ -19,6 +19,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.ndimage import median_filter
 
 from hcard.calibration.effects import recent_change, time_since_change
 from hcard.calibration.measurement import Measurement, MeasurementError
@@ -136,17 +137,19 @@ def strokes_since_rest(t: np.ndarray, ids: np.ndarray, rest_s: float = REST_S) -
 
 
 NORMAL_FORCE_WINDOW_S = 0.01
-"""The normal force a model sees is the recorded one averaged over this window, s, within each
-contact (spec/calibration.md K17): a force sensor's noise is white while the finger's load
-changes over tens of milliseconds, and a model fed the raw force carries the noise into its
-prediction, where it correlates with the recorded force (errors in the variables) and shows as
-residual structure against the normal force."""
+"""The normal force a model sees is the moving median of the recorded one over this window, s,
+within each contact (spec/calibration.md K16): a force sensor's noise is white while the
+finger's load changes slowly or in steps, and a model fed the raw force carries the noise into
+its prediction, where it correlates with the recorded force (errors in the variables) and shows
+as residual structure against the normal force. A median keeps the steps of a load that
+changes from stroke to stroke where a mean would smear them."""
 
 
 def smoothed_within(values: np.ndarray, t: np.ndarray, runs: np.ndarray,
                     window_s: float) -> np.ndarray:
-    """``values`` averaged over a centred window of ``window_s`` (s) of samples, separately
-    inside each run of ``runs`` (True samples; the others are returned as they are)."""
+    """The moving median of ``values`` over a centred window of ``window_s`` (s) of samples,
+    separately inside each run of ``runs`` (True samples; the others are returned as they
+    are; the window is cut at a run's ends)."""
     out = np.asarray(values, dtype=np.float64).copy()
     if out.size < 3 or window_s <= 0:
         return out
@@ -156,12 +159,7 @@ def smoothed_within(values: np.ndarray, t: np.ndarray, runs: np.ndarray,
         return out
     edges = np.flatnonzero(np.diff(np.concatenate([[0], runs.astype(np.int8), [0]])))
     for start, end in zip(edges[::2], edges[1::2], strict=True):
-        segment = out[start:end]
-        cumulative = np.concatenate([[0.0], np.cumsum(segment)])
-        index = np.arange(segment.size)
-        low = np.maximum(index - half, 0)
-        high = np.minimum(index + half + 1, segment.size)
-        out[start:end] = (cumulative[high] - cumulative[low]) / (high - low)
+        out[start:end] = median_filter(out[start:end], size=2 * half + 1, mode="nearest")
     return out
 
 
@@ -356,7 +354,7 @@ def prepare(
         columns_of = {
             # Out of contact the recorded force is sensor noise around 0, which some models
             # refuse (Eq. 4.1 divides by Fn): those samples, never fitted, take the threshold.
-            # In contact it is the recorded force smoothed over NORMAL_FORCE_WINDOW_S (K17).
+            # In contact it is the recorded force smoothed over NORMAL_FORCE_WINDOW_S (K16).
             "normal_force": np.maximum(
                 smoothed_within(m.normal_force, m.t, contact, NORMAL_FORCE_WINDOW_S),
                 CONTACT_THRESHOLD_N,

@@ -1,5 +1,5 @@
 """The calibration protocol: a card and a finger track that identify a device's models, and the
-held-out textures that verify a fitted profile (spec/calibration.md section 8).
+held-out textures that verify a fitted profile (spec/calibration.md section 6).
 
 The protocol follows the thesis's own measurements: strokes at several speeds and normal forces
 (the friction of the bare finger, Figs. 1.11-1.12, Eq. 2.35; the ultrasonic reduction against
@@ -181,7 +181,7 @@ def protocol_card(device: str) -> pb.Card:
     _check_device(device)
     return _lane_card(_lanes(PROTOCOL_LANES, device), PROTOCOL_TAXTEL_MM,
                       f"hcard calibration protocol ({device})",
-                      "Lanes of target levels for strokes along x (spec/calibration.md 8).")
+                      "Lanes of target levels for strokes along x (spec/calibration.md 6).")
 
 
 def verification_card(device: str) -> pb.Card:
@@ -189,7 +189,7 @@ def verification_card(device: str) -> pb.Card:
     _check_device(device)
     return _lane_card(_lanes(VERIFY_LANES, device), VERIFY_TAXTEL_MM,
                       f"hcard calibration verification ({device})",
-                      "Held-out levels between plain patches (spec/calibration.md 8).")
+                      "Held-out levels between plain patches (spec/calibration.md 6).")
 
 
 def _session_track(

@@ -1,4 +1,4 @@
-"""The friction a device rendered, measured against the card's target (spec/calibration.md K15).
+"""The friction a device rendered, measured against the card's target (spec/calibration.md K17).
 
 A device recording (spec/measurement-format.md, device columns of rule M12) carries, per STATE
 report, the lateral force ``F_l`` and the normal force ``F_n`` the device measured and the target

@@ -134,7 +134,7 @@ def write_plan(directory: Path, device: str, plan: Plan, check: Plan) -> list[Pa
                          "sessions": [{"lane": lane, "force_n": force,
                                        "speeds_mm_s": list(speeds)}
                                       for lane, force, speeds in check.sessions]},
-        "spec": "spec/calibration.md section 8",
+        "spec": "spec/calibration.md section 6",
     }
     write_atomically(directory / PLAN_JSON, (json.dumps(description, indent=2) + "\n").encode())
     return [*written, directory / PLAN_JSON]
@@ -161,7 +161,7 @@ def plan_command(device: str, output: Path, duration: str, verify_duration: str,
     there and back at several speeds and normal forces, with lifts and rests between (the
     thesis's protocols, chapters 2-4). Play it with `hcard play`, calibrate the recording, and
     verify the profile on the held-out textures (other levels, forces and speeds) with
-    `hcard calibrate ... --verify URI` (spec/calibration.md section 8).
+    `hcard calibrate ... --verify URI` (spec/calibration.md section 6).
     """
     seconds = quantity(duration, "s", "--duration")
     verify_seconds = quantity(verify_duration, "s", "--verify-duration")

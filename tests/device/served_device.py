@@ -15,7 +15,7 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 START_TIMEOUT_S = 20.0
@@ -62,15 +62,17 @@ def _read_line(fd: int, deadline: float) -> str:
 
 
 @contextlib.contextmanager
-def served_device(variant: str = "evita", *, cli: bool = False) -> Iterator[ServedDevice]:
+def served_device(variant: str = "evita", *, cli: bool = False,
+                  extra: Sequence[str] = ()) -> Iterator[ServedDevice]:
     """Serve a device in a subprocess on a free port of 127.0.0.1 (``cli``: through
-    ``hcard device serve``); the process is killed when the block ends, whatever happens."""
+    ``hcard device serve``; ``extra``: more options, e.g. ``--effect air-layer``); the process is
+    killed when the block ends, whatever happens."""
     if cli:
         command = [sys.executable, "-c", "from hcard.cli.main import cli; cli()", "device",
-                   "serve", "--port", "0", "--device", variant]
+                   "serve", "--port", "0", "--device", variant, *extra]
     else:
         command = [sys.executable, "-m", "hcard_device.usb.server", "--port", "0",
-                   "--device", variant]
+                   "--device", variant, *extra]
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
         assert process.stdout is not None

@@ -193,7 +193,7 @@ def test_sim_upload_cut_off_keeps_the_previous_card():
 def test_sim_rejected_upload_raises_with_the_reason():
     with open_device("sim://") as driver:
         driver.upload_card(step_card())
-        with pytest.raises(DeviceError, match=r"INVALID_CARD.*previous card stays active"):
+        with pytest.raises(DeviceError, match=r"INVALID_CARD.*previous card stays in force"):
             driver.upload_card(b"\x0a\x03abc")
         assert driver.upload_status().card_generation == 1
 

@@ -111,8 +111,8 @@ def touching(fw: Firmware, seconds: float = 0.02, x: float = 20.0) -> list[State
 @pytest.mark.parametrize(
     ("config", "kind", "caps", "plate_hz", "voltage_dv", "surface"),
     [
-        (DeviceConfig.evita(), 1, 0b1111101, 60_750, 0, (8100, 5400)),
-        (DeviceConfig.coupled(), 2, 0b1111111, 38_220, 20_000, (8000, 5000)),
+        (DeviceConfig.evita(), 1, 0b11111101, 60_750, 0, (8100, 5400)),
+        (DeviceConfig.coupled(), 2, 0b11111111, 38_220, 20_000, (8000, 5000)),
     ],
 )
 def test_device_info_describes_the_device(
@@ -121,7 +121,7 @@ def test_device_info_describes_the_device(
 ) -> None:
     info = feature(make_fw(config), ReportId.DEVICE_INFO)
     assert isinstance(info, DeviceInfo)
-    assert (info.protocol_major, info.protocol_minor) == (1, 0)
+    assert (info.protocol_major, info.protocol_minor) == (1, 1)
     assert info.device_kind == kind
     assert info.capabilities == caps
     assert info.plate_frequency_hz == plate_hz

@@ -298,7 +298,7 @@ def test_unknown_and_wrong_kind_ids_are_rejected() -> None:
          + bytes(56), r"frame 0: uv 10001"),
         (b"\x11\x00\x00\x02" + bytes([0x10, 0x27, 0x10, 0x27, 0, 0, 0x0F, 0x27]) + bytes(52),
          r"frame 1: ev 9999"),
-        (b"\x12\x06\x00", r"unknown command 6"),
+        (b"\x12\x07\x00", r"unknown command 7"),
         (b"\x12\x04\x02", r"unknown touch source 2"),
     ],
 )
@@ -311,7 +311,7 @@ def test_out_of_range_output_fields_are_rejected(wire: bytes, message: str) -> N
     ("wire", "message"),
     [
         (b"\x23" + bytes(4) + bytes([59]) + bytes(58), r"length 59 exceeds the chunk size 58"),
-        (b"\x24\x03", r"unknown upload action 3"),
+        (b"\x24\x04", r"unknown upload action 4"),
         (b"\x25\x03\x05" + bytes(15) + b"caf\xe9" + bytes(42), r"not ASCII"),
         (b"\x25\x03\x05" + bytes(15) + b"a\x07b" + bytes(43), r"printable ASCII"),
         (b"\x26" + bytes(4) + (257).to_bytes(2, "little") + bytes(57), r"clipped_textures = 257"),

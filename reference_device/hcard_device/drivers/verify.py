@@ -1,5 +1,5 @@
 """Verify a fitted profile on the device: play held-out textures without and with it, and
-measure the rendered friction each time (spec/calibration.md K16).
+measure the rendered friction each time (spec/calibration.md K18).
 
 Both plays go through the same connection, one after the other: the first with the device's
 own profile, the second with the fitted profile uploaded (UPLOAD_END COMMIT_PROFILE); the

@@ -358,15 +358,16 @@ class DeviceSimulation:
                 ("UV", self.config.has_uv, profile.uv_model),
                 ("EV", self.config.has_ev, profile.ev_model),
             ):
+                # short reasons first: the protocol's detail field holds 46 bytes (PU8)
                 if present and model is None:
                     raise ProfileError(
-                        f"predictor: the device has a {channel} channel that model "
-                        f"{profile.predictor.name!r} does not render"
+                        f"{channel} channel: the profile has none (model "
+                        f"{profile.predictor.name!r}), the device has one"
                     )
                 if not present and model is not None:
                     raise ProfileError(
-                        f"predictor: model {profile.predictor.name!r} renders a {channel} "
-                        f"channel this device does not have"
+                        f"{channel} channel: the device has none (model "
+                        f"{profile.predictor.name!r} renders one)"
                     )
         self._host_profile = profile
         self._profile = self._profile_in_force()
