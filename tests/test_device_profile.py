@@ -136,7 +136,7 @@ def test_bad_profiles_name_the_field(tmp_path, change, message):
 def test_an_effect_on_a_channel_the_model_lacks_is_refused():
     uv_only = DeviceProfile(get_registry().get("predictor", "dimensionless-group"),
                             COUPLED.limits.__class__(2.5e-6, 0.0, 1e-3, 440.0, 60750.0))
-    with pytest.raises(ProfileError, match="act.* on the EV channel"):
+    with pytest.raises(ProfileError, match=r"act.* on the EV channel"):
         with_effects(uv_only, air_layer={"air_gap": 5e-6})
 
 

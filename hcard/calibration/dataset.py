@@ -154,7 +154,7 @@ def smoothed_within(values: np.ndarray, t: np.ndarray, runs: np.ndarray,
     if out.size < 3 or window_s <= 0:
         return out
     step = float(np.median(np.diff(t))) if t.size > 1 else 0.0
-    half = int(round(window_s / step / 2)) if step > 0 else 0
+    half = round(window_s / step / 2) if step > 0 else 0
     if half < 1:
         return out
     edges = np.flatnonzero(np.diff(np.concatenate([[0], runs.astype(np.int8), [0]])))

@@ -61,13 +61,20 @@ def track_speeds(track: FingerTrack) -> np.ndarray:
 
 def echoed_samples(track: FingerTrack, echoes_us: np.ndarray) -> np.ndarray:
     """Index of the track sample each echoed host time (us, wrapping) names; -1 for an echo of
-    no sample of this track (before the first FINGER report of the session)."""
+    no sample of this session. A device echoes the last FINGER report it applied, which at the
+    start of a session is still one of the previous session (the same track played again
+    echoes the same times): every echo before the first one of this track's first sample is
+    taken as stale."""
     host_us = np.rint(track.t * 1e6).astype(np.int64) % _HOST_TIME_MODULO
     order = np.argsort(host_us, kind="stable")
     sorted_us = host_us[order]
     position = np.searchsorted(sorted_us, echoes_us, side="right") - 1
     found = (position >= 0) & (sorted_us[np.maximum(position, 0)] == echoes_us)
-    return np.where(found, order[np.maximum(position, 0)], -1)
+    index = np.where(found, order[np.maximum(position, 0)], -1)
+    first = np.flatnonzero(echoes_us == host_us[0])
+    if first.size:
+        index[: first[0]] = -1
+    return index
 
 
 def state_columns(states: list[State]) -> dict[str, np.ndarray]:
@@ -108,6 +115,12 @@ def device_description(info: DeviceInfo) -> str:
     return f"{kind} (hcard protocol {info.protocol_major}.{info.protocol_minor})"
 
 
+def public_uri(uri: str) -> str:
+    """The device URI without its query: the options of an in-process device (seed, hidden
+    effects) describe the simulation, not the device's conditions, and are not recorded."""
+    return str(uri).split("?", 1)[0]
+
+
 def sidecar(result: PlayResult, *, track_path: str | None = None,
             card_path: str | None = None) -> dict[str, Any]:
     """The conditions of a play session (rule M9 keys)."""
@@ -138,7 +151,7 @@ def sidecar(result: PlayResult, *, track_path: str | None = None,
         },
         "profile": dict(result.profile),
         "session": {
-            "uri": str(result.uri),
+            "uri": public_uri(result.uri),
             "track": track_path,
             "duration_s": result.duration_s,
             "reports": len(result.states),

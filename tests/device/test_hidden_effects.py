@@ -1,0 +1,123 @@
+"""Physical effects hidden in the simulated hardware (hcard_device.sim.hidden): the physics of
+their own model, switched on from the command line and the URI, and never named by the device."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from hcard import build
+from hcard.cli.main import cli
+from hcard.track import make_track
+from hcard_builtins.physics.electrovibration import AirLayer
+from hcard_device.drivers import open_device
+from hcard_device.drivers.errors import UriError
+from hcard_device.drivers.play import play
+from hcard_device.drivers.recording import recording
+from hcard_device.drivers.uri import parse_uri
+from hcard_device.sim.hidden import HiddenEffectError, parse_assignments, resolve
+
+EV_CARD = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[
+    build.texture(1.0, channel="ev", name="plain"), build.texture(1.1, channel="ev", name="ev")],
+    texture_index=[0, 1])
+
+
+def slow_stroke(force: float) -> object:
+    x = np.linspace(2.0, 18.0, 81)
+    return make_track(np.arange(x.size) * 0.01, x, np.full(x.size, 5.0), force, True)
+
+
+def ev_patch(uri: str, force: float) -> tuple[float, float, float]:
+    """(median voltage, mean measured lateral/normal on the EV patch, on the plain patch)."""
+    with open_device(uri) as driver:
+        m = recording(play(driver, EV_CARD, slow_stroke(force)))
+    settled = m.contact & (m.t > 0.05)
+    on = settled & (m.device["target_ev"] > 1.0)
+    off = settled & (m.device["target_ev"] == 1.0) & (m.x < 0.009)
+    mu = m.lateral_force / m.normal_force
+    return float(np.median(m.voltage[on])), float(mu[on].mean()), float(mu[off].mean())
+
+
+@pytest.mark.parametrize("force", [0.3, 0.6])
+def test_the_hidden_air_layer_is_eq_3_17_on_the_recorded_voltage(force):
+    voltage, ev_mu, plain_mu = ev_patch("sim://coupled?seed=3&effect=air-layer", force)
+    own_voltage, own_ev, own_plain = ev_patch("sim://coupled?seed=3", force)
+    assert voltage == pytest.approx(own_voltage, rel=0.01)  # the firmware does not know
+    # the rendered EV friction, independently from Eq. 3.17 with the section 3.6.1 contact
+    # (A = 1 cm^2, 200 um stratum corneum at 1560, 90 um film at 3.35) and d_a = 10 um / Fn,
+    # against Eq. 3.12 (no air) on the same device, seed and stroke: the finger's own drift
+    # (occlusion over the stroke) is the same in both and cancels in the ratio
+    gain = 0.99890  # leakage at the 440 Hz carrier (Eq. 3.22, tau_d ~ 7.7 ms)
+    layers = {"area": 1e-4, "sc_thickness": 200e-6, "sc_permittivity": 1560.0,
+              "insulator_thickness": 90e-6, "insulator_permittivity": 3.35}
+    effective = gain * voltage / math.sqrt(2.0)
+    with_air = 1.0 + float(AirLayer(**layers).forward(voltage=effective,
+                                                        air_gap=10e-6 / force)) / force
+    without = 1.0 + float(AirLayer(**layers).forward(voltage=effective, air_gap=0.0)) / force
+    measured = (ev_mu / plain_mu) / (own_ev / own_plain)
+    assert measured == pytest.approx(with_air / without, abs=0.005)
+    assert with_air / without < 0.97  # the effect is large enough to matter
+    # no effect: about the target (the finger's occlusion over the stroke adds ~2 %)
+    assert own_ev / own_plain == pytest.approx(1.1, abs=0.03)
+
+
+def test_effects_from_the_uri():
+    uri = parse_uri("sim://coupled?effect=air-layer&air-layer.air_gap=8um")
+    assert uri.effects == {"air-layer": {"air_gap": pytest.approx(8e-6)}}
+    assert parse_uri("sim://coupled?air-layer.air_gap=4um").effects == {
+        "air-layer": {"air_gap": pytest.approx(4e-6)}}
+    assert parse_uri("sim://coupled").effects == {}
+    loop = parse_uri("usbip://loopback?device=coupled&effect=air-layer")
+    assert loop.effects == {"air-layer": {"air_gap": pytest.approx(10e-6)}}
+
+
+@pytest.mark.parametrize(
+    ("uri", "message"),
+    [
+        ("sim://evita?effect=air-layer", "needs the coupled device, not evita"),
+        ("sim://coupled?effect=magic", "unknown hidden effect 'magic'"),
+        ("sim://coupled?air-layer.gap=1um", "no parameter 'gap'"),
+        ("sim://coupled?air-layer.air_gap=1kHz", "not a unit of m"),
+        ("sim://coupled?air-layer.air_gap=-1um", "outside its bounds"),
+        ("usbip://127.0.0.1:3240/1-1?effect=air-layer", "options apply to loopback only"),
+    ],
+)
+def test_bad_effects_in_a_uri_are_named(uri, message):
+    with pytest.raises(UriError, match=message):
+        parse_uri(uri)
+
+
+def test_assignments_and_resolution():
+    assert parse_assignments(["air-layer"], []) == {"air-layer": {}}
+    assert resolve("coupled", {"air-layer": {}}) == {"air-layer": {"air_gap": 10e-6}}
+    with pytest.raises(HiddenEffectError, match="expected EFFECT.PARAM=VALUE"):
+        parse_assignments([], ["air_gap=1um"])
+
+
+def test_nothing_the_device_says_names_the_effect():
+    card = EV_CARD
+    with open_device("sim://coupled?effect=air-layer&air-layer.air_gap=12um") as hidden, \
+            open_device("sim://coupled") as plain:
+        assert hidden.info() == plain.info()
+        assert hidden.limits() == plain.limits()
+        result = play(hidden, card, slow_stroke(0.5))
+    conditions = recording(result).conditions
+    text = json.dumps(conditions).lower()
+    assert "air-layer" not in text and "air_gap" not in text and "12um" not in text
+    assert conditions["session"]["uri"] == "sim://coupled"
+    assert conditions["profile"]["content"]["effects"] == []  # the device's own profile
+
+
+def test_serve_lists_and_checks_effects():
+    listing = CliRunner().invoke(cli, ["device", "serve", "--list-effects"])
+    assert listing.exit_code == 0 and listing.output.startswith("air-layer (coupled;")
+    refused = CliRunner().invoke(cli, ["device", "serve", "--device", "evita", "--effect",
+                                       "air-layer", "--port", "0"])
+    assert refused.exit_code == 1
+    assert "effect air-layer needs the coupled device, not evita" in refused.output
+    malformed = CliRunner().invoke(cli, ["device", "serve", "--effect-param", "air-layer=1"])
+    assert malformed.exit_code == 1 and "expected EFFECT.PARAM=VALUE" in malformed.output

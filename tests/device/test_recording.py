@@ -1,0 +1,123 @@
+"""A play session is a measurement recording (spec/measurement-format.md M3, M9, M12): columns
+by name in SI units, the finger's speed from the echoed track samples, and the sidecar of what
+the device and the host know."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+
+import numpy as np
+import pytest
+
+from hcard import build
+from hcard.calibration.measurement import read_measurement, write_measurement
+from hcard.card_io import to_bytes
+from hcard.physics.profile import DeviceProfile
+from hcard.track import make_track, straight_stroke
+from hcard_device.drivers import open_device
+from hcard_device.drivers.play import play
+from hcard_device.drivers.recording import echoed_samples, recording, track_speeds
+
+CARD = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[
+    build.texture(1.0, channel="uv", name="plain"), build.texture(0.5, channel="uv", name="slip")],
+    texture_index=[0, 1], title="step")
+
+
+def back_and_forth() -> object:
+    """2 mm -> 18 mm at 40 mm/s, then back at 80 mm/s, 100 Hz samples, 0.5 N."""
+    there = np.linspace(2.0, 18.0, 41)
+    back = np.linspace(18.0, 2.0, 21)[1:]
+    x = np.concatenate([there, back])
+    t = np.arange(x.size) * 0.01
+    return make_track(t, x, np.full(x.size, 5.0), 0.5, True)
+
+
+def test_the_recording_is_the_measurement_format_and_reads_back(tmp_path):
+    track = back_and_forth()
+    with open_device("sim://evita?seed=2") as driver:
+        result = play(driver, CARD, track)
+    m = recording(result, track_path="t.csv", card_path="c.hcard")
+    write_measurement(m, tmp_path / "rec.csv")
+    back = read_measurement(tmp_path / "rec.csv")
+    header = (tmp_path / "rec.csv").read_text().splitlines()[0].split(",")
+    assert header[:8] == ["t_s", "amplitude_m", "x_m", "y_m", "speed_m_s", "fn_n", "fl_n",
+                          "contact"]
+    assert "voltage_v" not in header  # the E-ViTa has no EV channel (rule M5)
+    for name in ("sequence", "faults", "target_uv", "texture", "echo", "f_tl", "current"):
+        np.testing.assert_array_equal(back.column(name), m.column(name), err_msg=name)
+    np.testing.assert_array_equal(back.contact, m.contact)
+    # one report per millisecond of device time, sequences consecutive
+    assert np.allclose(np.diff(back.t), 1e-3)
+    assert np.all(np.diff(back.column("sequence")) % 65536 == 1)
+    # the normal force is the sum of the four corner sensors
+    corners = sum(back.column(c) for c in ("f_tl", "f_tr", "f_bl", "f_br"))
+    np.testing.assert_allclose(back.normal_force, corners, atol=1e-12)
+
+
+def test_speed_is_the_tracks_signed_speed_at_the_echoed_sample():
+    track = back_and_forth()
+    with open_device("sim://evita") as driver:
+        m = recording(play(driver, CARD, track))
+    moving = m.contact & (m.speed != 0)
+    there = moving & (m.speed > 0)
+    away = moving & (m.speed < 0)
+    # independent: 16 mm in 0.4 s, then 16 mm back in 0.2 s
+    assert np.allclose(m.speed[there], 0.040, rtol=1e-6)
+    assert np.allclose(m.speed[away], -0.080, rtol=1e-6)
+    assert there.sum() > 300 and away.sum() > 150
+
+
+def test_a_stale_echo_of_the_previous_session_is_not_taken_for_this_ones():
+    # A device served in real time may send reports between START and the first FINGER of a
+    # session; they echo the previous session's last sample, which the same track played again
+    # also has.
+    track = straight_stroke((2.0, 5.0), (40.0, 0.0), 0.3)
+    host_us = np.rint(track.t * 1e6).astype(np.int64)
+    stale = [host_us[-1]] * 7
+    fresh = np.repeat(host_us, 20)
+    samples = echoed_samples(track, np.concatenate([stale, fresh]))
+    assert np.all(samples[:7] == -1)
+    np.testing.assert_array_equal(samples[7:], np.repeat(np.arange(len(track)), 20))
+    # an echo of no sample at all (another track's) is -1 too
+    assert echoed_samples(track, np.array([host_us[0], 12_345]))[1] == -1
+
+
+def test_track_speeds_of_a_lift_are_zero():
+    track = make_track([0.0, 0.1, 0.2, 0.3], [0.0, 4.0, 8.0, 8.0], [0.0, 0.0, 3.0, 3.0],
+                       0.5, [True, True, True, False])
+    np.testing.assert_allclose(track_speeds(track), [0.0, 0.04, 0.05, 0.0])
+
+
+def test_the_sidecar_holds_what_the_device_and_host_know():
+    track = back_and_forth()
+    with open_device("sim://coupled?seed=1") as driver:
+        result = play(driver, CARD, track)
+    conditions = recording(result, track_path="t.csv", card_path="c.hcard").conditions
+    assert conditions["device"] == "coupled UV+EV stimulator (hcard protocol 1.1)"
+    assert conditions["firmware"]["protocol"] == "1.1"
+    assert conditions["plate_frequency_hz"] == 38_220.0
+    assert conditions["voltage_form"] == "envelope"
+    assert conditions["carrier_frequency_hz"] == 440.0
+    assert conditions["limits"] == pytest.approx(
+        {"max_amplitude_m": 2.5e-6, "max_voltage_v": 2000.0, "max_current_a": 250e-6})
+    assert conditions["card"]["sha256"] == hashlib.sha256(to_bytes(CARD)).hexdigest()
+    assert conditions["card"]["title"] == "step" and conditions["card"]["path"] == "c.hcard"
+    assert conditions["session"]["reports"] == len(result.states)
+    assert conditions["session"]["track"] == "t.csv"
+    profile = conditions["profile"]
+    assert profile["source"] == "device" and profile["name"] == "coupled-stimulator"
+    own = DeviceProfile.from_dict(profile["content"])
+    assert own.predictor.params == DeviceProfile.coupled_stimulator().predictor.params
+    json.dumps(conditions, allow_nan=False)  # a valid sidecar
+
+
+def test_an_uploaded_profile_is_named_by_its_digest():
+    profile = DeviceProfile.coupled_stimulator().replace(name="fitted")
+    data = profile.to_json()
+    with open_device("sim://coupled") as driver:
+        result = play(driver, CARD, back_and_forth(), profile=data)
+    record = recording(result).conditions["profile"]
+    assert record["source"] == "host" and record["name"] == "fitted"
+    assert record["sha256"] == hashlib.sha256(data).hexdigest()
+    assert record["content"]["format"] == "hcard-device-profile/2"
