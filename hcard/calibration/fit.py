@@ -20,6 +20,8 @@ from scipy.optimize import least_squares
 from hcard.physics import Predictor, PredictorError
 
 UNIDENTIFIABLE = 1e-8
+COST_TOLERANCE = 1e-8
+"""A fit stops when an iteration lowers the training cost by less than this fraction of it."""
 """Relative singular value of the scaled Jacobian below which a direction is not identifiable."""
 
 
@@ -180,6 +182,7 @@ def fit_predictor(
     train: np.ndarray | None = None,
     test: np.ndarray | None = None,
     dynamic: bool = False,
+    max_evaluations: int | None = None,
 ) -> FitResult:
     """Fit ``predictor``'s free parameters to ``observed`` by bounded least squares.
 
@@ -200,6 +203,8 @@ def fit_predictor(
             whose state at a training sample depends on the inputs of the samples between
             (held-out strokes, rests); those samples' inputs are used, never their observed
             outputs. Default: evaluate on the training samples alone (faster).
+        max_evaluations: most evaluations of the model (each Jacobian counts once); the fit
+            ends there, converged or not (default: scipy's, 100 per free parameter).
 
     Returns:
         A :class:`FitResult`.
@@ -291,7 +296,8 @@ def fit_predictor(
             raise PredictorError(f"fit failed: model gives non-finite output at {shown}")
         return r
 
-    solution = least_squares(residual, x0, bounds=(low, high), method="trf", x_scale=1.0)
+    solution = least_squares(residual, x0, bounds=(low, high), method="trf", x_scale=1.0,
+                             ftol=COST_TOLERANCE, max_nfev=max_evaluations)
     x = np.clip(solution.x, low, high)
     fitted = predictor.with_params(**physical(x))
 

@@ -61,6 +61,12 @@ NO_EFFECT = "no effect needed"
 EXPLAINED = "explained by added effects"
 NOT_EXPLAINED = "structured residual not explained by any known effect"
 
+CANDIDATE_EVALUATIONS = 120
+"""Most model evaluations of a candidate's fit from the effect's defaults (K7). A fit that
+converges needs a few tens; one from defaults far from the data (an effect the data do not
+hold, next to a finger model that already explains the drift it would) crawls for hundreds,
+ends no better than the current model, and is then fitted again from the neutral values."""
+
 CRITERION = (
     "held-out information criterion H = n_eff ln(MSE_held-out) + 2k (k free parameters, n_eff "
     "the held-out sample count corrected for lag-1 autocorrelation); an effect is added when "
@@ -370,7 +376,8 @@ def calibrate(
             f"do not provide (they give {', '.join(sorted(data.inputs))})"
         )
 
-    def fit(effects: Sequence[Effect], start: Mapping[str, float]) -> FitResult:
+    def fit(effects: Sequence[Effect], start: Mapping[str, float],
+            budget: int | None = None) -> FitResult:
         model = _model(base, effects, start, observation)
         wanted = {v.name for v in model.inputs}
         inputs = data.inputs_for(model)
@@ -382,6 +389,7 @@ def calibrate(
             train=data.train,
             test=data.test,
             dynamic="time" in wanted,
+            max_evaluations=budget,
         )
 
     def fit_candidate(effect: Effect, current_fit: FitResult) -> FitResult:
@@ -389,7 +397,7 @@ def calibrate(
         ends worse on the training data than the current model (a local minimum), fitted
         again from the effect's neutral values (which start at the current model) and the
         better of the two by training error is kept. The held-out split never chooses."""
-        chosen = fit([*added, effect], current_fit.params)
+        chosen = fit([*added, effect], current_fit.params, CANDIDATE_EVALUATIONS)
         if chosen.train_rss > current_fit.train_rss * (1.0 + 1e-9) and effect.neutral:
             neutral = {f"{effect.name}.{k}": v for k, v in effect.neutral.items()}
             second = fit([*added, effect], {**current_fit.params, **neutral})

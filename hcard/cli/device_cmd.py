@@ -231,6 +231,9 @@ def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Pat
 
     if output.suffix.lower() != ".csv":
         raise click.BadParameter("the recording must end in .csv", param_hint="--output")
+    folder = output.parent if str(output.parent) else Path(".")
+    if not folder.is_dir():  # checked before the device plays: the session is not lost
+        raise HcardError(f"{output}: cannot write (no directory {folder})")
     loaded = load(card)
     track = read_track_csv(track_path)
     profile_bytes = None

@@ -183,3 +183,9 @@ def test_device_serve_reports_a_busy_port():
         result = CliRunner().invoke(cli, ["device", "serve", "--port", str(port)])
     assert result.exit_code == 1
     assert f"cannot serve on 127.0.0.1:{port}" in result.output
+
+
+def test_play_checks_the_output_directory_before_the_device(files):
+    result = play(files, "usbip://127.0.0.1:1/1-1", "-o", str(files / "no" / "rec.csv"))
+    assert result.exit_code == 1
+    assert "cannot write (no directory" in result.output and "cannot connect" not in result.output

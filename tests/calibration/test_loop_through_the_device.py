@@ -1,0 +1,113 @@
+"""The calibration loop run through the product, as a lab runs it (spec/calibration.md K14-K18):
+plan, play the protocol on a device with an effect hidden in its hardware, calibrate the
+recording, and play held-out textures without and with the fitted profile; over sim:// and over
+usbip:// against a device served by another process in real time, twice against the same
+running server.
+
+The hidden effect runs the physics of its own model in the device (AirLayer, Eq. 3.17, in
+hcard_device.sim.hidden); the loop only has the recordings and the calibration library's effect
+of the same name, a formula of its own.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+from served_device import served_device
+
+from hcard.calibration.measurement import read_measurement
+from hcard.cli.main import cli
+from hcard.physics.profile import DeviceProfile
+
+PLAN_S = "30s"
+"""Length of the protocol in these tests (the default is 60 s)."""
+VERIFY_S = "16s"
+"""Length of the verification track in these tests (the default is 24 s)."""
+MIN_CUT = 2.0
+"""The fitted profile must cut the rendered friction error at least this many times."""
+
+
+def invoke(*args: str) -> str:
+    result = CliRunner().invoke(cli, [str(a) for a in args])
+    assert result.exit_code == 0, result.output
+    return result.output
+
+
+@pytest.fixture(scope="module")
+def plan(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("plan")
+    invoke("calibrate", "plan", "--device", "ev", "--duration", PLAN_S, "--verify-duration",
+           VERIFY_S, "-o", out)
+    return out
+
+
+def run_loop(uri: str, plan: Path, out: Path) -> dict:
+    """Play the protocol on ``uri``, calibrate, verify on ``uri``; the report's content."""
+    out.mkdir(parents=True, exist_ok=True)
+    recording = out / "rec.csv"
+    invoke("play", plan / "protocol.hcard", "--track", plan / "protocol.csv", "--device", uri,
+           "-o", recording)
+    read_measurement(recording)  # the play recording is a measurement as it is
+    output = invoke("calibrate", recording, "-o", out / "calib", "--verify", uri, "--quiet",
+                    "--no-figures")
+    assert "rendered friction error on held-out textures:" in output
+    report = json.loads((out / "calib" / "report.json").read_text())
+    profile = DeviceProfile.load(out / "calib" / "profile.json")
+    assert profile.calibration["rendering"] == report["rendering"]
+    return report
+
+
+def air_gap(report: dict) -> tuple[float, float]:
+    (effect,) = [e for e in report["profile"]["effects"] if e["name"] == "air-layer"]
+    entry = effect["parameters"]["air_gap"]
+    return entry["value"], entry["uncertainty"]
+
+
+def assert_found_and_cut(report: dict, truth_m: float) -> None:
+    assert [e["name"] for e in report["profile"]["effects"]] == ["air-layer"]
+    value, sigma = air_gap(report)
+    assert abs(value - truth_m) < max(4 * sigma, 0.1 * truth_m), (value, sigma)
+    rmse = report["held_out_rmse_n"]
+    assert rmse["after"] < 0.95 * rmse["before"]
+    rendering = report["rendering"]
+    assert rendering["before"]["patch_rms"] > MIN_CUT * rendering["after"]["patch_rms"], rendering
+
+
+def assert_not_worse(report: dict) -> None:
+    rendering = report["rendering"]
+    before, after = rendering["before"]["patch_rms"], rendering["after"]["patch_rms"]
+    # within the measurement's own noise: a patch averages ~200 reports of ~0.05 noise
+    assert after <= max(1.25 * before, before + 0.003), rendering
+
+
+@pytest.mark.parametrize(("air_gap_m", "seed"), [(10e-6, 3), (6e-6, 8)])
+def test_sim_device_with_a_hidden_air_layer(plan, tmp_path, air_gap_m, seed):
+    uri = f"sim://coupled?seed={seed}&effect=air-layer&air-layer.air_gap={air_gap_m!r}"
+    report = run_loop(uri, plan, tmp_path)
+    assert_found_and_cut(report, air_gap_m)
+
+
+def test_sim_device_without_an_effect(plan, tmp_path):
+    report = run_loop("sim://coupled?seed=5", plan, tmp_path)
+    assert report["profile"]["effects"] == []
+    assert_not_worse(report)
+
+
+def test_served_device_in_real_time_repeatedly(plan, tmp_path):
+    with served_device("coupled", cli=True, extra=["--effect", "air-layer"]) as served:
+        first = run_loop(served.uri, plan, tmp_path / "first")
+        second = run_loop(served.uri, plan, tmp_path / "second")  # the same running server
+    for report in (first, second):
+        assert_found_and_cut(report, 10e-6)
+        conditions = report["data"]["conditions"][0] if "conditions" in report["data"] else {}
+        assert "air" not in json.dumps(conditions)
+
+
+def test_served_device_without_an_effect_in_real_time(plan, tmp_path):
+    with served_device("coupled", cli=True) as served:
+        report = run_loop(served.uri, plan, tmp_path)
+    assert report["profile"]["effects"] == []
+    assert_not_worse(report)
