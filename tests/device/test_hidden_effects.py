@@ -94,7 +94,7 @@ def test_bad_effects_in_a_uri_are_named(uri, message):
 def test_assignments_and_resolution():
     assert parse_assignments(["air-layer"], []) == {"air-layer": {}}
     assert resolve("coupled", {"air-layer": {}}) == {"air-layer": {"air_gap": 10e-6}}
-    with pytest.raises(HiddenEffectError, match="expected EFFECT.PARAM=VALUE"):
+    with pytest.raises(HiddenEffectError, match=r"expected EFFECT\.PARAM=VALUE"):
         parse_assignments([], ["air_gap=1um"])
 
 
