@@ -97,7 +97,8 @@ def _model_class(profile: DeviceProfile, effects: tuple[Effect, ...], envelope: 
     channel_inputs: list[Variable] = []
     if uv_base is not None:
         channel_inputs.append(Variable("amplitude", "m", "measured plate amplitude, "
-                                       "peak-to-peak"))
+                                       "peak-to-peak (0: a recording without one, plate off)",
+                                       0.0))
         channel_inputs.append(Variable("frequency", "Hz", "plate vibration frequency",
                                        plate if plate is not None else _default(uv_base,
                                                                                 "frequency")))

@@ -31,7 +31,7 @@ moves to the next lane; the (force, speed) combinations cycle so that every lane
 force and speed. Samples at :data:`TRACK_RATE_HZ` (a touch controller's report rate).
 
 **The verification card and track** (:func:`verification_card`, :func:`verification_track`)
-hold out what the protocol does not contain: other target levels (UV 0.85 ... 0.35, EV 1.03 ...
+hold out what the protocol does not contain: other target levels (UV 0.85 ... 0.4, EV 1.03 ...
 1.09), other forces (:data:`VERIFY_FORCES_N`) and speeds (:data:`VERIFY_SPEEDS_MM_S`), on 10 mm
 taxtels with a plain patch between every two textures, so that the rendered friction can be
 measured against the finger's natural friction next to it
@@ -87,10 +87,10 @@ PROTOCOL_LANES: dict[str, tuple[tuple[float, ...], str, tuple[str, ...]]] = {
 }
 """Lane name -> (targets along x, channel, device classes that play it), top to bottom."""
 
-VERIFY_UV = (PLAIN, 0.85, PLAIN, 0.65, PLAIN, 0.45, PLAIN, 0.35)
-VERIFY_UV_2 = (PLAIN, 0.55, PLAIN, 0.75, PLAIN, 0.5, PLAIN, PLAIN)
+VERIFY_UV = (PLAIN, 0.85, PLAIN, 0.7, PLAIN, 0.48, PLAIN, 0.4)
+VERIFY_UV_2 = (PLAIN, 0.57, PLAIN, 0.78, PLAIN, 0.62, PLAIN, PLAIN)
 VERIFY_EV = (PLAIN, 1.03, PLAIN, 1.05, PLAIN, 1.08, PLAIN, 1.09)
-VERIFY_EV_2 = (PLAIN, 1.06, PLAIN, 1.04, PLAIN, 1.07, PLAIN, PLAIN)
+VERIFY_EV_2 = (PLAIN, 1.06, PLAIN, 1.035, PLAIN, 1.065, PLAIN, PLAIN)
 VERIFY_LANES: dict[str, tuple[tuple[float, ...], str, tuple[str, ...]]] = {
     "uv-held-out": (VERIFY_UV, "uv", ("uv", "coupled")),
     "uv-held-out-2": (VERIFY_UV_2, "uv", ("uv", "coupled")),
@@ -157,11 +157,11 @@ def _lane_card(lanes: Sequence[tuple[str, tuple[float, ...], str]], taxtel_mm: f
         if len(targets) != cols:
             raise PlanError(f"a lane has {len(targets)} targets for {cols} taxtels")
         for col, level in enumerate(targets):
-            key = ("plain", PLAIN) if level == PLAIN else (channel, float(level))
+            lane_channel = channel
+            if channel == "bipolar":
+                lane_channel = "uv" if level < PLAIN else "ev"
+            key = ("plain", PLAIN) if level == PLAIN else (lane_channel, float(level))
             if key not in palette:
-                lane_channel = channel
-                if channel == "bipolar":
-                    lane_channel = "uv" if level < PLAIN else "ev"
                 palette[key] = len(textures)
                 textures.append(build.texture(float(level), channel=lane_channel,
                                               name=f"{lane_channel} {level:g}"))

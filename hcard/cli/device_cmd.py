@@ -151,6 +151,7 @@ def synthesize(device_class: str, uri: str | None, effect_names: tuple[str, ...]
     from hcard_device.drivers.play import play as play_track
     from hcard_device.drivers.play import summary
     from hcard_device.drivers.recording import recording
+    from hcard_device.drivers.uri import parse_uri
     from hcard_device.sim.hidden import HIDDEN_EFFECTS, HiddenEffectError, parse_assignments
 
     if list_effects:
@@ -174,6 +175,7 @@ def synthesize(device_class: str, uri: str | None, effect_names: tuple[str, ...]
             query.update({f"{name}.{key}": repr(value) for name, values in effects.items()
                           for key, value in values.items()})
         uri = f"sim://{VARIANT_OF_CLASS[device_class]}?{urlencode(query)}"
+    parse_uri(uri)  # a bad URI or an effect the device cannot have: before anything is written
     try:
         seconds = parse_quantity(duration, "s")
     except UnitError as exc:
