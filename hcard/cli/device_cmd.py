@@ -7,6 +7,7 @@ The device side lives in :mod:`hcard_device.usb`, the drivers in :mod:`hcard_dev
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import click
@@ -33,6 +34,45 @@ def _host_port(text: str) -> tuple[str, int]:
     return host or "127.0.0.1", int(port) if port else 3240
 
 
+def hidden_effect_options(where: str) -> Callable[[Callable[..., None]], Callable[..., None]]:
+    """``--effect``, ``--effect-param`` and ``--list-effects``: effects hidden ``where``."""
+    def decorate(command: Callable[..., None]) -> Callable[..., None]:
+        for option in reversed((
+            click.option("--effect", "effect_names", multiple=True, metavar="NAME",
+                         help=f"Hide a physical effect {where} (repeatable; see "
+                              "--list-effects)."),
+            click.option("--effect-param", "assignments", multiple=True,
+                         metavar="EFFECT.PARAM=VALUE",
+                         help="True value of a hidden effect's parameter, units accepted "
+                              "(air-layer.air_gap=8um). Repeatable."),
+            click.option("--list-effects", is_flag=True,
+                         help="List the effects a device can hide and exit."),
+        )):
+            command = option(command)
+        return command
+    return decorate
+
+
+def echo_hidden_effects() -> None:
+    """One line per effect a simulated device can hide: devices, parameters, what it is."""
+    from hcard_device.sim.hidden import HIDDEN_EFFECTS
+
+    for effect in HIDDEN_EFFECTS.values():
+        params = ", ".join(f"{p.name}={p.default:g} {p.unit}".rstrip() for p in effect.parameters)
+        click.echo(f"{effect.name} ({'/'.join(effect.devices)}; {params}): {effect.description}")
+
+
+def hidden_effects(names: tuple[str, ...], assignments: tuple[str, ...]
+                   ) -> dict[str, dict[str, float]]:
+    """The effects of ``--effect`` and ``--effect-param``; a one-line error when malformed."""
+    from hcard_device.sim.hidden import HiddenEffectError, parse_assignments
+
+    try:
+        return parse_assignments(names, assignments)
+    except HiddenEffectError as exc:
+        raise HcardError(f"--effect: {exc}") from None
+
+
 @click.group("device")
 def device() -> None:
     """Serve the reference device over USB/IP, or list the devices that are reachable."""
@@ -47,13 +87,7 @@ def device() -> None:
               show_default=True, help="E-ViTa (UV) or the coupled UV+EV stimulator.")
 @click.option("--seed", default=0, show_default=True, type=int,
               help="Seed of the simulation's noise.")
-@click.option("--effect", "effect_names", multiple=True, metavar="NAME",
-              help="Hide a physical effect in the hardware (repeatable; see --list-effects). "
-                   "Nothing the device reports names it.")
-@click.option("--effect-param", "assignments", multiple=True, metavar="EFFECT.PARAM=VALUE",
-              help="True value of a hidden effect's parameter, units accepted "
-                   "(air-layer.air_gap=8um). Repeatable.")
-@click.option("--list-effects", is_flag=True, help="List the effects a device can hide and exit.")
+@hidden_effect_options("in the hardware; nothing the device reports names it")
 def serve(host: str, port: int, variant: str, seed: int, effect_names: tuple[str, ...],
           assignments: tuple[str, ...], list_effects: bool) -> None:
     """Serve a simulated device as USB-HID over USB/IP until Ctrl-C or SIGTERM.
@@ -62,20 +96,12 @@ def serve(host: str, port: int, variant: str, seed: int, effect_names: tuple[str
     With --effect the hardware hides a physical effect from its own profile, for a calibration
     to find from recordings alone (sim://...?effect=NAME does the same in process).
     """
-    from hcard_device.sim.hidden import HIDDEN_EFFECTS, HiddenEffectError, parse_assignments
     from hcard_device.usb.server import serve as serve_device
 
     if list_effects:
-        for effect in HIDDEN_EFFECTS.values():
-            params = ", ".join(f"{p.name}={p.default:g} {p.unit}".rstrip()
-                               for p in effect.parameters)
-            click.echo(f"{effect.name} ({'/'.join(effect.devices)}; {params}): "
-                       f"{effect.description}")
+        echo_hidden_effects()
         return
-    try:
-        effects = parse_assignments(effect_names, assignments)
-    except HiddenEffectError as exc:
-        raise HcardError(f"--effect: {exc}") from None
+    effects = hidden_effects(effect_names, assignments)
     status = serve_device(variant, host, port, seed, effects=effects,
                           echo=lambda message, error: click.echo(message, err=error))
     if status:
@@ -117,12 +143,7 @@ RECORDING = "recording.csv"
 @click.option("--uri", metavar="URI",
               help="Device to play on (default: sim://evita or sim://coupled in this process, "
                    "with the hidden effects); any device URI, e.g. a served device.")
-@click.option("--effect", "effect_names", multiple=True, metavar="NAME",
-              help="Hide a physical effect in the simulated hardware (repeatable; sim:// only; "
-                   "see --list-effects).")
-@click.option("--effect-param", "assignments", multiple=True, metavar="EFFECT.PARAM=VALUE",
-              help="True value of a hidden effect's parameter, units accepted "
-                   "(air-layer.air_gap=8um). Repeatable.")
+@hidden_effect_options("in the simulated hardware of sim:// (a served device hides its own)")
 @click.option("--duration", default="60s", show_default=True, help="Length of the protocol.")
 @click.option("--seed", default=0, show_default=True, type=int,
               help="Seed of the protocol's order and of the simulation's noise.")
@@ -130,7 +151,6 @@ RECORDING = "recording.csv"
               help="Directory for the plan and recording.csv (with its .json sidecar).")
 @click.option("--timeout", default=1.0, show_default=True, type=click.FloatRange(min=0.001),
               help="Longest wait for any answer from the device, s.")
-@click.option("--list-effects", is_flag=True, help="List the effects a device can hide and exit.")
 def synthesize(device_class: str, uri: str | None, effect_names: tuple[str, ...],
                assignments: tuple[str, ...], duration: str, seed: int, output: Path | None,
                timeout: float, list_effects: bool) -> None:
@@ -152,18 +172,13 @@ def synthesize(device_class: str, uri: str | None, effect_names: tuple[str, ...]
     from hcard_device.drivers.play import summary
     from hcard_device.drivers.recording import recording
     from hcard_device.drivers.uri import parse_uri
-    from hcard_device.sim.hidden import HIDDEN_EFFECTS, HiddenEffectError, parse_assignments
 
     if list_effects:
-        for effect in HIDDEN_EFFECTS.values():
-            click.echo(f"{effect.name} ({'/'.join(effect.devices)}): {effect.description}")
+        echo_hidden_effects()
         return
     if output is None:
         raise SynthesizeUsageError("missing option -o/--output (the output directory)")
-    try:
-        effects = parse_assignments(effect_names, assignments)
-    except HiddenEffectError as exc:
-        raise SynthesizeUsageError(f"--effect: {exc}") from None
+    effects = hidden_effects(effect_names, assignments)
     if uri is not None and effects:
         raise SynthesizeUsageError(
             "--effect hides an effect in the simulated device of sim://; to hide one in a "

@@ -490,7 +490,8 @@ class Firmware:
         if isinstance(report, Finger):
             self._touch_source = TouchSource.HOST
             self.sim.host_finger(
-                self.sim.time_s, report.x_mm, report.y_mm, report.fn_n, report.contact
+                self.sim.time_s, report.x_mm, report.y_mm, report.fn_n, report.contact,
+                host_time_s=report.host_time_us * TIME_UNIT_S,
             )
             self._host_time_echo = report.host_time_us
             return True

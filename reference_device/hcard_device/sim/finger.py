@@ -33,6 +33,8 @@ from hcard_device.sim.hidden import HiddenPhysics
 
 MM = 1e-3
 """Metres per millimetre."""
+HOST_TIME_WRAP_S = (1 << 32) * 1e-6
+"""A host's FINGER time stamps wrap at 2^32 us, s."""
 
 
 @dataclass(frozen=True)
@@ -124,19 +126,27 @@ class HostFinger:
     def __init__(self, surface_mm: tuple[float, float]) -> None:
         self.surface_mm = surface_mm
         self.t = self.x = self.y = self.fn = 0.0
+        self.host_t: float | None = None
         self.contact = False
         self.speed_m_s = 0.0
         self.touchdown_s = 0.0
 
-    def update(self, t: float, x: float, y: float, fn: float, contact: bool) -> None:
-        """A new report at time ``t`` (s), later than the previous one."""
-        if contact and self.contact and t > self.t:
-            self.speed_m_s = float(np.hypot(x - self.x, y - self.y)) / (t - self.t) * MM
+    def update(self, t: float, x: float, y: float, fn: float, contact: bool,
+               host_t: float | None = None) -> None:
+        """A new report at time ``t`` (s, device clock), later than the previous one;
+        ``host_t``: the host's time of the sample (s, wrapping at 2^32 us), which times the
+        move from the previous sample when both have one (else the device's times do)."""
+        interval = t - self.t
+        if host_t is not None and self.host_t is not None:
+            interval = (host_t - self.host_t) % HOST_TIME_WRAP_S
+        if contact and self.contact and interval > 0:
+            self.speed_m_s = float(np.hypot(x - self.x, y - self.y)) / interval * MM
         else:
             self.speed_m_s = 0.0
         if contact and not self.contact:
             self.touchdown_s = t
         self.t, self.x, self.y, self.fn, self.contact = t, x, y, max(fn, 0.0), contact
+        self.host_t = host_t
 
     def state(self, times: np.ndarray) -> FingerTruth:
         """The held state at ``times`` (s)."""

@@ -408,13 +408,17 @@ class DeviceSimulation:
         self._last_feed = self.time_s
 
     def host_finger(
-        self, t_s: float, x_mm: float, y_mm: float, fn_n: float, contact: bool
+        self, t_s: float, x_mm: float, y_mm: float, fn_n: float, contact: bool,
+        host_time_s: float | None = None,
     ) -> None:
         """A finger state from the host (touch sensing on the host side).
 
         ``t_s`` is in the device clock (:attr:`time_s`); a time in the future is taken as now,
         and one not later than the previous sample is moved just after it. Non-finite values
-        are rejected (``INVALID_REQUEST``); a negative force counts as 0.
+        are rejected (``INVALID_REQUEST``); a negative force counts as 0. ``host_time_s``: the
+        host's time of the sample (FINGER.host_time_us): the finger moved between two samples
+        in the host's time, so its physical speed is taken over that interval, not over the
+        jittery interval between their arrivals (which is what the device's renderer sees).
         """
         try:
             values = [float(v) for v in (t_s, x_mm, y_mm, fn_n)]
@@ -439,7 +443,7 @@ class DeviceSimulation:
         self._pending = self._pending.concat(sample)
         if self._stream is not None:
             self._stream.push(t, x, y, max(fn, 0.0), bool(contact))
-        self._finger.update(t, x, y, fn, bool(contact))
+        self._finger.update(t, x, y, fn, bool(contact), host_time_s)
 
     def use_internal_finger(self, track: FingerTrack) -> None:
         """Let the simulated finger follow ``track`` from now on (its first sample now), sensed
