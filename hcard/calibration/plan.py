@@ -99,8 +99,10 @@ VERIFY_LANES: dict[str, tuple[tuple[float, ...], str, tuple[str, ...]]] = {
 }
 """The verification card's lanes (held-out levels, a plain patch between every two)."""
 
-FORCES_N = (0.25, 0.5, 0.8, 1.2)
-"""Normal forces of the protocol's sessions, N (the thesis's EV measurements span 0.1-2 N)."""
+FORCES_N = (0.15, 0.3, 0.5, 0.9)
+"""Normal forces of the protocol's sessions, N: a light touch, where the electrostatic force is
+largest against the load and an air layer or a finger's flattening shows most (Eqs. 3.17-3.18;
+the thesis's EV measurements span 0.1-2 N), to a firm one (the load index, Eq. 2.35)."""
 SPEEDS_MM_S = (25.0, 50.0, 100.0, 150.0)
 """Stroke speeds of the protocol, mm/s (within the 10-150 mm/s exploration range, Fig. 1.12)."""
 VERIFY_FORCES_N = (0.4, 0.6)
@@ -229,19 +231,22 @@ def _session_track(
 def _sessions(rows: Sequence[int], forces: Sequence[float], speeds: Sequence[float],
               duration_s: float, rng: np.random.Generator
               ) -> list[tuple[int, float, tuple[float, float]]]:
-    """Sessions until ``duration_s``: lanes in turn; (force, speed pair) combinations cycle
-    in an order drawn once from ``rng`` so that every lane meets them all."""
-    pairs = [(f, (speeds[i], speeds[(i + 1) % len(speeds)])) for f in forces
-             for i in range(len(speeds))]
-    order = [pairs[i] for i in rng.permutation(len(pairs))]
+    """Sessions until ``duration_s``: lanes in turn; every run of ``len(forces)`` sessions
+    holds each force once, in an order drawn from ``rng`` per run (so that even a short
+    protocol spans the loads, which the EV effects need); the speed pairs (each speed and the
+    next) cycle, shifted by one every run, so that lanes, forces and speeds all meet."""
+    pairs = [(speeds[i], speeds[(i + 1) % len(speeds)]) for i in range(len(speeds))]
     sessions: list[tuple[int, float, tuple[float, float]]] = []
     elapsed = 0.0
     length = STROKE_X_MM[1] - STROKE_X_MM[0]
     k = 0
+    order: list[float] = []
     while elapsed < duration_s:
-        force, pair = order[k % len(order)]
-        row = rows[k % len(rows)]
-        sessions.append((row, force, pair))
+        if not order:
+            order = [forces[i] for i in rng.permutation(len(forces))]
+        force = order.pop()
+        pair = pairs[(k + k // len(forces)) % len(pairs)]
+        sessions.append((rows[k % len(rows)], force, pair))
         elapsed += length / pair[0] + length / pair[1] + REST_S
         k += 1
     return sessions

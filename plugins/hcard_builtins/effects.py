@@ -297,7 +297,7 @@ class AirLayer(Effect):
         "air between the fingerprint ridges and the insulator adds a low-permittivity layer that "
         "thins as the finger is pressed, so a contact law over-predicts the force at light load"
     )
-    signature: ClassVar[tuple[str, ...]] = ("normal_force",)
+    signature: ClassVar[tuple[str, ...]] = ("normal_force", "voltage")
     neutral: ClassVar[dict[str, float]] = {"air_gap": 0.0}
     outputs: ClassVar[tuple[str, ...]] = ("electrostatic_force",)
     parameters: ClassVar[tuple[Parameter, ...]] = (
@@ -469,7 +469,7 @@ class FingerGeometry(Effect):
         "electrostatic force grows as the finger is pressed flat; a fixed-area contact law "
         "over-predicts the force at light load and under-predicts it at heavy load"
     )
-    signature: ClassVar[tuple[str, ...]] = ("normal_force",)
+    signature: ClassVar[tuple[str, ...]] = ("normal_force", "voltage")
     neutral: ClassVar[dict[str, float]] = {"area_index": 0.0}
     outputs: ClassVar[tuple[str, ...]] = ("electrostatic_force",)
     parameters: ClassVar[tuple[Parameter, ...]] = (
