@@ -352,6 +352,10 @@ def calibrate_command(
                                                 finger_name)
     if verify_uri is not None:
         verify_files = _verification_files(measurements, verify_card, verify_track)
+    if base_profile is None and voltage_form == "envelope":
+        click.echo(f"warning: the recordings' voltage is a carrier's envelope; {base.name} "
+                   "takes it as an instantaneous voltage (the device's own profile, the default "
+                   "base, averages over the carrier)", err=True)
     base = _with_start(base, params)
     free = _free_parameters(base, free_text)
     say(f"read {len(paths)} recording(s), {sum(len(m) for m in measurements)} samples; base "
