@@ -109,8 +109,10 @@ VERIFY_FORCES_N = (0.4, 0.6)
 """Normal forces of the verification, N (held out of :data:`FORCES_N`)."""
 VERIFY_SPEEDS_MM_S = (40.0, 70.0)
 """Stroke speeds of the verification, mm/s (held out of :data:`SPEEDS_MM_S`)."""
-REST_S = 0.4
-"""Rest with the finger lifted between sessions, s."""
+REST_S = 0.6
+"""Rest with the finger lifted between sessions, s: longer than the pause that rests the finger
+for the calibration (``hcard.calibration.dataset.REST_S``, 0.5 s), so the count of strokes
+since a rest (skin recovery, Figs. 2.25-2.26) restarts with every session."""
 TRACK_RATE_HZ = 100.0
 """Finger samples per second."""
 DEFAULT_DURATION_S = 60.0
