@@ -99,10 +99,12 @@ VERIFY_LANES: dict[str, tuple[tuple[float, ...], str, tuple[str, ...]]] = {
 }
 """The verification card's lanes (held-out levels, a plain patch between every two)."""
 
-FORCES_N = (0.15, 0.3, 0.5, 0.9)
+FORCES_N = (0.15, 0.35, 0.7, 1.5)
 """Normal forces of the protocol's sessions, N: a light touch, where the electrostatic force is
-largest against the load and an air layer or a finger's flattening shows most (Eqs. 3.17-3.18;
-the thesis's EV measurements span 0.1-2 N), to a firm one (the load index, Eq. 2.35)."""
+largest against the load and an air layer or a finger's flattening shows most (Eqs. 3.17-3.18),
+to a firm one, where an air layer is pressed out while a pad still flattens (the two differ
+most across the whole range; the thesis's EV measurements span 0.1-2 N) and the load index
+shows (Eq. 2.35)."""
 SPEEDS_MM_S = (25.0, 50.0, 100.0, 150.0)
 """Stroke speeds of the protocol, mm/s (within the 10-150 mm/s exploration range, Fig. 1.12)."""
 VERIFY_FORCES_N = (0.4, 0.6)
