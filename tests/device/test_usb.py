@@ -154,7 +154,13 @@ def test_unread_input_reports_are_dropped_not_queued_without_bound(loopback):
     assert isinstance(endpoint, BoundedEndpoint)
     assert endpoint.queued <= endpoint.capacity == 32
     assert server.interface.in_dropped >= 150
-    assert server.firmware.queued_input_reports <= 2  # the pump keeps the firmware queue empty
+    # The pump keeps the firmware's own queue (128) near empty: a report per millisecond moves
+    # to the endpoint every 0.5 ms; a busy machine may hold the pump thread for some ms.
+    queued = []
+    for _ in range(20):
+        queued.append(server.firmware.queued_input_reports)
+        time.sleep(0.001)
+    assert statistics.median(queued) <= 2 and max(queued) < server.firmware.input_capacity // 4, queued
     first = decode_input(link.read_in(T))  # the one URB completed with an early report
     recent = [decode_input(link.read_in(T)) for _ in range(5)]
     gap = (recent[0].sequence - first.sequence) % 65536

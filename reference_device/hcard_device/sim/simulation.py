@@ -51,6 +51,7 @@ from hcard_device.sim.config import DeviceConfig
 from hcard_device.sim.faults import Faults
 from hcard_device.sim.finger import FingerPhysics, FingerTruth, HostFinger, TrackFinger
 from hcard_device.sim.hidden import HiddenPhysics
+from hcard_device.sim.host_clock import HostClock
 from hcard_device.sim.models import device_profile, finger_capacitance
 from hcard_device.sim.plate import PIGains, PlateLoop, PlateModel
 from hcard_device.sim.sensors import (
@@ -216,6 +217,7 @@ class DeviceSimulation:
         self._finger: TrackFinger | HostFinger | None = None
         self._history = TouchSamples.empty()
         self._pending = TouchSamples.empty()
+        self._host_clock = HostClock()
         self._renderer: Renderer | None = None
         self._stream: RenderStream | None = None
         self._card_report = ClipReport()
@@ -417,8 +419,9 @@ class DeviceSimulation:
         and one not later than the previous sample is moved just after it. Non-finite values
         are rejected (``INVALID_REQUEST``); a negative force counts as 0. ``host_time_s``: the
         host's time of the sample (FINGER.host_time_us): the finger moved between two samples
-        in the host's time, so its physical speed is taken over that interval, not over the
-        jittery interval between their arrivals (which is what the device's renderer sees).
+        in the host's time, so its physical speed is taken over that interval, and the sample
+        is placed on the device clock by :class:`.host_clock.HostClock` (PO2), not at its
+        arrival: reports that arrive late and in bursts keep the spacing the host gave them.
         """
         try:
             values = [float(v) for v in (t_s, x_mm, y_mm, fn_n)]
@@ -433,6 +436,9 @@ class DeviceSimulation:
             if not self.host_driven:
                 self._last_feed = self.time_s
             self._finger = HostFinger(self.config.surface_mm)
+            self._host_clock.reset()
+        if host_time_s is not None and math.isfinite(host_time_s):
+            t = self._host_clock.device_time(t, host_time_s)
         last = self._last_sample_time()
         t = min(t, self.time_s)
         if t <= last:

@@ -1,0 +1,102 @@
+"""The host's finger samples are placed on the device clock by their host times (PO2, protocol
+1.1): reports that arrive late and in bursts render as if they had arrived on time."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hcard import build
+from hcard_device.sim import DeviceConfig, DeviceSimulation, SimBlock
+from hcard_device.sim.finger import HOST_TIME_WRAP_S
+from hcard_device.sim.host_clock import REANCHOR_GAP_S, HostClock
+
+SPEED_MM_S = 20.0
+SAMPLE_S = 0.01
+TRANSPORT_S = 0.001
+
+
+def test_the_fastest_report_fixes_the_offset():
+    clock = HostClock()
+    assert clock.device_time(5.030, 0.000) == pytest.approx(5.030)  # first: anchored, late
+    assert clock.device_time(5.031, 0.010) == pytest.approx(5.031)  # faster: offset 5.021
+    assert clock.device_time(5.100, 0.020) == pytest.approx(5.041)  # late again: host spacing
+    assert clock.device_time(5.100, 0.030) == pytest.approx(5.051)  # same arrival, 10 ms apart
+
+
+def test_host_time_wraps_and_a_pause_anchors_again():
+    clock = HostClock()
+    clock.device_time(1.000, HOST_TIME_WRAP_S - 0.005)
+    assert clock.device_time(1.010, 0.005) == pytest.approx(1.010)  # 10 ms later, after the wrap
+    # after a pause longer than the re-anchoring gap the (late) report sets a new offset
+    late = clock.device_time(3.500, 0.005 + REANCHOR_GAP_S + 0.5)
+    assert late == pytest.approx(3.500)
+
+
+def test_a_host_time_that_does_not_advance_gives_arrival_times():
+    clock = HostClock()
+    clock.device_time(2.0, 0.0)
+    assert clock.device_time(2.25, 0.0) == 2.25
+    assert clock.device_time(2.5, 0.0) == 2.5
+
+
+def grating_card():
+    grating = build.texture(
+        0.7, [build.spatial(1.5, 0.25, channel="uv")], channel="uv", locking="position",
+        name="grating",
+    )
+    return build.card(80.0, 40.0, taxtel_mm=40.0, textures=[grating],
+                      texture_index=[0, 0])
+
+
+def play(delivery_s: np.ndarray, seconds: float) -> SimBlock:
+    """Targets of a host finger sliding at SPEED_MM_S, sampled every SAMPLE_S (host clock
+    starting at 7 s), each sample applied at ``delivery_s[k]`` (device clock)."""
+    sim = DeviceSimulation(DeviceConfig.evita(), seed=3)
+    sim.load_card(grating_card())
+    sim.start()
+    n_frames = int(seconds * sim.config.frame_rate_hz)
+    frame_of = np.ceil(delivery_s * sim.config.frame_rate_hz - 1e-9).astype(int)
+    blocks, frame = [], 0
+    for arrival in [*np.unique(frame_of[frame_of < n_frames]), n_frames]:
+        blocks.append(sim.step(arrival - frame))
+        frame = arrival
+        for k in np.flatnonzero(frame_of == arrival):
+            host_t = 7.0 + k * SAMPLE_S
+            sim.host_finger(sim.time_s, 10.0 + SPEED_MM_S * k * SAMPLE_S, 20.0, 0.5, True,
+                            host_time_s=host_t)
+            sim.feed_watchdog()
+    return SimBlock.concatenate(blocks)
+
+
+@pytest.mark.parametrize("burst", [5, 9])
+def test_bursts_render_like_reports_that_arrive_on_time(burst):
+    """Samples every 10 ms; on time each arrives 1 ms after it was taken; in bursts, ``burst``
+    samples arrive together 1 ms after the last of them was taken (the renderer dead-reckons
+    up to 100 ms, longer than a burst). The finger moves at constant speed, so the targets
+    must agree frame by frame once the second burst is in."""
+    n = 100
+    taken = np.arange(n) * SAMPLE_S
+    on_time = play(taken + TRANSPORT_S, 0.9)
+    last_of_burst = np.minimum((np.arange(n) // burst + 1) * burst - 1, n - 1)
+    bursty = play(taken[last_of_burst] + TRANSPORT_S, 0.9)
+    # the first burst of a session is squeezed (the offset is learnt as it arrives); from
+    # the second on the clocks are tied
+    settled = on_time.t_s >= (2 * burst * SAMPLE_S + TRANSPORT_S)
+    assert np.ptp(on_time.target_uv[settled]) > 0.3  # the grating is rendered
+    np.testing.assert_allclose(bursty.target_uv[settled], on_time.target_uv[settled], atol=1e-6)
+
+
+def test_the_on_time_targets_follow_the_grating_under_the_finger():
+    """The reference of the burst test is itself right: frame by frame the target is the
+    grating at the finger's position (independent evaluation of the texture formula)."""
+    n = 100
+    taken = np.arange(n) * SAMPLE_S
+    block = play(taken + TRANSPORT_S, 0.9)
+    t = block.t_s
+    settled = t >= 0.02
+    # the sample taken at k*10 ms is on the device clock 1 ms later: position at frame time
+    x = 10.0 + SPEED_MM_S * (t - TRANSPORT_S)
+    expected = 0.7 + 0.25 * np.cos(2 * np.pi * 1.5 * x)
+    error = np.abs(block.target_uv[settled] - np.clip(expected[settled], 0.0, 1.0))
+    assert np.percentile(error, 95) < 0.02
