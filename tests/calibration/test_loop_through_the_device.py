@@ -67,7 +67,11 @@ def air_gap(report: dict) -> tuple[float, float]:
 
 
 def assert_found_and_cut(report: dict, truth_m: float) -> None:
-    assert [e["name"] for e in report["profile"]["effects"]] == ["air-layer"]
+    tried = [
+        (c["round"], c["effect"], c["improvement"], c["score_change"], c["accepted"])
+        for c in report["candidates"]
+    ]
+    assert [e["name"] for e in report["profile"]["effects"]] == ["air-layer"], tried
     value, sigma = air_gap(report)
     assert abs(value - truth_m) < max(4 * sigma, 0.1 * truth_m), (value, sigma)
     rmse = report["held_out_rmse_n"]
