@@ -41,41 +41,52 @@ DEFAULT_VECTORS = Path(__file__).resolve().parents[2] / "spec" / "vectors"
 Renderer = Callable[[pb.Card, FingerTrack, RenderOptions], Frames]
 
 
-def reported_frames(states: list[State], track: FingerTrack) -> Frames:
+def reported_frames(states: list[State], track: FingerTrack,
+                    host_us: np.ndarray | None = None) -> Frames:
     """The targets a device reported, as frames on the track's time base (spec Q5).
 
-    Each STATE report carries ``host_time_echo_us``, the host time (the track time sent with
-    the FINGER report) of the last finger sample the device applied. The device clock's offset
-    from the track clock is estimated as the smallest delay between a sample's time and the
-    first report echoing it, less one report period (a sample is applied at most one period
-    before the first report that echoes it). Report times shifted by that offset are therefore
-    never earlier than the truth, and at most one report period plus the transport delay later:
-    a constant lag that the lag search of metric A1 (up to 10 ms) absorbs. Transport delay is
+    Each STATE report carries ``host_time_echo_us``, the host time of the last finger sample
+    the device applied; ``host_us`` are the host times sent with the track's samples
+    (:attr:`hcard_device.drivers.play.PlayResult.host_us`; by default the track's own times),
+    so an echo names the sample of this session it applied, and an echo of an earlier session
+    (a device that stays powered between runs) names none. The device clock's offset from the
+    track clock is estimated as the smallest delay between a sample's time and the first
+    report echoing it, less one report period (a sample is applied at most one period before
+    the first report that echoes it). Report times shifted by that offset are therefore never
+    earlier than the truth, and at most one report period plus the transport delay later: a
+    constant lag that the lag search of metric A1 (up to 10 ms) absorbs. Transport delay is
     judged by the device level's latency check, not here. Reports before the first applied
-    sample are left out.
+    sample of the session are left out.
     """
-    from hcard_device.drivers.recording import unwrapped_times
-
-    device_t = unwrapped_times(states)
-    echo = np.array([s.host_time_echo_us for s in states], dtype=np.int64)
-    keep = echo > 0
-    if not np.any(keep):
-        empty = np.zeros(0)
-        return Frames(empty, empty, empty, np.zeros(0, bool), np.zeros(0, np.int32))
-    t0 = float(track.t[0]) if len(track) else 0.0
-    # the echo is the host time in u32 microseconds; restore the track's base past a wrap
-    base = t0 - (round(t0 * 1e6) % (1 << 32)) * 1e-6
-    echo_s = echo * 1e-6 + base
-    first = np.flatnonzero(keep & np.concatenate(([True], echo[1:] != echo[:-1])))
-    period = float(np.median(np.diff(device_t))) if len(states) > 1 else 0.0
-    offset = float(np.min(device_t[first] - echo_s[first])) - period
-    t = device_t - offset
+    keep, t = session_times(states, track, host_us)
     uv = np.array([s.target_uv for s in states], dtype=float)
     ev = np.array([s.target_ev for s in states], dtype=float)
     contact = np.array([bool(s.contact) for s in states])
     texture = np.array([s.texture for s in states], dtype=np.int32)
     return Frames(t=t[keep], uv=uv[keep], ev=ev[keep], contact=contact[keep],
                   texture=texture[keep])
+
+
+def session_times(states: list[State], track: FingerTrack,
+                  host_us: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Which reports belong to the session (from the first that echoes one of its samples on)
+    and every report's time on the track's time base, s (see :func:`reported_frames`)."""
+    from hcard_device.drivers.recording import HOST_TIME_MODULO, echoed_samples, unwrapped_times
+
+    if host_us is None:
+        host_us = np.rint(track.t * 1e6).astype(np.int64) % HOST_TIME_MODULO
+    device_t = unwrapped_times(states) if states else np.zeros(0)
+    echo = np.array([s.host_time_echo_us for s in states], dtype=np.int64)
+    sample = echoed_samples(host_us, echo)
+    applied = sample >= 0
+    if not np.any(applied):
+        return np.zeros(len(states), dtype=bool), device_t
+    keep = np.arange(len(states)) >= np.flatnonzero(applied)[0]
+    echo_s = track.t[np.maximum(sample, 0)]
+    first = np.flatnonzero(applied & np.concatenate(([True], sample[1:] != sample[:-1])))
+    period = float(np.median(np.diff(device_t))) if len(states) > 1 else 0.0
+    offset = float(np.min(device_t[first] - echo_s[first])) - period
+    return keep, device_t - offset
 
 
 @dataclass
@@ -135,7 +146,7 @@ class Context:
         with self.open_driver() as driver:
             result = play(driver, card, track, **({"tail_s": self.options["tail_s"]}
                                                   if "tail_s" in self.options else {}))
-        return reported_frames(result.states, track)
+        return reported_frames(result.states, track, result.host_us)
 
     @classmethod
     def for_driver(cls, name: str, *, vectors_root: Path | None = None,

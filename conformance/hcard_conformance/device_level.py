@@ -47,12 +47,12 @@ from hcard.physics.profile import DeviceProfile
 from hcard.render import render
 from hcard.track import FingerTrack, straight_stroke
 from hcard.v1 import card_pb2 as pb
-from hcard_conformance.context import Context, reported_frames
+from hcard_conformance.context import Context, session_times
 from hcard_conformance.registry import check
-from hcard_conformance.result import CheckResult
+from hcard_conformance.result import CannotAssess, CheckResult, guarded
+from hcard_conformance.streaming import stream
 from hcard_device.drivers.base import Driver
-from hcard_device.drivers.play import play
-from hcard_device.drivers.recording import unwrapped_times
+from hcard_device.drivers.play import PlayResult, play
 from hcard_device.protocol import Capability, DeviceInfo, DeviceKind, FaultBits, State
 from hcard_device.sim import DeviceConfig
 from hcard_device.sim.models import device_profile
@@ -103,8 +103,9 @@ CLASS_DYNAMICS = {
 }
 """Required plate dynamics by device class (``--option device_class=...``; by default from
 DEVICE_INFO.device_kind: 1 e-vita, 2 coupled)."""
-BANDWIDTH_FREQUENCIES_HZ = (50.0, 100.0, 200.0, 300.0, 400.0, 500.0)
-"""Sweep of D1, Hz (under the 500 Hz Nyquist frequency of 1 kHz STATE reports)."""
+BANDWIDTH_FREQUENCIES_HZ = (50.0, 100.0, 200.0, 300.0, 400.0, 450.0)
+"""Sweep of D1, Hz (under the 500 Hz Nyquist frequency of 1 kHz STATE reports, where a
+sinusoid sampled at its zero crossings has no measurable amplitude)."""
 BANDWIDTH_REFERENCE_HZ = 25.0
 BANDWIDTH_UV_MEAN, BANDWIDTH_UV_SWING = 0.25, 0.05
 """Streamed UV target of D1, ``mean + swing sin``: about 2 um of plate amplitude at
@@ -176,21 +177,22 @@ class FrictionMeasurement:
     target: np.ndarray
 
 
-def rendered_friction(states: list[State], track: FingerTrack,
+def rendered_friction(result: PlayResult,
                       profile: DeviceProfile) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Track time (s), rendered relative friction and contact of each report applied: the
-    measured amplitude and voltage through ``profile.forward`` at the track's speed and the
-    measured normal force."""
-    echo = np.array([s.host_time_echo_us for s in states], dtype=np.int64) > 0
-    applied = [s for s, ok in zip(states, echo, strict=True) if ok]
-    t = reported_frames(states, track).t
+    """Track time (s), rendered relative friction and contact of each report of the session:
+    the measured amplitude and voltage through ``profile.forward`` at the track's speed and
+    the measured normal force."""
+    track = result.track
+    keep, t = session_times(result.states, track, result.host_us)
+    applied = [s for s, ok in zip(result.states, keep, strict=True) if ok]
+    t = t[keep]
     speed = np.hypot(np.gradient(track.x, track.t), np.gradient(track.y, track.t)) * 1e-3
     v = np.interp(t, track.t, speed)
     amplitude = np.array([s.amplitude_m for s in applied])
     voltage = np.array([s.voltage_v for s in applied])
     fn = np.array([s.normal_force_n for s in applied])
     uv, ev = profile.forward(amplitude, voltage, v, np.maximum(fn, 1e-3))
-    contact = np.array([bool(s.contact) for s in applied]) & (fn > 0.05)
+    contact = np.array([bool(s.contact) for s in applied], dtype=bool) & (fn > 0.05)
     return t, uv * ev, contact
 
 
@@ -198,7 +200,7 @@ def measure_friction(driver: Driver, card: pb.Card, track: FingerTrack) -> Frict
     """Play ``card`` along ``track`` and compare rendered with target friction."""
     profile = device_profile_for(driver.info())
     result = play(driver, card, track)
-    t, rendered, contact = rendered_friction(result.states, track, profile)
+    t, rendered, contact = rendered_friction(result, profile)
     golden = render(card, track)
     target = np.interp(t, golden.t, golden.friction)
     settled = contact & (t >= track.t[0] + SETTLE_S) & (t <= track.t[-1])
@@ -220,88 +222,176 @@ def check_friction(ctx: Context) -> Iterator[CheckResult]:
     with ctx.open_driver() as driver:
         cases = friction_cases(driver.info())
     for case, card, track in cases:
-        with ctx.open_driver() as driver:
-            m = measure_friction(driver, card, track)
-        yield _result("device.friction", case, "rms_relative_error", m.rms_relative_error,
-                      FRICTION_JND, "relative", f"{m.reports} settled reports in contact")
+
+        def measure(case: str = case, card: pb.Card = card,
+                    track: FingerTrack = track) -> Iterator[CheckResult]:
+            assert ctx.open_driver is not None
+            with ctx.open_driver() as driver:
+                m = measure_friction(driver, card, track)
+            if m.reports == 0:
+                raise CannotAssess("no settled report in contact echoed a finger sample of "
+                                   "the session")
+            yield _result("device.friction", case, "rms_relative_error", m.rms_relative_error,
+                          FRICTION_JND, "relative", f"{m.reports} settled reports in contact")
+
+        yield from guarded("device.friction", LEVEL, [case], measure)
 
 
 # ---------------------------------------------------------------------- (b) dynamics
 
-def _stream(driver: Driver, uv: np.ndarray, chunk_s: float = 0.01) -> list[State]:
-    """Stream UV frames at the device frame rate while the host's finger strokes at
-    :data:`STROKE_SPEED_MM_S` (finger samples every 10 ms, so the firmware's velocity
-    compensation sees a sliding finger); returns the STATE reports."""
-    info = driver.info()
-    rate = info.frame_rate_hz
-    y = info.surface_height_10um * 0.005
-    x0 = info.surface_width_10um * 0.0025
-    per = round(chunk_s * rate)
-    states: list[State] = []
-    if info.capabilities & Capability.HOST_FINGER:
-        driver.set_touch_source(host=True)
-    start = driver.clock()
-    driver.start()
-    for k in range(0, uv.shape[0], per):
-        part = uv[k:k + per]
-        now = driver.clock()
-        driver.send_finger(now, x0 + STROKE_SPEED_MM_S * (now - start), y, 0.5, True)
-        driver.stream_frames(part, np.ones_like(part))
-        states += driver.collect_until(driver.clock() + part.shape[0] / rate)
-    driver.stop()
-    return states
+def _fit_sinusoid(t: np.ndarray, y: np.ndarray, frequency_hz: float) -> tuple[float, float]:
+    """Amplitude and offset of the least-squares sinusoid at ``frequency_hz`` in y(t)."""
+    basis = np.column_stack([np.sin(2 * np.pi * frequency_hz * t),
+                             np.cos(2 * np.pi * frequency_hz * t), np.ones(t.shape[0])])
+    coef = np.linalg.lstsq(basis, y, rcond=None)[0]
+    return float(np.hypot(coef[0], coef[1])), float(coef[2])
 
 
-def amplitude_gain(driver: Driver, frequency_hz: float, duration_s: float = 0.3) -> float:
-    """Fitted amplitude (m) of the plate amplitude's response at ``frequency_hz`` to a
-    streamed UV target :data:`BANDWIDTH_UV_MEAN` + :data:`BANDWIDTH_UV_SWING` sin; the first
-    50 ms are left out. The UV model is a static map before the plate's linear dynamics, so
-    gains relative to the reference frequency are those of the plate loop."""
+@dataclass(frozen=True)
+class Gain:
+    """The plate amplitude's response to a streamed sinusoid.
+
+    Attributes:
+        amplitude_m: fitted amplitude of the plate amplitude at the stimulus frequency, m.
+        mean_m: fitted mean of the plate amplitude, m.
+        reports: reports fitted.
+        underruns: reports in the stream with an empty queue (the host fell behind).
+    """
+
+    amplitude_m: float
+    mean_m: float
+    reports: int
+    underruns: int
+
+    @property
+    def relative(self) -> float:
+        """The oscillation relative to the mean: the velocity compensation scales both with
+        the finger speed the firmware estimates, which varies by ~1 % from run to run in real
+        time; their ratio is the plate loop's alone (its gain at DC is 1)."""
+        return self.amplitude_m / self.mean_m if self.mean_m > 0 else 0.0
+
+
+def amplitude_gain(driver: Driver, frequency_hz: float, duration_s: float = 0.6) -> Gain:
+    """The plate amplitude's response at ``frequency_hz`` to a streamed UV target
+    :data:`BANDWIDTH_UV_MEAN` + :data:`BANDWIDTH_UV_SWING` sin. The stimulus is found in the
+    targets the device reports (session-relative); its first :data:`FINGER_SETTLE_S` are left
+    out. The UV model is a static map before the plate's linear dynamics, so gains relative to
+    the reference frequency are those of the plate loop."""
     rate = driver.info().frame_rate_hz
-    t = np.arange(round(duration_s * rate)) / rate
-    states = _stream(driver, BANDWIDTH_UV_MEAN
+    t = np.arange(round((duration_s + FINGER_SETTLE_S) * rate)) / rate
+    session = stream(driver, BANDWIDTH_UV_MEAN
                      + BANDWIDTH_UV_SWING * np.sin(2 * np.pi * frequency_hz * t))
-    ts = unwrapped_times(states)
-    amp = np.array([s.amplitude_m for s in states])
-    keep = ts >= 0.05
-    basis = np.column_stack([np.sin(2 * np.pi * frequency_hz * ts[keep]),
-                             np.cos(2 * np.pi * frequency_hz * ts[keep]), np.ones(keep.sum())])
-    coef = np.linalg.lstsq(basis, amp[keep], rcond=None)[0]
-    return float(np.hypot(coef[0], coef[1]))
+    target, amp = session.column("target_uv"), session.column("amplitude_m")
+    playing = np.flatnonzero(np.abs(target - BANDWIDTH_UV_MEAN) <= 2 * BANDWIDTH_UV_SWING)
+    if playing.size < 10:
+        raise CannotAssess(f"the device reported the streamed {frequency_hz:g} Hz target "
+                               f"in {playing.size} reports (target_uv of STATE)")
+    t0, t1 = session.t_s[playing[0]], session.t_s[playing[-1]]
+    keep = (session.t_s >= t0 + FINGER_SETTLE_S) & (session.t_s <= t1)
+    oscillation, mean = _fit_sinusoid(session.t_s[keep], amp[keep], frequency_hz)
+    return Gain(oscillation, mean, int(keep.sum()), session.underruns)
 
 
-def measure_bandwidth(open_driver: Callable[[], Driver]) -> float:
+def measure_bandwidth(open_driver: Callable[[], Driver]) -> tuple[float, int]:
     """-3 dB frequency of the plate amplitude (Hz), log-interpolated between the sweep points
-    of :data:`BANDWIDTH_FREQUENCIES_HZ`; the last one when never reached."""
+    of :data:`BANDWIDTH_FREQUENCIES_HZ` (the last one when never reached), and the stream
+    underruns over the sweep."""
     with open_driver() as driver:
         reference = amplitude_gain(driver, BANDWIDTH_REFERENCE_HZ)
+    underruns = reference.underruns
     previous_f, previous_db = BANDWIDTH_REFERENCE_HZ, 0.0
     for f in BANDWIDTH_FREQUENCIES_HZ:
         with open_driver() as driver:
-            db = 20 * math.log10(max(amplitude_gain(driver, f), 1e-15) / reference)
+            gain = amplitude_gain(driver, f)
+        underruns += gain.underruns
+        db = 20 * math.log10(max(gain.relative, 1e-15) / max(reference.relative, 1e-15))
         if db <= -3.0:
             x = (-3.0 - previous_db) / (db - previous_db)
-            return float(math.exp(math.log(previous_f) + x * math.log(f / previous_f)))
+            return float(math.exp(math.log(previous_f) + x * math.log(f / previous_f))), underruns
         previous_f, previous_db = f, db
-    return BANDWIDTH_FREQUENCIES_HZ[-1]
+    return BANDWIDTH_FREQUENCIES_HZ[-1], underruns
 
 
-def measure_rise_time(driver: Driver) -> float:
-    """10-90 % rise time (s) of the plate amplitude after a streamed UV step 1 -> 0.3."""
-    rate = driver.info().frame_rate_hz
-    uv = np.concatenate([np.ones(round(0.03 * rate)), np.full(round(0.05 * rate), 0.3)])
-    states = _stream(driver, uv)
-    ts = unwrapped_times(states) + states[0].timestamp_us * 1e-6
-    amp = np.array([s.amplitude_m for s in states])
-    final = float(np.median(amp[ts > ts[-1] - 0.015]))
-    rising = ts >= ts[np.searchsorted(ts, 0.03) - 1]
+FINGER_SETTLE_S = 0.1
+"""Streamed time before a dynamics measurement starts, s: the host finger's first samples
+reach the device in real time at no fixed phase with the stream, and the firmware's speed
+estimate (velocity compensation) needs four of them (30 ms at 100 Hz) before it is steady; a
+step or a sine measured earlier carries the estimate's start-up in the commanded amplitude."""
+RISE_STEP_UV = 0.3
+"""UV target after each step of the rise-time stimulus (from 1)."""
+RISE_STEPS = 8
+"""Steps of the rise-time stimulus, each from rest."""
+RISE_MARKER_FRAMES = 10
+"""Frames at the start of each step whose targets count down in 1e-4 steps to 0.3 (a frame
+index in the reported target: the report that first shows the step says which frame of it
+was playing, so the onset is known to one frame, 0.1 ms)."""
+RISE_PHASE_FRAMES = 3
+"""Frames added to each cycle beyond a whole number of report periods, so the steps fall at
+different phases of the 1 kHz report clock (equivalent-time sampling)."""
 
-    def crossing(level: float) -> float:
-        idx = np.flatnonzero(rising & (amp >= level * final))[0]
-        t0, t1, a0, a1 = ts[idx - 1], ts[idx], amp[idx - 1], amp[idx]
-        return float(t0 + (level * final - a0) / (a1 - a0) * (t1 - t0)) if a1 > a0 else float(t1)
+
+def rise_stimulus(rate_hz: float, hold_s: float) -> np.ndarray:
+    """UV frames of the rise-time stimulus: :data:`RISE_STEPS` cycles of ``hold_s`` at rest
+    (UV 1) and ``hold_s`` at :data:`RISE_STEP_UV`, the first :data:`RISE_MARKER_FRAMES` frames
+    of each step marked ``0.3 + (10 - j) 1e-4``."""
+    hold = round(hold_s * rate_hz / 10) * 10
+    marker = RISE_STEP_UV + (RISE_MARKER_FRAMES - np.arange(RISE_MARKER_FRAMES)) * 1e-4
+    cycle = np.concatenate([np.ones(hold + RISE_PHASE_FRAMES), marker,
+                            np.full(hold - RISE_MARKER_FRAMES, RISE_STEP_UV)])
+    return np.tile(cycle, RISE_STEPS)
+
+
+def rise_time(t_s: np.ndarray, target: np.ndarray, amplitude: np.ndarray, frame_s: float,
+              hold_s: float) -> float:
+    """10-90 % rise time (s) of the plate amplitude from the reports of :func:`rise_stimulus`:
+    each step's onset from its marker, every report normalised to its step's settled value
+    and placed at its time since the onset; the pooled samples (eight phases of the report
+    clock) give the response at ~0.1-0.2 ms resolution, where one step sampled at 1 kHz
+    would put the crossings anywhere within a report period."""
+    counts = np.rint(target * 1e4).astype(int)
+    base = round(RISE_STEP_UV * 1e4)
+    marked = (counts > base) & (counts <= base + RISE_MARKER_FRAMES)
+    rest = np.concatenate(([False], counts[:-1] >= 9900))
+    onsets = [t_s[k] - (base + RISE_MARKER_FRAMES - counts[k]) * frame_s
+              for k in np.flatnonzero(marked & rest)]
+    if len(onsets) < RISE_STEPS // 2:
+        raise CannotAssess(f"the device reported {len(onsets)} of {RISE_STEPS} marked UV steps "
+                           f"(target_uv of STATE)")
+    tau, level = [], []
+    for onset in onsets:
+        settled = (t_s >= onset + 0.8 * hold_s) & (t_s < onset + hold_s)
+        window = (t_s >= onset - 0.002) & (t_s < onset + 0.8 * hold_s)
+        final = float(np.median(amplitude[settled])) if settled.any() else math.nan
+        if not final > 0:
+            continue
+        tau.append(t_s[window] - onset)
+        level.append(amplitude[window] / final)
+    if not tau:
+        raise CannotAssess("no UV step settled to a plate amplitude above 0")
+    order = np.argsort(np.concatenate(tau))
+    x, y = np.concatenate(tau)[order], np.concatenate(level)[order]
+
+    def crossing(fraction: float) -> float:
+        above = np.flatnonzero(y >= fraction)
+        if above.size == 0:
+            return math.inf
+        k = int(above[0])
+        if k == 0 or y[k] == y[k - 1]:
+            return float(x[k])
+        return float(x[k - 1] + (fraction - y[k - 1]) / (y[k] - y[k - 1]) * (x[k] - x[k - 1]))
 
     return crossing(0.9) - crossing(0.1)
+
+
+def measure_rise_time(driver: Driver, max_rise_s: float) -> float:
+    """10-90 % rise time (s) of the plate amplitude after streamed UV steps 1 ->
+    :data:`RISE_STEP_UV` (:func:`rise_stimulus`, :func:`rise_time`); each step holds for
+    three times ``max_rise_s`` (at least 20 ms)."""
+    rate = driver.info().frame_rate_hz
+    hold_s = max(0.02, 3 * max_rise_s)
+    session = stream(driver, rise_stimulus(rate, hold_s))
+    return rise_time(session.t_s, session.column("target_uv"), session.column("amplitude_m"),
+                     1.0 / rate, hold_s)
 
 
 @check(name="device.dynamics", level=LEVEL,
@@ -310,15 +400,24 @@ def check_dynamics(ctx: Context) -> Iterator[CheckResult]:
     """Bandwidth and rise time of the plate amplitude under direct streaming."""
     if ctx.open_driver is None:
         return
-    with ctx.open_driver() as driver:
+    open_driver = ctx.open_driver
+    with open_driver() as driver:
         dyn = CLASS_DYNAMICS[device_class(ctx, driver.info())]
-        rise = measure_rise_time(driver)
-    bandwidth = measure_bandwidth(ctx.open_driver)
-    yield _result("device.dynamics", "bandwidth", "bandwidth_-3dB", bandwidth,
-                  dyn.min_bandwidth_hz * (1.0 - BANDWIDTH_TOLERANCE), "Hz", dyn.why,
-                  at_most=False)
-    yield _result("device.dynamics", "rise-time", "rise_10_90", rise * 1e3,
-                  dyn.max_rise_s * 1e3, "ms", dyn.why)
+
+    def bandwidth() -> Iterator[CheckResult]:
+        value, underruns = measure_bandwidth(open_driver)
+        yield _result("device.dynamics", "bandwidth", "bandwidth_-3dB", value,
+                      dyn.min_bandwidth_hz * (1.0 - BANDWIDTH_TOLERANCE), "Hz",
+                      f"{dyn.why}; stream underruns in the sweep: {underruns}", at_most=False)
+
+    def rise_time() -> Iterator[CheckResult]:
+        with open_driver() as driver:
+            rise = measure_rise_time(driver, dyn.max_rise_s)
+        yield _result("device.dynamics", "rise-time", "rise_10_90", rise * 1e3,
+                      dyn.max_rise_s * 1e3, "ms", dyn.why)
+
+    yield from guarded("device.dynamics", LEVEL, ["bandwidth"], bandwidth)
+    yield from guarded("device.dynamics", LEVEL, ["rise-time"], rise_time)
 
 
 # ---------------------------------------------------------------------- (c) latency
@@ -370,12 +469,17 @@ def check_latency(ctx: Context) -> Iterator[CheckResult]:
     """End-to-end latency from a host finger update to the plate's change."""
     if ctx.open_driver is None:
         return
-    with ctx.open_driver() as driver:
-        lat = measure_latency(driver)
-    median = float(np.median(lat)) * 1e3
-    yield _result("device.latency", "boundary-move", "median_latency", median,
-                  LATENCY_THRESHOLD_S * 1e3, "ms",
-                  f"{len(lat)} moves, max {np.nanmax(lat) * 1e3:.1f} ms")
+    open_driver = ctx.open_driver
+
+    def measure() -> Iterator[CheckResult]:
+        with open_driver() as driver:
+            lat = measure_latency(driver)
+        median = float(np.median(lat)) * 1e3
+        yield _result("device.latency", "boundary-move", "median_latency", median,
+                      LATENCY_THRESHOLD_S * 1e3, "ms",
+                      f"{len(lat)} moves, max {np.nanmax(lat) * 1e3:.1f} ms")
+
+    yield from guarded("device.latency", LEVEL, ["boundary-move"], measure)
 
 
 # ---------------------------------------------------------------------- (d) safety
@@ -399,6 +503,21 @@ def _over(states: list[State], driver: Driver) -> tuple[int, float]:
     return int(np.count_nonzero(over)), worst
 
 
+def _wait_for_rest(driver: Driver, timeout_s: float = 0.5) -> None:
+    """Read STATE reports until the outputs are off (a device that stays powered may still be
+    ramping down from the previous session), at most ``timeout_s``."""
+    end = driver.clock() + timeout_s
+    while driver.clock() < end:
+        states = driver.collect_until(driver.clock() + 0.005)
+        if states and all(s.amplitude_m <= OFF_AMPLITUDE_M and s.voltage_v <= 1.0
+                          for s in states[-3:]):
+            return
+
+
+SAFETY_CASES = ("card-over-limit", "host-limits", "stream-extremes")
+"""The cases of the safety check, in order."""
+
+
 def measure_safety(open_driver: Callable[[], Driver]) -> dict[str, tuple[int, float]]:
     """Per case, reports over a limit and the worst measured output / limit: a card asking for
     more than the device can do, the same under host limits halved, streamed extreme frames."""
@@ -415,9 +534,13 @@ def measure_safety(open_driver: Callable[[], Driver]) -> dict[str, tuple[int, fl
     with open_driver() as driver:
         out["card-over-limit"] = _over(play(driver, greedy, track).states, driver)
     with open_driver() as driver:
+        _wait_for_rest(driver)  # lowered at rest; lowering while driven is another matter
         hw = driver.limits()
         driver.set_limits(hw.max_amplitude_m / 2, hw.max_voltage_v / 2, hw.max_current_a / 2)
-        out["host-limits"] = _over(play(driver, greedy, track).states, driver)
+        try:
+            out["host-limits"] = _over(play(driver, greedy, track).states, driver)
+        finally:  # a device stays powered between runs: leave its limits as they were
+            driver.set_limits(hw.max_amplitude_m, hw.max_voltage_v, hw.max_current_a)
     with open_driver() as driver:
         driver.send_finger(driver.clock(), w / 2, h / 2, 0.5, True)
         n = round(0.1 * info.frame_rate_hz)
@@ -439,9 +562,14 @@ def check_safety(ctx: Context) -> Iterator[CheckResult]:
     """Outputs stay within the limits in force whatever is asked (spec PS1)."""
     if ctx.open_driver is None:
         return
-    for case, (n_over, worst) in measure_safety(ctx.open_driver).items():
-        yield _result("device.safety", case, "n_over", n_over, 0.0, "reports",
-                      f"largest measured output {worst:.3f} x its limit in force")
+    open_driver = ctx.open_driver
+
+    def measure() -> Iterator[CheckResult]:
+        for case, (n_over, worst) in measure_safety(open_driver).items():
+            yield _result("device.safety", case, "n_over", n_over, 0.0, "reports",
+                          f"largest measured output {worst:.3f} x its limit in force")
+
+    yield from guarded("device.safety", LEVEL, SAFETY_CASES, measure)
 
 
 # ---------------------------------------------------------------------- (e) watchdog
@@ -483,11 +611,17 @@ def check_watchdog(ctx: Context) -> Iterator[CheckResult]:
     """Fault behaviour on host silence (spec PS3)."""
     if ctx.open_driver is None:
         return
-    with ctx.open_driver() as driver:
-        limit = driver.info().watchdog_ms * 1e-3 + WATCHDOG_ALLOWANCE_S
-        off, reported, driven = measure_watchdog(driver)
-    yield _result("device.watchdog", "host-silent", "time_to_off", off * 1e3, limit * 1e3,
-                  "ms", f"plate at {driven * 1e9:.0f} nm before the host went silent; off "
-                  f"means <= {OFF_AMPLITUDE_M * 1e9:.0f} nm and <= 1 V")
-    yield CheckResult("device.watchdog", LEVEL, "fault-reported", reported, "watchdog_fault",
-                      float(reported), 1.0, "bool", "fault WATCHDOG in STATE")
+    open_driver = ctx.open_driver
+
+    def measure() -> Iterator[CheckResult]:
+        with open_driver() as driver:
+            limit = driver.info().watchdog_ms * 1e-3 + WATCHDOG_ALLOWANCE_S
+            off, reported, driven = measure_watchdog(driver)
+        yield _result("device.watchdog", "host-silent", "time_to_off", off * 1e3,
+                      limit * 1e3, "ms", f"plate at {driven * 1e9:.0f} nm before the host "
+                      f"went silent; off means <= {OFF_AMPLITUDE_M * 1e9:.0f} nm and <= 1 V")
+        yield CheckResult("device.watchdog", LEVEL, "fault-reported", reported,
+                          "watchdog_fault", float(reported), 1.0, "bool",
+                          "fault WATCHDOG in STATE")
+
+    yield from guarded("device.watchdog", LEVEL, ["host-silent", "fault-reported"], measure)

@@ -19,7 +19,7 @@ from typing import Any
 
 from hcard import __version__
 from hcard.atomic import write_atomically
-from hcard_conformance.result import CheckResult
+from hcard_conformance.result import ERROR, FAIL, OUTCOMES, PASS, UNASSESSED, CheckResult
 from hcard_conformance.runner import SuiteReport
 
 JSON_FORMAT = "hcard-conformance-report/1"
@@ -66,16 +66,25 @@ def table(report: SuiteReport, *, verbose: bool = False) -> str:
                          f" cases pass{worst}")
     lines.append("")
     for level, seconds in report.level_durations_s().items():
-        in_level = report.by_level(level)
-        n_failed = sum(not r.passed for r in in_level)
-        lines.append(f"level {level:9} {len(in_level) - n_failed:4} passed {n_failed:4} failed "
+        counts = outcome_counts(report.by_level(level))
+        lines.append(f"level {level:9} {counts[PASS]:4} passed {counts[FAIL]:4} failed "
+                     f"{counts[ERROR]:4} errors {counts[UNASSESSED]:4} unassessed "
                      f"in {seconds:7.2f} s")
     total = len(report.results)
-    n_failed = len(report.failures)
+    counts = outcome_counts(report.results)
     verdict = "CONFORMS" if report.passed else "DOES NOT CONFORM"
-    lines.append(f"{verdict}: {total - n_failed} of {total} cases pass, {n_failed} fail "
+    lines.append(f"{verdict}: {counts[PASS]} of {total} cases pass, {counts[FAIL]} fail, "
+                 f"{counts[ERROR]} errors, {counts[UNASSESSED]} not assessed "
                  f"({report.duration_s:.2f} s)")
     return "\n".join(lines) + "\n"
+
+
+def outcome_counts(results: list[CheckResult]) -> dict[str, int]:
+    """How many results have each outcome (every outcome present, 0 when none)."""
+    counts = dict.fromkeys(OUTCOMES, 0)
+    for r in results:
+        counts[r.outcome] += 1
+    return counts
 
 
 def _shortfall(r: CheckResult) -> float:
@@ -102,14 +111,18 @@ def _worst(results: list[CheckResult]) -> str:
 
 def junit_xml(report: SuiteReport) -> bytes:
     """JUnit XML bytes (see the module docstring)."""
+    totals = outcome_counts(report.results)
     root = ET.Element("testsuites", name=f"hcard-conformance {report.driver}",
-                      tests=str(len(report.results)), failures=str(len(report.failures)),
-                      errors="0", time=f"{report.duration_s:.3f}")
+                      tests=str(len(report.results)), failures=str(totals[FAIL]),
+                      errors=str(totals[ERROR]), skipped=str(totals[UNASSESSED]),
+                      time=f"{report.duration_s:.3f}")
     for level in report.levels:
         results = report.by_level(level)
+        counts = outcome_counts(results)
         suite = ET.SubElement(
             root, "testsuite", name=level, tests=str(len(results)),
-            failures=str(sum(not r.passed for r in results)), errors="0", skipped="0",
+            failures=str(counts[FAIL]), errors=str(counts[ERROR]),
+            skipped=str(counts[UNASSESSED]),
             time=f"{sum(r.duration_s for r in results):.3f}")
         props = ET.SubElement(suite, "properties")
         ET.SubElement(props, "property", name="driver", value=report.driver)
@@ -122,7 +135,12 @@ def junit_xml(report: SuiteReport) -> bytes:
                 value = getattr(r, key)
                 text = _number(value) if isinstance(value, float) else str(value)
                 ET.SubElement(case_props, "property", name=key, value=text)
-            if not r.passed:
+            if r.outcome == ERROR:
+                error = ET.SubElement(case, "error", message=r.detail, type="error")
+                error.text = r.detail
+            elif r.outcome == UNASSESSED:
+                ET.SubElement(case, "skipped", message=r.detail)
+            elif not r.passed:
                 failure = ET.SubElement(case, "failure", message=failure_message(r),
                                         type=r.metric or "failure")
                 failure.text = r.detail
@@ -139,7 +157,8 @@ def to_json(report: SuiteReport) -> dict[str, Any]:
         "driver": report.driver,
         "levels": list(report.levels),
         "passed": report.passed,
-        "totals": {"cases": len(report.results), "failed": len(report.failures)},
+        "totals": {"cases": len(report.results), "failed": len(report.failures),
+                   **{k.lower(): v for k, v in outcome_counts(report.results).items()}},
         "duration_s": report.duration_s,
         "thresholds": {k: _finite(v) for k, v in report.thresholds.items()},
         "not_applicable": list(report.not_applicable),

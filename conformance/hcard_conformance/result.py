@@ -14,8 +14,19 @@ from __future__ import annotations
 
 import math
 import traceback
+from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass
 from typing import Any
+
+PASS, FAIL, ERROR, UNASSESSED = "PASS", "FAIL", "ERROR", "UNASSESSED"
+OUTCOMES = (PASS, FAIL, ERROR, UNASSESSED)
+"""Outcomes of a case; only PASS passes."""
+
+
+class CannotAssess(Exception):
+    """Raised by a measurement that cannot assess its case (the reason is the message): the
+    case is reported UNASSESSED, never dropped."""
+
 
 LEVELS: tuple[str, ...] = ("format", "renderer", "device")
 """Conformance levels, in the order they run (spec/conformance.md)."""
@@ -45,6 +56,9 @@ class CheckResult:
         unit: unit of ``value`` and ``threshold``.
         detail: one line for a human: what was found, what was expected, or the error.
         duration_s: wall-clock time spent on this case, s (set by the runner when 0).
+        outcome: ``PASS`` or ``FAIL`` (from ``passed``), ``ERROR`` (the check raised: the
+            implementation or the suite broke) or ``UNASSESSED`` (the case could not be
+            measured, for a reason in ``detail``); neither of the last two passes.
     """
 
     check: str
@@ -57,17 +71,22 @@ class CheckResult:
     unit: str = ""
     detail: str = ""
     duration_s: float = 0.0
+    outcome: str = ""
 
     def __post_init__(self) -> None:
         level_index(self.level)
-        self.passed = bool(self.passed)
         self.value = float(self.value)
         self.threshold = float(self.threshold)
+        if not self.outcome:
+            self.outcome = PASS if self.passed else FAIL
+        if self.outcome not in OUTCOMES:
+            raise ValueError(f"unknown outcome {self.outcome!r}; outcomes: {', '.join(OUTCOMES)}")
+        self.passed = self.outcome == PASS
 
     @property
     def status(self) -> str:
-        """``PASS`` or ``FAIL``."""
-        return "PASS" if self.passed else "FAIL"
+        """The :attr:`outcome`: ``PASS``, ``FAIL``, ``ERROR`` or ``UNASSESSED``."""
+        return self.outcome
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready dict (NaN becomes None)."""
@@ -114,4 +133,28 @@ def error_result(check: str, level: str, case: str, exc: BaseException) -> Check
     frames = traceback.extract_tb(exc.__traceback__)
     if frames:
         text += f" (at {frames[-1].filename}:{frames[-1].lineno})"
-    return CheckResult(check, level, case, False, "error", detail=f"check raised {text}")
+    return CheckResult(check, level, case, False, "error", detail=f"check raised {text}",
+                       outcome=ERROR)
+
+
+def unassessed(check: str, level: str, case: str, reason: str) -> CheckResult:
+    """A case that could not be measured, and why."""
+    return CheckResult(check, level, case, False, detail=f"not assessed: {reason}",
+                       outcome=UNASSESSED)
+
+
+def guarded(check: str, level: str, cases: Iterable[str],
+            measure: Callable[[], Iterable[CheckResult]]) -> list[CheckResult]:
+    """Run ``measure``, which yields the results of ``cases``; when it raises, every case it
+    has not yet reported becomes ERROR (UNASSESSED for :class:`CannotAssess`), one result
+    each, so a broken measurement never hides its cases."""
+    results: list[CheckResult] = []
+    try:
+        results.extend(measure())
+    except CannotAssess as exc:
+        done = {r.case for r in results}
+        results += [unassessed(check, level, c, str(exc)) for c in cases if c not in done]
+    except Exception as exc:
+        done = {r.case for r in results}
+        results += [error_result(check, level, c, exc) for c in cases if c not in done]
+    return results

@@ -172,14 +172,16 @@ def test_json_report_holds_every_result_with_non_finite_as_strings() -> None:
     data = json.loads(json_bytes(_sample_report()))
     assert data["format"] == "hcard-conformance-report/1"
     assert data["passed"] is False
-    assert data["totals"] == {"cases": 5, "failed": 2}
+    assert data["totals"] == {"cases": 5, "failed": 2, "pass": 3, "fail": 2, "error": 0,
+                              "unassessed": 0}
     assert data["thresholds"] == {"friction_rel_jnd": 0.08}
     assert len(data["results"]) == 5
     assert data["results"][3]["value"] == "inf"
     assert data["results"][2] | {"duration_s": 0} == {
         "check": "renderer.friction_error", "level": "renderer", "case": "g@slow",
         "passed": False, "metric": "A1", "value": 0.12, "threshold": 0.08,
-        "unit": "relative friction", "detail": "lag 1.0 ms", "duration_s": 0}
+        "unit": "relative friction", "detail": "lag 1.0 ms", "duration_s": 0,
+        "outcome": "FAIL"}
 
 
 def test_table_lists_failures_and_verdict() -> None:
@@ -208,7 +210,8 @@ def test_cli_writes_reports_and_exits_zero_for_the_reference(tmp_path: Path) -> 
     assert "CONFORMS" in result.output
     data = json.loads(report.read_text())
     cases = 2 * len(MANIFEST.cards) + len(MANIFEST.cards) + len(MANIFEST.invalid)
-    assert data["totals"] == {"cases": cases, "failed": 0}
+    assert data["totals"] == {"cases": cases, "failed": 0, "pass": cases, "fail": 0, "error": 0,
+                              "unassessed": 0}
     assert ET.parse(junit).getroot().get("tests") == str(cases)
 
 
@@ -246,3 +249,60 @@ def test_pytest_plugin_makes_one_item_per_case(broken_vectors: Path, tmp_path: P
     assert f"format.reject[{victim}]" in run.stdout
     suite = ET.parse(junit).getroot().find("testsuite")
     assert suite is not None and suite.get("tests") == str(cases)
+
+
+def _vanishing_device(after_writes: int):
+    """The simulated E-ViTa whose link breaks after ``after_writes`` output reports (a device
+    unplugged in the middle of a check): every later write raises DeviceError."""
+    from hcard_device.drivers import open_device
+    from hcard_device.drivers.errors import DeviceError
+
+    driver = open_device("sim://evita")
+    write = driver._write_output
+    count = {"n": 0}
+
+    def failing_write(report):
+        count["n"] += 1
+        if count["n"] > after_writes:
+            raise DeviceError("sim://evita: the device vanished (test)")
+        return write(report)
+
+    driver._write_output = failing_write
+    return driver
+
+
+def test_a_check_that_raises_is_an_error_per_case_in_table_json_and_junit() -> None:
+    from hcard_conformance.device_level import SAFETY_CASES
+
+    ctx = Context("vanishing", lambda: _vanishing_device(after_writes=5))
+    report = run_suite(ctx, ("device",), select=("device.safety", "device.dynamics"))
+    outcomes = {(r.check, r.case): r.outcome for r in report.results}
+    assert outcomes == {
+        **{("device.safety", case): "ERROR" for case in SAFETY_CASES},
+        ("device.dynamics", "bandwidth"): "ERROR",
+        ("device.dynamics", "rise-time"): "ERROR",
+    }
+    assert all("DeviceError" in r.detail and "vanished" in r.detail for r in report.results)
+    root = ET.fromstring(junit_xml(report))
+    assert (root.get("errors"), root.get("failures"), root.get("tests")) == ("5", "0", "5")
+    assert len(root.findall(".//testcase/error")) == 5
+    data = json.loads(json_bytes(report))
+    assert data["totals"]["error"] == 5 and data["passed"] is False
+    assert "0 of 5 cases pass, 0 fail, 5 errors" in table(report)
+
+
+def test_a_case_that_cannot_be_assessed_is_reported_not_dropped() -> None:
+    from hcard_conformance.result import CannotAssess, guarded
+
+    def measure() -> Iterator[CheckResult]:
+        yield measured("t.part", "device", "first", "m", 1.0, 2.0)
+        raise CannotAssess("the device reported no target")
+
+    results = guarded("t.part", "device", ["first", "second", "third"], measure)
+    assert [(r.case, r.outcome) for r in results] == [
+        ("first", "PASS"), ("second", "UNASSESSED"), ("third", "UNASSESSED")]
+    assert "not assessed: the device reported no target" in results[1].detail
+    report = SuiteReport("demo", ("device",), results=results)
+    assert not report.passed
+    root = ET.fromstring(junit_xml(report))
+    assert (root.get("skipped"), root.get("errors"), root.get("failures")) == ("2", "0", "0")

@@ -16,7 +16,7 @@ from hcard.card_io import to_bytes
 from hcard.physics.profile import DeviceProfile
 from hcard.track import make_track, straight_stroke
 from hcard_device.drivers import open_device
-from hcard_device.drivers.play import play
+from hcard_device.drivers.play import play, session_host_times
 from hcard_device.drivers.recording import echoed_samples, recording, track_speeds
 
 CARD = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[
@@ -69,18 +69,32 @@ def test_speed_is_the_tracks_signed_speed_at_the_echoed_sample():
 
 
 def test_a_stale_echo_of_the_previous_session_is_not_taken_for_this_ones():
-    # A device served in real time may send reports between START and the first FINGER of a
-    # session; they echo the previous session's last sample, which the same track played again
-    # also has.
+    # A device that stays powered echoes the previous session's last sample until the first
+    # FINGER of the next; the same track played again starts later on the host's clock, so
+    # its host times differ and the stale echo names no sample of the new session.
     track = straight_stroke((2.0, 5.0), (40.0, 0.0), 0.3)
-    host_us = np.rint(track.t * 1e6).astype(np.int64)
-    stale = [host_us[-1]] * 7
-    fresh = np.repeat(host_us, 20)
-    samples = echoed_samples(track, np.concatenate([stale, fresh]))
+    first = session_host_times(10.0, track)
+    second = session_host_times(10.0 + track.t[-1] + 0.5, track)
+    assert not set(first.tolist()) & set(second.tolist())
+    stale = [first[-1]] * 7
+    fresh = np.repeat(second, 20)
+    samples = echoed_samples(second, np.concatenate([stale, fresh]))
     assert np.all(samples[:7] == -1)
     np.testing.assert_array_equal(samples[7:], np.repeat(np.arange(len(track)), 20))
-    # an echo of no sample at all (another track's) is -1 too
-    assert echoed_samples(track, np.array([host_us[0], 12_345]))[1] == -1
+    assert echoed_samples(second, np.array([second[0], 12_345]))[1] == -1
+    # a session starting at 0 on its clock never sends 0, the echo of "no sample yet"
+    assert session_host_times(0.0, track)[0] == 1
+
+
+def test_two_sessions_on_one_device_each_echo_their_own_samples():
+    track = straight_stroke((2.0, 5.0), (40.0, 0.0), 0.2)
+    with open_device("sim://evita") as driver:
+        one, two = play(driver, CARD, track), play(driver, CARD, track)
+    for result in (one, two):
+        sample = echoed_samples(result.host_us, [s.host_time_echo_us for s in result.states])
+        named = sample[sample >= 0]
+        assert named.size > 150 and np.all(np.diff(named) >= 0)  # in order, this session's
+    assert two.host_us[0] > one.host_us[-1]  # later on the host's clock
 
 
 def test_track_speeds_of_a_lift_are_zero():

@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from typing import Any
 
+import numpy as np
+
 from hcard.calibration.measurement import MeasurementError
 from hcard.calibration.rendering import RenderingError, rendering_error
 from hcard.card_io import to_bytes
@@ -25,7 +27,7 @@ from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb
 from hcard_device.drivers.base import Driver, UploadOutcome
 from hcard_device.drivers.errors import DeviceError
-from hcard_device.drivers.recording import recording
+from hcard_device.drivers.recording import HOST_TIME_MODULO, recording
 from hcard_device.protocol import (
     FRICTION_SCALE,
     Capability,
@@ -61,6 +63,9 @@ class PlayResult:
             ``sha256``, ``content``; spec/measurement-format.md rule M9).
         uri: the device URI.
         started: when the session started, ISO 8601 UTC.
+        host_us: the host time sent with each track sample (FINGER.host_time_us, u32 us):
+            the session's start on the driver's clock plus the sample's track time, so an
+            echo names one sample of this session and never one of an earlier session.
     """
 
     states: list[State]
@@ -77,6 +82,13 @@ class PlayResult:
     profile: dict[str, Any] = field(default_factory=dict)
     uri: str = ""
     started: str = ""
+    host_us: np.ndarray | None = None
+
+    def sent_host_us(self) -> np.ndarray:
+        """:attr:`host_us`, or the track's own times for a result built without them."""
+        if self.host_us is not None:
+            return self.host_us
+        return np.rint(self.track.t * 1e6).astype(np.int64) % HOST_TIME_MODULO
 
     @property
     def faults(self) -> FaultBits:
@@ -141,16 +153,18 @@ def play(driver: Driver, card: pb.Card, track: FingerTrack, *, profile: bytes | 
     driver.start()
     start = driver.clock()
     t_first = float(track.t[0])
+    host_us = session_host_times(start, track)
     last_sent = start
-    for t, x, y, fn, contact in zip(track.t, track.x, track.y, track.fn, track.contact,
-                                    strict=True):
+    for k, (t, x, y, fn, contact) in enumerate(
+        zip(track.t, track.x, track.y, track.fn, track.contact, strict=True)
+    ):
         due = start + (float(t) - t_first)
         while due - last_sent > keepalive_s:
             last_sent += keepalive_s
             states += driver.collect_until(last_sent)
             driver.keepalive()
         states += driver.collect_until(due)
-        driver.send_finger(float(t), float(x), float(y), float(fn), bool(contact))
+        driver.send_finger(int(host_us[k]) * 1e-6, float(x), float(y), float(fn), bool(contact))
         last_sent = due
     states += driver.collect_until(driver.clock() + tail_s)
     duration = driver.clock() - start
@@ -158,7 +172,18 @@ def play(driver: Driver, card: pb.Card, track: FingerTrack, *, profile: bytes | 
     counters = driver.counters()
     return PlayResult(states, duration, upload, info, counters, driver.reports_lost,
                       driver.malformed_inputs, track, card_bytes, card.metadata.title, limits,
-                      profile_record, str(driver.uri), started)
+                      profile_record, str(driver.uri), started, host_us)
+
+
+def session_host_times(start_s: float, track: FingerTrack) -> np.ndarray:
+    """The host times (u32 us) of a session's FINGER reports: ``start_s`` (the driver clock at
+    START) plus each sample's time since the track's first, so they keep the track's spacing
+    (the device times the finger's moves by them, PO2) and differ from every earlier session
+    on a monotonic clock; 0 (which a STATE echo uses for "no sample yet") becomes 1 us."""
+    seconds = start_s + (track.t - float(track.t[0]))
+    host_us = np.rint(seconds * 1e6).astype(np.int64) % HOST_TIME_MODULO
+    host_us[host_us == 0] = 1
+    return host_us
 
 
 def clip_text(clip: ClipReport) -> str:

@@ -31,7 +31,7 @@ if TYPE_CHECKING:
 
 MM = 1e-3
 """Metres per millimetre."""
-_HOST_TIME_MODULO = 1 << 32
+HOST_TIME_MODULO = 1 << 32
 """FINGER.host_time_us wraps at 2**32 us."""
 
 
@@ -59,22 +59,19 @@ def track_speeds(track: FingerTrack) -> np.ndarray:
     return speed
 
 
-def echoed_samples(track: FingerTrack, echoes_us: np.ndarray) -> np.ndarray:
-    """Index of the track sample each echoed host time (us, wrapping) names; -1 for an echo of
-    no sample of this session. A device echoes the last FINGER report it applied, which at the
-    start of a session is still one of the previous session (the same track played again
-    echoes the same times): every echo before the first one of this track's first sample is
-    taken as stale."""
-    host_us = np.rint(track.t * 1e6).astype(np.int64) % _HOST_TIME_MODULO
+def echoed_samples(host_us: np.ndarray, echoes_us: np.ndarray) -> np.ndarray:
+    """Index of the sample each echoed host time (us, wrapping) names, given the host time
+    sent with each sample of the session (``host_us``, :attr:`PlayResult.host_us`); -1 for an
+    echo of no sample of this session. A device echoes the last FINGER report it applied,
+    which at the start of a session is still one of the previous session: the host times of
+    a session start at its own START on a monotonic clock, so such an echo names none."""
+    host_us = np.asarray(host_us, dtype=np.int64) % HOST_TIME_MODULO
+    echoes_us = np.asarray(echoes_us, dtype=np.int64)
     order = np.argsort(host_us, kind="stable")
     sorted_us = host_us[order]
     position = np.searchsorted(sorted_us, echoes_us, side="right") - 1
     found = (position >= 0) & (sorted_us[np.maximum(position, 0)] == echoes_us)
-    index = np.where(found, order[np.maximum(position, 0)], -1)
-    first = np.flatnonzero(echoes_us == host_us[0])
-    if first.size:
-        index[: first[0]] = -1
-    return index
+    return np.where(found, order[np.maximum(position, 0)], -1)
 
 
 def state_columns(states: list[State]) -> dict[str, np.ndarray]:
@@ -184,7 +181,7 @@ def recording(result: PlayResult, *, track_path: str | None = None,
     columns = state_columns(result.states)
     keep = np.concatenate(([True], np.diff(columns["t"]) > 0))
     columns = {name: values[keep] for name, values in columns.items()}
-    sample = echoed_samples(result.track, columns.pop("echo_us"))
+    sample = echoed_samples(result.sent_host_us(), columns.pop("echo_us"))
     speed = np.where(sample >= 0, track_speeds(result.track)[np.maximum(sample, 0)], 0.0)
     speed = np.where(columns["contact"], speed, 0.0)
     echo = np.where(sample >= 0, result.track.t[np.maximum(sample, 0)], math.nan)

@@ -1,0 +1,114 @@
+"""Direct streaming for the device-level dynamics checks, paced so the queue never runs dry.
+
+A device in real time plays one frame per ``1 / frame_rate_hz`` from its stream queue
+(DEVICE_INFO ``stream_capacity_frames``) and plays neutral frames when the queue is empty. A host
+that sends frames only as they fall due leaves the queue empty between its sends (USB/IP, a busy
+host): the device then plays bursts and gaps, and a 400 Hz sinusoid measures as 30-70 Hz. The
+streamer keeps a *lead*: frames sent ahead of the device's playback, sized from the queue
+(half of it, at most :data:`LEAD_S`), topped up against the clock and checked against the
+``stream_queued`` the device reports.
+
+Times in the result are session-relative: :attr:`StreamSession.t_s` counts from the first report
+of the session, and analyses find the stimulus in the ``target_uv`` the device reports (the
+frame it played), never in the device's uptime.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hcard_device.drivers.base import Driver
+from hcard_device.drivers.recording import unwrapped_times
+from hcard_device.protocol import Capability, State
+
+LEAD_S = 0.05
+"""Longest lead of the streamed frames over the device's playback, s."""
+SETTLE_S = 0.05
+"""Reports collected after the last streamed frame has played, s."""
+FINGER_PERIOD_S = 0.01
+"""Host finger reports while streaming (a 100 Hz touch screen), s."""
+FINGER_SPEED_MM_S = 60.0
+"""Speed of the host finger while streaming, mm/s (the firmware's velocity compensation sees a
+sliding finger; a still finger gives zero UV friction at any amplitude)."""
+
+
+@dataclass(frozen=True)
+class StreamSession:
+    """The STATE reports of one streaming session.
+
+    Attributes:
+        states: every report from START to STOP, in arrival order.
+        t_s: their device times since the first of them, s.
+        lead_frames: the lead kept, frames.
+        min_queued: the smallest ``stream_queued`` reported between the first and the last
+            streamed frame played (0: the queue ran dry).
+        underruns: reports in that span with an empty queue.
+    """
+
+    states: list[State]
+    t_s: np.ndarray
+    lead_frames: int
+    min_queued: int
+    underruns: int
+
+    def column(self, name: str) -> np.ndarray:
+        """One STATE field of every report, as floats."""
+        return np.array([getattr(s, name) for s in self.states], dtype=float)
+
+
+def lead_frames(capacity_frames: int, frame_rate_hz: float) -> int:
+    """The lead for a queue of ``capacity_frames``: half of it, at most :data:`LEAD_S`."""
+    return max(1, min(capacity_frames // 2, round(LEAD_S * frame_rate_hz)))
+
+
+def stream(driver: Driver, uv: np.ndarray, ev: np.ndarray | None = None) -> StreamSession:
+    """Stream ``uv`` (and ``ev``, default neutral) frames at the device's frame rate while
+    the host's finger strokes at :data:`FINGER_SPEED_MM_S` (devices with HOST_FINGER), then
+    collect until the queue has played out and STOP."""
+    info = driver.info()
+    rate = float(info.frame_rate_hz)
+    uv = np.asarray(uv, dtype=float)
+    ev = np.ones_like(uv) if ev is None else np.asarray(ev, dtype=float)
+    lead = lead_frames(int(info.stream_capacity_frames), rate)
+    width = info.surface_width_10um * 0.01
+    x0, y = width / 4, info.surface_height_10um * 0.005
+    host_finger = bool(info.capabilities & Capability.HOST_FINGER)
+    if host_finger:
+        driver.set_touch_source(host=True)
+    driver.start()
+    start = driver.clock()
+    states: list[State] = []
+    sent = 0
+    next_finger = start
+    n = uv.shape[0]
+    while sent < n:
+        now = driver.clock()
+        if host_finger and now >= next_finger:
+            x = x0 + FINGER_SPEED_MM_S * (now - start)
+            driver.send_finger(now, x, y, 0.5, True)
+            next_finger += FINGER_PERIOD_S
+        due = min(n, lead + int((now - start) * rate))
+        if due > sent:
+            driver.stream_frames(uv[sent:due], ev[sent:due])
+            sent = due
+        states += driver.collect_until(driver.clock() + 0.001)
+    end = driver.clock() + lead / rate + SETTLE_S  # the lead plays out, and the plate settles
+    while driver.clock() < end:
+        if host_finger and driver.clock() >= next_finger:
+            now = driver.clock()
+            driver.send_finger(now, x0 + FINGER_SPEED_MM_S * (now - start), y, 0.5, True)
+            next_finger += FINGER_PERIOD_S
+        states += driver.collect_until(min(end, driver.clock() + 0.002))
+    driver.stop()
+    queued = np.array([s.stream_queued for s in states], dtype=int)
+    # the span in which streamed frames were playing: from the first report with a queue to
+    # the last one before the queue emptied for good
+    filled = np.flatnonzero(queued > 0)
+    if filled.size:
+        span = queued[filled[0]:filled[-1] + 1]
+        min_queued, underruns = int(span.min()), int(np.count_nonzero(span == 0))
+    else:
+        min_queued, underruns = 0, len(states)
+    return StreamSession(states, unwrapped_times(states), lead, min_queued, underruns)
