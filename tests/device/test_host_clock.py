@@ -100,3 +100,34 @@ def test_the_on_time_targets_follow_the_grating_under_the_finger():
     expected = 0.7 + 0.25 * np.cos(2 * np.pi * 1.5 * x)
     error = np.abs(block.target_uv[settled] - np.clip(expected[settled], 0.0, 1.0))
     assert np.percentile(error, 95) < 0.02
+
+
+def stroke(sim: DeviceSimulation, x0: float, host_t0: float, n: int = 30) -> SimBlock:
+    """START, a 30-sample host stroke at SPEED_MM_S from ``x0`` (host clock from
+    ``host_t0``, each sample applied 1 ms after it was taken), STOP; the frames."""
+    sim.start()
+    blocks = []
+    for k in range(n):
+        blocks.append(sim.step(round(TRANSPORT_S * sim.config.frame_rate_hz)))
+        sim.host_finger(sim.time_s, x0 + SPEED_MM_S * k * SAMPLE_S, 20.0, 0.5, True,
+                        host_time_s=host_t0 + k * SAMPLE_S)
+        sim.feed_watchdog()
+        blocks.append(sim.step(round((SAMPLE_S - TRANSPORT_S) * sim.config.frame_rate_hz)))
+    sim.stop()
+    return SimBlock.concatenate(blocks)
+
+
+def test_start_begins_a_session_whose_first_sample_is_a_touch_down():
+    """PO4a: a device that stays powered renders a second stroke, which starts 40 mm to the
+    right of where the first ended, exactly as a fresh device renders it; without it the
+    renderer takes the gap for a move of 40 mm in 0.2 s and dead-reckons off the grating."""
+    powered = DeviceSimulation(DeviceConfig.evita(), seed=3)
+    powered.load_card(grating_card())
+    stroke(powered, 10.0, 7.0)
+    powered.step(2000)  # 0.2 s between the sessions
+    second = stroke(powered, 56.0, 7.5)
+    fresh = DeviceSimulation(DeviceConfig.evita(), seed=3)
+    fresh.load_card(grating_card())
+    alone = stroke(fresh, 56.0, 7.5)
+    assert np.ptp(alone.target_uv) > 0.3
+    np.testing.assert_allclose(second.target_uv, alone.target_uv, atol=1e-9)

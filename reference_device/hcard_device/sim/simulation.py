@@ -395,10 +395,18 @@ class DeviceSimulation:
         return self._host_profile.replace(limits=own.limits)
 
     def start(self) -> None:
-        """Enable the outputs (the watchdog, if armed, counts from now)."""
+        """Enable the outputs (the watchdog, if armed, counts from now). With the host's
+        finger, a new session (PO4a): its earlier touch samples are forgotten, so the next
+        one is a touch-down and not a jump from where the last session ended."""
         self._running = True
         self._gain = 1.0
         self._last_feed = self.time_s
+        if isinstance(self._finger, HostFinger):
+            self._finger = HostFinger(self.config.surface_mm)
+            self._history = TouchSamples.empty()
+            self._pending = TouchSamples.empty()
+            if self._renderer is not None:
+                self._new_stream()
 
     def stop(self) -> None:
         """Ramp the outputs to zero over ``ramp_down_s`` and drop streamed frames."""
