@@ -84,7 +84,9 @@ def test_bursts_render_like_reports_that_arrive_on_time(burst):
     # the second on the clocks are tied
     settled = on_time.t_s >= (2 * burst * SAMPLE_S + TRANSPORT_S)
     assert np.ptp(on_time.target_uv[settled]) > 0.3  # the grating is rendered
-    np.testing.assert_allclose(bursty.target_uv[settled], on_time.target_uv[settled], atol=1e-6)
+    # (the offset may grow by 50 ppm of host time between the bursts: 0.5 us per sample,
+    # a few thousandths of friction on this grating, far under the 0.08 JND)
+    np.testing.assert_allclose(bursty.target_uv[settled], on_time.target_uv[settled], atol=5e-3)
 
 
 def test_the_on_time_targets_follow_the_grating_under_the_finger():

@@ -10,18 +10,21 @@ report that travelled fastest fixes how far the two clocks are apart, and the ot
 spacing the host gave them.
 
 A host whose times do not advance (one that sends 0, say: the field is free for any value) gets
-its samples timed by their arrival, as in protocol 1.0. The offset is anchored afresh when the
-host's samples pause for longer than :data:`REANCHOR_GAP_S` (a new session, a lift between
-strokes), so two clocks that drift apart (ppm) or a host that restarts its clock never
-accumulate an error.
+its samples timed by their arrival, as in protocol 1.0. The offset is kept across sessions (a
+short first burst of a session is then placed right too) and may grow by
+:data:`DRIFT_ALLOWANCE` of the host time that passes, so two clocks that drift apart (ppm) are
+followed both ways; a jump of the host's clock by more than :data:`REANCHOR_GAP_S` (a restarted
+host) anchors it afresh.
 """
 
 from __future__ import annotations
 
 from hcard_device.sim.finger import HOST_TIME_WRAP_S
 
-REANCHOR_GAP_S = 1.0
-"""A pause between host samples (host time, s) after which the clock offset is anchored again."""
+REANCHOR_GAP_S = 600.0
+"""A step of the host's time (s) after which the clock offset is anchored again."""
+DRIFT_ALLOWANCE = 50e-6
+"""How fast the offset may grow, s per s of host time (50 ppm: two crystal clocks of +-25 ppm)."""
 
 
 class HostClock:
@@ -49,6 +52,7 @@ class HostClock:
             if step > REANCHOR_GAP_S:
                 self._offset_s = arrival_s - host
             else:
-                self._offset_s = min(self._offset_s, arrival_s - host)
+                relaxed = self._offset_s + DRIFT_ALLOWANCE * step
+                self._offset_s = min(relaxed, arrival_s - host)
         self._host_s = host
         return host + self._offset_s
