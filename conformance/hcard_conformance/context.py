@@ -38,6 +38,14 @@ CONTROL_PREFIX = "control:"
 DEFAULT_VECTORS = Path(__file__).resolve().parents[2] / "spec" / "vectors"
 """The vectors of this repository (``spec/vectors``)."""
 
+ECHO_MARGIN_PERIODS = 2
+"""Report periods subtracted from the echo-based clock offset of :func:`reported_frames` (whose
+A1 lag search absorbs a later mapping; the device level, with no lag search, uses one): one
+because a sample is applied up to a period before the first report that echoes it, one because
+a protocol 1.1 device places a sample by the fastest transport it has seen over all sessions
+(PO2), which may be up to a period faster than this session's fastest (seen over USB/IP: a
+dense grating mapped 0.5 ms early fails A1 at 0.10, whose lag search only goes forward)."""
+
 Renderer = Callable[[pb.Card, FingerTrack, RenderOptions], Frames]
 
 
@@ -58,7 +66,7 @@ def reported_frames(states: list[State], track: FingerTrack,
     judged by the device level's latency check, not here. Reports before the first applied
     sample of the session are left out.
     """
-    keep, t = session_times(states, track, host_us)
+    keep, t = session_times(states, track, host_us, ECHO_MARGIN_PERIODS)
     uv = np.array([s.target_uv for s in states], dtype=float)
     ev = np.array([s.target_ev for s in states], dtype=float)
     contact = np.array([bool(s.contact) for s in states])
@@ -67,10 +75,11 @@ def reported_frames(states: list[State], track: FingerTrack,
                   texture=texture[keep])
 
 
-def session_times(states: list[State], track: FingerTrack,
-                  host_us: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def session_times(states: list[State], track: FingerTrack, host_us: np.ndarray | None = None,
+                  margin_periods: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """Which reports belong to the session (from the first that echoes one of its samples on)
-    and every report's time on the track's time base, s (see :func:`reported_frames`)."""
+    and every report's time on the track's time base, s: the echo-based offset less
+    ``margin_periods`` report periods (see :func:`reported_frames`)."""
     from hcard_device.drivers.recording import HOST_TIME_MODULO, echoed_samples, unwrapped_times
 
     if host_us is None:
@@ -85,7 +94,7 @@ def session_times(states: list[State], track: FingerTrack,
     echo_s = track.t[np.maximum(sample, 0)]
     first = np.flatnonzero(applied & np.concatenate(([True], sample[1:] != sample[:-1])))
     period = float(np.median(np.diff(device_t))) if len(states) > 1 else 0.0
-    offset = float(np.min(device_t[first] - echo_s[first])) - period
+    offset = float(np.min(device_t[first] - echo_s[first])) - margin_periods * period
     return keep, device_t - offset
 
 

@@ -83,7 +83,7 @@ def outcome_counts(results: list[CheckResult]) -> dict[str, int]:
     """How many results have each outcome (every outcome present, 0 when none)."""
     counts = dict.fromkeys(OUTCOMES, 0)
     for r in results:
-        counts[r.outcome] += 1
+        counts[r.status] += 1
     return counts
 
 
@@ -135,10 +135,10 @@ def junit_xml(report: SuiteReport) -> bytes:
                 value = getattr(r, key)
                 text = _number(value) if isinstance(value, float) else str(value)
                 ET.SubElement(case_props, "property", name=key, value=text)
-            if r.outcome == ERROR:
+            if r.status == ERROR:
                 error = ET.SubElement(case, "error", message=r.detail, type="error")
                 error.text = r.detail
-            elif r.outcome == UNASSESSED:
+            elif r.status == UNASSESSED:
                 ET.SubElement(case, "skipped", message=r.detail)
             elif not r.passed:
                 failure = ET.SubElement(case, "failure", message=failure_message(r),

@@ -85,12 +85,16 @@ class CheckResult:
 
     @property
     def status(self) -> str:
-        """The :attr:`outcome`: ``PASS``, ``FAIL``, ``ERROR`` or ``UNASSESSED``."""
-        return self.outcome
+        """``PASS``, ``FAIL``, ``ERROR`` or ``UNASSESSED``: ERROR and UNASSESSED as recorded,
+        else from :attr:`passed` (which a check may still set after building the result)."""
+        if self.outcome in (ERROR, UNASSESSED):
+            return self.outcome
+        return PASS if self.passed else FAIL
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready dict (NaN becomes None)."""
         out = asdict(self)
+        out["outcome"] = self.status
         for key in ("value", "threshold"):
             if math.isnan(out[key]):
                 out[key] = None

@@ -306,3 +306,13 @@ def test_a_case_that_cannot_be_assessed_is_reported_not_dropped() -> None:
     assert not report.passed
     root = ET.fromstring(junit_xml(report))
     assert (root.get("skipped"), root.get("errors"), root.get("failures")) == ("2", "0", "0")
+
+
+def test_a_result_failed_after_it_was_built_is_counted_as_failed() -> None:
+    result = measured("t.late", "renderer", "case", "A5", 1.0, 2.5)
+    assert result.status == "PASS"
+    result.passed = False  # as a check does when the metric is infinite
+    report = SuiteReport("demo", ("renderer",), results=[result])
+    assert result.status == "FAIL" and result.to_dict()["outcome"] == "FAIL"
+    assert "0 of 1 cases pass, 1 fail" in table(report)
+    assert ET.fromstring(junit_xml(report)).get("failures") == "1"
