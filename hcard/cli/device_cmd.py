@@ -238,6 +238,11 @@ def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Pat
     faults; SI units) and a sidecar with the conditions the device knows, so `hcard calibrate`
     reads it as it is. The summary ends with the rendered friction error against the card's
     target, from the measured lateral force.
+
+    A recording is written only for a complete session: when another host's session is live
+    (device busy), when this session is lost to another host (taken over, or the card
+    replaced; protocol 1.2, spec section 14) or when the device's reports stop, play exits
+    with status 1 and the reason, and writes nothing (an earlier file at OUTPUT is kept).
     """
     from hcard.calibration.measurement import write_measurement
     from hcard.physics.profile import DeviceProfile

@@ -10,9 +10,17 @@
 - the card upload runs through :class:`~hcard_device.protocol.upload.UploadStore` (staging
   buffer, CRC-32, validation, atomic swap);
 - :meth:`Firmware.advance` runs the simulation and produces one STATE report per
-  ``frame_rate / 1000`` frames into a bounded queue (the oldest dropped and counted).
+  ``frame_rate / 1000`` frames into a bounded queue (the oldest dropped and counted);
+- a SET of LIMITS that lowers the amplitude limit under the plate's present amplitude completes
+  only once the braked plate has landed on it (rule PS5): the firmware runs those frames (at
+  most :attr:`DeviceSimulation.limit_settle_time_s`, their STATE reports included) before it
+  returns, as a device holds the control transfer's status stage, and the next
+  :meth:`Firmware.advance` calls absorb the lead so device time keeps following the caller's
+  clock.
 
-Every accepted host report feeds the simulation's watchdog. All public methods are serialised
+Every accepted host report feeds the simulation's watchdog and keeps the live session alive
+(protocol 1.2 sessions, spec section 14: START/STOP/TAKE_OVER carry the host's token, STATE
+names the session; :class:`Session`). All public methods are serialised
 by :attr:`Firmware.lock` (reentrant), so the USB threads and :meth:`run_realtime` may share one
 firmware.
 """
@@ -80,6 +88,9 @@ MAX_BLOCK_FRAMES = 1000
 """Largest simulation step of :meth:`Firmware.advance`, frames (0.1 s at 10 kHz)."""
 REALTIME_PERIOD_S = 1e-3
 """Wake-up period of :meth:`Firmware.run_realtime`, s."""
+LIMIT_SETTLE_MAX_S = 0.005
+"""Longest time a SET of LIMITS may run the device to bring the plate under a lowered limit, s
+(rule PS5's bound; the reference devices need at most 0.81 ms and 3.52 ms)."""
 REALTIME_MAX_LAG_S = 0.05
 """Most simulated time :meth:`Firmware.run_realtime` catches up in one go, s; beyond it the
 device falls behind the wall clock rather than stalling the USB threads."""
@@ -87,9 +98,9 @@ device falls behind the wall clock rather than stalling the USB threads."""
 _CONTACT, _RUNNING, _CARD_LOADED = (
     int(StateFlags.CONTACT), int(StateFlags.RUNNING), int(StateFlags.CARD_LOADED)
 )
-_HOST_FINGER, _STREAMING, _UPLOADING, _HOST_PROFILE = (
+_HOST_FINGER, _STREAMING, _UPLOADING, _HOST_PROFILE, _SESSION = (
     int(StateFlags.HOST_FINGER), int(StateFlags.STREAMING), int(StateFlags.UPLOADING),
-    int(StateFlags.HOST_PROFILE),
+    int(StateFlags.HOST_PROFILE), int(StateFlags.SESSION),
 )
 _I16 = (-0x8000, 0x7FFF)
 _U16 = 0xFFFF
@@ -129,6 +140,60 @@ def _fault_bits(sim_faults: int) -> int:
         if sim_faults & sim_bit:
             out |= wire_bit
     return out
+
+
+class Session:
+    """Session ownership of one device (spec section 14, protocol 1.2).
+
+    Attributes:
+        number: sessions begun since power-up, wrapping u16 (0: none yet); STATE
+            ``session_number`` (rule PN2).
+        token: the owner's token while a session is live (0: an anonymous session, begun by
+            a 1.0/1.1 host's START); None when no session is live.
+        last_host_s: device time of the last host report that was not malformed or refused,
+            s: the session ends ``timeout_s`` after it (rule PN7).
+        timeout_s: the device's ``watchdog_ms``, s.
+        ended: how the last session ended: ``""`` (none ended yet), ``stop``, ``timeout`` or
+            ``take-over``.
+    """
+
+    def __init__(self, timeout_s: float) -> None:
+        self.number = 0
+        self.token: int | None = None
+        self.last_host_s = 0.0
+        self.timeout_s = float(timeout_s)
+        self.ended = ""
+
+    @property
+    def live(self) -> bool:
+        """A session is live (state flag SESSION)."""
+        return self.token is not None
+
+    def owned_by_other(self, token: int) -> bool:
+        """A live session whose token is not ``token`` (rules PN3, PN4)."""
+        return self.token is not None and self.token != token
+
+    def begin(self, token: int) -> None:
+        """A new session for ``token`` (START with no session live, or TAKE_OVER: PN1, PN6)."""
+        if self.token is not None:
+            self.ended = "take-over"
+        self.number = (self.number + 1) & _U16
+        self.token = token
+
+    def end(self, how: str) -> None:
+        """End the live session (STOP, PN4; timeout, PN7)."""
+        if self.token is not None:
+            self.token = None
+            self.ended = how
+
+    def expire(self, now_s: float) -> None:
+        """End the live session when no host report arrived for :attr:`timeout_s` (PN7)."""
+        if self.token is not None and now_s - self.last_host_s > self.timeout_s:
+            self.end("timeout")
+
+    def busy_detail(self) -> str:
+        """Why a request was refused, for UPLOAD_STATUS ``detail`` (at most 46 bytes)."""
+        return f"session {self.number} of token {self.token} is live"
 
 
 def _no_finger_track() -> FingerTrack:
@@ -183,6 +248,7 @@ class Firmware:
         self._host_time_echo = 0
         self._clip_index = 0
         self._sequence = 0
+        self.session = Session(self.config.watchdog_s)
         # counters (spec 8.4), zeroed by CLEAR_COUNTERS
         self.input_reports = 0
         self.input_dropped = 0
@@ -207,7 +273,7 @@ class Firmware:
             except ProtocolError:
                 self.rejected_requests += 1
                 raise
-            self.sim.feed_watchdog()
+            self._host_report()
             return self._feature_report(cls).encode()
 
     def set_feature(self, data: bytes) -> None:
@@ -227,7 +293,7 @@ class Firmware:
                 raise
             if not accepted:
                 self.rejected_requests += 1
-            self.sim.feed_watchdog()
+            self._host_report()
 
     def handle_output(self, data: bytes) -> None:
         """An output report (interrupt OUT or SET_REPORT(Output)), report ID first.
@@ -246,7 +312,13 @@ class Firmware:
                 return
             if not (isinstance(report, Control) and report.command == Command.CLEAR_COUNTERS):
                 self.output_reports += 1  # CLEAR_COUNTERS leaves every counter at 0
-            self.sim.feed_watchdog()
+            self._host_report()
+
+    def _host_report(self) -> None:
+        """A host report that was not malformed or refused arrived: it feeds the watchdog
+        (PS3) and keeps the live session alive (PN7)."""
+        self.sim.feed_watchdog()
+        self.session.last_host_s = self.sim.time_s
 
     # ---- time -------------------------------------------------------------------------------
 
@@ -258,6 +330,8 @@ class Firmware:
         with self.lock:
             self._frame_debt += seconds * self.config.frame_rate_hz
             frames = math.floor(self._frame_debt + 1e-9)
+            if frames <= 0:
+                return  # a SET of LIMITS ran ahead (PS5): the clock catches up first
             self._frame_debt = max(self._frame_debt - frames, 0.0)
             while frames > 0:
                 n = min(frames, MAX_BLOCK_FRAMES)
@@ -342,6 +416,7 @@ class Firmware:
                 max_current_a=report.max_current_a,
             )
             self._clip_index = 0
+            self._settle_limits()
             return True
         if isinstance(report, ClipReport):
             self._clip_index = report.item_index
@@ -353,12 +428,33 @@ class Firmware:
         assert isinstance(report, UploadEnd)
         if report.action == UploadAction.ABORT:
             return self.upload.abort(now)
+        self.session.expire(now)
+        if self.session.token:  # a session with a token is live: no commit (PN5)
+            self._pending_faults |= FaultBits.SESSION_BUSY
+            return self.upload.busy(self.session.busy_detail())
         if report.action == UploadAction.COMMIT_PROFILE:
             return self.upload.commit_profile(self._load_profile, now)
         committed = self.upload.commit(self._load_card, now)
         if committed:
             self._clip_index = 0
         return committed
+
+    def _settle_limits(self) -> int:
+        """Run the device, frame by frame with its STATE reports, until the limits set are in
+        force (rule PS5: the plate braked down to a lowered amplitude limit), at most
+        :data:`LIMIT_SETTLE_MAX_S`; the frames run are owed to the caller's clock (a negative
+        frame debt that :meth:`advance` absorbs). Returns the frames run."""
+        rate = self.config.frame_rate_hz
+        budget = math.ceil(LIMIT_SETTLE_MAX_S * rate)
+        frames = 0
+        while self.sim.limits_pending and frames < budget:
+            # the frames the braking surely needs in one step, then frame by frame
+            n = min(max(math.floor(self.sim.pending_settle_time_s * rate), 1), budget - frames)
+            queued_before = self.sim.queued_frames
+            self._run_block(self.sim.step(n), queued_before)
+            frames += n
+        self._frame_debt -= frames
+        return frames
 
     def _load_card(self, card: pb.Card) -> None:
         """The loader of a COMMIT: the card goes into force between two frames."""
@@ -509,12 +605,8 @@ class Firmware:
         command = report.command
         if command == Command.KEEPALIVE:
             return True
-        if command == Command.START:
-            self.sim.start()
-            return True
-        if command == Command.STOP:
-            self.sim.stop()
-            return True
+        if command in (Command.START, Command.STOP, Command.TAKE_OVER):
+            return self._session_command(command, report.argument)
         if command == Command.CLEAR_COUNTERS:
             self.input_reports = self.input_dropped = self.output_reports = 0
             self.rejected_requests = self.stream_gaps = self.watchdog_trips = 0
@@ -522,6 +614,9 @@ class Firmware:
             self._stream_dropped_base = self.sim.stream_overruns
             return True
         if command == Command.DEVICE_PROFILE:
+            self.session.expire(self.sim.time_s)
+            if self.session.token:  # PN5: the profile in force stays during a session
+                return self._refuse_busy()
             self.sim.set_profile(None)
             self._clip_index = 0
             return True
@@ -537,6 +632,32 @@ class Firmware:
         self._touch_source = TouchSource.INTERNAL
         self.sim.use_internal_finger(self.internal_track or _no_finger_track())
         return True
+
+    def _session_command(self, command: int, token: int) -> bool:
+        """START (PN1, PN3), STOP (PN4) or TAKE_OVER (PN6) with the host's ``token``; False
+        when refused because another token's session is live."""
+        session = self.session
+        session.expire(self.sim.time_s)
+        if command == Command.TAKE_OVER:
+            session.begin(token)
+            self.sim.start()
+            return True
+        if session.owned_by_other(token):
+            return self._refuse_busy()
+        if command == Command.STOP:
+            self.sim.stop()
+            session.end("stop")
+            return True
+        if not session.live:
+            session.begin(token)
+        self.sim.start()
+        return True
+
+    def _refuse_busy(self) -> bool:
+        """A request refused because another host's session is live: flagged SESSION_BUSY
+        (and INVALID_REQUEST, PE2) in the next STATE report by the caller's refusal."""
+        self._pending_faults |= FaultBits.SESSION_BUSY
+        return False
 
     # ---- input reports ----------------------------------------------------------------------
 
@@ -585,6 +706,7 @@ class Firmware:
         )
         for (time_us, contact, x, y, f0, f1, f2, f3, lateral, amplitude, voltage, current,
              uv, ev, texture, queued, sim_faults) in columns:  # fmt: skip
+            self.session.expire(time_us * TIME_UNIT_S)
             self._emit(State(
                 timestamp_us=time_us & _U32, sequence=self._sequence,
                 flags=self._flags(contact), x_10um=x, y_10um=y,
@@ -594,7 +716,7 @@ class Firmware:
                 faults=self._faults(sim_faults), dropped_reports=self.input_dropped & _U16,
                 rejected_requests=self.rejected_requests & _U16,
                 stream_queued=min(max(queued, 0), _U16), host_time_echo_us=self._host_time_echo,
-                card_generation=self.upload.generation,
+                card_generation=self.upload.generation, **self._session_fields(),
             ))  # fmt: skip
 
     def _flags(self, contact: bool) -> int:
@@ -612,7 +734,14 @@ class Firmware:
             flags |= _UPLOADING
         if self.sim.host_profile:
             flags |= _HOST_PROFILE
+        if self.session.live:
+            flags |= _SESSION
         return flags
+
+    def _session_fields(self) -> dict[str, int]:
+        """STATE ``session_number`` and ``session_token`` (rule PN2)."""
+        return {"session_number": self.session.number,
+                "session_token": self.session.token or 0}
 
     def _faults(self, sim_faults: int) -> int:
         """STATE faults: the interval's simulation faults plus the firmware's events since the
@@ -645,6 +774,7 @@ class Firmware:
             target_ev_x1e4=FRICTION_SCALE, texture=-1, faults=0, dropped_reports=0,
             rejected_requests=self.rejected_requests & _U16, stream_queued=0,
             host_time_echo_us=self._host_time_echo, card_generation=self.upload.generation,
+            **self._session_fields(),
         )  # fmt: skip
 
 

@@ -80,8 +80,9 @@ def report_strategy(cls: type[Report]) -> st.SearchStrategy[Report]:
     elif cls is Control:
         fields["command"] = st.sampled_from([int(c) for c in Command])
         return st.builds(
-            lambda command, argument: Control(
-                command, argument if command == Command.SET_TOUCH_SOURCE else 0
+            lambda command, argument: Control(  # TAKE_OVER needs a token (1.2, PN6)
+                command, argument if command == Command.SET_TOUCH_SOURCE
+                else 1 if command == Command.TAKE_OVER else 0
             ),
             fields["command"],
             _ints(0, 1),
@@ -131,7 +132,7 @@ def test_report_table_matches_the_spec() -> None:
 def test_report_sizes_and_ids() -> None:
     assert {c.REPORT_ID for c in REPORT_CLASSES} == {int(r) for r in ReportId}
     assert all(c.size() <= 64 for c in REPORT_CLASSES)
-    assert State.size() == 52
+    assert State.size() == 55 and State.LEGACY_SIZE == 52  # 1.2 appends the session
     assert Stream.size() == UploadData.size() == UploadStatus.size() == 64
     assert report_ids(ReportKind.OUTPUT) == (0x10, 0x11, 0x12)
     assert report_ids(ReportKind.FEATURE) == tuple(range(0x20, 0x28))
@@ -259,6 +260,10 @@ def test_truncated_oversized_and_misnumbered_reports_are_rejected(
     cls: type[Report], data: st.DataObject
 ) -> None:
     wire = data.draw(report_strategy(cls)).encode()
+    if cls is State:  # a 1.0/1.1 STATE (no session fields, PV4) reads as session 0, token 0
+        legacy = cls.decode(wire[:State.LEGACY_SIZE])
+        assert (legacy.session_number, legacy.session_token) == (0, 0)
+        wire = wire[:State.LEGACY_SIZE]
     with pytest.raises(ProtocolError, match="shorter"):
         cls.decode(wire[:-1])
     with pytest.raises(ProtocolError, match="64-byte"):
@@ -298,7 +303,8 @@ def test_unknown_and_wrong_kind_ids_are_rejected() -> None:
          + bytes(56), r"frame 0: uv 10001"),
         (b"\x11\x00\x00\x02" + bytes([0x10, 0x27, 0x10, 0x27, 0, 0, 0x0F, 0x27]) + bytes(52),
          r"frame 1: ev 9999"),
-        (b"\x12\x07\x00", r"unknown command 7"),
+        (b"\x12\x08\x00", r"unknown command 8"),
+        (b"\x12\x07\x00", r"TAKE_OVER needs a session token"),
         (b"\x12\x04\x02", r"unknown touch source 2"),
     ],
 )

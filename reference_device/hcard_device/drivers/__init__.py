@@ -12,7 +12,14 @@ from collections.abc import Sequence
 from typing import Any
 
 from hcard_device.drivers.base import DEFAULT_TIMEOUT_S, DeviceListing, Driver
-from hcard_device.drivers.errors import DeviceError, DeviceStall, DeviceTimeout, UriError
+from hcard_device.drivers.errors import (
+    DeviceError,
+    DeviceStall,
+    DeviceTimeout,
+    SessionBusy,
+    SessionLost,
+    UriError,
+)
 from hcard_device.drivers.uri import SCHEMES, DeviceUri, parse_uri
 from hcard_device.usb.transport import DEFAULT_HOST, DEFAULT_PORT
 
@@ -24,6 +31,8 @@ __all__ = [
     "DeviceTimeout",
     "DeviceUri",
     "Driver",
+    "SessionBusy",
+    "SessionLost",
     "UriError",
     "driver_classes",
     "list_devices",

@@ -9,6 +9,13 @@ direct streaming, decoding of STATE reports, loss accounting) is implemented onc
 Every wait is bounded by a timeout; a device that vanishes raises :class:`DeviceError`, never a
 hang. A driver is used from one thread at a time.
 
+Sessions (protocol 1.2, spec section 14): :meth:`Driver.start` sends START with a token this
+driver chose and waits until the STATE reports name the session granted to it;
+:meth:`Driver.check_free` raises :class:`SessionBusy` while another host's session is live;
+afterwards every STATE report of another session, or of another card, raises
+:class:`SessionLost` from :meth:`Driver.read_inputs` and :meth:`Driver.collect_until`, and the
+driver sends nothing more that changes the device.
+
 >>> from hcard_device.drivers import open_device
 >>> with open_device("sim://") as driver:                       # doctest: +SKIP
 ...     driver.upload_card(card); driver.start()
@@ -19,6 +26,8 @@ hang. A driver is used from one thread at a time.
 from __future__ import annotations
 
 import abc
+import contextlib
+import random
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -27,7 +36,7 @@ from typing import ClassVar
 
 from hcard.card_io import to_bytes
 from hcard.v1 import card_pb2 as pb
-from hcard_device.drivers.errors import DeviceError, DeviceStall
+from hcard_device.drivers.errors import DeviceError, DeviceStall, SessionBusy, SessionLost
 from hcard_device.drivers.uri import DeviceUri
 from hcard_device.protocol import (
     PROTOCOL_MAJOR,
@@ -37,6 +46,7 @@ from hcard_device.protocol import (
     Control,
     Counters,
     DeviceInfo,
+    FaultBits,
     Finger,
     Limits,
     ProtocolError,
@@ -58,6 +68,16 @@ DEFAULT_TIMEOUT_S = 1.0
 COMMIT_TIMEOUT_S = 5.0
 """Longest wait for the device to validate and commit an uploaded card, s."""
 _SEQUENCE_MODULO = 1 << 16
+SESSION_PROTOCOL = (1, 2)
+"""First protocol version with sessions (spec section 14)."""
+SESSION_PEEK_S = 0.02
+"""Input reports a real-time driver reads to learn the device's session now, s: long enough
+to drain what queued while it was not reading (the reference device's IN queue holds 32 ms),
+so the newest report read is current."""
+SESSION_MARGIN_S = 0.05
+"""Silence beyond ``watchdog_ms`` a driver keeps before judging another host's session still
+fed (rule PN8), s."""
+_TOKENS = random.SystemRandom()
 
 
 @dataclass(frozen=True)
@@ -135,6 +155,16 @@ class Driver(abc.ABC):
         self._stream_seq = 0
         self._info: DeviceInfo | None = None
         self._closed = False
+        self.session_token: int | None = None
+        """Token of the session this driver owns or asked for (rule PN1); None: none."""
+        self.session_number: int | None = None
+        """STATE ``session_number`` granted to this driver; None while it owns no session."""
+        self.session_lost = ""
+        """Why this driver's session was lost (rule PN9); empty while it was not."""
+        self._session_card: int | None = None
+        self._session_ended = False
+        self._previous_session: tuple[int, int] | None = None
+        self._last_state: State | None = None
 
     # ------------------------------------------------------------------ plugin interface
 
@@ -189,8 +219,10 @@ class Driver(abc.ABC):
                 from None
 
     def set_report(self, report: Report) -> None:
-        """SET_REPORT(Feature) of a feature report."""
+        """SET_REPORT(Feature) of a feature report (:class:`SessionLost` once the session
+        was lost: rule PN9)."""
         self._check_open()
+        self._check_session()
         self._set_feature(report.encode())
 
     def info(self) -> DeviceInfo:
@@ -281,6 +313,7 @@ class Driver(abc.ABC):
         for report in reports:
             try:
                 self._check_open()
+                self._check_session()
                 self._set_feature(report)
             except DeviceStall:
                 status = self.upload_status()
@@ -315,8 +348,9 @@ class Driver(abc.ABC):
     # ------------------------------------------------------------------ output reports
 
     def send(self, report: Report) -> None:
-        """Send an output report."""
+        """Send an output report (:class:`SessionLost` once the session was lost: PN9)."""
         self._check_open()
+        self._check_session()
         self._write_output(report.encode())
 
     def command(self, command: Command, argument: int = 0) -> None:
@@ -324,12 +358,54 @@ class Driver(abc.ABC):
         self.send(Control(int(command), argument))
 
     def start(self) -> None:
-        """Start rendering (the active card, or streamed frames)."""
-        self.command(Command.START)
+        """Start rendering (the active card, or streamed frames).
+
+        On a protocol 1.2 device this begins a session (rule PN1): :meth:`check_free` first,
+        then START with a new token, then wait (up to :attr:`timeout_s`) for a STATE report
+        naming the session granted (the reports read meanwhile, from before the session or
+        its first, are not returned: a recording starts after START returns). A START of the
+        session this driver owns restarts rendering in it. On an older device: START with
+        argument 0 (anonymous).
+
+        Raises:
+            SessionBusy: another host's session is live (PN3, PN8).
+            SessionLost: this driver's session was lost earlier (PN9).
+            DeviceError: no session was granted within the timeout.
+        """
+        self._check_session()
+        if not self.sessions_supported():
+            self.command(Command.START)
+            return
+        if self.session_number is not None:
+            self.command(Command.START, self.session_token or 0)
+            return
+        self.check_free()
+        self._begin_session(Command.START)
+
+    def take_over(self) -> None:
+        """End whatever session is live and begin one owned by this driver (CONTROL
+        TAKE_OVER, rule PN6): the other host's driver then raises :class:`SessionLost`.
+
+        Raises:
+            DeviceError: the device has no sessions (protocol before 1.2), or none was
+                granted within the timeout.
+        """
+        self._check_session()
+        if not self.sessions_supported():
+            info = self.info()
+            raise DeviceError(f"{self.uri}: the device speaks protocol {info.protocol_major}."
+                              f"{info.protocol_minor}: no sessions, no TAKE_OVER (1.2)")
+        self.session_number = None
+        self._begin_session(Command.TAKE_OVER)
 
     def stop(self) -> None:
-        """Stop: the device ramps its outputs to zero."""
-        self.command(Command.STOP)
+        """Stop: the device ramps its outputs to zero, and this driver's session ends (PN4).
+        After a lost session nothing is sent (the device is another host's, PN9)."""
+        if self.session_lost:
+            return
+        token = self.session_token if self.session_number is not None else 0
+        self.command(Command.STOP, token or 0)
+        self._end_session()
 
     def keepalive(self) -> None:
         """Feed the device's watchdog without changing anything."""
@@ -366,6 +442,125 @@ class Driver(abc.ABC):
         self._stream_seq = (self._stream_seq + len(reports)) % _SEQUENCE_MODULO
         return len(reports)
 
+    # ------------------------------------------------------------------ sessions (1.2)
+
+    def sessions_supported(self) -> bool:
+        """The device speaks protocol 1.2 or later of major 1 (spec section 14)."""
+        info = self.info()
+        return (info.protocol_major, info.protocol_minor) >= SESSION_PROTOCOL
+
+    def check_free(self) -> None:
+        """Raise :class:`SessionBusy` when another host's session is live (rule PN8).
+
+        Looks at the STATE reports (reading them sends nothing). When they show another
+        host's session, the driver stays silent for ``watchdog_ms`` + :data:`SESSION_MARGIN_S`
+        and looks again: a session whose host is gone has then ended (PN7); one still live
+        is fed by its host, and the device is busy. The reports read (those waiting, at
+        least one) precede any session of this driver and are not returned to the caller.
+        No-op on a device without sessions.
+        """
+        if not self.sessions_supported():
+            return
+        seen = self._observe(SESSION_PEEK_S if self.realtime else 0.0)
+        if not seen or not self._foreign(seen[-1]):
+            return
+        first = seen[-1]
+        waited = self.info().watchdog_ms * 1e-3 + SESSION_MARGIN_S
+        later = self._observe(waited)
+        now = later[-1] if later else first
+        if self._foreign(now) and now.session_number == first.session_number:
+            raise SessionBusy(
+                f"{self.uri}: device busy: session {now.session_number} of another host "
+                f"({_owner(now.session_token)}) is live and still fed after {waited * 1e3:.0f} "
+                "ms of silence from this host; wait for it to stop, or take it over (spec "
+                "PN3, PN6)")
+
+    @property
+    def last_state(self) -> State | None:
+        """The newest STATE report this driver decoded (None before the first)."""
+        return self._last_state
+
+    def _foreign(self, state: State) -> bool:
+        """``state`` shows a live session this driver does not own."""
+        if not state.session_live:
+            return False
+        return (self.session_number is None or state.session_number != self.session_number
+                or state.session_token != self.session_token)
+
+    def _observe(self, seconds: float) -> list[State]:
+        """Reports arriving within ``seconds`` (at least one, waiting up to
+        :attr:`timeout_s`). They are the driver's own look at the session: the caller of
+        :meth:`start` or :meth:`check_free` does not get them."""
+        return self.collect_until(self.clock() + seconds) or self.read_inputs()
+
+    def _new_token(self) -> int:
+        """A token 1..255 other than the live session's and this driver's previous one."""
+        avoid = {0}
+        if self._last_state is not None and self._last_state.session_live:
+            avoid.add(self._last_state.session_token)
+        if self._previous_session is not None:
+            avoid.add(self._previous_session[0])
+        return _TOKENS.choice([t for t in range(1, 256) if t not in avoid])
+
+    def _begin_session(self, command: Command) -> None:
+        """Send START or TAKE_OVER with a new token and wait for the grant (PN1, PN6)."""
+        token = self._new_token()
+        self.session_token, self.session_lost = token, ""
+        self.command(command, token)
+        deadline = self.clock() + self.timeout_s
+        while True:
+            for state in self._observe(0.0):
+                if state.session_live and state.session_token == token and \
+                        (token, state.session_number) != self._previous_session:
+                    self.session_number = state.session_number
+                    self._session_card = state.card_generation
+                    self._session_ended = False
+                    return
+                if state.faults & FaultBits.SESSION_BUSY and self._foreign(state):
+                    self.session_token = None
+                    raise SessionBusy(
+                        f"{self.uri}: device busy: START refused, session "
+                        f"{state.session_number} of another host "
+                        f"({_owner(state.session_token)}) is live (spec PN3)")
+            if self.clock() >= deadline:
+                self.session_token = None
+                raise DeviceError(f"{self.uri}: no session granted within {self.timeout_s:g} s "
+                                  f"of {command.name} (token {token}; spec PN1)")
+
+    def _end_session(self) -> None:
+        if self.session_number is not None and self.session_token is not None:
+            self._previous_session = (self.session_token, self.session_number)
+        self.session_number = None
+        self.session_token = None
+
+    def _track_session(self, state: State) -> None:
+        """Raise :class:`SessionLost` when ``state`` belongs to another session than this
+        driver's, or shows another card than the one in force when it began (rule PN9)."""
+        self._last_state = state
+        number = self.session_number
+        if number is None or self.session_lost:
+            return
+        if state.session_number == number and not state.session_live:
+            self._session_ended = True  # PN7: the device ended it after host silence
+        if state.session_number != number:
+            how = ("ended by the device after host silence (PN7), then another host began"
+                   if self._session_ended else "taken over by")
+            self._lose(f"session {number} was lost: {how} session {state.session_number} "
+                       f"({_owner(state.session_token)}) at device time "
+                       f"{state.timestamp_us * 1e-6:.3f} s")
+        if self._session_card is not None and state.card_generation != self._session_card:
+            self._lose(f"session {number} was lost: the active card was replaced (generation "
+                       f"{self._session_card} -> {state.card_generation}) by another host at "
+                       f"device time {state.timestamp_us * 1e-6:.3f} s")
+
+    def _lose(self, reason: str) -> None:
+        self.session_lost = f"{self.uri}: {reason} (spec PN9)"
+        raise SessionLost(self.session_lost)
+
+    def _check_session(self) -> None:
+        if self.session_lost:
+            raise SessionLost(self.session_lost)
+
     # ------------------------------------------------------------------ input reports
 
     def parse_input(self, data: bytes) -> State | None:
@@ -384,6 +579,13 @@ class Driver(abc.ABC):
         self.reports_received += 1
         return state
 
+    def accept_input(self, data: bytes) -> State | None:
+        """:meth:`parse_input`, then session tracking (:class:`SessionLost`, rule PN9)."""
+        state = self.parse_input(data)
+        if state is not None:
+            self._track_session(state)
+        return state
+
     def read_inputs(self, timeout_s: float | None = None,
                     max_count: int | None = None) -> list[State]:
         """STATE reports: waits up to ``timeout_s`` (default :attr:`timeout_s`) for the first,
@@ -394,7 +596,7 @@ class Driver(abc.ABC):
         states: list[State] = []
         data = self._read_input(wait)
         while data is not None:
-            state = self.parse_input(data)
+            state = self.accept_input(data)
             if state is not None:
                 states.append(state)
                 if max_count is not None and len(states) >= max_count:
@@ -403,7 +605,8 @@ class Driver(abc.ABC):
         return states
 
     def collect_until(self, t_s: float) -> list[State]:
-        """Every STATE report that arrives until :meth:`clock` reaches ``t_s``."""
+        """Every STATE report that arrives until :meth:`clock` reaches ``t_s``. Raises
+        :class:`SessionLost` when a report shows this driver's session lost (rule PN9)."""
         states: list[State] = []
         while True:
             remaining = t_s - self.clock()
@@ -418,8 +621,12 @@ class Driver(abc.ABC):
             raise DeviceError(f"{self.uri}: the driver is closed")
 
     def close(self) -> None:
-        """Close the connection (idempotent)."""
+        """Close the connection (idempotent). A session this driver still owns is ended
+        first with STOP (rule PN4), so the next host need not wait for PN7."""
         if not self._closed:
+            if self.session_number is not None and not self.session_lost:
+                with contextlib.suppress(DeviceError):  # gone: PN7 ends the session
+                    self.stop()
             self._closed = True
             self._close()
 
@@ -429,3 +636,8 @@ class Driver(abc.ABC):
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  tb: TracebackType | None) -> None:
         self.close()
+
+
+def _owner(token: int) -> str:
+    """The owner of a session, for messages: its token, or anonymous (a 1.0/1.1 host)."""
+    return f"token {token}" if token else "anonymous, a protocol 1.0/1.1 host"

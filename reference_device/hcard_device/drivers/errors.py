@@ -18,5 +18,18 @@ class DeviceStall(DeviceError):
     """The device refused a request with a USB STALL (e.g. an unknown or read-only report ID)."""
 
 
+class SessionBusy(DeviceError):
+    """Another host's session is live on the device (spec section 14, rules PN3, PN8): this
+    host's START was refused, or the driver saw the session and sent nothing that changes the
+    device. The other host keeps the device; wait for it to STOP, or take the session over."""
+
+
+class SessionLost(DeviceError):
+    """This host's session ended under it (spec section 14, rule PN9): another host took it
+    over or began a new session (STATE ``session_number`` changed), or the active card was
+    replaced (``card_generation`` changed). Nothing the host received after that is its own;
+    the driver sends nothing more that changes the device."""
+
+
 class UriError(HcardError):
     """A device URI is malformed or names an unknown scheme."""

@@ -26,7 +26,7 @@ from hcard.card_io import to_bytes
 from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb
 from hcard_device.drivers.base import Driver, UploadOutcome
-from hcard_device.drivers.errors import DeviceError
+from hcard_device.drivers.errors import DeviceError, SessionLost
 from hcard_device.drivers.recording import HOST_TIME_MODULO, recording
 from hcard_device.protocol import (
     FRICTION_SCALE,
@@ -41,6 +41,9 @@ from hcard_device.protocol import (
 
 TAIL_S = 0.05
 """Reports collected after the last track sample before STOP, s."""
+STREAM_STALL_S = 0.5
+"""Longest time without any STATE report, on the driver's clock, at the end of a session
+before :func:`play` declares the input stream stopped and records nothing, s."""
 
 
 @dataclass(frozen=True)
@@ -136,10 +139,20 @@ def play(driver: Driver, card: pb.Card, track: FingerTrack, *, profile: bytes | 
     on the driver's clock. Between samples the driver collects STATE reports; a KEEPALIVE is
     sent when samples are further apart than half the device's watchdog time.
 
+    Sessions (protocol 1.2, spec section 14): before it changes anything, :func:`play` checks
+    that no other host's session is live (rule PN8); START begins its own session. A result is
+    returned only for a complete session: when the session is lost (PN9) or the input stream
+    stops (:data:`STREAM_STALL_S`), it raises, and the caller records nothing.
+
     Raises:
-        DeviceError: the device is missing, refuses the card or the profile, or vanishes.
+        SessionBusy: another host's session is live; nothing was sent that changes the device.
+        SessionLost: the session was lost while playing (the error says how and after how
+            much of the track); nothing more was sent to the device.
+        DeviceError: the device is missing, refuses the card or the profile, vanishes, or its
+            input stream stopped.
     """
     info = driver.info()
+    driver.check_free()
     profile_record = _profile_record(driver, info, profile)
     card_bytes = to_bytes(card)
     upload = driver.upload_card(card_bytes)
@@ -152,27 +165,60 @@ def play(driver: Driver, card: pb.Card, track: FingerTrack, *, profile: bytes | 
     started = datetime.now(timezone.utc).isoformat(timespec="seconds")
     driver.start()
     start = driver.clock()
-    t_first = float(track.t[0])
     host_us = session_host_times(start, track)
-    last_sent = start
+    try:
+        last_report = _drive(driver, track, host_us, start, keepalive_s, tail_s, states)
+    except SessionLost as exc:
+        raise SessionLost(f"{exc}; play stopped after {driver.clock() - start:.3f} s of the "
+                          f"{float(track.t[-1] - track.t[0]):.3f} s track with "
+                          f"{len(states)} reports: nothing is recorded") from None
+    duration = driver.clock() - start
+    _check_stream(driver, start + duration - last_report, duration)
+    driver.stop()
+    counters = driver.counters()
+    return PlayResult(states, duration, upload, info, counters, driver.reports_lost,
+                      driver.malformed_inputs, track, card_bytes, card.metadata.title, limits,
+                      profile_record, str(driver.uri), started, host_us)
+
+
+def _drive(driver: Driver, track: FingerTrack, host_us: np.ndarray, start: float,
+           keepalive_s: float, tail_s: float, states: list[State]) -> float:
+    """Send the track's FINGER reports at their times (relative to ``start`` on the driver's
+    clock, s) with KEEPALIVEs in long gaps, appending every STATE report to ``states``;
+    returns the driver clock when the last report arrived (``start`` if none), s."""
+    t_first = float(track.t[0])
+    last_sent = last_report = start
+
+    def collect(until: float) -> None:
+        nonlocal last_report
+        new = driver.collect_until(until)
+        if new:
+            states.extend(new)
+            last_report = driver.clock()
+
     for k, (t, x, y, fn, contact) in enumerate(
         zip(track.t, track.x, track.y, track.fn, track.contact, strict=True)
     ):
         due = start + (float(t) - t_first)
         while due - last_sent > keepalive_s:
             last_sent += keepalive_s
-            states += driver.collect_until(last_sent)
+            collect(last_sent)
             driver.keepalive()
-        states += driver.collect_until(due)
+        collect(due)
         driver.send_finger(int(host_us[k]) * 1e-6, float(x), float(y), float(fn), bool(contact))
         last_sent = due
-    states += driver.collect_until(driver.clock() + tail_s)
-    duration = driver.clock() - start
-    driver.stop()
-    counters = driver.counters()
-    return PlayResult(states, duration, upload, info, counters, driver.reports_lost,
-                      driver.malformed_inputs, track, card_bytes, card.metadata.title, limits,
-                      profile_record, str(driver.uri), started, host_us)
+    collect(driver.clock() + tail_s)
+    return last_report
+
+
+def _check_stream(driver: Driver, silent_s: float, duration_s: float) -> None:
+    """Raise DeviceError when no STATE report arrived in the last :data:`STREAM_STALL_S` of
+    the session (``silent_s``, s): the recording would be truncated, not complete."""
+    if silent_s > STREAM_STALL_S:
+        raise DeviceError(
+            f"{driver.uri}: the input stream stopped {silent_s:.3f} s before the end of the "
+            f"{duration_s:.3f} s session (another host may have taken the device): nothing is "
+            "recorded")
 
 
 def session_host_times(start_s: float, track: FingerTrack) -> np.ndarray:

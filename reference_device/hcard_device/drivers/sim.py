@@ -6,12 +6,16 @@ time asked (1 ms at a time while waiting for a report), so a track plays as fast
 allows and the outcome is reproducible for a seed. Reports and feature requests take the same
 codec and firmware paths as over USB; a feature request the firmware refuses raises
 :class:`DeviceStall`, as the USB STALL does.
+
+Every ``sim://`` URI opens a new device. :meth:`SimDriver.another_host` opens a second host on
+the same device (a :class:`SharedDevice`: one clock, every host gets every STATE report, as two
+processes that open one hidraw node; spec rule PN10), for checks of session ownership.
 """
 
 from __future__ import annotations
 
 import collections
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from hcard_device.drivers.base import DEFAULT_TIMEOUT_S, DeviceListing, Driver
@@ -29,6 +33,57 @@ PENDING_CAPACITY = 65_536
 """Input reports held for the host before the oldest are dropped (65 s at 1 kHz)."""
 
 
+class SharedDevice:
+    """One simulated device and its clock, shared by the hosts (drivers) attached to it.
+
+    Attributes:
+        firmware: the :class:`~hcard_device.firmware.Firmware`.
+        time_s: simulated time since the device was opened, s.
+    """
+
+    def __init__(self, firmware: Any) -> None:
+        self.firmware = firmware
+        self.time_s = 0.0
+        self._queues: list[collections.deque[bytes]] = []
+        self._watches: list[tuple[Callable[[], bool], Callable[[], None]]] = []
+
+    def attach(self) -> collections.deque[bytes]:
+        """A new host's input queue: it gets every STATE report produced from now on."""
+        queue: collections.deque[bytes] = collections.deque(maxlen=PENDING_CAPACITY)
+        self._queues.append(queue)
+        return queue
+
+    def detach(self, queue: collections.deque[bytes]) -> None:
+        """A host closed: stop feeding its queue."""
+        self._queues = [q for q in self._queues if q is not queue]  # by identity
+
+    def call_when(self, due: Callable[[], bool], action: Callable[[], None]) -> None:
+        """Run ``action`` once, between two steps of :meth:`advance`, when ``due()`` holds:
+        another host acting at a chosen moment of a session driven by this one."""
+        self._watches.append((due, action))
+
+    def advance(self, seconds: float) -> None:
+        """Run the device for ``seconds`` of simulated time (in steps of at most
+        :data:`CHUNK_S`), handing its input reports to every attached host."""
+        target = self.time_s + max(seconds, 0.0)
+        while self.time_s < target:
+            step = min(target - self.time_s, CHUNK_S)
+            self.firmware.advance(step)
+            # land exactly on the target: rounding must never leave the clock just short of it
+            self.time_s = target if target - self.time_s - step < 1e-12 else self.time_s + step
+            reports = self.firmware.take_input_reports()
+            for queue in self._queues:
+                queue.extend(reports)
+            self._run_watches()
+
+    def _run_watches(self) -> None:
+        for watch in list(self._watches):
+            due, action = watch
+            if due():
+                self._watches.remove(watch)
+                action()  # may advance the device itself (time only moves forward)
+
+
 class SimDriver(Driver):
     """The in-process driver (see the module docstring).
 
@@ -42,11 +97,16 @@ class SimDriver(Driver):
     realtime = False
 
     def __init__(self, uri: DeviceUri, firmware: Any, *,
-                 timeout_s: float = DEFAULT_TIMEOUT_S) -> None:
+                 timeout_s: float = DEFAULT_TIMEOUT_S, device: SharedDevice | None = None) -> None:
         super().__init__(uri, timeout_s=timeout_s)
-        self.firmware = firmware
-        self._time_s = 0.0
-        self._pending: collections.deque[bytes] = collections.deque(maxlen=PENDING_CAPACITY)
+        self.device = device if device is not None else SharedDevice(firmware)
+        self.firmware = self.device.firmware
+        self._pending = self.device.attach()
+
+    def another_host(self) -> SimDriver:
+        """A second host on this driver's device (same firmware and clock, its own copy of
+        every STATE report from now on; spec rule PN10). Close it like any driver."""
+        return type(self)(self.uri, self.firmware, timeout_s=self.timeout_s, device=self.device)
 
     @classmethod
     def open(cls, uri: DeviceUri | str, *, timeout_s: float = DEFAULT_TIMEOUT_S) -> SimDriver:
@@ -64,28 +124,22 @@ class SimDriver(Driver):
     # ---- the clock --------------------------------------------------------------------
 
     def clock(self) -> float:
-        """Simulated time since the driver opened, s."""
-        return self._time_s
+        """Simulated time since the device was opened, s (shared by its hosts)."""
+        return self.device.time_s
 
     def advance(self, seconds: float) -> None:
         """Run the device for ``seconds`` of simulated time, collecting its input reports."""
-        target = self._time_s + max(seconds, 0.0)
-        while self._time_s < target:
-            step = min(target - self._time_s, CHUNK_S)
-            self.firmware.advance(step)
-            # land exactly on the target: rounding must never leave the clock just short of it
-            self._time_s = target if target - self._time_s - step < 1e-12 else self._time_s + step
-            self._pending.extend(self.firmware.take_input_reports())
+        self.device.advance(seconds)
 
     def _idle(self, seconds: float) -> None:
         self.advance(seconds)
 
     def collect_until(self, t_s: float) -> list[State]:
-        if t_s > self._time_s:
-            self.advance(t_s - self._time_s)
+        if t_s > self.clock():
+            self.advance(t_s - self.clock())
         states = []
         while self._pending:
-            state = self.parse_input(self._pending.popleft())
+            state = self.accept_input(self._pending.popleft())
             if state is not None:
                 states.append(state)
         return states
@@ -117,3 +171,4 @@ class SimDriver(Driver):
 
     def _close(self) -> None:
         self._pending.clear()
+        self.device.detach(self._pending)

@@ -11,8 +11,8 @@ from enum import IntEnum, IntFlag
 
 PROTOCOL_MAJOR = 1
 """Major protocol version (incompatible changes). A host MUST refuse another major (rule P3)."""
-PROTOCOL_MINOR = 1
-"""Minor protocol version (compatible additions)."""
+PROTOCOL_MINOR = 2
+"""Minor protocol version (compatible additions; 1.2 adds session ownership, spec section 14)."""
 
 MAX_REPORT_BYTES = 64
 """Largest report on the wire, bytes, including the report ID byte (one full-speed packet)."""
@@ -134,6 +134,8 @@ class StateFlags(IntFlag):
     """A card upload is in progress (UPLOAD_STATUS.state RECEIVING)."""
     HOST_PROFILE = 1 << 6
     """The device renders with a profile the host uploaded, not its own (protocol 1.1)."""
+    SESSION = 1 << 7
+    """A session is live: STATE.session_token names its owner (protocol 1.2, rule PN2)."""
 
 
 class FaultBits(IntFlag):
@@ -157,6 +159,9 @@ class FaultBits(IntFlag):
     """A malformed or unknown output report was received and ignored."""
     INPUT_DROPPED = 1 << 8
     """Input reports were dropped because the host did not read them in time."""
+    SESSION_BUSY = 1 << 9
+    """A START, STOP, COMMIT, COMMIT_PROFILE or DEVICE_PROFILE was refused because another
+    host's session is live (protocol 1.2, rules PN3-PN5)."""
 
 
 class Command(IntEnum):
@@ -176,6 +181,8 @@ class Command(IntEnum):
     """Leave direct streaming and render the active card again (from its initial state)."""
     DEVICE_PROFILE = 6
     """Render with the device's own profile again (protocol 1.1; capability PROFILE)."""
+    TAKE_OVER = 7
+    """End any live session and start one for the token in the argument (protocol 1.2, PN6)."""
 
 
 class TouchSource(IntEnum):
@@ -233,6 +240,9 @@ class UploadResult(IntEnum):
     INVALID_PROFILE = 10
     """COMMIT_PROFILE: the bytes are not a device profile this device can render with (detail:
     the field and the reason; protocol 1.1)."""
+    BUSY = 11
+    """COMMIT or COMMIT_PROFILE while a host's session with a token is live: the active card
+    and profile stay (protocol 1.2, rule PN5)."""
 
 
 class ClipReason(IntEnum):

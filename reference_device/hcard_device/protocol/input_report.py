@@ -51,11 +51,20 @@ class State(Report):
         stream_queued: frames waiting in the stream queue.
         host_time_echo_us: host_time_us of the last FINGER report applied (0: none yet).
         card_generation: incremented by every successful COMMIT, wrapping u16 (0: no card).
+        session_number: the session the report belongs to, +1 per session begun since
+            power-up, wrapping u16 (0: none yet; protocol 1.2, rule PN2).
+        session_token: the token of the live session's owner, 1..255; 0 when no session is
+            live or the live one is anonymous (a 1.0/1.1 host's START; rule PN2).
+
+    A protocol 1.1 device sends the first :data:`LEGACY_SIZE` bytes only; :meth:`decode`
+    reads its session fields as 0 (rule PV4: fields appended by a minor version).
     """
 
     REPORT_ID: ClassVar[int] = ReportId.STATE
     KIND: ClassVar[ReportKind] = ReportKind.INPUT
-    STRUCT: ClassVar[struct.Struct] = struct.Struct("<BIHBii4hhHHHHHhHHHHIH")
+    STRUCT: ClassVar[struct.Struct] = struct.Struct("<BIHBii4hhHHHHHhHHHHIHHB")
+    LEGACY_SIZE: ClassVar[int] = 52
+    """Bytes of STATE in protocol 1.0 and 1.1 (before the session fields of 1.2)."""
     RANGES: ClassVar[dict[str, tuple[int, int]]] = {
         "timestamp_us": U32,
         "sequence": U16,
@@ -75,6 +84,8 @@ class State(Report):
         "stream_queued": U16,
         "host_time_echo_us": U32,
         "card_generation": U16,
+        "session_number": U16,
+        "session_token": U8,
     }
 
     timestamp_us: int
@@ -96,6 +107,8 @@ class State(Report):
     stream_queued: int
     host_time_echo_us: int
     card_generation: int
+    session_number: int = 0
+    session_token: int = 0
 
     def _check(self) -> None:
         forces = self.corner_forces_mn
@@ -113,14 +126,29 @@ class State(Report):
             *self.corner_forces_mn, self.lateral_force_mn, self.amplitude_nm, self.voltage_dv,
             self.current_10na, self.target_uv_x1e4, self.target_ev_x1e4, self.texture,
             self.faults, self.dropped_reports, self.rejected_requests, self.stream_queued,
-            self.host_time_echo_us, self.card_generation,
+            self.host_time_echo_us, self.card_generation, self.session_number,
+            self.session_token,
         )  # fmt: skip
+
+    @classmethod
+    def decode(cls, data: bytes | bytearray | memoryview) -> State:
+        """Parse a STATE report; one of a protocol 1.0/1.1 device (:data:`LEGACY_SIZE` bytes,
+        no session fields) reads as session 0, token 0. Otherwise as :meth:`Report.decode`."""
+        if isinstance(data, (bytes, bytearray, memoryview)) and \
+                cls.LEGACY_SIZE <= len(data) < cls.STRUCT.size:
+            data = bytes(data) + bytes(cls.STRUCT.size - len(data))
+        return super().decode(data)
 
     @classmethod
     def _from_values(cls, values: tuple[Any, ...]) -> State:
         return cls(*values[:5], tuple(values[5:9]), *values[9:])
 
     # SI views
+    @property
+    def session_live(self) -> bool:
+        """A session is live (state flag SESSION, protocol 1.2)."""
+        return bool(self.flags & StateFlags.SESSION)
+
     @property
     def contact(self) -> bool:
         """A finger touches the surface."""

@@ -175,7 +175,9 @@ class Control(Report):
 
     Attributes:
         command: a :class:`Command` value.
-        argument: SET_TOUCH_SOURCE: a :class:`TouchSource`; every other command: reserved, 0.
+        argument: SET_TOUCH_SOURCE: a :class:`TouchSource`; START and STOP: the host's
+            session token, 0 for none (protocol 1.2, rules PN1, PN4); TAKE_OVER: the token,
+            1..255 (PN6); every other command: reserved, 0.
     """
 
     REPORT_ID: ClassVar[int] = ReportId.CONTROL
@@ -194,3 +196,5 @@ class Control(Report):
             and self.argument not in TouchSource._value2member_map_
         ):
             raise ProtocolError(f"unknown touch source {self.argument}", report=self.name())
+        if self.command == Command.TAKE_OVER and self.argument == 0:
+            raise ProtocolError("TAKE_OVER needs a session token 1..255", report=self.name())

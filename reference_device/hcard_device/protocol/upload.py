@@ -222,6 +222,11 @@ class UploadStore:
 
     # ---- internals --------------------------------------------------------------------------
 
+    def busy(self, detail: str) -> bool:
+        """COMMIT or COMMIT_PROFILE refused because a host's session is live (rule PN5): the
+        upload fails with BUSY and ``detail``; the active card and profile stay. False."""
+        return self._fail(UploadResult.BUSY, detail)
+
     def _not_started(self) -> bool:
         # A failed upload keeps its first reason until the next BEGIN; otherwise NOT_STARTED.
         if self.state == UploadState.FAILED:

@@ -24,8 +24,19 @@ At loop sample ``k`` (period ``T``) with reference ``r``::
 the exact zero-order-hold discretisation of the envelope.
 ``u_hi[k] = clip((A_max - a A[k]) / ((1 - a) G), 0, 1)`` is the hard safety clamp: it is the
 largest drive that keeps ``A[k+1] <= A_max``, so the amplitude can never exceed the limit
-whatever the reference; when it binds (or when a lowered limit finds the plate above it, which
-cuts the drive) the sample is flagged.
+whatever the reference; when it binds the sample is flagged.
+
+Braking. A lowered limit that finds the plate above it (``A[k] > A_max``) takes the drive from
+the PI: the inverter reverses its phase and drives in antiphase, at most ``b`` of full drive
+(:attr:`PlateLoop.brake_drive`; 0: the drive is only cut), with the drive that lands the
+envelope on the limit::
+
+    u[k] = clip((A_max - a A[k]) / ((1 - a) G), -b, 0),   I[k+1] = -Kp e[k]   (flagged),
+
+so at full reverse drive ``A(t) = (A0 + b G) exp(-sigma t) - b G`` reaches the limit ``L``
+after ``tau ln((A0 + b G) / (L + b G))`` (:meth:`PlateLoop.brake_time`), and reaches even 0 in
+finite time, where a plate left to decay (``b = 0``) only approaches it. The integrator tracks
+zero drive meanwhile, so the PI resumes bumplessly at the limit.
 
 Gains (:meth:`PIGains.ziegler_nichols`): the Ziegler-Nichols reaction-curve rule for a first
 order process of gain ``K`` and time constant ``tau`` with apparent dead time ``L``::
@@ -145,8 +156,9 @@ class PlateRun:
 
     Attributes:
         amplitude: (N,) peak-to-peak amplitude after each loop sample, m.
-        drive: (N,) drive applied at each sample, fraction of full drive in [0, 1].
-        clamped: (N,) the hard amplitude clamp acted on the sample.
+        drive: (N,) drive applied at each sample, fraction of full drive in [-b, 1] (negative:
+            antiphase, braking a plate above a lowered limit; ``b`` = ``brake_drive``).
+        clamped: (N,) the hard amplitude clamp (or the brake) acted on the sample.
     """
 
     amplitude: np.ndarray
@@ -174,10 +186,14 @@ class PlateLoop:
         gains: PI gains.
         loop_rate_hz: loop sampling rate, Hz.
         limit_m: hard amplitude limit, m (peak-to-peak).
+        brake_drive: largest antiphase drive the inverter applies to a plate above the limit,
+            fraction of full drive in [0, 1] (0: the drive is only cut and the plate decays at
+            its own rate; see the module documentation).
     """
 
     def __init__(
-        self, plate: PlateModel, gains: PIGains, loop_rate_hz: float, limit_m: float
+        self, plate: PlateModel, gains: PIGains, loop_rate_hz: float, limit_m: float,
+        brake_drive: float = 0.0,
     ) -> None:
         self.plate = plate
         self.gains = gains
@@ -185,8 +201,10 @@ class PlateLoop:
         self.amplitude_m = 0.0
         self.integrator = 0.0
         self._limit = 0.0
+        self._brake = 0.0
         self._cache: dict[int, _Coefficients] = {}
         self.limit_m = limit_m
+        self.brake_drive = brake_drive
 
     @property
     def limit_m(self) -> float:
@@ -198,6 +216,36 @@ class PlateLoop:
         if not (math.isfinite(value) and value >= 0):
             raise ValueError(f"amplitude limit must be a finite number >= 0 m, got {value}")
         self._limit = float(value)
+
+    @property
+    def brake_drive(self) -> float:
+        """Largest antiphase drive on a plate above the limit, fraction of full drive."""
+        return self._brake
+
+    @brake_drive.setter
+    def brake_drive(self, value: float) -> None:
+        if not (math.isfinite(value) and 0.0 <= value <= 1.0):
+            raise ValueError(f"brake drive must be a fraction of full drive in [0, 1], got {value}")
+        self._brake = float(value)
+
+    @property
+    def above_limit(self) -> bool:
+        """The plate is above the limit by more than the clamp's guarantee
+        (:data:`AMPLITUDE_TOLERANCE_M`): a lowered limit it has not reached yet."""
+        return self.amplitude_m > self._limit * (1.0 + LIMIT_SLACK) + AMPLITUDE_TOLERANCE_M
+
+    def brake_time(self, from_m: float, to_m: float, normal_force_n: float = 0.0) -> float:
+        """Time the brake takes to bring the envelope from ``from_m`` down to ``to_m`` (m), s:
+        ``tau(Fn) ln((A0 + b G(Fn)) / (L + b G(Fn)))`` (continuous time; the loop lands on the
+        limit within the loop sample that crosses it). The unloaded plate is the slowest: the
+        finger's damping shortens ``tau`` more than it lowers ``G``. Infinite when ``b = 0``
+        and ``to_m = 0``."""
+        if from_m <= to_m:
+            return 0.0
+        pull = self._brake * self.plate.full_drive_amplitude(normal_force_n)
+        if to_m + pull <= 0.0:
+            return math.inf
+        return self.plate.time_constant(normal_force_n) * math.log((from_m + pull) / (to_m + pull))
 
     def reset(self) -> None:
         """Plate at rest, integrator cleared."""
@@ -251,6 +299,26 @@ class PlateLoop:
         return PlateRun(np.maximum(amplitude[1:], 0.0), drive, clamped)
 
     # -- one constant-force run ------------------------------------------------------------
+    def _brake_run(
+        self, amp: float, lim: float, decay: np.ndarray, co: _Coefficients
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A plate above the limit braked at up to ``-b`` (module documentation): amplitudes
+        (from ``amp``, m), the drive of each sample, and where the loop leaves the brake (the
+        sample after the one that lands on the limit; none when it is not reached)."""
+        n = decay.shape[0] - 1
+        pull = self._brake * co.full
+        amps = -pull + (amp + pull) * decay  # full reverse drive all along
+        applied = np.full(n, -self._brake)
+        leave = np.zeros(n, dtype=bool)
+        crossed = np.flatnonzero(amps[1:] <= lim * (1.0 + LIMIT_SLACK))
+        if crossed.size:
+            m = int(crossed[0])  # the sample that lands on the limit
+            applied[m] = min(max((lim - co.a * amps[m]) / co.g, -self._brake), 0.0)
+            amps[m + 1] = min(max(co.a * amps[m] + co.g * applied[m], 0.0), lim)
+            if m + 1 < n:
+                leave[m + 1] = True
+        return amps, applied, leave
+
     def _mode(self, amp: float, integ: float, ref: float, co: _Coefficients) -> int:
         if amp > self._limit * (1.0 + LIMIT_SLACK):
             return _OVER
@@ -300,8 +368,9 @@ class PlateLoop:
                         amp, integ = float(amps[j]), float(integs[j])
                     k += j
                     continue
-            # Saturated: constant drive (or the clamp). The integrator is frozen at full drive,
-            # unwinds at zero drive and tracks the applied drive while the safety clamp acts.
+            # Saturated: constant drive, the clamp or the brake. The integrator is frozen at full
+            # drive, unwinds at zero drive, tracks the applied drive while the safety clamp acts
+            # and zero drive while the brake acts.
             steps = np.arange(rest.shape[0] + 1, dtype=np.float64)
             decay = co.a**steps
             integs = np.full(rest.shape[0] + 1, integ)
@@ -316,20 +385,20 @@ class PlateLoop:
                 u_lin = kp * err + integs[:-1]
                 leave = u_lin <= applied + DRIVE_SLACK
                 clamp = tracking & (u_lin > applied + DRIVE_SLACK)
+            elif mode == _OVER:
+                amps, applied, leave = self._brake_run(amp, lim, decay, co)
+                err = rest - amps[:-1]
+                clamp = np.ones(rest.shape[0], dtype=bool)
+                integs[1:] = -kp * err
             else:
+                # Zero drive. The error is negative here (u_lin < 0 and I >= 0): the
+                # integrator unwinds, down to zero drive at most.
                 amps = amp * decay
                 err = rest - amps[:-1]
                 applied = np.zeros(rest.shape[0])
-                if mode == _LOW:
-                    # The error is negative here (u_lin < 0 and I >= 0): the integrator
-                    # unwinds, down to zero drive at most.
-                    integs[1:] = np.maximum(integ + co.c * np.cumsum(err), min(integ, 0.0))
-                    leave = kp * err + integs[:-1] >= -DRIVE_SLACK
-                    clamp = np.zeros(rest.shape[0], dtype=bool)
-                else:
-                    leave = amps[:-1] <= lim * (1.0 + LIMIT_SLACK)
-                    clamp = ~leave
-                    integs[1:] = -kp * err
+                integs[1:] = np.maximum(integ + co.c * np.cumsum(err), min(integ, 0.0))
+                leave = kp * err + integs[:-1] >= -DRIVE_SLACK
+                clamp = np.zeros(rest.shape[0], dtype=bool)
             leave[0] = False
             j = int(np.argmax(leave)) if leave.any() else rest.shape[0]
             drive_out[k : k + j] = applied[:j]

@@ -23,6 +23,14 @@ user current under theirs; a host that stops feeding the watchdog for ``watchdog
 drives the finger or streams frames gets its outputs ramped to zero (fault ``WATCHDOG``) until
 it feeds again.
 
+Lowering a limit while driven (spec PS5): the commands take a lowered limit at once. The plate,
+a high-Q resonator, cannot follow by itself, so the inverter brakes it (drive in antiphase at
+full drive, :data:`BRAKE_DRIVE`, :mod:`.plate`) until it lands on the new limit; only then does
+the lowered amplitude limit come into force (:attr:`DeviceSimulation.limits`; until then the
+previous one, which the braked plate stays under, is in force). That takes at most
+:attr:`DeviceSimulation.limit_settle_time_s` (E-ViTa 0.81 ms, coupled stimulator 3.52 ms). The EV
+amplifier's limiter takes lowered voltage and current limits from the next frame.
+
 Faults per frame (:class:`~hcard_device.sim.faults.Faults`): condition flags (limits, watchdog,
 clipped card) are set on every frame they hold; event flags (``STREAM_OVERRUN``,
 ``INVALID_REQUEST``) on the first frame of the step after the event.
@@ -71,6 +79,10 @@ HOST_SAMPLE_SPACING_S = 1e-6
 
 OFF_AMPLITUDE_M = 10e-9
 """Plate amplitude counted as off, m (10 nm, a fifth of the loop's 50 nm tolerance)."""
+
+BRAKE_DRIVE = 1.0
+"""Antiphase drive that brakes a plate above a lowered amplitude limit, fraction of full drive:
+the inverter reverses its phase at full drive (:class:`.plate.PlateLoop` ``brake_drive``)."""
 
 _TARGET_TOLERANCE = 1e-9
 
@@ -177,7 +189,8 @@ class DeviceSimulation:
         self.hardware_limits = Limits(
             config.max_amplitude_m, config.max_voltage_v, config.max_current_a
         )
-        self._limits = self.hardware_limits
+        self._limits = self.hardware_limits  # the limits set (commands, rendering, clamps)
+        self._amplitude_in_force = self._limits.max_amplitude_m
         self._host_profile: DeviceProfile | None = None
         self._profile = device_profile(config)
         plate = PlateModel(
@@ -191,6 +204,7 @@ class DeviceSimulation:
             PIGains.ziegler_nichols(plate, config.pi_dead_time_s, config.pi_tuning_force_n),
             config.loop_rate_hz,
             config.max_amplitude_m,
+            brake_drive=BRAKE_DRIVE,
         )
         self.amplifier = (
             EVAmplifier(
@@ -246,8 +260,40 @@ class DeviceSimulation:
 
     @property
     def limits(self) -> Limits:
-        """The limits in force."""
+        """The limits in force (PS1, PS5): those set, except a lowered amplitude limit the
+        plate is still being braked down to (:attr:`limits_pending`), for which the previous
+        one stays in force."""
+        return Limits(self._amplitude_in_force, self._limits.max_voltage_v,
+                      self._limits.max_current_a)
+
+    @property
+    def limits_set(self) -> Limits:
+        """The limits last set (:meth:`set_limits`): the commands, the model-based rendering
+        and the clamps use them at once."""
         return self._limits
+
+    @property
+    def limits_pending(self) -> bool:
+        """A lowered amplitude limit is set but not yet in force: the plate is above it and
+        being braked (PS5)."""
+        return self._amplitude_in_force > self._limits.max_amplitude_m
+
+    @property
+    def pending_settle_time_s(self) -> float:
+        """Time the plate still needs to land on a pending lowered amplitude limit, at most, s
+        (0 when none is pending): the unloaded plate's brake time from its present amplitude
+        (a finger shortens it, by 2 % at 3 N on the E-ViTa)."""
+        if not self.limits_pending:
+            return 0.0
+        return self.plate.brake_time(self.plate.amplitude_m, self._limits.max_amplitude_m, 0.0)
+
+    @property
+    def limit_settle_time_s(self) -> float:
+        """Longest time a lowered amplitude limit takes to come into force, s: the unloaded
+        plate (the slowest) braked at :data:`BRAKE_DRIVE` from the hardware limit to 0,
+        ``tau0 ln((A_max + b A_full) / (b A_full))`` (E-ViTa 0.81 ms, coupled stimulator
+        3.52 ms; :meth:`.plate.PlateLoop.brake_time`)."""
+        return self.plate.brake_time(self.hardware_limits.max_amplitude_m, 0.0, 0.0)
 
     @property
     def profile(self) -> DeviceProfile:
@@ -309,11 +355,15 @@ class DeviceSimulation:
     ) -> Limits:
         """Set limits at or below the hardware ones (None: keep). Values above the hardware
         limit are clamped to it; negative values count as 0 and NaN leaves the limit as it was
-        (both flag ``INVALID_REQUEST``). Never raises. Returns the limits in force.
+        (both flag ``INVALID_REQUEST``). Never raises. Returns the limits set.
 
-        A limit lowered under the present output takes effect at once on the commands; the
-        plate, whose drive is cut, decays at its natural rate (``tau`` ~1.6 ms) to the new
-        limit, and the amplifier's envelope collapses within the frame.
+        The commands, the model-based rendering, the plate loop and the amplifier take them
+        from the next frame. A raised limit, or one the output is at or under, is in force at
+        once; an amplitude limit lowered under the plate's present amplitude comes into force
+        only once the braked plate has landed on it (PS5, :attr:`limits_pending`; at most
+        :attr:`limit_settle_time_s`), the previous one staying in force meanwhile. The
+        amplifier's envelope collapses to lowered EV limits within the next frame, its current
+        held at the limit.
         """
         hardware = self.hardware_limits
         values = []
@@ -335,15 +385,23 @@ class DeviceSimulation:
                 values.append(current if math.isnan(number) else 0.0)
                 continue
             values.append(min(number, getattr(hardware, name)))
+        in_force = self._amplitude_in_force
         self._limits = Limits(*values)
         self._profile = self._profile_in_force()
         self.plate.limit_m = self._limits.max_amplitude_m
+        self._amplitude_in_force = max(in_force, self._limits.max_amplitude_m)
+        if not self.plate.above_limit:
+            self._commit_limits()
         if self.amplifier is not None:
             self.amplifier.max_voltage_v = self._limits.max_voltage_v
             self.amplifier.max_current_a = self._limits.max_current_a
         if self._renderer is not None:
             self._card_report = clip_report(self._renderer.card, self._profile)
         return self._limits
+
+    def _commit_limits(self) -> None:
+        """Put the limits set in force (the plate is at or under them)."""
+        self._amplitude_in_force = self._limits.max_amplitude_m
 
     def set_profile(self, profile: DeviceProfile | None) -> ClipReport:
         """Render with ``profile`` (a host's device profile) from now on, or with the device's
@@ -560,6 +618,8 @@ class DeviceSimulation:
         m = cfg.loop_samples_per_frame
         plate = self.plate.run(np.repeat(amplitude_cmd, m), np.repeat(truth.fn_n, m))
         amplitude = plate.amplitude.reshape(n, m).mean(axis=1)
+        if self.limits_pending and not self.plate.above_limit:
+            self._commit_limits()  # the braked plate landed on the lowered limit (PS5)
         faults[plate.clamped.reshape(n, m).any(axis=1)] |= int(Faults.AMPLITUDE_LIMIT)
         if self.amplifier is not None:
             load = np.where(truth.contact, self.finger_capacitance_f, 0.0)

@@ -10,6 +10,12 @@ One HID interface (class 0x03, no boot subclass) with the protocol's report desc
 * OUT 0x01 (64 bytes): output reports, to :meth:`Firmware.handle_output`; SET_REPORT(Output) on
   EP0 goes the same way (hidraw uses it when a host stack has no OUT endpoint).
 
+Several hosts: every USB/IP connection that imports the device gets its own IN queue
+(:meth:`HcardHID.subscribe`, :class:`ConnectionView`) and every STATE report, as every process
+that opens one hidraw node gets every input report; their output and feature reports all reach
+the one firmware, which tells them apart only by the session tokens of protocol 1.2 (spec
+section 14, rule PN10).
+
 GET/SET_REPORT(Feature) go to :meth:`Firmware.get_feature` / :meth:`Firmware.set_feature`; a
 :class:`ProtocolError` (unknown report ID, a GET-only report SET, a malformed report) answers
 with a STALL, as the spec asks. GET_REPORT(Input) returns the latest STATE report.
@@ -22,12 +28,12 @@ protocol must get its own PID. The product string names the variant (E-ViTa or c
 from __future__ import annotations
 
 import threading
-from typing import Protocol
+from typing import Any, Protocol
 
 import usbip
 from usbip.classes.device import hid
 from usbip.core import Stall
-from usbip.device import Endpoint, _EPSpec
+from usbip.device import IN, Endpoint, In, _EPSpec
 
 from hcard_device.protocol import REPORT_DESCRIPTOR, ProtocolError, ReportId, ReportKind
 
@@ -117,6 +123,8 @@ class HcardHID(hid.HID):
         self.lock = lock or getattr(firmware, "lock", None) or threading.RLock()
         self.stalls = 0
         """Requests answered with a STALL (refused by the firmware or not allowed)."""
+        self._subscribers: list[BoundedEndpoint] = []
+        self._subscribers_lock = threading.Lock()
         super().__init__(
             REPORT_DESCRIPTOR,
             in_ep=IN_ENDPOINT, in_mps=MAX_PACKET, in_interval=INTERVAL_MS,
@@ -134,8 +142,25 @@ class HcardHID(hid.HID):
 
     @property
     def in_dropped(self) -> int:
-        """STATE reports dropped at the IN endpoint because the host did not read them."""
-        return self.in_ep.dropped if isinstance(self.in_ep, BoundedEndpoint) else 0
+        """STATE reports dropped at the IN endpoints because a host did not read them."""
+        own = self.in_ep.dropped if isinstance(self.in_ep, BoundedEndpoint) else 0
+        with self._subscribers_lock:
+            return own + sum(ep.dropped for ep in self._subscribers)
+
+    def subscribe(self) -> BoundedEndpoint:
+        """A new IN queue that gets every STATE report from now on (one per connection)."""
+        endpoint = BoundedEndpoint(In(IN_ENDPOINT, "interrupt", MAX_PACKET, INTERVAL_MS),
+                                   self._in_queue)
+        with self._subscribers_lock:
+            self._subscribers.append(endpoint)
+        return endpoint
+
+    def unsubscribe(self, endpoint: BoundedEndpoint) -> None:
+        """Stop feeding ``endpoint`` (its connection ended); parked URBs are dropped."""
+        with self._subscribers_lock:
+            if endpoint in self._subscribers:
+                self._subscribers.remove(endpoint)
+        endpoint.reset()
 
     # ---- firmware calls ------------------------------------------------------------------
 
@@ -175,12 +200,67 @@ class HcardHID(hid.HID):
             self.firmware.handle_output(bytes(payload))  # never raises (counts + fault flag)
 
     def pump(self) -> int:
-        """Move the firmware's pending STATE reports to the IN endpoint; returns how many."""
+        """Move the firmware's pending STATE reports to the IN endpoint of every connection
+        (the device's own one when none subscribed); returns how many reports."""
         with self.lock:
             reports = self.firmware.take_input_reports()
+        with self._subscribers_lock:
+            targets = list(self._subscribers)
         for report in reports:
-            self.send_report(report)
+            if not targets:
+                self.send_report(report)
+            for endpoint in targets:
+                endpoint.write(report)
         return len(reports)
+
+
+class ConnectionView:
+    """The device as one USB/IP connection sees it: IN URBs of the interrupt endpoint are
+    served from the connection's own queue (:meth:`HcardHID.subscribe`); everything else
+    (control requests, OUT reports, descriptors) goes to the shared device.
+
+    Args:
+        device: the :class:`usbip.USBDevice`.
+        interface: its :class:`HcardHID`.
+    """
+
+    def __init__(self, device: usbip.USBDevice, interface: HcardHID) -> None:
+        self._device = device
+        self._interface = interface
+        self.in_ep = interface.subscribe()
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._device, name)
+
+    def handle_urb(self, urb: Any, respond: Any = None) -> Any:
+        """Serve an IN URB of the interrupt endpoint from this connection's queue (parked
+        until a report arrives); any other URB as the device does."""
+        endpoint = self.in_ep
+        if urb.ep != endpoint.number or urb.direction != IN or respond is None:
+            return self._device.handle_urb(urb, respond)
+
+        def complete(data: bytes, status: int = 0) -> None:
+            urb.buffer, urb.actual, urb.status = data, len(data), status
+            respond(urb)
+
+        data = endpoint.take_or_park(urb.length or endpoint.mps, complete, urb.seqnum)
+        if data is None:
+            return None
+        urb.buffer, urb.actual, urb.status = data, len(data), 0
+        return urb
+
+    def reset_io(self) -> None:
+        """A fresh import: drop this connection's stale reports and URBs (not the others')."""
+        self.in_ep.reset()
+
+    def cancel_urb(self, seqnum: int) -> None:
+        """The host unlinked ``seqnum``: drop it from this connection's queue or the device."""
+        if not self.in_ep.cancel(seqnum):
+            self._device.cancel_urb(seqnum)
+
+    def close(self) -> None:
+        """The connection ended: stop feeding its queue."""
+        self._interface.unsubscribe(self.in_ep)
 
 
 def build_usb_device(
@@ -200,5 +280,6 @@ def build_usb_device(
     )
     interface = HcardHID(firmware, in_queue=in_queue, lock=lock)
     device.add(interface)
+    device.connection_view = lambda: ConnectionView(device, interface)  # per connection
     return device, interface
 

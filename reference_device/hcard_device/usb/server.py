@@ -7,6 +7,10 @@ host can then ``usbip attach -r HOST -b 1-1`` and get a ``/dev/hidrawN``. SIGINT
 stop it cleanly: the firmware and pump threads end and are joined, the listener and every
 connection are closed (hosts see the device vanish), and the process exits with status 0.
 
+Several clients may import the device at the same time, as several processes may open one
+hidraw node: each gets every STATE report, and the protocol's sessions (spec section 14) decide
+which host owns the device; a second host's START is refused while the first's session is live.
+
 Options: ``--host`` (default 127.0.0.1), ``--port`` (default 3240; 0 picks a free port),
 ``--device evita|coupled``, ``--seed``. The first line on stdout is
 ``serving <variant> at usbip://HOST:PORT/1-1`` once the port is bound (tests wait for it).
@@ -69,6 +73,11 @@ class DeviceServer:
         in_queue: STATE reports the IN endpoint holds before dropping the oldest.
         effects: physical effects hidden in the hardware (:mod:`hcard_device.sim.hidden`:
             name -> parameter values), checked here.
+        firmware_factory: builds the firmware instead of :func:`make_firmware` (negative
+            controls of the conformance suite serve a deliberately faulty one).
+
+    Several clients may import the device at once; each gets every STATE report (spec rule
+    PN10, :class:`~hcard_device.usb.device.ConnectionView`).
     """
 
     _running: ClassVar[set[DeviceServer]] = set()
@@ -77,7 +86,8 @@ class DeviceServer:
     def __init__(self, variant: str = "evita", *, host: str = DEFAULT_HOST,
                  port: int = DEFAULT_PORT, seed: int = 0, loopback: bool = False,
                  nodelay: bool = True, in_queue: int = DEFAULT_IN_QUEUE,
-                 effects: Mapping[str, Mapping[str, float]] | None = None) -> None:
+                 effects: Mapping[str, Mapping[str, float]] | None = None,
+                 firmware_factory: Callable[[], Any] | None = None) -> None:
         from hcard_device.sim.hidden import resolve
 
         if variant not in PRODUCTS:
@@ -90,6 +100,7 @@ class DeviceServer:
         self.transport: Any = usbip.Loopback() if loopback else NoDelayUSBIP(
             host, port, nodelay=nodelay)
         self.in_queue = in_queue
+        self.firmware_factory = firmware_factory
         self.firmware: Any = None
         self.interface: HcardHID | None = None
         self.usb_device: usbip.USBDevice | None = None
@@ -121,7 +132,8 @@ class DeviceServer:
         Raises:
             OSError: the address cannot be bound.
         """
-        self.firmware = make_firmware(self.variant, self.seed, self.effects)
+        self.firmware = (self.firmware_factory() if self.firmware_factory is not None
+                         else make_firmware(self.variant, self.seed, self.effects))
         self.usb_device, self.interface = build_usb_device(self.firmware, self.variant,
                                                            in_queue=self.in_queue)
         self.usb_device.plug(via=self.transport)

@@ -109,9 +109,16 @@ class NoDelayUSBIP(usbip.USBIP):
                              name="usbip-conn").start()
 
     def _serve_one(self, conn: socket.socket) -> None:
+        """Serve one connection; a device with ``connection_view`` (the hcard device) gives
+        each connection its own view, so that every importer gets every input report."""
+        factory = getattr(self._device, "connection_view", None)
+        device = factory() if callable(factory) else self._device
         try:
-            protocol.serve_connection(conn, [self._device])
+            protocol.serve_connection(conn, [device])
         finally:
+            close = getattr(device, "close", None) if device is not self._device else None
+            if callable(close):
+                close()
             with self._lock:
                 self._connections.discard(conn)
 

@@ -1,0 +1,344 @@
+"""Sessions and ownership (spec/device-protocol.md section 14, protocol 1.2): the firmware's
+rules PN1-PN7 and PN11, the drivers' PN8-PN9, two clients of one device served in another
+process (PN10), and ``hcard play`` losing its session."""
+
+from __future__ import annotations
+
+import contextlib
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from served_device import served_device
+
+from hcard import build
+from hcard.calibration.measurement import read_measurement
+from hcard.card_io import save, to_bytes
+from hcard.track import straight_stroke, track_to_csv
+from hcard_device.drivers import open_device
+from hcard_device.drivers.errors import DeviceError, SessionBusy, SessionLost
+from hcard_device.protocol import (
+    Command,
+    Control,
+    FaultBits,
+    State,
+    StateFlags,
+    UploadResult,
+    UploadState,
+    UploadStatus,
+    decode_input,
+    upload_reports,
+)
+from hcard_device.protocol.constants import ReportId, UploadAction
+from hcard_device.usb.server import make_firmware
+
+CARD = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[
+    build.texture(1.0, channel="uv"), build.texture(0.4, channel="uv")], texture_index=[0, 1])
+OTHER_CARD = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[
+    build.texture(1.0, channel="uv"), build.texture(0.2, channel="uv")], texture_index=[0, 1])
+BUSY = int(FaultBits.SESSION_BUSY | FaultBits.INVALID_REQUEST)
+
+
+# ---------------------------------------------------------------------- firmware (PN1-PN7)
+
+def firmware():
+    """A fresh E-ViTa firmware run for 10 ms (its first reports taken)."""
+    fw = make_firmware("evita")
+    fw.advance(0.01)
+    fw.take_input_reports()
+    return fw
+
+
+def control(fw, command: Command, argument: int = 0, run_s: float = 0.002) -> list[State]:
+    """Send CONTROL, run ``run_s`` of device time, return the reports of that time."""
+    fw.handle_output(Control(int(command), argument).encode())
+    return run(fw, run_s)
+
+
+def run(fw, seconds: float) -> list[State]:
+    fw.advance(seconds)
+    return [decode_input(r) for r in fw.take_input_reports()]
+
+
+def session(state: State) -> tuple[int, int, bool]:
+    return state.session_number, state.session_token, bool(state.flags & StateFlags.SESSION)
+
+
+def upload(fw, card) -> UploadStatus:
+    """Upload ``card`` with COMMIT through the feature path; the final UPLOAD_STATUS."""
+    for report in upload_reports(to_bytes(card), UploadAction.COMMIT):
+        fw.set_feature(report)
+    return UploadStatus.decode(fw.get_feature(ReportId.UPLOAD_STATUS))
+
+
+def test_start_with_a_token_begins_a_numbered_session_and_stamps_every_report():
+    fw = firmware()
+    before = run(fw, 0.002)
+    assert session(before[-1]) == (0, 0, False)  # no session since power-up (PN2)
+    states = control(fw, Command.START, 5)
+    assert session(states[-1]) == (1, 5, True)  # PN1
+    assert states[-1].flags & StateFlags.RUNNING
+    again = control(fw, Command.START, 5)  # the owner's START: same session
+    assert {session(s) for s in again} == {(1, 5, True)}
+    assert not any(s.faults & FaultBits.SESSION_BUSY for s in again)
+
+
+def test_start_of_another_token_is_refused_flagged_and_does_not_feed_the_session():
+    fw = firmware()
+    control(fw, Command.START, 5)
+    started_ms = fw.session.last_host_s * 1e3  # device time of the START of token 5
+    rejected = fw.counters().rejected_requests
+    states = control(fw, Command.START, 6)
+    assert states[0].faults & BUSY == BUSY  # PN3, in the next report only
+    assert not any(s.faults & FaultBits.SESSION_BUSY for s in states[1:])
+    assert {session(s) for s in states} == {(1, 5, True)}
+    assert fw.counters().rejected_requests == rejected + 1
+    # refused STARTs every 20 ms do not keep the session alive: it ends 100 ms after the last
+    # accepted report, the START of token 5 (PN7)
+    states = []
+    for _ in range(5):
+        states += control(fw, Command.START, 6, run_s=0.02)
+    states += run(fw, 0.01)
+    live = [s.session_live for s in states]
+    assert live[0] and not live[-1]
+    ended = states[live.index(False)].timestamp_us * 1e-3 - started_ms
+    assert 100 < ended <= 101  # ms: the first report more than watchdog_ms after it
+    assert session(control(fw, Command.START, 6)[-1]) == (2, 6, True)  # now it may begin
+
+
+def test_stop_ends_only_the_owners_session():
+    fw = firmware()
+    control(fw, Command.START, 5)
+    refused = control(fw, Command.STOP, 6)  # PN4: another token cannot stop it
+    assert refused[0].faults & BUSY == BUSY
+    assert session(refused[-1]) == (1, 5, True) and refused[-1].flags & StateFlags.RUNNING
+    stopped = control(fw, Command.STOP, 5)
+    assert session(stopped[-1]) == (1, 0, False)  # number stays, flag clears
+    assert not stopped[-1].flags & StateFlags.RUNNING
+    idle = control(fw, Command.STOP, 0)  # no session live: STOP as in 1.1
+    assert not idle[0].faults & FaultBits.INVALID_REQUEST
+    assert session(control(fw, Command.START, 7)[-1]) == (2, 7, True)
+
+
+def test_commit_and_device_profile_are_busy_during_a_session_with_a_token():
+    fw = firmware()
+    assert upload(fw, CARD).card_generation == 1
+    control(fw, Command.START, 5)
+    status = upload(fw, OTHER_CARD)  # PN5: the owner is not exempt either
+    assert (status.state, status.result) == (UploadState.FAILED, UploadResult.BUSY)
+    assert status.detail == "session 1 of token 5 is live"
+    assert status.card_generation == 1
+    states = run(fw, 0.002)
+    assert states[0].faults & FaultBits.SESSION_BUSY and states[-1].card_generation == 1
+    refused = control(fw, Command.DEVICE_PROFILE)
+    assert refused[0].faults & BUSY == BUSY
+    control(fw, Command.STOP, 5)
+    assert upload(fw, OTHER_CARD).card_generation == 2  # after STOP the upload goes through
+
+
+def test_take_over_ends_the_live_session_and_begins_the_next():
+    fw = firmware()
+    control(fw, Command.START, 5)
+    states = control(fw, Command.TAKE_OVER, 9)  # PN6: never refused
+    assert session(states[-1]) == (2, 9, True)
+    assert not any(s.faults & FaultBits.INVALID_REQUEST for s in states)
+    assert fw.session.ended == "take-over"
+    fw.handle_output(b"\x12\x07\x00")  # PO5: TAKE_OVER without a token is malformed
+    malformed = run(fw, 0.002)
+    assert malformed[0].faults & FaultBits.INVALID_REQUEST
+    assert session(malformed[-1]) == (2, 9, True)
+
+
+def test_a_session_ends_after_watchdog_ms_without_host_reports_whatever_the_touch_source():
+    fw = firmware()
+    control(fw, Command.SET_TOUCH_SOURCE, 0)  # internal sensor: the watchdog never trips
+    states = control(fw, Command.START, 5, run_s=0.095)
+    assert all(s.session_live for s in states)  # 95 ms of silence: still live
+    states = run(fw, 0.01)
+    assert not states[-1].session_live and states[-1].session_number == 1  # PN7
+    assert fw.session.ended == "timeout"
+    assert not any(s.faults & FaultBits.WATCHDOG for s in states)
+
+
+def test_an_older_host_alone_works_as_before():
+    fw = firmware()
+    states = control(fw, Command.START, 0)  # a 1.1 host: argument 0, an anonymous session
+    assert session(states[-1]) == (1, 0, True)
+    assert upload(fw, CARD).state == UploadState.COMMITTED  # PN11: uploads not restricted
+    assert run(fw, 0.002)[-1].card_generation == 1
+    refused = control(fw, Command.START, 7)  # a 1.2 host cannot enter it either (PN3)
+    assert refused[0].faults & BUSY == BUSY
+    stopped = control(fw, Command.STOP, 0)
+    assert session(stopped[-1]) == (1, 0, False)
+    legacy = decode_input(states[-1].encode()[:State.LEGACY_SIZE])  # what a 1.1 device sends
+    assert (legacy.session_number, legacy.session_token, legacy.sequence) == (
+        0, 0, states[-1].sequence)
+
+
+# ---------------------------------------------------------------------- driver (PN8, PN9)
+
+def test_sim_driver_begins_and_ends_its_session_and_refuses_to_send_after_a_loss():
+    with open_device("sim://") as driver:
+        driver.upload_card(CARD)
+        driver.start()
+        token, number = driver.session_token, driver.session_number
+        assert 1 <= token <= 255 and number == 1
+        assert {s.session_number for s in driver.collect_until(driver.clock() + 0.01)} == {1}
+        driver.stop()
+        driver.start()
+        assert driver.session_number == 2 and driver.session_token != token  # PN1
+        driver.firmware.handle_output(Control(Command.TAKE_OVER, 200).encode())
+        with pytest.raises(SessionLost, match=r"session 2 was lost: taken over by session 3 "
+                                              r"\(token 200\)"):
+            driver.collect_until(driver.clock() + 0.01)
+        with pytest.raises(SessionLost, match="session 2 was lost"):
+            driver.keepalive()  # PN9: nothing more that changes the device
+        rejected = driver.counters().rejected_requests
+        driver.stop()  # no STOP goes out: it would be refused and flag the new owner
+    assert driver.firmware.counters().rejected_requests == rejected
+
+
+# ---------------------------------------------------------------------- served (PN10)
+
+@contextlib.contextmanager
+def feeding(driver) -> Iterator[list[State]]:
+    """Keep ``driver``'s session fed on a thread (KEEPALIVE every 20 ms, as a playing host's
+    reports would) and collect its reports into the list yielded; the thread owns the driver
+    until the block ends."""
+    states: list[State] = []
+    stop = threading.Event()
+
+    def feed() -> None:
+        while not stop.is_set():
+            states.extend(driver.collect_until(driver.clock() + 0.02))
+            driver.keepalive()
+
+    thread = threading.Thread(target=feed, daemon=True)
+    thread.start()
+    try:
+        yield states
+    finally:
+        stop.set()
+        thread.join(5)
+
+
+def test_two_clients_of_one_device_served_in_another_process_repeatedly():
+    with served_device() as served:
+        for round_ in range(3):
+            first, second = open_device(served.uri), open_device(served.uri)
+            try:
+                first.start()
+                number = first.session_number
+                assert number == 2 * round_ + 1
+                with feeding(first) as states_a:
+                    t0 = time.monotonic()
+                    with pytest.raises(SessionBusy, match=rf"session {number} of another host "
+                                                          rf"\(token {first.session_token}\)"):
+                        second.start()  # PN8: looks, waits 150 ms of silence, sends nothing
+                    waited = time.monotonic() - t0
+                    states_b = second.collect_until(second.clock() + 0.05)
+                    second.send(Control(Command.START, first.session_token % 255 + 1))
+                    seen = second.collect_until(second.clock() + 0.02)
+                assert 0.15 <= waited < 0.6
+                assert any(s.faults & FaultBits.SESSION_BUSY for s in seen)  # PN3
+                assert {s.session_number for s in states_a + states_b + seen} == {number}
+                # PN10: both clients get the same reports (every report, per connection)
+                common = {s.sequence for s in states_a} & {s.sequence for s in states_b}
+                assert len(common) >= 40
+                first.keepalive()
+                second.take_over()
+                assert second.session_number == number + 1
+                with pytest.raises(SessionLost, match=rf"session {number} was lost: taken over "
+                                                      rf"by session {number + 1}"):
+                    first.collect_until(first.clock() + 0.1)
+                second.stop()
+            finally:
+                first.close()
+                second.close()
+
+
+def _write_inputs(folder: Path, seconds: float) -> tuple[Path, Path]:
+    card, track = folder / "step.hcard", folder / "stroke.csv"
+    save(CARD, card)
+    track.write_text(track_to_csv(straight_stroke((2.0, 5.0), (16.0 / seconds, 0.0), seconds)))
+    return card, track
+
+
+def _hcard_play(card: Path, uri: str, track: Path, output: Path) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-c", "from hcard.cli.main import cli; cli()", "play", str(card),
+         "--device", uri, "--track", str(track), "-o", str(output)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _wait_for_session(uri: str, timeout_s: float = 20.0) -> State:
+    """The first STATE report with a live session, read by a client that sends nothing."""
+    with open_device(uri) as watcher:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            live = [s for s in watcher.read_inputs(0.05) if s.session_live]
+            if live:
+                return live[-1]
+    raise AssertionError(f"no session began within {timeout_s} s")
+
+
+def test_hcard_play_that_loses_its_session_exits_1_with_the_reason_and_writes_nothing(
+        tmp_path):
+    card, track = _write_inputs(tmp_path, 3.0)
+    output = tmp_path / "rec.csv"
+    output.write_text("previous\n")
+    with served_device() as served:
+        player = _hcard_play(card, served.uri, track, output)
+        owner = _wait_for_session(served.uri)
+        time.sleep(0.5)
+        with open_device(served.uri) as intruder:
+            intruder.take_over()
+            assert intruder.session_number == owner.session_number + 1
+            out, err = player.communicate(timeout=30)
+            intruder.stop()
+    assert player.returncode == 1, (out, err)
+    assert f"session {owner.session_number} was lost: taken over by session " \
+           f"{owner.session_number + 1}" in err
+    assert "nothing is recorded" in err and err.startswith("Error: ")
+    assert "reports from" not in out  # no recording reported
+    assert output.read_text() == "previous\n"  # the earlier file is kept
+    assert not (tmp_path / "rec.csv.json").exists()
+
+
+def test_a_second_hcard_play_is_refused_and_the_first_records_its_whole_track(tmp_path):
+    """The audit's scenario: two `hcard play` on one served device."""
+    card, track = _write_inputs(tmp_path, 6.0)  # longer than a CLI process takes to start
+    with served_device() as served:
+        first = _hcard_play(card, served.uri, track, tmp_path / "first.csv")
+        _wait_for_session(served.uri)
+        second = _hcard_play(card, served.uri, track, tmp_path / "second.csv")
+        _out2, err2 = second.communicate(timeout=30)
+        out1, err1 = first.communicate(timeout=30)
+    assert "reports from" in out1
+    assert second.returncode == 1 and "device busy: session 1 of another host" in err2
+    assert not (tmp_path / "second.csv").exists()
+    assert first.returncode == 0, err1
+    table = read_measurement(tmp_path / "first.csv")
+    session = table.conditions["session"]
+    assert 6.05 <= session["duration_s"] < 6.5  # the whole track and its tail (wall clock)
+    x_mm = table.column("x")[table.column("contact").astype(bool)] * 1e3  # touching rows
+    assert x_mm.min() == pytest.approx(2.0, abs=0.2) and x_mm.max() == pytest.approx(18.0, abs=0.2)
+    last_sample_s = straight_stroke((2.0, 5.0), (16.0 / 6.0, 0.0), 6.0).t[-1]
+    assert table.column("echo")[-1] == pytest.approx(last_sample_s, abs=1e-6)  # applied
+    # (the device's clock may run slower than the wall clock on a loaded machine, and the
+    # second CLI starting up may starve the first for some ms: reports missed in transit are
+    # counted as sequence gaps, PT5, and stay few)
+    assert session["reports_lost"] <= 0.05 * session["reports"]
+
+
+def test_a_driver_refuses_take_over_on_a_device_without_sessions():
+    from hcard_conformance.served_controls import open_no_ownership
+
+    with open_no_ownership() as driver:
+        assert not driver.sessions_supported()
+        with pytest.raises(DeviceError, match=r"protocol 1\.1: no sessions, no TAKE_OVER"):
+            driver.take_over()
