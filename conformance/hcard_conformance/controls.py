@@ -19,23 +19,67 @@ Open them with :func:`open_control` (``hcard conformance --driver control:NAME``
     The E-ViTa whose firmware accepts and reports a lowered LIMITS request but never applies it
     to the plate loop or the model-based rendering: the plate goes up to the hardware limit
     whatever the host set.
+``swapped-channels``
+    The coupled stimulator whose firmware hands the UV target stream to the EV actuation and
+    the EV stream to the UV actuation (and reports them as it routed them): friction
+    decreases go to electrovibration, which can only raise friction, and increases to the
+    plate, which can only lower it, so neither happens.
+``inverted-phase``
+    The E-ViTa whose renderer adds half a cycle to every component's phase (a sign slip in
+    ``cos(2 pi cycles + phase)``): every grating sits half a period off the card's.
+``frequency-off``
+    The E-ViTa whose renderer reads every component's frequency 15 % high (a scale slip):
+    gratings come out with a 13 % shorter period.
+``weak-actuator``
+    The E-ViTa whose piezo delivers 35 % of the full-drive amplitude the firmware's plate
+    loop was tuned for (an actuator far off its gain): the loop responds slower and the
+    plate saturates below the amplitudes the rendering asks for.
+``ignored-watchdog``
+    The E-ViTa whose main loop feeds its own watchdog every frame (instead of on host
+    reports, rule PS3): a silent host leaves the plate driven.
+``late-limits``
+    The E-ViTa as it was before rule PS5: a lowered LIMITS request is in force at once for new
+    commands, but the plate is not braked: its drive is only cut and it decays at its own rate
+    (tau 1.57 ms), so the reports of the next few milliseconds after lowering the amplitude
+    limit while driven show the plate above it. Limits set at rest are honoured.
+``no-ownership``
+    The E-ViTa as it was before protocol 1.2 sessions (it reports 1.1): a second host's START
+    and upload are carried out under the first host's session, and TAKE_OVER is unknown.
+    Served over USB/IP in this process (one device, any number of drivers; see
+    :mod:`hcard_conformance.served_controls`), since two ``sim://`` drivers never share one.
+``accepts-bad-crc``
+    The E-ViTa whose upload store never compares the CRC-32 of the received bytes with the one
+    UPLOAD_BEGIN declared (protocol PU3, 9.3): a card whose CRC is wrong is committed, as long
+    as its length is right and it parses. Fails ``device.upload-integrity`` case ``bad-crc``.
+``drops-reports``
+    The E-ViTa whose firmware loses :data:`DROPPED_FRACTION` of its STATE reports at random as
+    it produces them (an IN endpoint starved by the firmware's main loop), and counts them
+    honestly as PT5 asks: the sequence advances over them, COUNTERS ``input_dropped`` and
+    STATE ``dropped_reports`` count them, the next report sent carries INPUT_DROPPED. Fails
+    ``device.report-loss`` case ``loss-fraction``, passes ``sequence-gaps`` and
+    ``drops-counted``.
 """
 
 from __future__ import annotations
 
 import collections
+import dataclasses
+import math
 from collections.abc import Callable
 
 import numpy as np
 
 from hcard.render import RenderMode, RenderOptions
+from hcard.v1 import card_pb2 as pb
 from hcard_device.drivers.base import DEFAULT_TIMEOUT_S
 from hcard_device.drivers.sim import SimDriver
 from hcard_device.drivers.uri import parse_uri
 from hcard_device.firmware import Firmware
-from hcard_device.protocol import ReportId
+from hcard_device.protocol import FaultBits, ReportId, State, crc32
+from hcard_device.protocol.upload import UploadStore
 from hcard_device.sim import DeviceConfig, DeviceSimulation
-from hcard_device.sim.simulation import Limits
+from hcard_device.sim.clip import ClipReport
+from hcard_device.sim.simulation import Limits, SimBlock
 
 ADDED_LATENCY_S = 0.030
 """Delay the ``latency-30ms`` control adds to every FINGER report, s."""
@@ -84,6 +128,100 @@ class UnenforcedLimitsSimulation(DeviceSimulation):
         return self._reported
 
 
+def _remap_card(card: pb.Card, change: Callable[[pb.Texture, pb.Component | None], None]
+                ) -> pb.Card:
+    """A copy of ``card`` with ``change(texture, component)`` applied to every texture
+    (component None) and every component."""
+    mapped = pb.Card()
+    mapped.CopyFrom(card)
+    for texture in mapped.textures:
+        change(texture, None)
+        for component in texture.components:
+            change(texture, component)
+    return mapped
+
+
+Misread = Callable[[pb.Texture, "pb.Component | None"], None]
+"""A card-reading defect: changes a component (or, given None, its texture) in place."""
+
+
+class CardMisreadSimulation(DeviceSimulation):
+    """A device whose firmware misreads every card it loads with ``misread`` (test control)."""
+
+    def __init__(self, config: DeviceConfig, misread: Misread, seed: int = 0) -> None:
+        super().__init__(config, seed)
+        self.misread = misread
+
+    def load_card(self, card: pb.Card) -> ClipReport:
+        return super().load_card(_remap_card(card, self.misread))
+
+
+class SwappedChannelsSimulation(DeviceSimulation):
+    """UV targets routed to the EV actuation and EV targets to the UV actuation
+    (``swapped-channels``)."""
+
+    def _targets(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        uv, ev, texture = super()._targets(n)
+        return ev, uv, texture
+
+
+def invert_phase(_texture: pb.Texture, component: pb.Component | None) -> None:
+    """Half a cycle added to every component's phase (``inverted-phase``)."""
+    if component is not None:
+        component.phase = math.remainder(component.phase + math.pi, 2 * math.pi)
+
+
+FREQUENCY_ERROR = 1.15
+"""Factor the ``frequency-off`` control applies to every component frequency."""
+
+
+def raise_frequency(_texture: pb.Texture, component: pb.Component | None) -> None:
+    """Every component frequency read :data:`FREQUENCY_ERROR` times too high
+    (``frequency-off``)."""
+    if component is not None:
+        component.frequency *= FREQUENCY_ERROR
+
+
+ACTUATOR_GAIN = 0.35
+"""Fraction of the nominal full-drive amplitude the ``weak-actuator`` control's piezo gives."""
+
+
+class WeakActuatorSimulation(DeviceSimulation):
+    """A plate whose full-drive amplitude is :data:`ACTUATOR_GAIN` of the one its PI loop was
+    tuned for (``weak-actuator``); firmware, profile and limits are the nominal device's."""
+
+    def __init__(self, config: DeviceConfig, seed: int = 0) -> None:
+        super().__init__(config, seed)
+        nominal = self.plate.plate
+        self.plate.plate = dataclasses.replace(
+            nominal, full_drive_amplitude_m=nominal.full_drive_amplitude_m * ACTUATOR_GAIN)
+
+
+class SelfFedWatchdogSimulation(DeviceSimulation):
+    """A firmware that feeds its watchdog from its own main loop (``ignored-watchdog``)."""
+
+    def step(self, n_frames: int) -> SimBlock:
+        self.feed_watchdog()
+        return super().step(n_frames)
+
+
+class LateLimitsSimulation(DeviceSimulation):
+    """A device that puts a lowered limit in force at once and lets the plate decay to it at
+    its own rate (``late-limits``; test control: it violates PS1 for ``tau ln(A / L)`` after
+    lowering the amplitude limit ``L`` under the amplitude ``A`` while driven, and PS5)."""
+
+    def __init__(self, config: DeviceConfig, seed: int = 0) -> None:
+        super().__init__(config, seed)
+        self.plate.brake_drive = 0.0  # the drive is cut, never reversed
+
+    def set_limits(self, max_amplitude_m: float | None = None,
+                   max_voltage_v: float | None = None,
+                   max_current_a: float | None = None) -> Limits:
+        limits = super().set_limits(max_amplitude_m, max_voltage_v, max_current_a)
+        self._commit_limits()  # in force whatever the plate does: the SET completes at once
+        return limits
+
+
 class DelayedFingerDriver(SimDriver):
     """``sim://`` with every FINGER report held for :data:`ADDED_LATENCY_S` of device time."""
 
@@ -110,6 +248,54 @@ class DelayedFingerDriver(SimDriver):
             super().advance(target - self.clock())
 
 
+class NoCrcUploadStore(UploadStore):
+    """An upload store that skips the CRC-32 comparison of PU3 (``accepts-bad-crc``): before
+    a COMMIT is judged, the declared CRC-32 is replaced by that of the bytes received, so the
+    comparison always holds; length and card checks stay."""
+
+    def _staged(self, now_s: float) -> bytes | None:
+        self.expected_crc = crc32(bytes(self._staging))
+        return super()._staged(now_s)
+
+
+def _no_crc_firmware(simulation: DeviceSimulation) -> Firmware:
+    """The firmware of ``accepts-bad-crc``: the reference one with :class:`NoCrcUploadStore`."""
+    firmware = Firmware(simulation)
+    firmware.upload = NoCrcUploadStore(firmware.upload.max_card_bytes)
+    return firmware
+
+
+DROPPED_FRACTION = 0.05
+"""Fraction of its STATE reports the ``drops-reports`` control loses (at random)."""
+
+
+class LossyFirmware(Firmware):
+    """A firmware that loses ``dropped_fraction`` of its STATE reports at random as it produces
+    them and counts each as PT5 asks (``drops-reports``; the draws are seeded by ``seed``)."""
+
+    def __init__(self, sim: DeviceSimulation, *, dropped_fraction: float = DROPPED_FRACTION,
+                 seed: int = 0) -> None:
+        super().__init__(sim)
+        self.dropped_fraction = float(dropped_fraction)
+        self._draws = np.random.default_rng(seed)
+
+    def _emit(self, report: State) -> None:
+        if self._draws.random() >= self.dropped_fraction:
+            super()._emit(report)
+            return
+        # produced (numbered, counted) but never queued for the host; the drop is counted
+        # and flagged in the next report sent, as for a full queue
+        self.latched_faults |= report.faults
+        self._sequence = (self._sequence + 1) & 0xFFFF
+        self.input_reports += 1
+        self.input_dropped += 1
+        self._pending_faults |= FaultBits.INPUT_DROPPED
+
+
+def _firmware_driver(firmware: Firmware, uri: str) -> SimDriver:
+    return SimDriver(parse_uri(uri), firmware, timeout_s=DEFAULT_TIMEOUT_S)
+
+
 def _sim_driver(simulation: DeviceSimulation, uri: str,
                 cls: type[SimDriver] = SimDriver) -> SimDriver:
     return cls(parse_uri(uri), Firmware(simulation), timeout_s=DEFAULT_TIMEOUT_S)
@@ -122,13 +308,56 @@ CONTROLS: dict[str, Callable[[], SimDriver]] = {
     "no-ev": lambda: _sim_driver(NoEVSimulation(DeviceConfig.coupled()), "sim://coupled"),
     "over-limit": lambda: _sim_driver(UnenforcedLimitsSimulation(DeviceConfig.evita()),
                                       "sim://"),
+    "swapped-channels": lambda: _sim_driver(SwappedChannelsSimulation(DeviceConfig.coupled()),
+                                            "sim://coupled"),
+    "inverted-phase": lambda: _sim_driver(
+        CardMisreadSimulation(DeviceConfig.evita(), invert_phase), "sim://"),
+    "frequency-off": lambda: _sim_driver(
+        CardMisreadSimulation(DeviceConfig.evita(), raise_frequency), "sim://"),
+    "weak-actuator": lambda: _sim_driver(WeakActuatorSimulation(DeviceConfig.evita()), "sim://"),
+    "ignored-watchdog": lambda: _sim_driver(SelfFedWatchdogSimulation(DeviceConfig.evita()),
+                                            "sim://"),
+    "late-limits": lambda: _sim_driver(LateLimitsSimulation(DeviceConfig.evita()), "sim://"),
+    "no-ownership": lambda: _no_ownership(),
+    "accepts-bad-crc": lambda: _firmware_driver(
+        _no_crc_firmware(DeviceSimulation(DeviceConfig.evita())), "sim://"),
+    "drops-reports": lambda: _firmware_driver(
+        LossyFirmware(DeviceSimulation(DeviceConfig.evita())), "sim://"),
 }
 """The negative controls by name (see the module docstring)."""
 
+CATCHES: dict[str, tuple[str, str]] = {
+    "position-only": ("device.friction", "dense-grating"),
+    "latency-30ms": ("device.latency", "boundary-move"),
+    "no-ev": ("device.friction", "bipolar"),
+    "over-limit": ("device.safety", "host-limits"),
+    "swapped-channels": ("device.friction", "bipolar"),
+    "inverted-phase": ("renderer.spatial_phase", "coarse-grating@moderate-stroke"),
+    "frequency-off": ("renderer.component_frequency", "single-grating@moderate-stroke"),
+    "weak-actuator": ("device.dynamics", "rise-time"),
+    "ignored-watchdog": ("device.watchdog", "host-silent"),
+    "late-limits": ("device.safety", "limits-while-driven"),
+    "no-ownership": ("device.session-ownership", "second-host-refused"),
+    "accepts-bad-crc": ("device.upload-integrity", "bad-crc"),
+    "drops-reports": ("device.report-loss", "loss-fraction"),
+}
+"""The (check, case) each negative control exists to fail (issue 12 item 5): the proof that
+the threshold of that check bites. ``tests/conformance/test_negative_controls.py`` runs every
+control against its case and requires FAIL."""
+
+
+def _no_ownership() -> SimDriver:
+    """The ``no-ownership`` control: the E-ViTa without protocol 1.2 sessions, served over
+    USB/IP in this process so that two drivers share it (a USB/IP driver, not a SimDriver;
+    :mod:`hcard_conformance.served_controls`)."""
+    from hcard_conformance.served_controls import open_no_ownership
+
+    return open_no_ownership()  # type: ignore[return-value]
+
 
 def open_control(name: str) -> SimDriver:
-    """Open the negative-control driver ``name`` (``position-only``, ``latency-30ms``,
-    ``no-ev``, ``over-limit``; a ``control:`` prefix is accepted).
+    """Open the negative-control driver ``name`` (a key of :data:`CONTROLS`; a ``control:``
+    prefix is accepted).
 
     Raises:
         ValueError: unknown control name.

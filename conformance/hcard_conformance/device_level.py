@@ -22,12 +22,16 @@ reads STATE input reports (spec/device-protocol.md). Thresholds (spec/conformanc
 ``device.latency``
     Median, over :data:`LATENCY_TRIALS` moves of the host finger across a texture boundary,
     of the time from sending the FINGER report to the measured plate amplitude crossing half
-    way to its new settled value; threshold :data:`LATENCY_THRESHOLD_S` (10 ms: half the
+    way to its new settled value; threshold from the timing class (real time: 10 ms: half the
     20 ms period of a 50 Hz touch screen, so a change is felt before the next touch sample).
 ``device.safety`` (S1)
     Cards, host-set limits and streamed frames asking for more than the limits; metric: the
     number of reports whose measured amplitude / voltage / current exceeds the limit in force
     (one report count of quantisation allowed) or whose targets leave [0, 1] x [1, 4]; must be 0.
+    Case ``limits-while-driven`` (PS1, PS5) lowers the limits to :data:`LOWERED_FRACTION` of
+    those in force while streamed frames drive the plate at its limit, and counts the reports
+    after the change (those echoing a FINGER sent after the SET returned) with an output above
+    the new limit.
 ``device.watchdog``
     The host goes silent while driving the finger; metric: time from the last host report to
     outputs off (amplitude <= :data:`OFF_AMPLITUDE_M`, voltage <= 1 V) with fault WATCHDOG
@@ -50,10 +54,11 @@ from hcard.v1 import card_pb2 as pb
 from hcard_conformance.context import Context, session_times
 from hcard_conformance.registry import check
 from hcard_conformance.result import CannotAssess, CheckResult, guarded
-from hcard_conformance.streaming import stream
+from hcard_conformance.streaming import FINGER_PERIOD_S, STARVED_FRACTION, lead_frames, stream
+from hcard_conformance.timing import needs_real_time_host, timing_class
 from hcard_device.drivers.base import Driver
 from hcard_device.drivers.play import PlayResult, play
-from hcard_device.protocol import Capability, DeviceInfo, DeviceKind, FaultBits, State
+from hcard_device.protocol import Capability, DeviceInfo, DeviceKind, FaultBits, Limits, State
 from hcard_device.sim import DeviceConfig
 from hcard_device.sim.models import device_profile
 
@@ -68,7 +73,6 @@ STROKE_SPEED_MM_S = 60.0
 STROKE_S = 0.6
 """Duration of the device-level strokes, s."""
 LATENCY_TRIALS = 10
-LATENCY_THRESHOLD_S = 0.010
 OFF_AMPLITUDE_M = 50e-9
 """Plate amplitude counted as off, m (the E-ViTa loop's 50 nm amplitude tolerance)."""
 BANDWIDTH_TOLERANCE = 0.05
@@ -213,7 +217,7 @@ def measure_friction(driver: Driver, card: pb.Card, track: FingerTrack) -> Frict
                                target[settled])
 
 
-@check(name="device.friction", level=LEVEL,
+@check(name="device.friction", level=LEVEL, applies=needs_real_time_host,
        description="rendered friction (measured actuation) matches the card's target")
 def check_friction(ctx: Context) -> Iterator[CheckResult]:
     """Rendered friction from measured actuation vs the card's target, per case."""
@@ -281,6 +285,7 @@ def amplitude_gain(driver: Driver, frequency_hz: float, duration_s: float = 0.6)
     t = np.arange(round((duration_s + FINGER_SETTLE_S) * rate)) / rate
     session = stream(driver, BANDWIDTH_UV_MEAN
                      + BANDWIDTH_UV_SWING * np.sin(2 * np.pi * frequency_hz * t))
+    session.require_fed(f"the {frequency_hz:g} Hz sine")
     target, amp = session.column("target_uv"), session.column("amplitude_m")
     playing = np.flatnonzero(np.abs(target - BANDWIDTH_UV_MEAN) <= 2 * BANDWIDTH_UV_SWING)
     if playing.size < 10:
@@ -390,11 +395,12 @@ def measure_rise_time(driver: Driver, max_rise_s: float) -> float:
     rate = driver.info().frame_rate_hz
     hold_s = max(0.02, 3 * max_rise_s)
     session = stream(driver, rise_stimulus(rate, hold_s))
+    session.require_fed("the rise-time steps")
     return rise_time(session.t_s, session.column("target_uv"), session.column("amplitude_m"),
                      1.0 / rate, hold_s)
 
 
-@check(name="device.dynamics", level=LEVEL,
+@check(name="device.dynamics", level=LEVEL, applies=needs_real_time_host,
        description="plate amplitude -3 dB bandwidth and rise time meet the device class")
 def check_dynamics(ctx: Context) -> Iterator[CheckResult]:
     """Bandwidth and rise time of the plate amplitude under direct streaming."""
@@ -464,20 +470,21 @@ def measure_latency(driver: Driver, trials: int = LATENCY_TRIALS) -> list[float]
 
 
 @check(name="device.latency", level=LEVEL,
-       description="finger move to friction change, median within 10 ms")
+       description="finger move to friction change, median within 10 ms (real-time host)")
 def check_latency(ctx: Context) -> Iterator[CheckResult]:
     """End-to-end latency from a host finger update to the plate's change."""
     if ctx.open_driver is None:
         return
     open_driver = ctx.open_driver
+    timing = timing_class(ctx)
 
     def measure() -> Iterator[CheckResult]:
         with open_driver() as driver:
             lat = measure_latency(driver)
         median = float(np.median(lat)) * 1e3
         yield _result("device.latency", "boundary-move", "median_latency", median,
-                      LATENCY_THRESHOLD_S * 1e3, "ms",
-                      f"{len(lat)} moves, max {np.nanmax(lat) * 1e3:.1f} ms")
+                      timing.latency_s * 1e3, "ms",
+                      f"{len(lat)} moves, max {np.nanmax(lat) * 1e3:.1f} ms; {timing.why}")
 
     yield from guarded("device.latency", LEVEL, ["boundary-move"], measure)
 
@@ -514,13 +521,181 @@ def _wait_for_rest(driver: Driver, timeout_s: float = 0.5) -> None:
             return
 
 
-SAFETY_CASES = ("card-over-limit", "host-limits", "stream-extremes")
+SAFETY_CASES = ("card-over-limit", "host-limits", "stream-extremes", "limits-while-driven")
 """The cases of the safety check, in order."""
 
+LOWERED_FRACTION = 0.25
+"""Case ``limits-while-driven``: the limits are lowered to this fraction of those in force. The
+plate, driven at the amplitude limit, is then 4 times over the new one: left to decay at its own
+rate it takes ``tau ln 4`` to get under it (E-ViTa 2.2 ms, coupled stimulator 9.5 ms, two and
+nine report periods), so a device that does not brake it shows in the reports after the SET."""
+DRIVEN_S = 0.08
+"""Streaming before the limits are lowered, s (the plate settles at its limit in ~5 ms)."""
+AFTER_CHANGE_S = 0.05
+"""Streaming after the limits are lowered, s, at least."""
+MIN_REPORTS_AFTER = 30
+"""Reports after the change the case waits for (a loaded host or transport may deliver the first
+FINGER after the SET late), at most :data:`AFTER_CHANGE_TIMEOUT_S`."""
+AFTER_CHANGE_TIMEOUT_S = 1.0
+"""Longest streaming after the change while waiting for :data:`MIN_REPORTS_AFTER`, s."""
+MIN_OVER_NEW_LIMIT = 2.0
+"""The plate must be at least this many times the new amplitude limit just before the change,
+or the case assesses nothing (UNASSESSED)."""
+REPORT_QUANTA = (1e-9, 0.1, 1e-8)
+"""One report count of amplitude (m), voltage (V) and current (A): the measurement tolerance of
+the safety cases."""
 
-def measure_safety(open_driver: Callable[[], Driver]) -> dict[str, tuple[int, float]]:
-    """Per case, reports over a limit and the worst measured output / limit: a card asking for
-    more than the device can do, the same under host limits halved, streamed extreme frames."""
+
+@dataclass(frozen=True)
+class LimitsChange:
+    """The reports after lowering the limits while the plate is driven.
+
+    Attributes:
+        reports: STATE reports after the change (echoing a FINGER sent after the SET).
+        over: those with a measured output above the new limit plus one report count.
+        worst: largest measured output / new limit among them.
+        before_m: median plate amplitude of the last 5 reports before the change, m.
+        lowered: the limits set (wire counts).
+        read_back: LIMITS read right after the SET.
+    """
+
+    reports: int
+    over: int
+    worst: float
+    before_m: float
+    lowered: Limits
+    read_back: Limits
+
+    @property
+    def detail(self) -> str:
+        """One line for the result."""
+        low = self.lowered
+        return (f"{self.over} of {self.reports} reports after the SET over the new limits "
+                f"({low.max_amplitude_m * 1e9:.0f} nm, {low.max_voltage_v:g} V, "
+                f"{low.max_current_a * 1e6:g} uA; read back "
+                f"{'the same' if self.read_back == low else str(self.read_back)}); plate at "
+                f"{self.before_m * 1e9:.0f} nm before; largest output {self.worst:.3f} x its "
+                f"new limit (tolerance one report count)")
+
+
+class _Finger:
+    """FINGER reports of a stroke at :data:`STROKE_SPEED_MM_S` and 0.5 N, each with a host time
+    (us) later than the previous one's, remembering those sent after :meth:`mark`."""
+
+    def __init__(self, driver: Driver, x0_mm: float, y_mm: float) -> None:
+        self.driver, self.x0_mm, self.y_mm = driver, x0_mm, y_mm
+        self.start_s = driver.clock()
+        self.last_us = -1
+        self.marked = False
+        self.after_us: set[int] = set()
+
+    def send(self) -> None:
+        """Send the finger where the stroke is now."""
+        now = self.driver.clock()
+        host_us = max(round(now * 1e6), self.last_us + 1)
+        x = self.x0_mm + STROKE_SPEED_MM_S * (now - self.start_s)
+        self.driver.send_finger(host_us * 1e-6, x, self.y_mm, 0.5, True)
+        self.last_us = host_us
+        if self.marked:
+            self.after_us.add(host_us % (1 << 32))
+
+    def mark(self) -> None:
+        """From now on, reports echoing a FINGER sent are after the change."""
+        self.marked = True
+
+
+def _over_new_limits(states: list[State], new: Limits) -> tuple[int, float]:
+    """Reports with an output above its limit in ``new`` plus :data:`REPORT_QUANTA`, and the
+    largest output / limit."""
+    over = np.zeros(len(states), dtype=bool)
+    worst = 0.0
+    for field, limit, quantum in zip(
+            ("amplitude_m", "voltage_v", "current_a"),
+            (new.max_amplitude_m, new.max_voltage_v, new.max_current_a), REPORT_QUANTA,
+            strict=True):
+        value = np.array([getattr(s, field) for s in states], dtype=float)
+        over |= value > limit + quantum
+        if limit > 0 and value.size:
+            worst = max(worst, float(value.max()) / limit)
+    return int(np.count_nonzero(over)), worst
+
+
+def measure_limits_while_driven(driver: Driver, base: Limits) -> LimitsChange:
+    """Stream UV 0 (EV 4 with EV) with the host's finger sliding so the plate runs at its
+    amplitude limit, SET LIMITS to :data:`LOWERED_FRACTION` of ``base`` after :data:`DRIVEN_S`,
+    send a FINGER at once and keep streaming for :data:`AFTER_CHANGE_S` (longer, up to
+    :data:`AFTER_CHANGE_TIMEOUT_S`, until :data:`MIN_REPORTS_AFTER` arrived). Every report echoing
+    a FINGER sent after the SET returned is after the change (session-relative: the echoes name
+    this session's finger reports, never the device's uptime) and must be under the new limits
+    (PS1, PS5).
+
+    Raises:
+        CannotAssess: no HOST_FINGER, the plate was not driven over the new limit, or no report
+            echoed a FINGER sent after the change.
+    """
+    info = driver.info()
+    if not info.capabilities & Capability.HOST_FINGER:
+        raise CannotAssess("the device takes no FINGER reports: the reports after the change "
+                           "cannot be told apart")
+    rate = float(info.frame_rate_hz)
+    ev = 4.0 if info.capabilities & Capability.EV else 1.0
+    lead = lead_frames(int(info.stream_capacity_frames), rate)
+    lowered = Limits.from_si(base.max_amplitude_m * LOWERED_FRACTION,
+                             base.max_voltage_v * LOWERED_FRACTION,
+                             base.max_current_a * LOWERED_FRACTION)
+    finger = _Finger(driver, info.surface_width_10um * 0.0025, info.surface_height_10um * 0.005)
+    driver.set_touch_source(host=True)
+    driver.start()
+    start = finger.start_s
+    states: list[State] = []
+    before: list[State] = []
+    read_back: Limits | None = None
+    sent, next_finger, end, timeout, n_after = 0, start, math.inf, math.inf, 0
+    while driver.clock() < timeout and (driver.clock() < end or n_after < MIN_REPORTS_AFTER):
+        now = driver.clock()
+        if now >= next_finger:
+            finger.send()
+            next_finger += FINGER_PERIOD_S
+        due = lead + int((now - start) * rate)
+        if due > sent:
+            driver.stream_frames(np.zeros(due - sent), np.full(due - sent, ev))
+            sent = due
+        new = driver.collect_until(driver.clock() + 0.001)
+        n_after += sum(s.host_time_echo_us in finger.after_us for s in new)
+        states += new
+        if read_back is None and driver.clock() >= start + DRIVEN_S:
+            before = list(states)
+            driver.set_report(lowered)
+            finger.mark()
+            finger.send()  # the first FINGER after the change, as soon as the SET returned
+            read_back = driver.limits()
+            next_finger = driver.clock() + FINGER_PERIOD_S
+            end = driver.clock() + AFTER_CHANGE_S
+            timeout = driver.clock() + AFTER_CHANGE_TIMEOUT_S
+    driver.stop()
+    assert read_back is not None
+    driven = float(np.median([s.amplitude_m for s in before[-5:]])) if before else 0.0
+    empty = sum(s.stream_queued == 0 for s in before[len(before) // 2:])
+    if empty > STARVED_FRACTION * max(len(before) // 2, 1):
+        raise CannotAssess(f"the host left the stream queue empty in {empty} of the "
+                           f"{len(before) - len(before) // 2} reports before the change (plate "
+                           f"at {driven * 1e9:.0f} nm): it cannot drive the device in real time")
+    if not driven >= MIN_OVER_NEW_LIMIT * lowered.max_amplitude_m:
+        raise CannotAssess(f"the plate was at {driven * 1e9:.0f} nm before the change, not "
+                           f"{MIN_OVER_NEW_LIMIT:g} x the new {lowered.max_amplitude_m * 1e9:.0f}"
+                           f" nm limit")
+    after = [s for s in states if s.host_time_echo_us in finger.after_us]
+    if not after:
+        raise CannotAssess("no report echoed a FINGER sent after the change")
+    over, worst = _over_new_limits(after, lowered)
+    return LimitsChange(len(after), over, worst, driven, lowered, read_back)
+
+
+def measure_safety(open_driver: Callable[[], Driver]) -> Iterator[tuple[str, int, float, str]]:
+    """Per case as it is measured (case, reports over a limit, the worst measured output /
+    limit, a detail line): a card asking for more than the device can do, the same under host
+    limits halved, streamed extreme frames, and limits lowered while the plate is driven
+    (:func:`measure_limits_while_driven`)."""
     out: dict[str, tuple[int, float]] = {}
     with open_driver() as driver:
         info = driver.info()
@@ -553,7 +728,16 @@ def measure_safety(open_driver: Callable[[], Driver]) -> dict[str, tuple[int, fl
             states += driver.collect_until(driver.clock() + 0.01)
         driver.stop()
         out["stream-extremes"] = _over(states, driver)
-    return out
+    for case, (n, worst) in out.items():
+        yield case, n, worst, f"largest measured output {worst:.3f} x its limit in force"
+    with open_driver() as driver:
+        _wait_for_rest(driver)
+        base = driver.limits()
+        try:
+            change = measure_limits_while_driven(driver, base)
+        finally:  # leave the limits as they were, as host-limits does
+            driver.set_limits(base.max_amplitude_m, base.max_voltage_v, base.max_current_a)
+    yield "limits-while-driven", change.over, change.worst, change.detail
 
 
 @check(name="device.safety", level=LEVEL,
@@ -565,9 +749,8 @@ def check_safety(ctx: Context) -> Iterator[CheckResult]:
     open_driver = ctx.open_driver
 
     def measure() -> Iterator[CheckResult]:
-        for case, (n_over, worst) in measure_safety(open_driver).items():
-            yield _result("device.safety", case, "n_over", n_over, 0.0, "reports",
-                          f"largest measured output {worst:.3f} x its limit in force")
+        for case, n_over, _worst, detail in measure_safety(open_driver):
+            yield _result("device.safety", case, "n_over", n_over, 0.0, "reports", detail)
 
     yield from guarded("device.safety", LEVEL, SAFETY_CASES, measure)
 

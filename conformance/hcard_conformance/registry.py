@@ -43,6 +43,8 @@ BUILTIN_MODULES: tuple[str, ...] = (
     "hcard_conformance.format_level",
     "hcard_conformance.renderer_level",
     "hcard_conformance.device_level",
+    "hcard_conformance.link_checks",
+    "hcard_conformance.session_checks",
 )
 """Modules whose ``@check`` functions are the built-in checks, in level order."""
 

@@ -26,7 +26,7 @@ Each implementation rendering is computed once per run and shared by the checks
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
 import numpy as np
@@ -36,7 +36,7 @@ from hcard_conformance import metrics
 from hcard_conformance.context import Context
 from hcard_conformance.metrics import Metric, Signal, Tolerances
 from hcard_conformance.registry import check
-from hcard_conformance.result import CheckResult, measured
+from hcard_conformance.result import CheckResult, guarded, measured, unassessed
 
 LEVEL = "renderer"
 COMPONENT_TAGS = frozenset({"dense", "oriented", "temporal", "bipolar"})
@@ -89,16 +89,41 @@ def case(ctx: Context, entry: Any) -> dict[str, Any]:
     frames as returned)."""
     key = ("renderer-case", entry.name)
     if key not in ctx.cache:
-        manifest = ctx.manifest
-        card_entry = manifest.card(entry.card)
-        card = card_entry.load_card()
-        track = manifest.track(entry.track).load_track()
-        golden = Signal.of(entry.load_arrays())
-        raw = ctx.render(card, track, entry.options())
-        impl = Signal.of(raw) if ctx.frame_exact else resample_reports(raw, golden.t)
-        ctx.cache[key] = {"golden": golden, "impl": impl, "card": card, "track": track,
-                          "tags": set(card_entry.tags), "raw": raw}
-    return ctx.cache[key]
+        try:
+            ctx.cache[key] = _render_case(ctx, entry)
+        except Exception as exc:  # kept: every check of this entry reports it, none re-plays
+            ctx.cache[key] = exc
+    found = ctx.cache[key]
+    if isinstance(found, Exception):
+        raise found
+    return found
+
+
+def _render_case(ctx: Context, entry: Any) -> dict[str, Any]:
+    manifest = ctx.manifest
+    card_entry = manifest.card(entry.card)
+    card = card_entry.load_card()
+    track = manifest.track(entry.track).load_track()
+    golden = Signal.of(entry.load_arrays())
+    raw = ctx.render(card, track, entry.options())
+    impl = Signal.of(raw) if ctx.frame_exact else resample_reports(raw, golden.t)
+    return {"golden": golden, "impl": impl, "card": card, "track": track,
+            "tags": set(card_entry.tags), "raw": raw}
+
+
+def _each_entry(ctx: Context, name: str, entries: Iterable[Any],
+                judge: Callable[[Any], CheckResult | None]) -> Iterator[CheckResult]:
+    """``judge(entry)`` for every entry, each guarded: an entry whose rendering or metric
+    raises is one ERROR result (spec section 6), the others are judged as usual. ``judge``
+    returns None when its metric does not apply to the entry (spec Q6)."""
+    for entry in entries:
+
+        def measure(entry: Any = entry) -> Iterator[CheckResult]:
+            result = judge(entry)
+            if result is not None:
+                yield result
+
+        yield from guarded(name, LEVEL, [entry.name], measure)
 
 
 def _entries(ctx: Context) -> list[Any]:
@@ -115,31 +140,53 @@ def _result(name: str, entry: Any, metric_id: str, metric: Metric, threshold: fl
     return result
 
 
+def _unmeasured(name: str, entry: Any, data: dict[str, Any],
+                metric_of: Callable[[Signal], Metric], found: Metric) -> CheckResult | None:
+    """A metric that did not apply to the implementation's frames: None when it does not apply
+    to the golden frames either (spec Q6: not applicable), else the case is UNASSESSED with
+    why (the implementation reported nothing the metric can judge; never dropped)."""
+    if not metric_of(data["golden"]).applicable:
+        return None
+    return unassessed(name, LEVEL, entry.name,
+                      f"{found.detail} in the implementation's frames (applies to the golden)")
+
+
 @check(name="renderer.exact", level=LEVEL, applies=lambda ctx: ctx.frame_exact,
        description="A0: every golden render reproduced frame for frame within 1e-5")
 def check_exact(ctx: Context) -> Iterator[CheckResult]:
     """A0 on every golden render (frame-exact implementations only)."""
-    for entry in _entries(ctx):
+
+    def judge(entry: Any) -> CheckResult:
         data = case(ctx, entry)
         tol = tolerances(ctx, entry)
         metric, passed = metrics.exact_error(data["impl"], data["golden"], tol)
         result = _result("renderer.exact", entry, "A0", metric, tol.friction_abs,
                          "relative friction")
         result.passed = passed
-        yield result
+        return result
+
+    yield from _each_entry(ctx, "renderer.exact", _entries(ctx), judge)
 
 
 @check(name="renderer.friction_error", level=LEVEL,
        description="A1: RMS relative friction error within the 8% JND on every golden render")
 def check_friction_error(ctx: Context) -> Iterator[CheckResult]:
     """A1 on every golden render."""
-    for entry in _entries(ctx):
+
+    def judge(entry: Any) -> CheckResult | None:
         data = case(ctx, entry)
         tol = tolerances(ctx, entry)
-        metric = metrics.relative_error(data["impl"], data["golden"], tol)
-        if metric.applicable:
-            yield _result("renderer.friction_error", entry, "A1", metric,
-                          tol.friction_rel_jnd, "relative friction")
+
+        def metric_of(impl: Signal) -> Metric:
+            return metrics.relative_error(impl, data["golden"], tol)
+
+        metric = metric_of(data["impl"])
+        if not metric.applicable:
+            return _unmeasured("renderer.friction_error", entry, data, metric_of, metric)
+        return _result("renderer.friction_error", entry, "A1", metric,
+                       tol.friction_rel_jnd, "relative friction")
+
+    yield from _each_entry(ctx, "renderer.friction_error", _entries(ctx), judge)
 
 
 def _tags(ctx: Context, entry: Any) -> set[str]:
@@ -153,61 +200,86 @@ def _changes_texture_in_contact(ctx: Context, entry: Any) -> bool:
     return bool(np.any(contact[1:] & contact[:-1] & (texture[1:] != texture[:-1])))
 
 
-def _components(ctx: Context, entry: Any) -> tuple[Metric, Metric] | None:
+def _components(ctx: Context, entry: Any, which: int, name: str, metric_id: str,
+                threshold: float, unit: str) -> CheckResult | None:
+    """A2 (``which`` 0) or A3 (1) of one entry; None where the card has no components."""
     if not _tags(ctx, entry) & COMPONENT_TAGS:
         return None
     data = case(ctx, entry)
-    return metrics.component_errors(data["impl"], data["golden"], tolerances(ctx, entry),
-                                    entry.band_limit_hz)
+
+    def metric_of(impl: Signal) -> Metric:
+        return metrics.component_errors(impl, data["golden"], tolerances(ctx, entry),
+                                        entry.band_limit_hz)[which]
+
+    metric = metric_of(data["impl"])
+    if not metric.applicable:
+        return _unmeasured(name, entry, data, metric_of, metric)
+    return _result(name, entry, metric_id, metric, threshold, unit)
 
 
 @check(name="renderer.component_amplitude", level=LEVEL,
        description="A2: amplitude of each golden spectral peak within 8% of the mean friction")
 def check_component_amplitude(ctx: Context) -> Iterator[CheckResult]:
     """A2 on dense, oriented, temporal and bipolar cards."""
-    for entry in _entries(ctx):
-        found = _components(ctx, entry)
-        if found is not None and found[0].applicable:
-            yield _result("renderer.component_amplitude", entry, "A2", found[0],
-                          tolerances(ctx, entry).component_amplitude_rel, "relative friction")
+
+    def judge(entry: Any) -> CheckResult | None:
+        return _components(ctx, entry, 0, "renderer.component_amplitude", "A2",
+                           tolerances(ctx, entry).component_amplitude_rel, "relative friction")
+
+    yield from _each_entry(ctx, "renderer.component_amplitude", _entries(ctx), judge)
 
 
 @check(name="renderer.component_frequency", level=LEVEL,
        description="A3: frequency of each golden spectral peak within 5%")
 def check_component_frequency(ctx: Context) -> Iterator[CheckResult]:
     """A3 on dense, oriented, temporal and bipolar cards."""
-    for entry in _entries(ctx):
-        found = _components(ctx, entry)
-        if found is not None and found[1].applicable:
-            yield _result("renderer.component_frequency", entry, "A3", found[1],
-                          tolerances(ctx, entry).component_frequency_rel, "fraction")
+
+    def judge(entry: Any) -> CheckResult | None:
+        return _components(ctx, entry, 1, "renderer.component_frequency", "A3",
+                           tolerances(ctx, entry).component_frequency_rel, "fraction")
+
+    yield from _each_entry(ctx, "renderer.component_frequency", _entries(ctx), judge)
 
 
 @check(name="renderer.spatial_phase", level=LEVEL,
        description="A4: position-locked features within 2.5 mm of where they are drawn")
 def check_spatial_phase(ctx: Context) -> Iterator[CheckResult]:
     """A4 on coarse and sparse cards."""
-    for entry in _entries(ctx):
-        if not _tags(ctx, entry) & PHASE_TAGS:
-            continue
+
+    def judge(entry: Any) -> CheckResult | None:
         data = case(ctx, entry)
         tol = tolerances(ctx, entry)
         locked = metrics.position_locked_textures(data["card"], entry.options())
-        metric = metrics.spatial_phase_error(data["impl"], data["golden"], tol, data["track"],
-                                             locked)
-        if metric.applicable:
-            yield _result("renderer.spatial_phase", entry, "A4", metric, tol.spatial_phase_mm, "mm")
+
+        def metric_of(impl: Signal) -> Metric:
+            return metrics.spatial_phase_error(impl, data["golden"], tol, data["track"], locked)
+
+        metric = metric_of(data["impl"])
+        if not metric.applicable:
+            return _unmeasured("renderer.spatial_phase", entry, data, metric_of, metric)
+        return _result("renderer.spatial_phase", entry, "A4", metric, tol.spatial_phase_mm,
+                       "mm")
+
+    entries = [e for e in _entries(ctx) if _tags(ctx, e) & PHASE_TAGS]
+    yield from _each_entry(ctx, "renderer.spatial_phase", entries, judge)
 
 
 @check(name="renderer.boundary", level=LEVEL,
        description="A5: taxtel boundaries within 2.5 mm of where they are drawn")
 def check_boundary(ctx: Context) -> Iterator[CheckResult]:
     """A5 on every golden render whose texture changes while in contact."""
-    for entry in _entries(ctx):
-        if not _changes_texture_in_contact(ctx, entry):
-            continue
+
+    def judge(entry: Any) -> CheckResult | None:
         data = case(ctx, entry)
         tol = tolerances(ctx, entry)
-        metric = metrics.boundary_error(data["impl"], data["golden"], tol, data["track"])
-        if metric.applicable:
-            yield _result("renderer.boundary", entry, "A5", metric, tol.boundary_mm, "mm")
+
+        def metric_of(impl: Signal) -> Metric:
+            return metrics.boundary_error(impl, data["golden"], tol, data["track"])
+
+        metric = metric_of(data["impl"])
+        if not metric.applicable:
+            return _unmeasured("renderer.boundary", entry, data, metric_of, metric)
+        return _result("renderer.boundary", entry, "A5", metric, tol.boundary_mm, "mm")
+
+    entries = [e for e in _entries(ctx) if _changes_texture_in_contact(ctx, e)]
+    yield from _each_entry(ctx, "renderer.boundary", entries, judge)

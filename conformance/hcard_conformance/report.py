@@ -46,6 +46,12 @@ def table(report: SuiteReport, *, verbose: bool = False) -> str:
     a per-check summary), then totals and timings per level."""
     lines = [f"hcard conformance {__version__}: driver {report.driver}, "
              f"levels {', '.join(report.levels)}"]
+    for kind in ("device_class", "timing_class"):
+        if kind in report.conditions:
+            lines.append(f"{kind.replace('_', ' ')}: {report.conditions[kind]} "
+                         f"({report.conditions[kind + '_why']})")
+    if report.not_applicable:
+        lines.append(f"not applicable here: {', '.join(report.not_applicable)}")
     header = f"{'status':6}  {'check':34} {'case':44} {'metric':26} {'value':>10} {'limit':>10}"
     lines += ["", header, "-" * len(header)]
     by_check: dict[str, list[CheckResult]] = {}
@@ -127,6 +133,9 @@ def junit_xml(report: SuiteReport) -> bytes:
         props = ET.SubElement(suite, "properties")
         ET.SubElement(props, "property", name="driver", value=report.driver)
         ET.SubElement(props, "property", name="hcard_version", value=__version__)
+        if level == "device":
+            for key, value in report.conditions.items():
+                ET.SubElement(props, "property", name=key, value=value)
         for r in results:
             case = ET.SubElement(suite, "testcase", classname=r.check, name=r.case,
                                  time=f"{r.duration_s:.6f}")
@@ -161,6 +170,7 @@ def to_json(report: SuiteReport) -> dict[str, Any]:
                    **{k.lower(): v for k, v in outcome_counts(report.results).items()}},
         "duration_s": report.duration_s,
         "thresholds": {k: _finite(v) for k, v in report.thresholds.items()},
+        "conditions": dict(report.conditions),
         "not_applicable": list(report.not_applicable),
         "level_durations_s": report.level_durations_s(),
         "check_durations_s": report.check_durations_s,

@@ -14,6 +14,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from hcard_conformance.conditions import run_conditions
 from hcard_conformance.context import Context
 from hcard_conformance.registry import all_checks, applies_to
 from hcard_conformance.result import LEVELS, CheckResult, error_result, level_index
@@ -33,6 +34,8 @@ class SuiteReport:
         not_applicable: checks of the levels that do not concern this implementation (for
             example the exact-render check A0 for a driver, device checks for ``reference``).
         thresholds: the manifest's tolerances in force (with the run's overrides).
+        conditions: device class and timing class of a device-level run, with why
+            (:func:`hcard_conformance.conditions.run_conditions`).
         check_durations_s: wall-clock time of each check, s.
         duration_s: wall-clock time of the whole run, s.
     """
@@ -42,6 +45,7 @@ class SuiteReport:
     results: list[CheckResult] = field(default_factory=list)
     not_applicable: list[str] = field(default_factory=list)
     thresholds: dict[str, float] = field(default_factory=dict)
+    conditions: dict[str, str] = field(default_factory=dict)
     check_durations_s: dict[str, float] = field(default_factory=dict)
     duration_s: float = 0.0
 
@@ -128,6 +132,8 @@ def run_suite(ctx: Context, levels: Sequence[str] = LEVELS, *, checks: Sequence[
     except Exception as exc:  # no vectors: the checks report it, one failed result each
         report.thresholds = {"error": math.nan}
         report.not_applicable.append(f"(thresholds unavailable: {exc})")
+    if any(c.level == "device" for c in chosen):
+        report.conditions = run_conditions(ctx, ordered)
     start = time.perf_counter()
     for chk in chosen:
         if not applies_to(chk, ctx):

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hcard_conformance.result import CannotAssess
 from hcard_device.drivers.base import Driver
 from hcard_device.drivers.recording import unwrapped_times
 from hcard_device.protocol import Capability, State
@@ -33,6 +34,9 @@ FINGER_SPEED_MM_S = 60.0
 """Speed of the host finger while streaming, mm/s (the firmware's velocity compensation sees a
 sliding finger; a still finger gives zero UV friction at any amplitude)."""
 
+STARVED_FRACTION = 0.05
+"""Fraction of a streaming session's reports with an empty queue beyond which a dynamics
+measurement is not assessed (the reference over usbip in real time: 0-3 of ~700)."""
 
 @dataclass(frozen=True)
 class StreamSession:
@@ -56,6 +60,16 @@ class StreamSession:
     def column(self, name: str) -> np.ndarray:
         """One STATE field of every report, as floats."""
         return np.array([getattr(s, name) for s in self.states], dtype=float)
+
+    def require_fed(self, what: str) -> None:
+        """Raise :class:`CannotAssess` when the host left the queue empty in more than
+        :data:`STARVED_FRACTION` of the reports: the stream then measured the host (a
+        software-emulated or overloaded one), not the device."""
+        if self.underruns > STARVED_FRACTION * max(len(self.states), 1):
+            raise CannotAssess(
+                f"{what}: the host left the stream queue empty in {self.underruns} of "
+                f"{len(self.states)} reports (lead {self.lead_frames} frames); it cannot feed "
+                "the device in real time, so the measurement would be of the host")
 
 
 def lead_frames(capacity_frames: int, frame_rate_hz: float) -> int:

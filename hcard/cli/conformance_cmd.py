@@ -16,6 +16,9 @@ import click
 from hcard.errors import HcardError
 
 LEVEL_NAMES = ("format", "renderer", "device")
+TIMING_NAMES = ("real-time", "software-emulation")
+"""Names of hcard_conformance.timing.TIMING_CLASSES, the default first (kept here so that
+``hcard --help`` does not import the conformance package; a test holds them equal)."""
 
 
 def _option_value(text: str) -> Any:
@@ -49,9 +52,8 @@ def _parse_options(pairs: tuple[str, ...]) -> dict[str, Any]:
 @click.command()
 @click.option("--driver", "driver_name", required=True, metavar="NAME",
               help="Implementation under test: 'reference' (hcard.render), a device URI "
-                   "(sim://, usbip://HOST:PORT/BUSID, ...) or a negative control "
-                   "(control:position-only, control:latency-30ms, control:no-ev, "
-                   "control:over-limit).")
+                   "(sim://, usbip://HOST:PORT/BUSID, hid://PATH, ...) or a negative control "
+                   "(control:NAME; see conformance/README.md).")
 @click.option("--level", "levels", multiple=True, type=click.Choice(LEVEL_NAMES),
               help="Level to run (repeatable); default: all levels.")
 @click.option("--check", "select", multiple=True, metavar="PREFIX",
@@ -65,17 +67,28 @@ def _parse_options(pairs: tuple[str, ...]) -> dict[str, Any]:
 @click.option("--option", "option_pairs", multiple=True, metavar="KEY=VALUE",
               help="Option for checks (repeatable); 'tolerance.NAME=VALUE' tightens a "
                    "threshold of the manifest.")
+@click.option("--timing", type=click.Choice(TIMING_NAMES), default=None,
+              help="What the host keeps of real time (spec/conformance.md 5.2): 'real-time' "
+                   "(a bench PC; default) or 'software-emulation' (an emulated guest: "
+                   "looser latency and report-loss bounds; rendered friction and dynamics "
+                   "not applicable).")
 @click.option("-v", "--verbose", is_flag=True, help="List every case, not only failures.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress lines on stderr.")
 def conformance(driver_name: str, levels: tuple[str, ...], select: tuple[str, ...],
                 junit_path: Path | None, json_path: Path | None, vectors_dir: Path | None,
-                option_pairs: tuple[str, ...], verbose: bool, quiet: bool) -> None:
+                option_pairs: tuple[str, ...], timing: str | None, verbose: bool,
+                quiet: bool) -> None:
     """Run the hcard conformance suite against an implementation (spec/conformance.md)."""
     from hcard_conformance.context import Context
     from hcard_conformance.report import table, write_json, write_junit
     from hcard_conformance.runner import run_suite
 
     options = _parse_options(option_pairs)
+    if timing is not None:
+        options["timing"] = timing
+    if str(options.get("timing", TIMING_NAMES[0])) not in TIMING_NAMES:
+        raise click.BadParameter(f"unknown timing class {options['timing']!r}; known: "
+                                 f"{', '.join(TIMING_NAMES)}", param_hint="--option timing")
     ctx = Context.for_driver(driver_name, vectors_root=vectors_dir, options=options)
     try:
         ctx.manifest  # noqa: B018 - load now: missing vectors are a usage error (exit 2)

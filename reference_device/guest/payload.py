@@ -411,7 +411,36 @@ def summary_counts(values: list[int]) -> dict[str, float]:
     }
 
 
-MODES = {"probe": mode_probe, "echo": mode_echo, "hcard": mode_hcard}
+
+# ---- conformance mode -----------------------------------------------------------------------
+def mode_conformance(args: argparse.Namespace) -> dict[str, Any]:
+    """The device level of the conformance suite over hid:// (the unmodified hidapi driver on
+    the guest kernel's hidraw node), with the thresholds of ``--timing``."""
+    from hcard_conformance.context import Context
+    from hcard_conformance.runner import run_suite
+
+    result: dict[str, Any] = usbip_attach(args.server, args.port, args.busid, args.attach_timeout)
+    uri = f"hid://{result['hidraw']}"
+    ctx = Context.for_driver(uri)
+    ctx.options["timing"] = args.timing
+    select = tuple(args.checks.split(",")) if args.checks else ()
+    t0 = time.monotonic()
+    report = run_suite(ctx, ("device",), select=select)
+    result["suite_s"] = round(time.monotonic() - t0, 2)
+    result["conditions"] = report.conditions
+    result["not_applicable"] = report.not_applicable
+    result["passed"] = report.passed
+    result["results"] = [
+        {"check": r.check, "case": r.case, "outcome": r.outcome, "metric": r.metric,
+         "value": None if r.value != r.value else r.value, "threshold": r.threshold,
+         "unit": r.unit, "detail": r.detail}
+        for r in report.results
+    ]
+    result["ok"] = True
+    return result
+
+MODES = {"probe": mode_probe, "echo": mode_echo, "hcard": mode_hcard,
+         "conformance": mode_conformance}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -430,6 +459,10 @@ def main(argv: list[str] | None = None) -> int:
         default=BOUNDARY_X_MM,
         help="hcard mode: x where the card's texture changes (friction latency, left/right)",
     )
+    parser.add_argument("--timing", default="software-emulation",
+                        help="conformance mode: timing class of the thresholds")
+    parser.add_argument("--checks", default="",
+                        help="conformance mode: comma-separated check names (default: all)")
     args = parser.parse_args(argv)
     t0 = time.monotonic()
     try:

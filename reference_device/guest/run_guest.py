@@ -106,7 +106,7 @@ def stop_process(proc: subprocess.Popen[Any] | None, name: str, grace_s: float =
 
 def server_command(mode: str, python: str, port: int, device: str) -> list[str] | None:
     """The device server for `mode`, on 127.0.0.1:port (None: the mode needs none)."""
-    if mode == "hcard":
+    if mode in ("hcard", "conformance"):
         return [
             python, "-m", "hcard_device.usb.server",
             "--host", "127.0.0.1", "--port", str(port), "--device", device,
@@ -197,6 +197,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
     port = args.port or free_port()
     payload_args = [args.mode, "--server", "10.0.2.2", "--port", str(port), "--busid", args.busid]
+    if args.mode == "conformance":
+        payload_args += ["--timing", args.timing]
+        if args.checks:
+            payload_args += ["--checks", args.checks]
     for option in ("card", "track"):
         value = getattr(args, option)
         if value:
@@ -304,16 +308,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="Boot the hcard QEMU guest tier.")
     parser.add_argument(
         "--mode",
-        choices=("hcard", "echo", "probe"),
+        choices=("hcard", "conformance", "echo", "probe"),
         default="hcard",
-        help="hcard: the reference device and the hidapi driver; echo: a minimal HID device "
-        "on the usbip package (kernel path only); probe: boot + 9p only",
+        help="hcard: the reference device and the hidapi driver; conformance: the device "
+        "level of the conformance suite over hid://; echo: a minimal HID device on the usbip "
+        "package (kernel path only); probe: boot + 9p only",
     )
     parser.add_argument(
         "--device", choices=("evita", "coupled"), default="evita", help="hcard mode: the variant"
     )
     parser.add_argument("--card", help="hcard mode: card file to upload (default: built in)")
     parser.add_argument("--track", help="hcard mode: finger track CSV (default: built in)")
+    parser.add_argument(
+        "--timing", default="software-emulation",
+        help="conformance mode: the timing class whose thresholds apply",
+    )
+    parser.add_argument(
+        "--checks", default="", help="conformance mode: comma-separated checks (default: all)"
+    )
     parser.add_argument("--timeout", type=float, default=240.0, help="guest time limit, s")
     parser.add_argument("--server-timeout", type=float, default=30.0)
     parser.add_argument("--port", type=int, default=0, help="server port (0: a free one)")

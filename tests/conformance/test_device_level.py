@@ -16,7 +16,8 @@ from hcard_conformance.runner import run_suite
 from hcard_device.drivers import open_device
 
 DEVICE_CHECKS = {"device.friction", "device.dynamics", "device.latency", "device.safety",
-                 "device.watchdog"}
+                 "device.watchdog", "device.upload-integrity", "device.report-loss",
+                 "device.session-ownership"}
 
 
 def _results(uri: str) -> dict[tuple[str, str], CheckResult]:

@@ -44,5 +44,6 @@ def test_session_relative_checks_pass_twice_against_one_running_server():
             ("device.dynamics", "bandwidth"), ("device.dynamics", "rise-time"),
             ("device.latency", "boundary-move"), ("device.safety", "card-over-limit"),
             ("device.safety", "host-limits"), ("device.safety", "stream-extremes"),
+            ("device.safety", "limits-while-driven"),
             ("device.watchdog", "host-silent"), ("device.watchdog", "fault-reported"),
         }

@@ -159,3 +159,54 @@ def test_guest_hidapi_driver_uploads_card_and_streams_track(tmp_path: Path) -> N
         f"finger -> device echo {payload['finger_echo_latency_ms']} ms, finger crossing -> "
         f"target change {payload['friction_latency_ms']} ms"
     )
+
+
+def test_guest_device_level_conforms_over_hid_under_software_emulation(tmp_path: Path) -> None:
+    """The device level of the conformance suite over hid:// on the guest kernel, judged with
+    the software-emulation timing class (spec/conformance.md 5.2): every case the class
+    applies is reported and passes, latency and report loss within the class's finite bounds,
+    and the checks that need a real-time host are declared not applicable, not dropped."""
+    require_guest()
+    from hcard_conformance.timing import SOFTWARE_EMULATION
+
+    summary = run_guest("conformance", tmp_path, "--timeout", "400")
+    payload = summary["payload"]
+    results = payload["results"]
+    # Under software emulation a case that needs the host to keep real time may be
+    # UNASSESSED, saying so (spec 5.2 T2): the stream behind limits-while-driven, the first
+    # host's session kept alive while a second host uploads. Nothing may FAIL or raise.
+    host_timed = {("device.safety", "limits-while-driven"),
+                  ("device.session-ownership", "second-host-refused")}
+    failed = [(r["check"], r["case"], r["outcome"], r["value"], r["detail"]) for r in results
+              if r["outcome"] != "PASS"
+              and not (r["outcome"] == "UNASSESSED" and (r["check"], r["case"]) in host_timed
+                       and "real time" in r["detail"])]
+    assert not failed, failed
+    required = {("device.latency", "boundary-move"), ("device.watchdog", "host-silent"),
+                ("device.watchdog", "fault-reported"), ("device.report-loss", "sequence-gaps"),
+                ("device.report-loss", "loss-fraction"), ("device.report-loss", "drops-counted"),
+                ("device.session-ownership", "takeover-reported"),
+                ("device.session-ownership", "released-by-stop")}
+    required |= {("device.safety", c) for c in ("card-over-limit", "host-limits",
+                                                "stream-extremes")}
+    required |= {("device.upload-integrity", c) for c in (
+        "bad-crc", "truncated", "out-of-order", "interrupted", "restarted", "oversize",
+        "valid-after")}
+    passed = {(r["check"], r["case"]) for r in results if r["outcome"] == "PASS"}
+    assert required <= passed, sorted(required - passed)
+    assert payload["conditions"]["timing_class"] == "software-emulation"
+    assert payload["conditions"]["device_class"] == "e-vita"
+    assert set(payload["not_applicable"]) == {"device.friction", "device.dynamics"}
+    by_case = {(r["check"], r["case"]): r for r in results}
+    assert {("device.latency", "boundary-move"), ("device.safety", "card-over-limit"),
+            ("device.safety", "host-limits"), ("device.safety", "stream-extremes"),
+            ("device.watchdog", "host-silent"),
+            ("device.watchdog", "fault-reported")} <= set(by_case)
+    latency = by_case[("device.latency", "boundary-move")]
+    assert latency["threshold"] == SOFTWARE_EMULATION.latency_s * 1e3
+    assert 0.5 < latency["value"] <= latency["threshold"]  # ms: bounded, and a real delay
+    loss = by_case[("device.report-loss", "loss-fraction")]
+    assert loss["threshold"] == SOFTWARE_EMULATION.host_report_loss * 100  # % of reports
+    assert 0.0 <= loss["value"] <= loss["threshold"]
+    print(f"guest conformance: {len(results)} cases in {payload['suite_s']} s; latency "
+          f"{latency['value']:.1f} ms; reports lost {loss['value']:.2f} %")

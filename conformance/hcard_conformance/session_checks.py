@@ -1,0 +1,382 @@
+"""Device-level conformance check of session ownership (spec/device-protocol.md section 14).
+
+``device.session-ownership``
+    Two hosts on one device. The check opens two drivers on the implementation's URI and first
+    makes sure they reach the same device: the second reads COUNTERS ``output_reports``
+    before and after the first sends :data:`PROBE_KEEPALIVES` KEEPALIVEs. When it does not
+    move by that much the two drivers reach two devices: ``sim://`` opens a new device for
+    every driver, and there the second host is ``SimDriver.another_host()`` on the first's
+    device (same clock, every report to both, in simulated time); a driver that cannot attach
+    one makes every case UNASSESSED with that reason. Cases:
+
+    ``second-host-refused``
+        The first host plays a :data:`PLAY_S` stroke (:func:`hcard_device.drivers.play.play`);
+        :data:`INTRUDE_S` after its START, the second host sends START with another token and
+        uploads another card. Metric: the intrusions the device carried out (a START not
+        refused with SESSION_BUSY or that changed the session, PN3; a COMMIT not refused with
+        BUSY, PN5; the first host's play failing, its last report not echoing its last
+        finger sample, more than :data:`MAX_LOST` of its reports lost, or its reports showing
+        another session or card); must be 0.
+    ``takeover-reported``
+        As above, but the second host sends TAKE_OVER (PN6) and keeps its session fed. Metric:
+        time from the TAKE_OVER to the first host's play raising
+        :class:`~hcard_device.drivers.errors.SessionLost` (PN9), ms (infinite when it never
+        does); threshold :data:`LOSS_THRESHOLD_S`.
+    ``released-by-stop``
+        The first host starts and stops (PN4) and stays connected; the second host then
+        starts. Pass: its START is granted and STATE shows its token in the next session
+        (``session_number`` + 1, PN1, PN2).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import threading
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+from hcard import build
+from hcard.track import FingerTrack, straight_stroke
+from hcard.v1 import card_pb2 as pb
+from hcard_conformance.context import Context
+from hcard_conformance.registry import check
+from hcard_conformance.result import (
+    CannotAssess,
+    CheckResult,
+    guarded,
+    measured,
+    unassessed,
+)
+from hcard_device.drivers.base import Driver
+from hcard_device.drivers.errors import DeviceError, SessionBusy, SessionLost
+from hcard_device.drivers.play import PlayResult, play
+from hcard_device.protocol import Command, Control, DeviceInfo, FaultBits, State, StateFlags
+
+LEVEL = "device"
+CHECK = "device.session-ownership"
+CASES = ("second-host-refused", "takeover-reported", "released-by-stop")
+PROBE_KEEPALIVES = 5
+"""KEEPALIVEs the first driver sends to show the second one shares its device."""
+PLAY_S = 1.5
+"""Length of the first host's stroke, s."""
+STROKE_SPEED_MM_S = 30.0
+"""Finger speed of the stroke, mm/s (45 mm over :data:`PLAY_S`)."""
+INTRUDE_S = 0.4
+"""Time after the first host's START at which the second host acts, s."""
+SESSION_WAIT_S = 2.0
+"""Longest wait for the first host's START (its profile and card upload come first), s."""
+MAX_LOST = 0.05
+"""Largest fraction of the first host's STATE reports that may be lost in transit (sequence
+gaps, PT5) for its recording to count as complete."""
+LOSS_THRESHOLD_S = 0.25
+"""Longest time from a TAKE_OVER to the former owner's driver reporting the loss, s."""
+SETTLE_S = 0.05
+"""Reports read after a request before judging its effect, s."""
+
+
+@dataclass
+class Background:
+    """A play session of the first host, during which the second host acts (``intrude``):
+    its result, or the error it raised and when (the first driver's clock, s).
+
+    On a real-time driver the play runs on a thread and ``intrude`` on the caller's, on the
+    wall clock; on ``sim://`` (simulated time) ``intrude`` runs inside the play, between two
+    steps of the shared device (:meth:`hcard_device.drivers.sim.SharedDevice.call_when`)."""
+
+    driver: Driver
+    card: pb.Card
+    track: FingerTrack
+    result: PlayResult | None = None
+    error: BaseException | None = None
+    error_at: float = math.nan
+
+    def _run(self) -> None:
+        try:
+            self.result = play(self.driver, self.card, self.track)
+        except Exception as exc:  # reported by the case, never lost
+            self.error, self.error_at = exc, self.driver.clock()
+
+    def run(self, intrude: Callable[[], None]) -> None:
+        """Play, and call ``intrude`` :data:`INTRUDE_S` after the first host's START took
+        effect (:meth:`_rendering`).
+
+        Raises:
+            CannotAssess: the first host's play never started (its error is the reason)."""
+        if self.driver.realtime:
+            self._run_realtime(intrude)
+        else:
+            self._run_simulated(intrude)
+
+    def _run_realtime(self, intrude: Callable[[], None]) -> None:
+        thread = threading.Thread(target=self._run, name="session-check-first-host",
+                                  daemon=True)
+        thread.start()
+        deadline = time.monotonic() + SESSION_WAIT_S
+        while not self._rendering() and thread.is_alive() and time.monotonic() < deadline:
+            time.sleep(0.002)
+        if not self._rendering():
+            thread.join(PLAY_S + 10.0)
+            raise CannotAssess(f"the first host's play did not start: {self.error}")
+        time.sleep(INTRUDE_S)
+        try:
+            intrude()
+        finally:
+            thread.join(PLAY_S + 10.0)
+
+    def _run_simulated(self, intrude: Callable[[], None]) -> None:
+        seen: list[float] = []
+
+        def due() -> bool:
+            if not seen and self._rendering():
+                seen.append(self.driver.clock())
+            return bool(seen) and self.driver.clock() >= seen[0] + INTRUDE_S
+
+        self.driver.device.call_when(due, intrude)  # type: ignore[attr-defined]
+        self._run()
+        if not seen:
+            raise CannotAssess(f"the first host's play did not start: {self.error}")
+
+    def _rendering(self) -> bool:
+        """The first host's START took effect: RUNNING in its reports, and its session
+        granted (a device without sessions reports session 0)."""
+        state = self.driver.last_state
+        if state is None or not state.flags & StateFlags.RUNNING:
+            return False
+        return self.driver.session_number is not None or state.session_number == 0
+
+
+@dataclass(frozen=True)
+class Hosts:
+    """How the check puts a second host on the first host's device.
+
+    Attributes:
+        open_driver: opens the first host's driver.
+        shared_uri: two drivers opened with ``open_driver`` reach one device (USB/IP, hidraw);
+            otherwise the second host is the first driver's ``another_host()`` (``sim://``).
+    """
+
+    open_driver: Callable[[], Driver]
+    shared_uri: bool
+
+    def second(self, first: Driver) -> Driver:
+        """A new driver of a second host on ``first``'s device."""
+        if self.shared_uri:
+            return self.open_driver()
+        return first.another_host()  # type: ignore[attr-defined]
+
+
+def stroke_card(info: DeviceInfo, uv: float) -> pb.Card:
+    """A card over the whole surface: friction 1 on the left half, ``uv`` on the right."""
+    width, height = info.surface_width_10um * 0.01, info.surface_height_10um * 0.01
+    return build.card(width, height, taxtel_mm=(width / 2, height), textures=[
+        build.texture(1.0, channel="uv"), build.texture(uv, channel="uv")], texture_index=[0, 1])
+
+
+def stroke_track(info: DeviceInfo) -> FingerTrack:
+    """A :data:`PLAY_S` stroke from a quarter of the surface's width along +x."""
+    width, height = info.surface_width_10um * 0.01, info.surface_height_10um * 0.01
+    return straight_stroke((width / 4, height / 2), (STROKE_SPEED_MM_S, 0.0), PLAY_S)
+
+
+def other_token(token: int) -> int:
+    """A session token 1..255 that is not ``token``."""
+    return token % 255 + 1
+
+
+def latest_state(driver: Driver) -> State:
+    """The newest STATE report the driver can read (waiting up to its timeout for one).
+
+    Raises:
+        DeviceError: no report arrived.
+    """
+    states = driver.read_inputs()
+    if not states:
+        raise DeviceError(f"{driver.uri}: no STATE report within {driver.timeout_s:g} s")
+    return states[-1]
+
+
+def two_hosts(open_driver: Callable[[], Driver]) -> Hosts:
+    """How to reach one device from two hosts; CannotAssess when the transport cannot.
+
+    Two drivers opened with ``open_driver`` share a device when the second one's COUNTERS
+    ``output_reports`` moves by the first one's :data:`PROBE_KEEPALIVES` KEEPALIVEs."""
+    with open_driver() as first, open_driver() as second:
+        before = second.counters().output_reports
+        for _ in range(PROBE_KEEPALIVES):
+            first.keepalive()
+        moved = (second.counters().output_reports - before) % (1 << 32)
+        attachable = callable(getattr(first, "another_host", None))
+    if moved >= PROBE_KEEPALIVES:
+        return Hosts(open_driver, True)
+    if attachable:
+        return Hosts(open_driver, False)
+    raise CannotAssess(
+        f"two drivers opened on this URI reach two devices (the second saw output_reports "
+        f"move by {moved} for the first's {PROBE_KEEPALIVES} KEEPALIVEs) and the driver "
+        "cannot attach a second host to its device: this transport cannot put two hosts on "
+        "one device; run the check on usbip:// or hid://")
+
+
+def session_faults(first: Background, owner: State) -> list[str]:
+    """What went wrong for the first host of ``second-host-refused`` (empty when its play
+    completed up to its last finger sample with at most :data:`MAX_LOST` of its reports lost,
+    and stayed in session ``owner.session_number`` with one card)."""
+    if first.error is not None:
+        return [f"the first host's play failed: {first.error}"]
+    result = first.result
+    if result is None:
+        return ["the first host's play did not end"]
+    problems = []
+    last_sample = int(result.sent_host_us()[-1])
+    if not result.states or result.states[-1].host_time_echo_us != last_sample:
+        problems.append("the first host's last report does not echo its last finger sample: "
+                        "its recording stops short of the track")
+    sent = len(result.states) + result.reports_lost
+    if not sent or result.reports_lost > MAX_LOST * sent:
+        problems.append(f"the first host lost {result.reports_lost} of {sent} reports")
+    late = [s for s in result.states if s.timestamp_us >= owner.timestamp_us]
+    generations = sorted({s.card_generation for s in late})
+    if len(generations) > 1:
+        problems.append(f"the card changed under the first host's play (generations "
+                        f"{generations})")
+    sessions = sorted({s.session_number for s in late})
+    if len(sessions) > 1:
+        problems.append(f"the first host's reports show sessions {sessions}")
+    return problems
+
+
+def case_second_host_refused(hosts: Hosts) -> CheckResult:
+    """``second-host-refused`` (module docstring; rules PN3, PN5)."""
+    intrusions: list[str] = []
+    starved: list[str] = []
+    seen_owner: list[State] = []
+    with hosts.open_driver() as first_driver, contextlib.ExitStack() as stack:
+        info = first_driver.info()
+
+        def intrude() -> None:
+            second = stack.enter_context(hosts.second(first_driver))
+            owner = latest_state(second)
+            seen_owner.append(owner)
+            if not owner.session_live and owner.faults & FaultBits.WATCHDOG:
+                starved.append(
+                    "the first host went silent for watchdog_ms before the second host came "
+                    "(WATCHDOG flagged, its session ended by PN7): this host cannot hold a "
+                    "session in real time, so the refusals of PN3 and PN5 could not be tested")
+                return
+            if not owner.session_live:
+                intrusions.append("no live session in STATE while the first host plays (PN2)")
+            second.send(Control(Command.START, other_token(owner.session_token)))
+            seen = second.collect_until(second.clock() + SETTLE_S)
+            if not any(s.faults & FaultBits.SESSION_BUSY for s in seen):
+                intrusions.append("the second host's START was not flagged SESSION_BUSY (PN3)")
+            if any(s.session_number != owner.session_number for s in seen):
+                intrusions.append("the second host's START began a new session (PN3)")
+            try:
+                second.upload_card(stroke_card(info, 0.2))
+                during = second.collect_until(second.clock())
+                if any(not s.session_live or s.faults & FaultBits.WATCHDOG for s in during):
+                    starved.append(
+                        "the first host went silent for watchdog_ms while the second uploaded "
+                        "(WATCHDOG flagged, its session ended by PN7 before the COMMIT): this "
+                        "host cannot hold a session in real time, so the refusal of PN5 could "
+                        "not be tested")
+                    return
+                intrusions.append("the second host's COMMIT replaced the card (PN5)")
+            except DeviceError as exc:
+                if "BUSY" not in str(exc):
+                    intrusions.append(f"the second host's upload failed without BUSY: {exc}")
+
+        first = Background(first_driver, stroke_card(info, 0.4), stroke_track(info))
+        first.run(intrude)
+    if starved:
+        return unassessed(CHECK, LEVEL, CASES[0], starved[0])
+    owner = seen_owner[0]
+    intrusions += session_faults(first, owner)
+    if intrusions:
+        detail = "; ".join(intrusions)
+    else:
+        result = first.result
+        assert result is not None
+        detail = (f"second host: START refused (SESSION_BUSY), COMMIT refused (BUSY); first "
+                  f"host: {len(result.states)} reports over {result.duration_s:.3f} s in "
+                  f"session {owner.session_number}, card generation "
+                  f"{result.upload.status.card_generation} throughout")
+    return measured(CHECK, LEVEL, CASES[0], "carried_out_intrusions", len(intrusions), 0,
+                    unit="requests", detail=detail)
+
+
+def case_takeover_reported(hosts: Hosts) -> CheckResult:
+    """``takeover-reported`` (module docstring; rules PN6, PN9)."""
+    took_over: list[tuple[Driver, int, float]] = []
+    with hosts.open_driver() as first_driver, contextlib.ExitStack() as stack:
+        info = first_driver.info()
+
+        def intrude() -> None:
+            second = stack.enter_context(hosts.second(first_driver))
+            token = other_token(latest_state(second).session_token)
+            second.send(Control(Command.TAKE_OVER, token))
+            took_over.append((second, token, second.clock()))
+
+        first = Background(first_driver, stroke_card(info, 0.4), stroke_track(info))
+        first.run(intrude)
+        second, token, at = took_over[0]
+        second.send(Control(Command.STOP, token))  # the second host ends its session (PN4)
+    if isinstance(first.error, SessionLost):
+        delay_ms = (first.error_at - at) * 1e3
+        detail = f"the first host's play raised SessionLost {delay_ms:.1f} ms after TAKE_OVER: "
+        detail += str(first.error)
+    else:
+        delay_ms = math.inf
+        outcome = ("completed as if nothing happened" if first.error is None
+                   else f"failed otherwise: {first.error}")
+        detail = f"the takeover was not reported: the first host's play {outcome}"
+    return measured(CHECK, LEVEL, CASES[1], "time_to_loss", delay_ms, LOSS_THRESHOLD_S * 1e3,
+                    unit="ms", detail=detail)
+
+
+def case_released_by_stop(hosts: Hosts) -> CheckResult:
+    """``released-by-stop`` (module docstring; rules PN1, PN2, PN4)."""
+    case = CASES[2]
+    with hosts.open_driver() as first, hosts.second(first) as second:
+        first.start()
+        number = first.session_number
+        first.collect_until(first.clock() + SETTLE_S)
+        first.stop()
+        try:
+            second.start()
+        except SessionBusy as exc:
+            return CheckResult(CHECK, LEVEL, case, False, "granted", 0.0, 1.0, "bool",
+                               f"after the first host's STOP: {exc}")
+        state = latest_state(second)
+        first.collect_until(first.clock() + SETTLE_S)  # the former owner sees it, no error
+        granted = (number is not None and second.session_number == (number + 1) % (1 << 16)
+                   and state.session_live and state.session_token == second.session_token)
+        second.stop()
+    if granted:
+        detail = (f"session {number} stopped; the second host's START was granted session "
+                  f"{state.session_number} (token {state.session_token})")
+    else:
+        detail = (f"no session granted after the first host's STOP: STATE shows session "
+                  f"{state.session_number}, token {state.session_token}, flag SESSION "
+                  f"{int(state.session_live)} (first host's session {number}; PN1, PN2)")
+    return CheckResult(CHECK, LEVEL, case, granted, "granted", float(granted), 1.0, "bool",
+                       detail)
+
+
+@check(name=CHECK, level=LEVEL,
+       description="a second host is refused, a takeover is reported, STOP releases the device")
+def check_session_ownership(ctx: Context) -> Iterator[CheckResult]:
+    """Session ownership between two hosts on one device (spec section 14)."""
+    if ctx.open_driver is None:
+        return
+    open_driver = ctx.open_driver
+
+    def measure() -> Iterator[CheckResult]:
+        hosts = two_hosts(open_driver)
+        yield case_second_host_refused(hosts)
+        yield case_takeover_reported(hosts)
+        yield case_released_by_stop(hosts)
+
+    yield from guarded(CHECK, LEVEL, CASES, measure)

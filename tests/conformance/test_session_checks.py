@@ -1,0 +1,87 @@
+"""The conformance check ``device.session-ownership`` (spec/device-protocol.md section 14): it
+passes on the reference device served over USB/IP by another process and on ``sim://`` (a
+second host attached to the simulated device), fails on the ``no-ownership`` negative control,
+and is UNASSESSED, with the reason, where two drivers cannot share one device."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from served_device import served_device
+
+from hcard_conformance.context import Context
+from hcard_conformance.controls import CONTROLS
+from hcard_conformance.registry import BUILTIN_MODULES, builtin_checks
+from hcard_conformance.result import FAIL, PASS, UNASSESSED, CheckResult
+from hcard_conformance.session_checks import (
+    CASES,
+    CHECK,
+    LOSS_THRESHOLD_S,
+    check_session_ownership,
+)
+
+
+def run(name: str) -> dict[str, CheckResult]:
+    return {r.case: r for r in check_session_ownership(Context.for_driver(name))}
+
+
+def test_the_check_is_built_in_after_the_device_level() -> None:
+    modules = list(BUILTIN_MODULES)
+    assert modules.index("hcard_conformance.session_checks") > modules.index(
+        "hcard_conformance.device_level")
+    found = {c.name: c for c in builtin_checks()}
+    assert found[CHECK].level == "device"
+    assert "no-ownership" in CONTROLS
+
+
+def test_the_reference_served_over_usbip_passes_twice_on_one_server() -> None:
+    with served_device() as served:
+        for _ in range(2):  # the device stays powered between runs: sessions carry on
+            results = run(served.uri)
+            assert set(results) == set(CASES)
+            assert all(r.status == PASS for r in results.values()), \
+                [r.detail for r in results.values()]
+            refused = results["second-host-refused"]
+            assert refused.value == 0 and "COMMIT refused (BUSY)" in refused.detail
+            takeover = results["takeover-reported"]
+            assert 0 <= takeover.value <= LOSS_THRESHOLD_S * 1e3  # ms
+            assert "SessionLost" in takeover.detail and "taken over by session" in \
+                takeover.detail
+            assert "granted session" in results["released-by-stop"].detail
+
+
+def test_the_no_ownership_control_fails_every_case() -> None:
+    results = run("control:no-ownership")
+    assert all(r.status == FAIL for r in results.values()), [r.detail for r in results.values()]
+    refused = results["second-host-refused"]
+    assert refused.value >= 3  # START not flagged, COMMIT carried out, card changed under play
+    assert "COMMIT replaced the card (PN5)" in refused.detail
+    assert "the card changed under the first host's play" in refused.detail
+    takeover = results["takeover-reported"]
+    assert math.isinf(takeover.value)
+    assert "completed as if nothing happened" in takeover.detail
+    assert "session 0, token 0, flag SESSION 0" in results["released-by-stop"].detail
+
+
+@pytest.mark.parametrize("uri", ["sim://", "sim://coupled"])
+def test_sim_passes_with_a_second_host_on_the_simulated_device(uri: str) -> None:
+    results = run(uri)
+    assert all(r.status == PASS for r in results.values()), [r.detail for r in results.values()]
+    assert results["second-host-refused"].value == 0
+    assert "1550 reports over 1.550 s in session 1" in results["second-host-refused"].detail
+    # simulated time: the loss shows at the first report after the TAKE_OVER, within the
+    # 10 ms the first host's driver advances the device at a time
+    assert 0 < results["takeover-reported"].value <= 10.0
+    assert "granted session 2" in results["released-by-stop"].detail
+
+
+def test_a_transport_that_cannot_share_one_device_is_unassessed_with_the_reason() -> None:
+    results = run("usbip://loopback")  # every driver starts its own in-process device
+    assert [r.status for r in results.values()] == [UNASSESSED] * 3
+    assert all("reach two devices" in r.detail and "usbip:// or hid://" in r.detail
+               for r in results.values())
+
+
+def test_the_reference_implementation_without_a_driver_is_not_checked() -> None:
+    assert list(check_session_ownership(Context.for_driver("reference"))) == []
