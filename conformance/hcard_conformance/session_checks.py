@@ -259,7 +259,8 @@ def case_second_host_refused(hosts: Hosts) -> CheckResult:
             second = stack.enter_context(hosts.second(first_driver))
             owner = latest_state(second)
             seen_owner.append(owner)
-            if not owner.session_live and owner.faults & FaultBits.WATCHDOG:
+            if not owner.session_live and (owner.faults & FaultBits.WATCHDOG or
+                                           second.counters().watchdog_trips != trips_before[0]):
                 starved.append(
                     "the first host went silent for watchdog_ms before the second host came "
                     "(WATCHDOG flagged, its session ended by PN7): this host cannot hold a "
@@ -276,7 +277,9 @@ def case_second_host_refused(hosts: Hosts) -> CheckResult:
             try:
                 second.upload_card(stroke_card(info, 0.2))
                 during = second.collect_until(second.clock())
-                if any(not s.session_live or s.faults & FaultBits.WATCHDOG for s in during):
+                tripped = second.counters().watchdog_trips != trips_before[0]
+                if tripped or any(not s.session_live or s.faults & FaultBits.WATCHDOG
+                                  for s in during):
                     starved.append(
                         "the first host went silent for watchdog_ms while the second uploaded "
                         "(WATCHDOG flagged, its session ended by PN7 before the COMMIT): this "
@@ -288,6 +291,9 @@ def case_second_host_refused(hosts: Hosts) -> CheckResult:
                 if "BUSY" not in str(exc):
                     intrusions.append(f"the second host's upload failed without BUSY: {exc}")
 
+        # the watchdog trips of this device so far: one more by the intrusion's end means the
+        # first host went silent for watchdog_ms (its session ended by PN7), not an intrusion
+        trips_before = [first_driver.counters().watchdog_trips]
         first = Background(first_driver, stroke_card(info, 0.4), stroke_track(info))
         first.run(intrude)
     if starved:
