@@ -7,7 +7,7 @@ For each scenario the reference device's tribometer simulation records ``--sampl
 the loop then runs with every installed calibration effect as a candidate. Prints, per scenario,
 the wall time of :func:`hcard.calibration.loop.calibrate` (best of ``--repeat``), the number of
 fits, what it found and the held-out RMSE before and after. The process is pinned to one CPU
-and BLAS to one thread. Aim (issue 7): under 60 s per scenario.
+and BLAS to one thread. Aim: under 60 s per scenario.
 """
 
 from __future__ import annotations

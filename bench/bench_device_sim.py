@@ -7,7 +7,7 @@ The internal finger strokes back and forth across the plate, its speed swelling 
 the card is a UV grating (E-ViTa) or a bipolar grating (coupled stimulator). Every step runs the
 streaming renderer, the model-based rendering, the 60 kHz PI plate loop, the EV amplifier, the
 sensors and the finger physics. Prints, per device and block size, the best ratio to real time
-(aim: at least 10x on one core, issue 5 item 7) and the RMS relative error of the friction felt
+(aim: at least 10x on one core) and the RMS relative error of the friction felt
 against the target (the 8 % JND). Single process, single thread; the CPU-time ratio is the
 one-core figure when other processes share the machine. Each ``step()`` call costs a fixed
 ~0.5-1 ms besides its frames, so small steps (firmware wake-ups) run closer to real time.

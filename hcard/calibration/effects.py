@@ -25,6 +25,7 @@ Regressor names used in signatures (all 1-D arrays aligned with the samples, SI 
 
 from __future__ import annotations
 
+import abc
 import itertools
 import math
 from collections.abc import Mapping, Sequence
@@ -116,17 +117,18 @@ class Effect:
         return f"<{type(self).__name__} {self.name!r}>"
 
 
-class EffectHost(Predictor):
+class EffectHost(Predictor, abc.ABC):
     """A predictor made of parts (the channels of a device profile) that places each effect on
-    the part it acts on, instead of wrapping the whole (:func:`augment` defers to it)."""
+    the part it acts on, instead of wrapping the whole (:func:`augment` defers to it).
+    Abstract: a host says which effects it refuses and how it adds the others."""
 
+    @abc.abstractmethod
     def refuses(self, effect: Effect) -> str | None:
         """Why ``effect`` cannot be added, or None."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def with_effects(self, effects: Sequence[Effect]) -> Predictor:
         """This model with ``effects`` added (parameters ``"<effect>.<parameter>"``)."""
-        raise NotImplementedError
 
 
 def _check_effects(base: Predictor, effects: Sequence[Effect]) -> None:

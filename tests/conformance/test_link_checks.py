@@ -1,4 +1,4 @@
-"""Link checks (issue 12 item 3): upload integrity and STATE report loss.
+"""Link checks (spec/conformance.md sections 4.6-4.7): upload integrity and STATE report loss.
 
 The reference device passes both on ``sim://`` and over ``usbip://`` served in real time by
 another process, twice against the same running server; the negative controls

@@ -1,7 +1,8 @@
 """The suite against the reference device served in real time by another process, run twice
 against the same running server (a vendor's device stays powered between runs).
 
-What holds here is session-relative timing (issue 12 item 1): boundaries and spatial phase are
+What holds here is session-relative timing (spec/conformance.md section 5.2;
+conformance/README.md, bench runs): boundaries and spatial phase are
 judged on this session's echoes (a stale echo of the previous run once dropped 12 of 26
 renders and failed 10 of 11 boundaries), the dynamics stream keeps a lead (the queue once ran
 dry: 29-67 Hz measured for 400 Hz), the rise time is timed from the reported step (not from

@@ -1,4 +1,4 @@
-"""Limits lowered while the plate is driven (issue 12 item 3; spec rules PS1, PS5).
+"""Limits lowered while the plate is driven (spec/device-protocol.md rules PS1, PS5).
 
 The plate is a high-Q resonator: cut its drive and it decays at its own rate only, so a limit
 lowered under the present amplitude used to be exceeded for ``tau ln(A0 / L)`` (the audit: 1347 nm
