@@ -54,7 +54,7 @@ from hcard.v1 import card_pb2 as pb
 from hcard_conformance.context import Context, session_times
 from hcard_conformance.registry import check
 from hcard_conformance.result import CannotAssess, CheckResult, guarded
-from hcard_conformance.streaming import FINGER_PERIOD_S, STARVED_FRACTION, lead_frames, stream
+from hcard_conformance.streaming import FINGER_PERIOD_S, lead_frames, require_fed, stream
 from hcard_conformance.timing import needs_real_time_host, timing_class
 from hcard_device.drivers.base import Driver
 from hcard_device.drivers.play import PlayResult, play
@@ -675,11 +675,9 @@ def measure_limits_while_driven(driver: Driver, base: Limits) -> LimitsChange:
     driver.stop()
     assert read_back is not None
     driven = float(np.median([s.amplitude_m for s in before[-5:]])) if before else 0.0
-    empty = sum(s.stream_queued == 0 for s in before[len(before) // 2:])
-    if empty > STARVED_FRACTION * max(len(before) // 2, 1):
-        raise CannotAssess(f"the host left the stream queue empty in {empty} of the "
-                           f"{len(before) - len(before) // 2} reports before the change (plate "
-                           f"at {driven * 1e9:.0f} nm): it cannot drive the device in real time")
+    settled = before[len(before) // 2:]
+    require_fed(sum(s.stream_queued == 0 for s in settled), len(settled),
+                f"the stream before the change (plate at {driven * 1e9:.0f} nm)")
     if not driven >= MIN_OVER_NEW_LIMIT * lowered.max_amplitude_m:
         raise CannotAssess(f"the plate was at {driven * 1e9:.0f} nm before the change, not "
                            f"{MIN_OVER_NEW_LIMIT:g} x the new {lowered.max_amplitude_m * 1e9:.0f}"

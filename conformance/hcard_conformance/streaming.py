@@ -62,14 +62,19 @@ class StreamSession:
         return np.array([getattr(s, name) for s in self.states], dtype=float)
 
     def require_fed(self, what: str) -> None:
-        """Raise :class:`CannotAssess` when the host left the queue empty in more than
-        :data:`STARVED_FRACTION` of the reports: the stream then measured the host (a
-        software-emulated or overloaded one), not the device."""
-        if self.underruns > STARVED_FRACTION * max(len(self.states), 1):
-            raise CannotAssess(
-                f"{what}: the host left the stream queue empty in {self.underruns} of "
-                f"{len(self.states)} reports (lead {self.lead_frames} frames); it cannot feed "
-                "the device in real time, so the measurement would be of the host")
+        """:func:`require_fed` over this session's span (lead :attr:`lead_frames`)."""
+        require_fed(self.underruns, len(self.states),
+                    f"{what} (lead {self.lead_frames} frames)")
+
+
+def require_fed(empty: int, reports: int, what: str) -> None:
+    """Raise :class:`CannotAssess` when the host left the stream queue empty in ``empty`` of
+    ``reports`` reports, more than :data:`STARVED_FRACTION`: the stream then measured the host
+    (a software-emulated or overloaded one), not the device (spec/conformance.md 5.2, T2)."""
+    if empty > STARVED_FRACTION * max(reports, 1):
+        raise CannotAssess(
+            f"{what}: the host left the stream queue empty in {empty} of {reports} reports; "
+            "it cannot feed the device in real time, so the measurement would be of the host")
 
 
 def lead_frames(capacity_frames: int, frame_rate_hz: float) -> int:
