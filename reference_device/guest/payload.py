@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import array
+import faulthandler
 import fcntl
 import json
 import os
@@ -59,6 +60,15 @@ def hidiocgfeature(length: int) -> int:
 
 class GuestError(Exception):
     """A check in the guest failed; the message says which and why."""
+
+
+PLAY_READ_BATCH = 20
+"""Reports read between two finger samples are checked for due at most this many at a time:
+the emulated guest decodes fewer than the device's 1000 reports/s, and a longer drain would
+send the finger samples late and in bursts."""
+CATCH_UP_S = 3.0
+"""Longest the hcard mode reads on after the track for the reports the guest has not read yet, s."""
+STALL_DUMP_S = 60.0  # s; the stacks of a payload still running after this long are logged
 
 
 def log(message: str) -> None:
@@ -333,7 +343,8 @@ def play_track(driver: Any, track: Any, boundary_x_mm: float) -> dict[str, Any]:
     for i in range(len(track)):
         due = start + float(track.t[i] - track.t[0])
         while (now := time.monotonic()) < due:
-            states += [(time.monotonic(), s) for s in driver.read_inputs(due - now)]
+            batch = driver.read_inputs(due - now, max_count=PLAY_READ_BATCH)
+            states += [(time.monotonic(), s) for s in batch]
         host_t = time.monotonic() - start + 1e-3  # > 0: an echo of 0 means "none yet"
         driver.send_finger(host_t, track.x[i], track.y[i], track.fn[i], bool(track.contact[i]))
         sent[Finger.from_si(host_t, 0.0, 0.0, 0.0, False).host_time_us] = time.monotonic()
@@ -343,13 +354,30 @@ def play_track(driver: Any, track: Any, boundary_x_mm: float) -> dict[str, Any]:
     while (now := time.monotonic()) < end:
         states += [(time.monotonic(), s) for s in driver.read_inputs(end - now)]
     driver.stop()
-    states += [(time.monotonic(), s) for s in driver.read_inputs(0.05)]
+    # The emulated guest reads its reports up to a second late: read on until one echoes
+    # the last finger sample (or CATCH_UP_S), so the end of the track is seen too.
+    last_us = Finger.from_si(host_t, 0.0, 0.0, 0.0, False).host_time_us
+    catch_up = time.monotonic() + CATCH_UP_S
+    while time.monotonic() < catch_up:
+        batch = driver.read_inputs(0.05)
+        states += [(time.monotonic(), s) for s in batch]
+        if any(s.host_time_echo_us == last_us for s in batch):
+            states += [(time.monotonic(), s) for s in driver.read_inputs(0.05)]
+            break
 
+    # How late each report was read: its arrival less its time on the host clock, which the
+    # device states exactly (echoed sample's host time + echo age, rule PI3). This is the
+    # guest's read backlog (kernel queue x decoding time), apart from the device's latency.
+    read_lag = [arrival - start - (state.host_time_echo_us * 1e-6 + state.echo_age_s - 1e-3)
+                for arrival, state in states
+                if state.host_time_echo_us and state.echo_age_s is not None]
     echo_latency = []
+    echoed_us: list[int] = []
     for arrival, state in states:
         echo = state.host_time_echo_us
         if echo in sent:
             echo_latency.append(arrival - sent.pop(echo))
+            echoed_us.append(echo)
     friction_latency = None
     if crossing_sent is not None:
         before = [s.target_uv_x1e4 for a, s in states if a < crossing_sent]
@@ -373,7 +401,10 @@ def play_track(driver: Any, track: Any, boundary_x_mm: float) -> dict[str, Any]:
         "inputs": len(states),
         "inputs_touching": len(touching),
         "echoed_fingers": len(echo_latency),
+        # host time from the first to the last finger sample the device echoed, s
+        "echoed_span_s": round((max(echoed_us) - min(echoed_us)) * 1e-6, 3) if echoed_us else 0.0,
         "finger_echo_latency_ms": summary_ms(echo_latency),
+        "report_read_lag_ms": summary_ms(read_lag),
         "friction_latency_ms": (
             round(1e3 * friction_latency, 2) if friction_latency is not None else None
         ),
@@ -464,6 +495,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--checks", default="",
                         help="conformance mode: comma-separated check names (default: all)")
     args = parser.parse_args(argv)
+    # A payload that stalls shows where: every STALL_DUMP_S the stacks go to the console log.
+    faulthandler.dump_traceback_later(STALL_DUMP_S, repeat=True, file=sys.stdout)
     t0 = time.monotonic()
     try:
         result = MODES[args.mode](args)
@@ -472,6 +505,7 @@ def main(argv: list[str] | None = None) -> int:
         for line in kernel_log()[-40:]:
             log(f"dmesg: {line}")
         result = {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
+    faulthandler.cancel_dump_traceback_later()
     result["mode"] = args.mode
     result["kernel"] = platform.release()
     result["payload_s"] = round(time.monotonic() - t0, 3)

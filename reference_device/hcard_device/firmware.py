@@ -27,11 +27,14 @@ firmware.
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import math
 import threading
 import time
 from collections import deque
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -41,6 +44,7 @@ from hcard.v1 import card_pb2 as pb
 from hcard_device.protocol import (
     AMPLITUDE_UNIT_M,
     CURRENT_UNIT_A,
+    ECHO_AGE_UNKNOWN,
     FORCE_UNIT_N,
     FRICTION_SCALE,
     INPUT_RATE_HZ,
@@ -79,7 +83,7 @@ from hcard_device.protocol import (
 from hcard_device.protocol.constants import DEFAULT_MAX_CARD_BYTES
 from hcard_device.protocol.reports import POSITION_RANGE
 from hcard_device.protocol.upload import UploadStore, detail_text
-from hcard_device.sim import DeviceSimulation, Faults, SimBlock
+from hcard_device.sim import TOUCH_DTYPE, DeviceSimulation, Faults, SimBlock
 from hcard_device.sim.clip import ClipItem
 
 DEFAULT_INPUT_QUEUE = 128
@@ -114,15 +118,79 @@ def _clamp(value: float, low: int, high: int) -> int:
     return max(low, min(high, round(value)))
 
 
-def _counts(values: np.ndarray, unit: float, low: int, high: int) -> list[int]:
-    """SI values as wire counts: rounded, saturated at the field range (rule PI2), NaN as 0."""
-    scaled = np.nan_to_num(np.asarray(values, dtype=np.float64) / unit, nan=0.0)
-    return np.clip(np.rint(scaled), low, high).astype(np.int64).tolist()
+_STATE_FIELDS: tuple[tuple[str, float, int, int], ...] = (
+    ("timestamp", TIME_UNIT_S, 0, 1 << 62),
+    ("contact", 1.0, 0, 1),
+    ("x", POSITION_UNIT_MM, *POSITION_RANGE),
+    ("y", POSITION_UNIT_MM, *POSITION_RANGE),
+    *((f"corner_force_{k}", FORCE_UNIT_N, *_I16) for k in range(4)),
+    ("lateral_force", FORCE_UNIT_N, *_I16),
+    ("amplitude", AMPLITUDE_UNIT_M, 0, _U16),
+    ("voltage", VOLTAGE_UNIT_V, 0, _U16),
+    ("current", CURRENT_UNIT_A, 0, _U16),
+    ("target_uv", 1 / FRICTION_SCALE, 0, FRICTION_SCALE),
+    ("target_ev", 1 / FRICTION_SCALE, FRICTION_SCALE, 4 * FRICTION_SCALE),
+    ("texture", 1.0, -1, 255),
+)
+"""STATE fields read from the frame that closes an interval, in :func:`_state_counts` order:
+(name, SI value of one wire count, lowest count, highest count). The time stamp is wrapped to
+u32 later; the contact flag is 0/1 and the palette index -1 for a neutral frame."""
+_STATE_UNIT = np.array([[unit] for _, unit, _, _ in _STATE_FIELDS])
+_STATE_LOW = np.array([[float(low)] for _, _, low, _ in _STATE_FIELDS])
+_STATE_HIGH = np.array([[float(high)] for _, _, _, high in _STATE_FIELDS])
 
 
-def _texture_column(block: SimBlock, ends: np.ndarray) -> list[int]:
-    """Active palette index at the frames ``ends`` (-1: neutral frame)."""
-    return np.clip(np.asarray(block.texture)[ends], -1, 255).astype(np.int64).tolist()
+def _state_counts(block: SimBlock, ends: slice) -> list[list[int]]:
+    """Wire counts of :data:`_STATE_FIELDS` at the frames ``ends`` of ``block`` (the frames
+    that close an interval), one list per field: SI values rounded to the nearest count,
+    saturated at the field range (rule PI2), NaN as 0. All fields go through one (fields,
+    reports) array, so the cost is a handful of numpy calls whatever the number of reports."""
+    values = _state_values(block, ends)
+    np.divide(values, _STATE_UNIT, out=values)
+    values[np.isnan(values)] = 0.0
+    np.rint(values, out=values)
+    np.maximum(values, _STATE_LOW, out=values)  # infinities saturate too
+    np.minimum(values, _STATE_HIGH, out=values)
+    return values.astype(np.int64).tolist()
+
+
+def _state_values(block: SimBlock, ends: slice) -> np.ndarray:
+    """The SI values of :data:`_STATE_FIELDS` at the frames ``ends``, (fields, reports)."""
+    first = ends.start
+    if first + ends.step >= len(block):  # one report (a step of one interval or less)
+        # the held touch sample as a plain tuple (np.ndarray.item: no recarray attribute lookup)
+        touch = dict(zip(_TOUCH_FIELDS, np.ndarray.item(block.touch, first), strict=True))
+        return np.array([
+            block.t_s.item(first), touch["contact"], touch["x_mm"], touch["y_mm"],
+            *block.corner_forces_n[first].tolist(), block.lateral_force_n.item(first),
+            block.amplitude_m.item(first), block.voltage_v.item(first),
+            block.current_a.item(first), block.target_uv.item(first),
+            block.target_ev.item(first), block.texture.item(first),
+        ], dtype=np.float64)[:, None]  # fmt: skip
+    touch = block.touch.view(np.ndarray)
+    forces = block.corner_forces_n[ends]
+    return np.array((
+        block.t_s[ends], touch["contact"][ends], touch["x_mm"][ends], touch["y_mm"][ends],
+        forces[:, 0], forces[:, 1], forces[:, 2], forces[:, 3], block.lateral_force_n[ends],
+        block.amplitude_m[ends], block.voltage_v[ends], block.current_a[ends],
+        block.target_uv[ends], block.target_ev[ends], block.texture[ends],
+    ), dtype=np.float64)  # fmt: skip
+
+
+_TOUCH_FIELDS = TOUCH_DTYPE.names
+"""Fields of a held touch sample (:data:`hcard_device.sim.TOUCH_DTYPE`), in order."""
+
+_STATE_NAMES = tuple(f.name for f in dataclasses.fields(State))
+
+
+def _state(values: tuple[Any, ...]) -> State:
+    """The STATE report of ``values`` (its fields in order), each already saturated to its
+    field's range by the firmware: made as ``State(*values)`` is, without the report's own
+    range checks (``__post_init__``), which cost more than the rest of a report. A host that
+    decodes the report checks the ranges (:meth:`State.decode`)."""
+    report = object.__new__(State)
+    report.__dict__.update(zip(_STATE_NAMES, values, strict=True))  # frozen: as __init__ sets
+    return report
 
 
 _FAULT_MAP: tuple[tuple[int, int], ...] = tuple(
@@ -133,8 +201,10 @@ _FAULT_MAP: tuple[tuple[int, int], ...] = tuple(
 """(simulation bit, wire bit) of every fault both know, matched by name."""
 
 
+@functools.lru_cache(maxsize=1024)
 def _fault_bits(sim_faults: int) -> int:
-    """Wire fault bits of the simulation's :class:`Faults`."""
+    """Wire fault bits of the simulation's :class:`Faults` (memoised: few combinations
+    occur)."""
     out = 0
     for sim_bit, wire_bit in _FAULT_MAP:
         if sim_faults & sim_bit:
@@ -246,6 +316,7 @@ class Firmware:
         self._streaming = False
         self._expected_seq: int | None = None
         self._host_time_echo = 0
+        self._echo_placed_us: int | None = None  # device time of the echoed sample (PO2)
         self._clip_index = 0
         self._sequence = 0
         self.session = Session(self.config.watchdog_s)
@@ -585,11 +656,13 @@ class Firmware:
         """Carry out a decoded output report; False when it is refused (PO5)."""
         if isinstance(report, Finger):
             self._touch_source = TouchSource.HOST
-            self.sim.host_finger(
+            placed_s = self.sim.host_finger(
                 self.sim.time_s, report.x_mm, report.y_mm, report.fn_n, report.contact,
                 host_time_s=report.host_time_us * TIME_UNIT_S,
             )
-            self._host_time_echo = report.host_time_us
+            if placed_s is not None:
+                self._host_time_echo = report.host_time_us
+                self._echo_placed_us = round(placed_s / TIME_UNIT_S)
             return True
         if isinstance(report, Stream):
             if self._expected_seq is not None and report.stream_seq != self._expected_seq:
@@ -669,59 +742,72 @@ class Firmware:
         n = len(block)
         if n == 0:
             return
-        faults = block.faults.astype(np.int64)
-        watchdog = (faults & int(Faults.WATCHDOG)) != 0
-        previous = np.concatenate(([self._watchdog_was_tripped], watchdog[:-1]))
-        self.watchdog_trips += int(np.count_nonzero(watchdog & ~previous))
-        self._watchdog_was_tripped = bool(watchdog[-1])
+        faults = block.faults
+        any_fault = int(np.bitwise_or.reduce(faults))
+        if any_fault or self._watchdog_was_tripped:
+            self._count_watchdog_trips(faults)
         per = self.frames_per_report
         first_end = per - self._interval_frames - 1  # index of the frame closing the interval
         self._interval_frames = (self._interval_frames + n) % per
-        ends = np.arange(first_end, n, per)
-        if ends.size == 0:
-            self._interval_faults |= int(np.bitwise_or.reduce(faults))
+        if first_end >= n:
+            self._interval_faults |= any_fault
             return
-        starts = np.concatenate(([0], ends[:-1] + 1))
-        covered = np.bitwise_or.reduceat(faults[: ends[-1] + 1], starts)
-        covered[0] |= self._interval_faults
-        self._interval_faults = int(np.bitwise_or.reduce(faults[ends[-1] + 1 :]))
-        touch = block.touch
-        forces = block.corner_forces_n[ends]
+        ends = range(first_end, n, per)
         columns = zip(
-            _counts(block.t_s[ends], TIME_UNIT_S, 0, 1 << 62),
-            np.asarray(touch.contact)[ends].tolist(),
-            _counts(np.asarray(touch.x_mm)[ends], POSITION_UNIT_MM, *POSITION_RANGE),
-            _counts(np.asarray(touch.y_mm)[ends], POSITION_UNIT_MM, *POSITION_RANGE),
-            *(_counts(forces[:, k], FORCE_UNIT_N, *_I16) for k in range(4)),
-            _counts(block.lateral_force_n[ends], FORCE_UNIT_N, *_I16),
-            _counts(block.amplitude_m[ends], AMPLITUDE_UNIT_M, 0, _U16),
-            _counts(block.voltage_v[ends], VOLTAGE_UNIT_V, 0, _U16),
-            _counts(block.current_a[ends], CURRENT_UNIT_A, 0, _U16),
-            _counts(block.target_uv[ends], 1 / FRICTION_SCALE, 0, FRICTION_SCALE),
-            _counts(block.target_ev[ends], 1 / FRICTION_SCALE, FRICTION_SCALE, 4 * FRICTION_SCALE),
-            _texture_column(block, ends),
-            np.maximum(queued_before - (ends + 1), self.sim.queued_frames).tolist(),
-            covered.tolist(),
+            *_state_counts(block, slice(first_end, n, per)),
+            [max(queued_before - (end + 1), self.sim.queued_frames) for end in ends],
+            self._covered_faults(faults, ends, any_fault),
             strict=True,
         )
+        static = self._static_flags()
+        clipped = int(FaultBits.CARD_CLIPPED) if self._clip_item_count() and not self._streaming \
+            else 0
+        session, echo, generation = self.session, self._host_time_echo, self.upload.generation
         for (time_us, contact, x, y, f0, f1, f2, f3, lateral, amplitude, voltage, current,
              uv, ev, texture, queued, sim_faults) in columns:  # fmt: skip
-            self.session.expire(time_us * TIME_UNIT_S)
-            self._emit(State(
-                timestamp_us=time_us & _U32, sequence=self._sequence,
-                flags=self._flags(contact), x_10um=x, y_10um=y,
-                corner_forces_mn=(f0, f1, f2, f3), lateral_force_mn=lateral,
-                amplitude_nm=amplitude, voltage_dv=voltage, current_10na=current,
-                target_uv_x1e4=uv, target_ev_x1e4=ev, texture=texture,
-                faults=self._faults(sim_faults), dropped_reports=self.input_dropped & _U16,
-                rejected_requests=self.rejected_requests & _U16,
-                stream_queued=min(max(queued, 0), _U16), host_time_echo_us=self._host_time_echo,
-                card_generation=self.upload.generation, **self._session_fields(),
-            ))  # fmt: skip
+            session.expire(time_us * TIME_UNIT_S)
+            self._emit(_state((
+                time_us & _U32, self._sequence, self._flags(static, contact), x, y,
+                (f0, f1, f2, f3), lateral, amplitude, voltage, current, uv, ev, texture,
+                self._faults(sim_faults, clipped), self.input_dropped & _U16,
+                self.rejected_requests & _U16, min(max(queued, 0), _U16), echo, generation,
+                session.number, session.token or 0, self._echo_age(time_us),
+            )))  # fmt: skip
 
-    def _flags(self, contact: bool) -> int:
-        """STATE flags of the device's present state."""
-        flags = _CONTACT if contact else 0
+    def _covered_faults(self, faults: np.ndarray, ends: range, any_fault: int) -> list[int]:
+        """The simulation faults of each interval a block completes (``ends``: the frames that
+        close them; ``any_fault``: the OR of all the block's faults), the first one with the
+        faults of its frames in earlier blocks; keeps those of the frames after the last end
+        for the next block."""
+        last = ends[-1] + 1
+        if not any_fault:  # nothing in this block
+            covered = [self._interval_faults, *([0] * (len(ends) - 1))]
+            self._interval_faults = 0
+            return covered
+        if len(ends) == 1:
+            covered = [int(np.bitwise_or.reduce(faults[:last])) | self._interval_faults]
+        else:
+            starts = np.arange(ends[0] + 1 - ends.step, last, ends.step)
+            starts[0] = 0
+            covered = np.bitwise_or.reduceat(faults[:last], starts).tolist()
+            covered[0] |= self._interval_faults
+        self._interval_faults = int(np.bitwise_or.reduce(faults[last:]))
+        return covered
+
+    def _count_watchdog_trips(self, faults: np.ndarray) -> None:
+        """Count the watchdog's trips (frames where WATCHDOG rises) in a block's faults."""
+        watchdog_bit = int(Faults.WATCHDOG)
+        if not self._watchdog_was_tripped and not int(np.bitwise_or.reduce(faults)) & watchdog_bit:
+            return  # not tripped before nor during the block
+        watchdog = (faults & watchdog_bit) != 0
+        previous = np.concatenate(([self._watchdog_was_tripped], watchdog[:-1]))
+        self.watchdog_trips += int(np.count_nonzero(watchdog & ~previous))
+        self._watchdog_was_tripped = bool(watchdog[-1])
+
+    def _static_flags(self) -> int:
+        """STATE flags of the device's present state that no report of a block changes (all
+        but CONTACT and SESSION)."""
+        flags = 0
         if self.sim.running:
             flags |= _RUNNING
         if self.upload.active is not None:
@@ -734,6 +820,12 @@ class Firmware:
             flags |= _UPLOADING
         if self.sim.host_profile:
             flags |= _HOST_PROFILE
+        return flags
+
+    def _flags(self, static: int, contact: int) -> int:
+        """STATE flags: ``static`` (:meth:`_static_flags`) with the frame's contact and the
+        session's state."""
+        flags = static | (_CONTACT if contact else 0)
         if self.session.live:
             flags |= _SESSION
         return flags
@@ -743,12 +835,11 @@ class Firmware:
         return {"session_number": self.session.number,
                 "session_token": self.session.token or 0}
 
-    def _faults(self, sim_faults: int) -> int:
-        """STATE faults: the interval's simulation faults plus the firmware's events since the
-        previous report (which are consumed)."""
-        faults = _fault_bits(sim_faults) | int(self._pending_faults)
-        if self._clip_item_count() and not self._streaming:
-            faults |= int(FaultBits.CARD_CLIPPED)
+    def _faults(self, sim_faults: int, clipped: int) -> int:
+        """STATE faults: the interval's simulation faults, ``clipped`` (CARD_CLIPPED while a
+        clipped card plays) and the firmware's events since the previous report (which are
+        consumed)."""
+        faults = _fault_bits(sim_faults) | int(self._pending_faults) | clipped
         self._pending_faults = 0
         return faults & _U16
 
@@ -774,8 +865,16 @@ class Firmware:
             target_ev_x1e4=FRICTION_SCALE, texture=-1, faults=0, dropped_reports=0,
             rejected_requests=self.rejected_requests & _U16, stream_queued=0,
             host_time_echo_us=self._host_time_echo, card_generation=self.upload.generation,
+            echo_age_us=self._echo_age(round(self.sim.time_s / TIME_UNIT_S)),
             **self._session_fields(),
         )  # fmt: skip
+
+    def _echo_age(self, time_us: int) -> int:
+        """STATE echo_age_us of a report whose last frame is at ``time_us`` (device clock, us,
+        not wrapped): the time since the echoed sample's placement (PI3), saturated (PI2)."""
+        if self._echo_placed_us is None:
+            return ECHO_AGE_UNKNOWN
+        return min(max(time_us - self._echo_placed_us, 0), ECHO_AGE_UNKNOWN - 1)
 
 
 def _clip_reason(item: ClipItem) -> int:

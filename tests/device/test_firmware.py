@@ -121,7 +121,7 @@ def test_device_info_describes_the_device(
 ) -> None:
     info = feature(make_fw(config), ReportId.DEVICE_INFO)
     assert isinstance(info, DeviceInfo)
-    assert (info.protocol_major, info.protocol_minor) == (1, 2)
+    assert (info.protocol_major, info.protocol_minor) == (1, 3)  # this document, spec 8.1
     assert info.device_kind == kind
     assert info.capabilities == caps
     assert info.plate_frequency_hz == plate_hz

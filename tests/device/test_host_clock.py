@@ -133,3 +133,63 @@ def test_start_begins_a_session_whose_first_sample_is_a_touch_down():
     alone = stroke(fresh, 56.0, 7.5)
     assert np.ptp(alone.target_uv) > 0.3
     np.testing.assert_allclose(second.target_uv, alone.target_uv, atol=1e-9)
+
+
+def velocity_locked_card():
+    """A 2.5 mm velocity-locked grating with a 250 Hz temporal component: both phases depend
+    on the renderer's time line (odometer, time since touch-down), none on absolute position."""
+    texture = build.texture(
+        0.55,
+        [build.spatial(0.4, 0.2, channel="uv"), build.temporal(250.0, 0.1, channel="uv")],
+        channel="uv", locking="velocity", name="fine",
+    )
+    return build.card(80.0, 40.0, taxtel_mm=40.0, textures=[texture], texture_index=[0, 0])
+
+
+def stroke_with_transport(first_delay_s: float, delay_s: float) -> SimBlock:
+    """A host stroke at 100 mm/s, sampled every 20 ms (host clock from 7 s): sample 0 reaches
+    the fresh device ``first_delay_s`` after it was taken, every later one ``delay_s``."""
+    sim = DeviceSimulation(DeviceConfig.evita(), seed=3)
+    sim.load_card(velocity_locked_card())
+    sim.start()
+    rate = sim.config.frame_rate_hz
+    blocks, frame = [], 0
+    for k in range(40):
+        arrival = k * 0.02 + (first_delay_s if k == 0 else delay_s)
+        due = round(arrival * rate)
+        blocks.append(sim.step(due - frame))
+        frame = due
+        sim.host_finger(sim.time_s, 10.0 + 100.0 * k * 0.02, 20.0, 0.5, True,
+                        host_time_s=7.0 + k * 0.02)
+        sim.feed_watchdog()
+    blocks.append(sim.step(round(0.8 * rate) - frame))
+    return SimBlock.concatenate(blocks)
+
+
+def test_a_clock_offset_learnt_mid_stroke_leaves_no_lead_on_the_host_time_line():
+    """PO2 learns the clock offset from the fastest report: here sample 0 travelled 0.5 ms
+    longer than the rest, so the offset falls by 0.5 ms when sample 1 arrives. The device must
+    still render on the host's time line (what the echo age maps its reports to, PI3): its
+    targets at device time T are the batch render of the same track at host time T - offset,
+    the final offset. Rendering on the device's placements instead took the shortened first
+    interval into the odometer and led by 0.5 ms for the rest of the stroke."""
+    from hcard.render import render
+    from hcard.track import make_track
+
+    block = stroke_with_transport(0.0015, 0.0010)
+    k = np.arange(40)
+    track = make_track(k * 0.02, 10.0 + 100.0 * k * 0.02, np.full(40, 20.0), 0.5, True)
+    golden = render(velocity_locked_card(), track)
+    settled = (block.t_s >= 0.045) & (block.t_s <= 0.78)  # from the third sample on
+
+    def error_at(lag_s: float) -> float:
+        # the final offset: device time = host time - 7 s + 1 ms
+        host_t = block.t_s[settled] - 0.001 + lag_s
+        expected = np.interp(host_t, golden.t, golden.friction)
+        return float(np.sqrt(np.mean((block.target_uv[settled] - expected) ** 2)))
+
+    assert np.ptp(block.target_uv[settled]) > 0.5  # both components are rendered
+    # dead reckoning at constant speed is exact: on the host time line the targets agree
+    assert error_at(0.0) < 0.01
+    # the comparison can fail: half a millisecond off the time line is far outside it
+    assert error_at(0.0005) > 10 * error_at(0.0)

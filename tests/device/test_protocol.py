@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 
 from hcard.errors import HcardError
 from hcard_device.protocol import (
+    ECHO_AGE_UNKNOWN,
     MAX_REPORT_BYTES,
     REPORT_CLASSES,
     REPORT_DESCRIPTOR,
@@ -132,7 +133,7 @@ def test_report_table_matches_the_spec() -> None:
 def test_report_sizes_and_ids() -> None:
     assert {c.REPORT_ID for c in REPORT_CLASSES} == {int(r) for r in ReportId}
     assert all(c.size() <= 64 for c in REPORT_CLASSES)
-    assert State.size() == 55 and State.LEGACY_SIZE == 52  # 1.2 appends the session
+    assert (State.size(), State.SESSION_SIZE, State.LEGACY_SIZE) == (59, 55, 52)  # 1.2, 1.3 append
     assert Stream.size() == UploadData.size() == UploadStatus.size() == 64
     assert report_ids(ReportKind.OUTPUT) == (0x10, 0x11, 0x12)
     assert report_ids(ReportKind.FEATURE) == tuple(range(0x20, 0x28))
@@ -230,6 +231,42 @@ def test_state_layout_golden_bytes() -> None:
     assert report.contact and report.y_mm == pytest.approx(54.0)
 
 
+@settings(max_examples=300, suppress_health_check=[HealthCheck.too_slow])
+@given(raw=st.binary(min_size=State.STRUCT.size - 1, max_size=State.STRUCT.size - 1))
+def test_state_decode_accepts_exactly_what_the_checked_constructor_accepts(raw: bytes) -> None:
+    """The decoder checks only the ranges narrower than their wire type; on any bytes it must
+    agree with the constructor, which checks every field: same report, or both refuse."""
+    data = bytes([ReportId.STATE]) + raw
+    values = struct.unpack("<BIHBii4hhHHHHHhHHHHIHHBI", data)[1:]
+    try:
+        expected: State | None = State(*values[:5], tuple(values[5:9]), *values[9:])
+    except ProtocolError:
+        expected = None
+    if expected is None:
+        with pytest.raises(ProtocolError, match="outside"):
+            State.decode(data)
+    else:
+        assert State.decode(data) == expected
+        assert State.decode(data).encode() == data
+
+
+def test_state_decode_names_each_narrow_field_out_of_range() -> None:
+    good = State(timestamp_us=1, sequence=2, flags=0, x_10um=0, y_10um=0,
+                 corner_forces_mn=(0, 0, 0, 0), lateral_force_mn=0, amplitude_nm=0,
+                 voltage_dv=0, current_10na=0, target_uv_x1e4=5000, target_ev_x1e4=20000,
+                 texture=3, faults=0, dropped_reports=0, rejected_requests=0,
+                 stream_queued=0, host_time_echo_us=0, card_generation=0).encode()
+    for offset, fmt, value, name in ((8, "<i", 2_000_001, "x_10um"),
+                                     (12, "<i", -2_000_001, "y_10um"),
+                                     (32, "<H", 10_001, "target_uv_x1e4"),
+                                     (34, "<H", 9_999, "target_ev_x1e4"),
+                                     (36, "<h", -2, "texture")):
+        bad = bytearray(good)
+        struct.pack_into(fmt, bad, offset, value)
+        with pytest.raises(ProtocolError, match=rf"STATE: {name} = {value} is outside"):
+            State.decode(bytes(bad))
+
+
 def test_finger_from_si_and_layout() -> None:
     report = Finger.from_si(1.5, 12.5, -3.25, 0.8, True)
     assert (report.host_time_us, report.x_10um, report.y_10um, report.fn_mn) == (
@@ -263,6 +300,14 @@ def test_truncated_oversized_and_misnumbered_reports_are_rejected(
     if cls is State:  # a 1.0/1.1 STATE (no session fields, PV4) reads as session 0, token 0
         legacy = cls.decode(wire[:State.LEGACY_SIZE])
         assert (legacy.session_number, legacy.session_token) == (0, 0)
+        assert legacy.echo_age_s is None
+        full = cls.decode(wire)
+        sessions = cls.decode(wire[:State.SESSION_SIZE])  # a 1.2 STATE: no echo age (PI3)
+        assert (sessions.session_number, sessions.session_token) == (
+            full.session_number, full.session_token)
+        assert sessions.echo_age_us == ECHO_AGE_UNKNOWN and sessions.echo_age_s is None
+        with pytest.raises(ProtocolError, match="shorter"):
+            cls.decode(wire[:State.SESSION_SIZE + 2])  # neither a 1.2 nor a 1.3 STATE
         wire = wire[:State.LEGACY_SIZE]
     with pytest.raises(ProtocolError, match="shorter"):
         cls.decode(wire[:-1])

@@ -108,8 +108,8 @@ def test_the_sidecar_holds_what_the_device_and_host_know():
     with open_device("sim://coupled?seed=1") as driver:
         result = play(driver, CARD, track)
     conditions = recording(result, track_path="t.csv", card_path="c.hcard").conditions
-    assert conditions["device"] == "coupled UV+EV stimulator (hcard protocol 1.2)"
-    assert conditions["firmware"]["protocol"] == "1.2"
+    assert conditions["device"] == "coupled UV+EV stimulator (hcard protocol 1.3)"
+    assert conditions["firmware"]["protocol"] == "1.3"
     assert conditions["plate_frequency_hz"] == 38_220.0
     assert conditions["voltage_form"] == "envelope"
     assert conditions["carrier_frequency_hz"] == 440.0

@@ -342,3 +342,42 @@ def test_a_driver_refuses_take_over_on_a_device_without_sessions():
         assert not driver.sessions_supported()
         with pytest.raises(DeviceError, match=r"protocol 1\.1: no sessions, no TAKE_OVER"):
             driver.take_over()
+
+
+def test_a_host_slower_than_the_report_stream_still_begins_its_session():
+    """A host that decodes a report in 2 ms (slower than the device's 1000 reports/s, as a
+    Python host under software emulation is) always finds another report waiting; the driver's
+    reads are bounded (READ_BATCH_MAX), so start() is granted instead of draining forever."""
+    from hcard_device.drivers.base import READ_BATCH_MAX
+
+    with served_device() as served:
+        for _round in range(2):  # the same running server, twice
+            driver = open_device(served.uri)
+            parse = driver.parse_input
+
+            def slow_parse(data: bytes, parse=parse) -> State | None:
+                time.sleep(0.002)
+                return parse(data)
+
+            driver.parse_input = slow_parse  # type: ignore[method-assign]
+            outcome: dict[str, object] = {}
+
+            def begin(driver=driver, outcome=outcome) -> None:
+                try:
+                    driver.start()
+                    outcome["batch"] = len(driver.read_inputs(0.05))
+                    driver.stop()
+                except Exception as exc:  # reported by the assertion below
+                    outcome["error"] = exc
+
+            thread = threading.Thread(target=begin, daemon=True)
+            t0 = time.monotonic()
+            thread.start()
+            thread.join(15.0)
+            try:
+                assert not thread.is_alive(), "start() kept draining the report stream"
+                assert "error" not in outcome, outcome.get("error")
+                assert time.monotonic() - t0 < 5.0
+                assert 1 <= int(outcome["batch"]) <= READ_BATCH_MAX  # type: ignore[call-overload]
+            finally:
+                driver.close()

@@ -531,6 +531,10 @@ def test_amplitude_voltage_and_current_never_exceed_the_limits(commands, capacit
 def test_malicious_stream_is_clipped_flagged_and_overruns_are_counted():
     config = DeviceConfig.coupled(stream_queue_frames=300)
     sim = host_driven(config)
+    sim.step(100)
+    # the finger slides at 100 mm/s: a UV target of 0 then needs an unbounded amplitude
+    # (Eq. 2.33: mu' = 0 only as w -> inf at U > 0; a resting finger would need next to none)
+    sim.host_finger(sim.time_s, 41.0, 25.0, 0.5, True)
     queued = sim.stream_frames(np.array([np.nan, -5.0, 9.0] * 100), np.array([np.inf] * 300))
     assert queued == 300
     assert sim.stream_frames(np.full(50, 0.5), 1.0) == 0

@@ -71,6 +71,10 @@ _SEQUENCE_MODULO = 1 << 16
 SESSION_PROTOCOL = (1, 2)
 """First protocol version with sessions (spec section 14)."""
 SESSION_PEEK_S = 0.02
+READ_BATCH_MAX = 256
+"""Input reports one :meth:`Driver.read_inputs` call reads at most. A device streams ~1000
+STATE reports/s; a host slower than that (software emulation) always finds another waiting,
+so an unbounded "take what is waiting" would never return. 256 is a quarter second of them."""
 """Input reports a real-time driver reads to learn the device's session now, s: long enough
 to drain what queued while it was not reading (the reference device's IN queue holds 32 ms),
 so the newest report read is current."""
@@ -161,6 +165,8 @@ class Driver(abc.ABC):
         """STATE ``session_number`` granted to this driver; None while it owns no session."""
         self.session_lost = ""
         """Why this driver's session was lost (rule PN9); empty while it was not."""
+        self.granted_state: State | None = None
+        """The STATE report that granted this driver's latest session (PN1, PN2)."""
         self._session_card: int | None = None
         self._session_ended = False
         self._previous_session: tuple[int, int] | None = None
@@ -513,6 +519,7 @@ class Driver(abc.ABC):
                 if state.session_live and state.session_token == token and \
                         (token, state.session_number) != self._previous_session:
                     self.session_number = state.session_number
+                    self.granted_state = state
                     self._session_card = state.card_generation
                     self._session_ended = False
                     return
@@ -589,18 +596,22 @@ class Driver(abc.ABC):
     def read_inputs(self, timeout_s: float | None = None,
                     max_count: int | None = None) -> list[State]:
         """STATE reports: waits up to ``timeout_s`` (default :attr:`timeout_s`) for the first,
-        then takes those already waiting without further wait (at most ``max_count``).
-        Returns [] on timeout; raises :class:`DeviceError` when the device is gone."""
+        then takes those already waiting without further wait (at most ``max_count``, by
+        default :data:`READ_BATCH_MAX`, so a host slower than the device's stream still
+        returns). Returns [] on timeout; raises :class:`DeviceError` when the device is gone."""
         self._check_open()
         wait = self.timeout_s if timeout_s is None else max(float(timeout_s), 0.0)
+        limit = READ_BATCH_MAX if max_count is None else max_count
         states: list[State] = []
         data = self._read_input(wait)
+        reads = 0
         while data is not None:
+            reads += 1
             state = self.accept_input(data)
             if state is not None:
                 states.append(state)
-                if max_count is not None and len(states) >= max_count:
-                    break
+            if len(states) >= limit or reads >= READ_BATCH_MAX:
+                break
             data = self._read_input(0.0)
         return states
 

@@ -23,6 +23,7 @@ from hcard_device.protocol.codec import (
 from hcard_device.protocol.constants import (
     AMPLITUDE_UNIT_M,
     CURRENT_UNIT_A,
+    ECHO_AGE_UNKNOWN,
     FORCE_UNIT_N,
     FRICTION_SCALE,
     INPUT_RATE_HZ,
@@ -69,6 +70,7 @@ from hcard_device.protocol.reports import (
 __all__ = [
     "AMPLITUDE_UNIT_M",
     "CURRENT_UNIT_A",
+    "ECHO_AGE_UNKNOWN",
     "FORCE_UNIT_N",
     "FRICTION_SCALE",
     "INPUT_RATE_HZ",

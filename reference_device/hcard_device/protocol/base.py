@@ -122,12 +122,39 @@ class Report:
         return cls._from_values(values[1:])
 
 
+def narrow_ranges(report: type[Report], indices: dict[str, int]) -> tuple[tuple[int, str, int,
+                                                                                 int], ...]:
+    """The fields of ``report.RANGES`` whose range is narrower than their wire type, as
+    (index in the unpacked values without the report ID, name, low, high): the only checks a
+    decoded report needs, since unpacking cannot give a value outside its wire type.
+    ``indices`` maps each ranged field to its index in the unpacked values."""
+    expanded: list[str] = []
+    digits = ""
+    for char in report.STRUCT.format.lstrip("<>=!@"):
+        if char.isdigit():
+            digits += char
+            continue
+        expanded += [char] * int(digits or 1)
+        digits = ""
+    wire = expanded[1:]  # without the report ID byte
+    narrow = []
+    for name, (low, high) in report.RANGES.items():
+        index = indices[name]
+        wire_low, wire_high = _WIRE_RANGES[wire[index]]
+        if low > wire_low or high < wire_high:
+            narrow.append((index, name, low, high))
+    return tuple(narrow)
+
+
 # ---- field helpers shared by the report modules ------------------------------------------------
 
 U8 = (0, 0xFF)
 U16 = (0, 0xFFFF)
 U32 = (0, 0xFFFF_FFFF)
 I16 = (-0x8000, 0x7FFF)
+I32 = (-0x8000_0000, 0x7FFF_FFFF)
+_WIRE_RANGES = {"B": U8, "b": (-0x80, 0x7F), "H": U16, "I": U32, "h": I16, "i": I32}
+"""Values each struct integer code of the reports can hold."""
 POSITION_RANGE = (-2_000_000, 2_000_000)
 """Positions, 0.01 mm: +-20 m, twice the largest card surface side."""
 MAX_FINGER_FORCE_MN = 50_000

@@ -11,8 +11,9 @@ from enum import IntEnum, IntFlag
 
 PROTOCOL_MAJOR = 1
 """Major protocol version (incompatible changes). A host MUST refuse another major (rule P3)."""
-PROTOCOL_MINOR = 2
-"""Minor protocol version (compatible additions; 1.2 adds session ownership, spec section 14)."""
+PROTOCOL_MINOR = 3
+"""Minor protocol version (compatible additions; 1.2 adds session ownership, spec section 14;
+1.3 the echo age of STATE, rule PI3)."""
 
 MAX_REPORT_BYTES = 64
 """Largest report on the wire, bytes, including the report ID byte (one full-speed packet)."""
@@ -35,6 +36,8 @@ VOLTAGE_UNIT_V = 0.1
 """EV voltage (envelope): 0.1 V."""
 CURRENT_UNIT_A = 1e-8
 """EV current: 0.01 uA (10 nA)."""
+ECHO_AGE_UNKNOWN = 0xFFFF_FFFF
+"""STATE.echo_age_us when the device cannot say (no sample applied yet, or a 1.0-1.2 device)."""
 FRICTION_SCALE = 10_000
 """Relative friction: counts per 1.0 (1e-4 resolution, far below the 8 % JND)."""
 

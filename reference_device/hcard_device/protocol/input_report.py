@@ -3,13 +3,23 @@
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any, ClassVar
 
-from hcard_device.protocol.base import I16, POSITION_RANGE, U8, U16, U32, ProtocolError, Report
+from hcard_device.protocol.base import (
+    I16,
+    POSITION_RANGE,
+    U8,
+    U16,
+    U32,
+    ProtocolError,
+    Report,
+    narrow_ranges,
+)
 from hcard_device.protocol.constants import (
     AMPLITUDE_UNIT_M,
     CURRENT_UNIT_A,
+    ECHO_AGE_UNKNOWN,
     EV_MAX,
     EV_MIN,
     FORCE_UNIT_N,
@@ -55,16 +65,23 @@ class State(Report):
             power-up, wrapping u16 (0: none yet; protocol 1.2, rule PN2).
         session_token: the token of the live session's owner, 1..255; 0 when no session is
             live or the live one is anonymous (a 1.0/1.1 host's START; rule PN2).
+        echo_age_us: device time from the placement of the echoed finger sample on the device
+            clock (rule PO2) to the last frame covered, us; :data:`ECHO_AGE_UNKNOWN` when no
+            sample was applied yet (protocol 1.3, rule PI3). The sample's host time plus this
+            age is the report's time on the host's clock, exactly, whatever the transport did.
 
-    A protocol 1.1 device sends the first :data:`LEGACY_SIZE` bytes only; :meth:`decode`
-    reads its session fields as 0 (rule PV4: fields appended by a minor version).
+    A protocol 1.0/1.1 device sends the first :data:`LEGACY_SIZE` bytes only, a 1.2 device
+    :data:`SESSION_SIZE`; :meth:`decode` reads the missing session fields as 0 and the missing
+    echo age as unknown (rule PV4: fields appended by a minor version).
     """
 
     REPORT_ID: ClassVar[int] = ReportId.STATE
     KIND: ClassVar[ReportKind] = ReportKind.INPUT
-    STRUCT: ClassVar[struct.Struct] = struct.Struct("<BIHBii4hhHHHHHhHHHHIHHB")
+    STRUCT: ClassVar[struct.Struct] = struct.Struct("<BIHBii4hhHHHHHhHHHHIHHBI")
     LEGACY_SIZE: ClassVar[int] = 52
     """Bytes of STATE in protocol 1.0 and 1.1 (before the session fields of 1.2)."""
+    SESSION_SIZE: ClassVar[int] = 55
+    """Bytes of STATE in protocol 1.2 (before the echo age of 1.3)."""
     RANGES: ClassVar[dict[str, tuple[int, int]]] = {
         "timestamp_us": U32,
         "sequence": U16,
@@ -86,6 +103,7 @@ class State(Report):
         "card_generation": U16,
         "session_number": U16,
         "session_token": U8,
+        "echo_age_us": U32,
     }
 
     timestamp_us: int
@@ -109,6 +127,7 @@ class State(Report):
     card_generation: int
     session_number: int = 0
     session_token: int = 0
+    echo_age_us: int = ECHO_AGE_UNKNOWN
 
     def _check(self) -> None:
         forces = self.corner_forces_mn
@@ -127,23 +146,44 @@ class State(Report):
             self.current_10na, self.target_uv_x1e4, self.target_ev_x1e4, self.texture,
             self.faults, self.dropped_reports, self.rejected_requests, self.stream_queued,
             self.host_time_echo_us, self.card_generation, self.session_number,
-            self.session_token,
+            self.session_token, self.echo_age_us,
         )  # fmt: skip
 
     @classmethod
     def decode(cls, data: bytes | bytearray | memoryview) -> State:
-        """Parse a STATE report; one of a protocol 1.0/1.1 device (:data:`LEGACY_SIZE` bytes,
-        no session fields) reads as session 0, token 0. Otherwise as :meth:`Report.decode`."""
+        """Parse a STATE report. One of a protocol 1.0/1.1 device (:data:`LEGACY_SIZE` bytes, no
+        session fields) reads as session 0, token 0; one of a 1.0-1.2 device (up to
+        :data:`SESSION_SIZE` bytes) with the echo age unknown. Otherwise as
+        :meth:`Report.decode`."""
         if isinstance(data, (bytes, bytearray, memoryview)) and \
-                cls.LEGACY_SIZE <= len(data) < cls.STRUCT.size:
-            data = bytes(data) + bytes(cls.STRUCT.size - len(data))
+                len(data) in (cls.LEGACY_SIZE, cls.SESSION_SIZE):
+            data = bytes(data) + bytes(cls.SESSION_SIZE - len(data))
+            data += ECHO_AGE_UNKNOWN.to_bytes(4, "little")
         return super().decode(data)
 
     @classmethod
     def _from_values(cls, values: tuple[Any, ...]) -> State:
-        return cls(*values[:5], tuple(values[5:9]), *values[9:])
+        """The decoded report. Unpacked values already fit their wire types, so only the
+        ranges narrower than the type are checked (positions, targets, texture) and the
+        constructor's per-field type checks are skipped: a host reads ~1000 of these a second,
+        and under software emulation the full checks made it fall behind the stream."""
+        for index, name, low, high in _DECODE_CHECKS:
+            if not low <= values[index] <= high:
+                raise ProtocolError(f"{name} = {values[index]} is outside [{low}, {high}]",
+                                    report=cls.name())
+        state = object.__new__(cls)
+        state.__dict__.update(zip(_FIELD_NAMES, _arguments(values), strict=True))
+        return state
 
     # SI views
+    @property
+    def echo_age_s(self) -> float | None:
+        """Device time from the placement of the echoed finger sample to this report, s; None
+        when the device does not say (rule PI3)."""
+        if self.echo_age_us == ECHO_AGE_UNKNOWN:
+            return None
+        return self.echo_age_us * TIME_UNIT_S
+
     @property
     def session_live(self) -> bool:
         """A session is live (state flag SESSION, protocol 1.2)."""
@@ -209,3 +249,18 @@ class State(Report):
     def timestamp_s(self) -> float:
         """Device time stamp (wrapping), s."""
         return self.timestamp_us * TIME_UNIT_S
+
+
+def _arguments(values: tuple[Any, ...]) -> tuple[Any, ...]:
+    """The constructor's arguments from STATE's unpacked values (report ID removed): the four
+    corner forces (values 5-8) make one tuple field."""
+    return (*values[:5], tuple(values[5:9]), *values[9:])
+
+
+_FIELD_NAMES = tuple(f.name for f in fields(State))
+_VALUE_COUNT = len(State.STRUCT.unpack(bytes(State.STRUCT.size))) - 1
+_DECODE_CHECKS = narrow_ranges(State, {
+    name: index
+    for name, index in zip(_FIELD_NAMES, _arguments(tuple(range(_VALUE_COUNT))), strict=True)
+    if isinstance(index, int)})
+"""(index, name, low, high) of the STATE fields whose range is narrower than their wire type."""

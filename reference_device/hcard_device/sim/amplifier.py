@@ -89,8 +89,9 @@ class EVAmplifier:
     def _budget(self, capacitance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Rate budget ``R`` (V/s) and whether the current (not the slew) sets it."""
         limit = self.max_current_a * (1.0 - _SLACK)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            by_current = np.where(capacitance > 0, limit / capacitance, np.inf)
+        by_current = np.empty(capacitance.shape)
+        by_current.fill(np.inf)
+        np.divide(limit, capacitance, out=by_current, where=capacitance > 0)
         return np.minimum(self.slew_v_per_s, by_current), by_current < self.slew_v_per_s
 
     def run(self, command: np.ndarray, capacitance: np.ndarray) -> AmplifierRun:
@@ -100,10 +101,13 @@ class EVAmplifier:
             command: (N,) commanded peak envelope, V (negative and NaN read as 0).
             capacitance: (N,) load capacitance through the user, F (0 without contact).
         """
-        cmd = np.nan_to_num(np.asarray(command, dtype=np.float64), nan=0.0)
-        np.maximum(cmd, 0.0, out=cmd)
+        cmd = _command(command)
         cap = np.maximum(np.asarray(capacitance, dtype=np.float64), 0.0)
         n = cmd.shape[0]
+        if self._idle(cmd):
+            # Off and commanded off: the envelope stays at 0 V (what the recursion gives).
+            zeros = np.zeros(n, dtype=bool)
+            return AmplifierRun(np.zeros(n), cap * 0.0, zeros, zeros.copy())
         budget, by_current = self._budget(cap)
         w, dt = self.omega, self.dt
         steady = np.minimum(self.max_voltage_v, budget / w)
@@ -112,6 +116,7 @@ class EVAmplifier:
         hard = np.zeros(n, dtype=bool)
         k, prev = 0, self.voltage_v
         start = prev
+        steady_before = None  # the envelope before each frame, when the first pass holds
         while k < n:
             # Vectorised pass: the clipped command, checked against the rate bounds.
             v = target[k:]
@@ -119,7 +124,9 @@ class EVAmplifier:
             hi = (budget[k:] + before / dt) / (w + 1.0 / dt)
             lo = before - dt * (budget[k:] - w * before)
             bad = (v > hi * (1 + 1e-12)) | (v < lo * (1 - 1e-12))
-            j = int(np.argmax(bad)) if bad.any() else v.shape[0]
+            j = int(bad.argmax()) if np.logical_or.reduce(bad) else v.shape[0]
+            if k == 0 and j == n:
+                steady_before = before  # every frame is the clipped command
             volts[k : k + j] = v[:j]
             if j:
                 prev = float(v[j - 1])
@@ -142,12 +149,42 @@ class EVAmplifier:
                 if value == target[k - 1]:
                     break
         self.voltage_v = prev
-        before = np.concatenate(([start], volts[:-1]))
+        before = steady_before if steady_before is not None else \
+            np.concatenate(([start], volts[:-1]))
         current = cap * (w * np.maximum(volts, before) + np.abs(volts - before) / dt)
-        np.minimum(current, self.max_current_a, out=current, where=hard)
         held = volts < cmd * (1.0 - 1e-9)
+        if not np.logical_or.reduce(hard):
+            if not np.logical_or.reduce(held):  # nothing held the envelope back
+                return AmplifierRun(volts, current, held, held.copy())
+            hard_current = hard
+        else:
+            np.minimum(current, self.max_current_a, out=current, where=hard)
+            hard_current = hard & (w * before * cap > self.max_current_a * (1.0 - _SLACK))
         at_voltage_limit = volts >= self.max_voltage_v * (1.0 - 1e-9)
-        hard_current = hard & (w * before * cap > self.max_current_a * (1.0 - _SLACK))
         current_limited = hard_current | (held & ~at_voltage_limit & by_current)
         voltage_limited = (held | hard) & ~current_limited
         return AmplifierRun(volts, current, voltage_limited, current_limited)
+
+    def _idle(self, command: np.ndarray) -> bool:
+        """The envelope is at 0 V and ``command`` (sanitised) asks for 0 V throughout, with
+        sane limits: the recursion then keeps it at exactly 0 V, holds nothing and draws no
+        current, so :meth:`run` may skip it."""
+        return (
+            self.voltage_v == 0.0
+            and self.max_voltage_v > 0.0
+            and self.max_current_a >= 0.0
+            and self.slew_v_per_s > 0.0
+            and not np.logical_or.reduce(command)
+        )
+
+
+_FLOAT_MAX = float(np.finfo(np.float64).max)
+
+
+def _command(command: np.ndarray) -> np.ndarray:
+    """The commanded envelope (V) as the amplifier reads it: NaN and negative values as 0,
+    +inf as the largest float (``np.nan_to_num`` then ``max(., 0)``, in three ufuncs)."""
+    cmd = np.minimum(np.asarray(command, dtype=np.float64), _FLOAT_MAX)
+    np.fmax(cmd, 0.0, out=cmd)  # NaN and -inf read as 0
+    cmd += 0.0  # -0.0 reads as 0.0, as np.maximum(-0.0, 0.0) gives
+    return cmd

@@ -22,6 +22,8 @@ Without contact the friction reads 1 (neutral) and the tribometer reads its nois
 
 from __future__ import annotations
 
+import functools
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,6 +49,8 @@ class FingerTruth:
         contact: the finger touches the plate.
         speed_m_s: sliding speed, m/s.
         contact_time_s: time since the touch-down of the current contact, s.
+        held: position, force, contact and speed are the same in every frame (a state the
+            host reported, held between its reports).
     """
 
     x_mm: np.ndarray
@@ -55,6 +59,14 @@ class FingerTruth:
     contact: np.ndarray
     speed_m_s: np.ndarray
     contact_time_s: np.ndarray
+    held: bool = False
+
+    @functools.cached_property
+    def checked(self) -> bool:
+        """Force, speed and contact time are all finite and >= 0, so the physics may skip
+        its input checks on them (the finger models that know it set it when they build
+        the state)."""
+        return finite_non_negative(self.fn_n, self.speed_m_s, self.contact_time_s)
 
     @staticmethod
     def absent(n: int) -> FingerTruth:
@@ -69,6 +81,18 @@ def _on_plate(
 ) -> np.ndarray:
     width, height = surface_mm
     return contact & (x >= 0) & (x <= width) & (y >= 0) & (y <= height)
+
+
+def finite_non_negative(*arrays: np.ndarray) -> bool:
+    """Every value of every array is finite and >= 0 (two reductions per array: a NaN makes
+    them NaN, which fails the comparison)."""
+    for values in arrays:
+        if values.size and not (
+            np.minimum.reduce(values, axis=None) >= 0.0
+            and np.maximum.reduce(values, axis=None) < math.inf
+        ):
+            return False
+    return True
 
 
 class TrackFinger:
@@ -151,16 +175,20 @@ class HostFinger:
     def state(self, times: np.ndarray) -> FingerTruth:
         """The held state at ``times`` (s)."""
         n = times.shape[0]
-        on = bool(_on_plate(np.array([self.x]), np.array([self.y]), np.array([self.contact]),
-                            self.surface_mm)[0])
-        return FingerTruth(
-            np.full(n, self.x),
-            np.full(n, self.y),
-            np.full(n, self.fn if on else 0.0),
-            np.full(n, on),
-            np.full(n, self.speed_m_s if on else 0.0),
-            np.where(on, np.maximum(times - self.touchdown_s, 0.0), 0.0),
+        width, height = self.surface_mm
+        on = bool(self.contact and 0 <= self.x <= width and 0 <= self.y <= height)
+        fn, speed = (self.fn, self.speed_m_s) if on else (0.0, 0.0)
+        contact_time = np.maximum(times - self.touchdown_s, 0.0) if on else np.zeros(n)
+        x, y, force, sliding = np.array([[self.x], [self.y], [fn], [speed]]).repeat(n, axis=1)
+        contact = np.empty(n, dtype=bool)
+        contact.fill(on)
+        truth = FingerTruth(x, y, force, contact, sliding, contact_time, held=True)
+        # the held values are scalars: checking them is cheaper than checking the arrays
+        truth.__dict__["checked"] = (
+            0.0 <= fn < math.inf and 0.0 <= speed < math.inf
+            and math.isfinite(self.touchdown_s)
         )
+        return truth
 
 
 class FingerPhysics:
@@ -192,9 +220,17 @@ class FingerPhysics:
         self, amplitude_m: np.ndarray, voltage_v: np.ndarray, truth: FingerTruth
     ) -> np.ndarray:
         """Relative friction felt ``F_t / (mu0 Fn)`` (Eq. 4.1) per frame; 1 without contact."""
-        if not truth.contact.any():
+        if not np.logical_or.reduce(truth.contact):  # .any(), without its wrapper
             return np.ones(truth.contact.shape[0])
-        uv, ev = self.profile.forward(amplitude_m, voltage_v, truth.speed_m_s, truth.fn_n)
+        shape = truth.fn_n.shape
+        trusted = (
+            amplitude_m.shape == shape and voltage_v.shape == shape and truth.checked
+            and finite_non_negative(amplitude_m)
+            # the voltage acts only through an EV channel
+            and (self.profile.ev_model is None or finite_non_negative(voltage_v))
+        )
+        uv, ev = self.profile.forward(amplitude_m, voltage_v, truth.speed_m_s, truth.fn_n,
+                                      trusted=trusted)
         hidden = self.hidden.ev_force(voltage_v, truth.fn_n) if self.hidden else None
         if hidden is not None:
             with np.errstate(divide="ignore", invalid="ignore"):
@@ -206,11 +242,22 @@ class FingerPhysics:
         n = friction.shape[0]
         force = np.zeros(n)
         pressing = truth.contact & (truth.fn_n > 0)
-        if pressing.any():
-            mu = self.finger.friction_coefficient(
-                normal_force=truth.fn_n[pressing],
-                speed=truth.speed_m_s[pressing],
-                contact_time=truth.contact_time_s[pressing],
-            )
-            force[pressing] = mu * friction[pressing] * truth.fn_n[pressing]
+        if np.logical_or.reduce(pressing):
+            every = np.logical_and.reduce(pressing)  # then no frame needs picking out
+            fn = truth.fn_n if every else truth.fn_n[pressing]
+            inputs = {
+                "normal_force": fn,
+                "speed": truth.speed_m_s if every else truth.speed_m_s[pressing],
+                "contact_time": truth.contact_time_s if every else truth.contact_time_s[pressing],
+            }
+            if truth.checked:
+                if truth.held:  # one speed: its factor (Fig. 1.12) is one number
+                    inputs["speed"] = truth.speed_m_s.item(0)
+                mu = self.finger.friction_coefficient_trusted(**inputs)
+            else:
+                mu = self.finger.friction_coefficient(**inputs)
+            if every:
+                force = mu * friction * fn
+            else:
+                force[pressing] = mu * friction[pressing] * fn
         return force + self.rng.normal(0.0, 1.0, size=n) * self.lateral_noise_n

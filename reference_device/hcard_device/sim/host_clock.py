@@ -33,10 +33,19 @@ class HostClock:
     def __init__(self) -> None:
         self._host_s: float | None = None  # the last host time, unwrapped, s
         self._offset_s = 0.0  # device time - host time, s
+        self._timed_by_host = False
 
     def reset(self) -> None:
         """Forget the anchor (the next sample anchors it)."""
         self._host_s = None
+        self._timed_by_host = False
+
+    @property
+    def last_host_s(self) -> float | None:
+        """The unwrapped host time of the sample :meth:`device_time` placed last, s, on a
+        time line that only moves forward (wraps of the u32 counter unrolled); None when that
+        sample was timed by its arrival (its host time did not advance) or none was placed."""
+        return self._host_s if self._timed_by_host else None
 
     def device_time(self, arrival_s: float, host_time_s: float) -> float:
         """The device time (s) of a sample taken at ``host_time_s`` that arrived at
@@ -47,6 +56,7 @@ class HostClock:
         else:
             step = (host_time_s - self._host_s) % HOST_TIME_WRAP_S
             if step == 0.0:
+                self._timed_by_host = False
                 return arrival_s
             host = self._host_s + step
             if step > REANCHOR_GAP_S:
@@ -55,4 +65,5 @@ class HostClock:
                 relaxed = self._offset_s + DRIFT_ALLOWANCE * step
                 self._offset_s = min(relaxed, arrival_s - host)
         self._host_s = host
+        self._timed_by_host = True
         return host + self._offset_s

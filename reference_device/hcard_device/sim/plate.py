@@ -59,6 +59,7 @@ in 1.49 ms with the drive saturated and no overshoot, and force steps between 0 
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -168,6 +169,18 @@ class PlateRun:
 
 @dataclass(frozen=True)
 class _Coefficients:
+    """The loop's coefficients at one quantised finger force (module documentation).
+
+    Attributes:
+        a: envelope decay per loop sample, ``exp(-sigma T)``.
+        g: ``(1 - a) G``: amplitude gained per sample at full drive, m.
+        c: ``Ki T``, 1/m.
+        num, den: the closed loop ``r -> A`` as a filter.
+        phi11, phi12: first row of the state matrix.
+        full: full-drive amplitude ``G``, m.
+        decay: ``a ** k`` for ``k = 0 .. MAX_SEGMENT_SAMPLES`` (the saturated plate).
+    """
+
     a: float
     g: float
     c: float
@@ -176,6 +189,21 @@ class _Coefficients:
     phi11: float
     phi12: float
     full: float
+    decay: np.ndarray
+
+
+def _force_runs(normal_force: np.ndarray) -> list[tuple[int, int, int]]:
+    """``(start, end, key)`` of each run of loop samples whose finger force (N) falls in one
+    quantum of :data:`FORCE_QUANTUM_N` (``key``: the force in quanta, rounded half to even;
+    negative forces count as 0). One run for an empty array (key of its first sample)."""
+    n = normal_force.shape[0]
+    if n and np.minimum.reduce(normal_force) == np.maximum.reduce(normal_force):
+        force = float(normal_force[0])  # one force (a held finger): no per-sample keys
+        if math.isfinite(force) and force < 1e12:
+            return [(0, n, round(max(force, 0.0) / FORCE_QUANTUM_N))]
+    keys = np.rint(np.maximum(normal_force, 0.0) / FORCE_QUANTUM_N).astype(np.int64)
+    edges = [0, *(np.flatnonzero(keys[1:] != keys[:-1]) + 1).tolist(), n]
+    return [(start, end, int(keys[start])) for start, end in itertools.pairwise(edges)]
 
 
 class PlateLoop:
@@ -266,7 +294,9 @@ class PlateLoop:
         gamma1, gamma2 = g * kp, c
         den = np.array([1.0, -(phi11 + phi22), phi11 * phi22 - phi12 * phi21])
         num = np.array([0.0, gamma1, phi12 * gamma2 - phi22 * gamma1])
-        co = _Coefficients(a, g, c, num, den, phi11, phi12, full)
+        decay = a ** np.arange(MAX_SEGMENT_SAMPLES + 1, dtype=np.float64)
+        decay.flags.writeable = False
+        co = _Coefficients(a, g, c, num, den, phi11, phi12, full, decay)
         self._cache[key] = co
         return co
 
@@ -278,23 +308,18 @@ class PlateLoop:
             normal_force: (N,) finger force on the plate per loop sample, N (0 without
                 contact).
         """
-        ref = np.clip(np.asarray(reference, dtype=np.float64), 0.0, self._limit)
+        ref = np.asarray(reference, dtype=np.float64).clip(0.0, self._limit)
         n = ref.shape[0]
-        if self.amplitude_m == 0.0 and self.integrator == 0.0 and not ref.any():
+        if self.amplitude_m == 0.0 and self.integrator == 0.0 and not np.logical_or.reduce(ref):
             return PlateRun(np.zeros(n), np.zeros(n), np.zeros(n, dtype=bool))  # at rest
         amplitude = np.empty(n + 1)
         drive = np.empty(n)
         clamped = np.zeros(n, dtype=bool)
         amplitude[0] = self.amplitude_m
-        keys = np.rint(np.maximum(np.asarray(normal_force, dtype=np.float64), 0.0)
-                       / FORCE_QUANTUM_N).astype(np.int64)
-        bounds = np.flatnonzero(np.diff(keys)) + 1
-        starts = np.concatenate(([0], bounds))
-        ends = np.append(bounds, n)
-        for start, end in zip(starts, ends, strict=True):
-            co = self._coefficients(int(keys[start]))
-            for s in range(int(start), int(end), MAX_SEGMENT_SAMPLES):
-                e = min(s + MAX_SEGMENT_SAMPLES, int(end))
+        for start, end, key in _force_runs(np.asarray(normal_force, dtype=np.float64)):
+            co = self._coefficients(key)
+            for s in range(start, end, MAX_SEGMENT_SAMPLES):
+                e = min(s + MAX_SEGMENT_SAMPLES, end)
                 self._segment(ref[s:e], co, amplitude[s : e + 1], drive[s:e], clamped[s:e])
         return PlateRun(np.maximum(amplitude[1:], 0.0), drive, clamped)
 
@@ -350,15 +375,16 @@ class PlateLoop:
                 zi = np.array([amp, (co.phi11 + co.den[1]) * amp + co.phi12 * integ])
                 amps, zf = lfilter(co.num, co.den, rest, zi=zi)
                 err = rest - amps
-                integs = integ + co.c * (np.cumsum(err) - err)
+                integs = integ + co.c * (err.cumsum() - err)
                 u = kp * err + integs
-                u_hi = np.clip((lim - co.a * amps) / co.g, 0.0, 1.0)
+                u_hi = (lim - co.a * amps) / co.g  # clipped to [0, 1] (only compared)
+                np.minimum(np.maximum(u_hi, 0.0, out=u_hi), 1.0, out=u_hi)
                 bad = (u < -DRIVE_SLACK) | (u > u_hi + DRIVE_SLACK)
-                j = int(np.argmax(bad)) if bad.any() else rest.shape[0]
+                j = int(bad.argmax()) if np.logical_or.reduce(bad) else rest.shape[0]
                 if j == 0:  # rounding put the boundary sample out of range: saturate it
                     mode = _LOW if u[0] < -DRIVE_SLACK else _HIGH
                 else:
-                    drive_out[k : k + j] = np.clip(u[:j], 0.0, 1.0)
+                    drive_out[k : k + j] = u[:j].clip(0.0, 1.0)
                     if j == rest.shape[0]:
                         amp_out[k + 1 : k + j] = amps[1:j]
                         amp, integ = float(zf[0]), float(integs[-1] + co.c * err[-1])
@@ -371,14 +397,14 @@ class PlateLoop:
             # Saturated: constant drive, the clamp or the brake. The integrator is frozen at full
             # drive, unwinds at zero drive, tracks the applied drive while the safety clamp acts
             # and zero drive while the brake acts.
-            steps = np.arange(rest.shape[0] + 1, dtype=np.float64)
-            decay = co.a**steps
-            integs = np.full(rest.shape[0] + 1, integ)
+            decay = co.decay[: rest.shape[0] + 1]
+            integs = np.empty(rest.shape[0] + 1)
+            integs.fill(integ)
             if mode == _HIGH:
                 amps = co.full + (amp - co.full) * decay
                 np.minimum(amps, lim, out=amps)
                 amps[0] = amp
-                applied = np.clip((lim - co.a * amps[:-1]) / co.g, 0.0, 1.0)
+                applied = ((lim - co.a * amps[:-1]) / co.g).clip(0.0, 1.0)
                 tracking = applied < 1.0
                 err = rest - amps[:-1]
                 integs[1:] = np.where(tracking, applied - kp * err, integ)
@@ -395,14 +421,16 @@ class PlateLoop:
                 # integrator unwinds, down to zero drive at most.
                 amps = amp * decay
                 err = rest - amps[:-1]
-                applied = np.zeros(rest.shape[0])
-                integs[1:] = np.maximum(integ + co.c * np.cumsum(err), min(integ, 0.0))
+                applied = clamp = None  # zero drive, no clamp (clamp_out is zero already)
+                integs[1:] = np.maximum(integ + co.c * err.cumsum(), min(integ, 0.0))
                 leave = kp * err + integs[:-1] >= -DRIVE_SLACK
-                clamp = np.zeros(rest.shape[0], dtype=bool)
             leave[0] = False
-            j = int(np.argmax(leave)) if leave.any() else rest.shape[0]
-            drive_out[k : k + j] = applied[:j]
-            clamp_out[k : k + j] = clamp[:j]
+            j = int(leave.argmax()) if np.logical_or.reduce(leave) else rest.shape[0]
+            if applied is None:
+                drive_out[k : k + j] = 0.0
+            else:
+                drive_out[k : k + j] = applied[:j]
+                clamp_out[k : k + j] = clamp[:j]
             amp_out[k + 1 : k + j + 1] = amps[1 : j + 1]
             amp, integ = float(amps[j]), float(integs[j])
             k += j

@@ -19,6 +19,7 @@ adds independent Gaussian noise.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -46,7 +47,10 @@ class TouchSamples:
         return TouchSamples(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool))
 
     def concat(self, other: TouchSamples) -> TouchSamples:
-        """These samples followed by ``other``."""
+        """These samples followed by ``other`` (``self`` itself when ``other`` is empty: the
+        arrays are never written to)."""
+        if len(other) == 0:
+            return self
         return TouchSamples(
             np.concatenate((self.t, other.t)),
             np.concatenate((self.x, other.x)),
@@ -54,9 +58,31 @@ class TouchSamples:
             np.concatenate((self.contact, other.contact)),
         )
 
+    @functools.cached_property
+    def kinematics(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per sample (at least two): its two-sample speed (mm/s), the slope of the speed over
+        two sensor periods (mm/s^2), and half the interval since the previous sample (s; 0 for
+        the first), as :func:`predicted_speed` describes them. Worked out once: a device steps
+        many times between two touch samples, on the same samples (do not modify them)."""
+        m = len(self)
+        t = self.t
+        dt = t[1:] - t[:-1]
+        moving = self.contact[1:] & self.contact[:-1] & (dt > 0)
+        speed = np.zeros(m)  # 0 where not moving (no division there)
+        distance = np.hypot(self.x[1:] - self.x[:-1], self.y[1:] - self.y[:-1])
+        np.divide(distance, dt, out=speed[1:], where=moving)
+        slope = np.zeros(m)
+        if m > 2:
+            valid = np.concatenate(([False], moving))
+            both = valid[2:] & valid[1:-1] & valid[:-2]
+            np.divide(speed[2:] - speed[:-2], t[2:] - t[:-2], out=slope[2:], where=both)
+        return speed, slope, np.concatenate(([0.0], dt / 2))
+
     def tail(self, count: int) -> TouchSamples:
-        """The last ``count`` samples."""
+        """The last ``count`` samples (``self`` itself when it has no more)."""
         start = max(len(self) - count, 0)
+        if start == 0:
+            return self
         return TouchSamples(
             self.t[start:], self.x[start:], self.y[start:], self.contact[start:]
         )
@@ -97,7 +123,7 @@ class TouchSensor:
 
 def hold(samples: TouchSamples, times: np.ndarray) -> np.ndarray:
     """Index of the latest sample at or before each time (-1 before the first)."""
-    return np.searchsorted(samples.t, times, side="right") - 1
+    return samples.t.searchsorted(times, side="right") - 1
 
 
 def predicted_speed(samples: TouchSamples, times: np.ndarray, horizon_s: float) -> np.ndarray:
@@ -113,29 +139,22 @@ def predicted_speed(samples: TouchSamples, times: np.ndarray, horizon_s: float) 
     a one-period slope), and is never negative; ``a_i = 0`` until a contact has four samples.
     Times before the first sample get 0.
     """
-    m = len(samples)
     out = np.zeros(times.shape[0])
-    if m < 2:
+    if len(samples) < 2:
         return out
-    dt = np.diff(samples.t)
-    moving = samples.contact[1:] & samples.contact[:-1] & (dt > 0)
-    speed = np.zeros(m)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        speed[1:] = np.where(
-            moving, np.hypot(np.diff(samples.x), np.diff(samples.y)) / dt, 0.0
-        )
-    valid = np.concatenate(([False], moving))
-    slope = np.zeros(m)
-    if m > 2:
-        span = samples.t[2:] - samples.t[:-2]
-        both = valid[2:] & valid[1:-1] & valid[:-2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            slope[2:] = np.where(both, (speed[2:] - speed[:-2]) / span, 0.0)
+    speed, slope, half = samples.kinematics
     index = hold(samples, times)
+    if index.shape[0] and np.minimum.reduce(index) == np.maximum.reduce(index):
+        # Every time holds one sample (the common block between two touch samples).
+        i = index.item(0)
+        if i < 0:
+            return out
+        ahead = np.minimum(times - samples.t.item(i) + half.item(i), horizon_s)
+        return np.maximum(speed.item(i) + slope.item(i) * ahead, 0.0, out=out)
     known = index >= 0
-    i = index[known]
-    half = np.concatenate(([0.0], dt / 2))[i]
-    ahead = np.minimum(times[known] - samples.t[i] + half, horizon_s)
+    everywhere = bool(known.all())
+    i = index if everywhere else index[known]
+    ahead = np.minimum((times if everywhere else times[known]) - samples.t[i] + half[i], horizon_s)
     out[known] = np.maximum(speed[i] + slope[i] * ahead, 0.0)
     return out
 
@@ -160,12 +179,31 @@ class CornerForceSensors:
     def split(self, force_n: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray) -> np.ndarray:
         """(N, 4) noiseless corner forces (order :data:`CORNERS`) of a force at ``(x, y)``;
         positions outside the surface are taken at its edge."""
-        u = np.clip(np.asarray(x_mm, dtype=np.float64) / self.width_mm, 0.0, 1.0)
-        v = np.clip(np.asarray(y_mm, dtype=np.float64) / self.height_mm, 0.0, 1.0)
+        x = np.asarray(x_mm, dtype=np.float64)
+        y = np.asarray(y_mm, dtype=np.float64)
         f = np.asarray(force_n, dtype=np.float64)
-        return np.column_stack(
-            (f * (1 - u) * (1 - v), f * u * (1 - v), f * (1 - u) * v, f * u * v)
-        )
+        if not (f.ndim == 1 and f.shape == x.shape == y.shape):
+            u = (x / self.width_mm).clip(0.0, 1.0)
+            v = (y / self.height_mm).clip(0.0, 1.0)
+            return np.column_stack(
+                (f * (1 - u) * (1 - v), f * u * (1 - v), f * (1 - u) * v, f * u * v)
+            )
+        # One frame per row, u and v side by side: (f (1 - u)) (1 - v), (f u) (1 - v),
+        # (f (1 - u)) v, (f u) v.
+        n = f.shape[0]
+        uv = np.empty((n, 2))
+        np.divide(x, self.width_mm, uv[:, 0])
+        np.divide(y, self.height_mm, uv[:, 1])
+        uv.clip(0.0, 1.0, out=uv)
+        rest = np.subtract(1.0, uv)  # (1 - u, 1 - v)
+        by_x = np.empty((n, 4))
+        np.multiply(f, rest[:, 0], by_x[:, 0])
+        np.multiply(f, uv[:, 0], by_x[:, 1])
+        by_x[:, 2:] = by_x[:, :2]
+        by_y = np.empty((n, 4))
+        by_y[:, :2] = rest[:, 1:]
+        by_y[:, 2:] = uv[:, 1:]
+        return np.multiply(by_x, by_y, by_x)
 
     def measure(self, force_n: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray) -> np.ndarray:
         """(N, 4) measured corner forces, N: :meth:`split` plus each sensor's noise."""

@@ -232,6 +232,9 @@ class DeviceSimulation:
         self._history = TouchSamples.empty()
         self._pending = TouchSamples.empty()
         self._host_clock = HostClock()
+        self._last_placed_s = -math.inf  # device time of the last host sample, s
+        self._render_reference_s: float | None = None  # offset of the render time line, s
+        self._render_shift_s = 0.0  # render time - device time, s
         self._renderer: Renderer | None = None
         self._stream: RenderStream | None = None
         self._card_report = ClipReport()
@@ -463,6 +466,7 @@ class DeviceSimulation:
             self._finger = HostFinger(self.config.surface_mm)
             self._history = TouchSamples.empty()
             self._pending = TouchSamples.empty()
+            self._forget_render_time_line()
             if self._renderer is not None:
                 self._new_stream()
 
@@ -478,8 +482,9 @@ class DeviceSimulation:
     def host_finger(
         self, t_s: float, x_mm: float, y_mm: float, fn_n: float, contact: bool,
         host_time_s: float | None = None,
-    ) -> None:
-        """A finger state from the host (touch sensing on the host side).
+    ) -> float | None:
+        """A finger state from the host (touch sensing on the host side); returns the device
+        time (s) the sample was placed at, None when it was rejected.
 
         ``t_s`` is in the device clock (:attr:`time_s`); a time in the future is taken as now,
         and one not later than the previous sample is moved just after it. Non-finite values
@@ -493,29 +498,63 @@ class DeviceSimulation:
             values = [float(v) for v in (t_s, x_mm, y_mm, fn_n)]
         except (TypeError, ValueError):
             self._invalid()
-            return
+            return None
         if not all(math.isfinite(v) for v in values):
             self._invalid()
-            return
+            return None
         t, x, y, fn = values
         if not isinstance(self._finger, HostFinger):
             if not self.host_driven:
                 self._last_feed = self.time_s
             self._finger = HostFinger(self.config.surface_mm)
             self._host_clock.reset()
+            self._forget_render_time_line()
+        host_s = None
         if host_time_s is not None and math.isfinite(host_time_s):
             t = self._host_clock.device_time(t, host_time_s)
-        last = self._last_sample_time()
+            host_s = self._host_clock.last_host_s
         t = min(t, self.time_s)
-        if t <= last:
-            t = last + HOST_SAMPLE_SPACING_S
+        if t <= self._last_placed_s:
+            t = self._last_placed_s + HOST_SAMPLE_SPACING_S
+        self._last_placed_s = t
+        render_t = self._render_time(t, host_s)
         sample = TouchSamples(
-            np.array([t]), np.array([x]), np.array([y]), np.array([bool(contact)])
+            np.array([render_t]), np.array([x]), np.array([y]), np.array([bool(contact)])
         )
         self._pending = self._pending.concat(sample)
         if self._stream is not None:
-            self._stream.push(t, x, y, max(fn, 0.0), bool(contact))
+            self._stream.push(render_t, x, y, max(fn, 0.0), bool(contact))
         self._finger.update(t, x, y, fn, bool(contact), host_time_s)
+        return t
+
+    def _render_time(self, placed_s: float, host_s: float | None) -> float:
+        """The render time of a host sample placed at ``placed_s`` (device clock) whose
+        unwrapped host time is ``host_s`` (None: timed by its arrival), s.
+
+        The renderer works on the host's time line: a sample's render time is its host time
+        plus a reference offset fixed when the time line began (the first host-timed sample
+        since the host's samples were last forgotten), so the samples keep the spacing the
+        host gave them; frames are rendered at device time plus :attr:`_render_shift_s`, the
+        reference less the offset of the latest placement. When the device's estimate of the
+        clock offset moves (PO2: a report that travelled faster), the rendered frames move
+        with it, exactly as the echo age tells the host (PI3: a report's last frame is at host
+        time ``host_time_echo_us + echo_age_us``); velocity, odometer and temporal phase stay
+        those of the host's time line. A sample timed by its arrival keeps the current shift.
+        """
+        if host_s is not None:
+            offset = placed_s - host_s
+            if self._render_reference_s is None:
+                self._render_reference_s = offset
+            self._render_shift_s = self._render_reference_s - offset
+        render_t = placed_s + self._render_shift_s
+        last = self._last_sample_time()
+        return render_t if render_t > last else last + HOST_SAMPLE_SPACING_S
+
+    def _forget_render_time_line(self) -> None:
+        """Start the render time line afresh (the samples on it were forgotten)."""
+        self._last_placed_s = -math.inf
+        self._render_reference_s = None
+        self._render_shift_s = 0.0
 
     def use_internal_finger(self, track: FingerTrack) -> None:
         """Let the simulated finger follow ``track`` from now on (its first sample now), sensed
@@ -523,6 +562,7 @@ class DeviceSimulation:
         counting."""
         self._finger = TrackFinger(track, self.time_s, self.config.surface_mm)
         self._pending = TouchSamples.empty()
+        self._forget_render_time_line()
 
     def stream_frames(self, uv: np.ndarray | float, ev: np.ndarray | float) -> int:
         """Queue target relative friction frames (UV in [0, 1], EV in [1, 4]; broadcast
@@ -583,7 +623,8 @@ class DeviceSimulation:
         truth = self._finger.state(times) if self._finger is not None else FingerTruth.absent(n)
         new = self._sense_touch(self._frame / rate, t_end)
         samples = self._history.concat(new)
-        index = hold(samples, times)
+        render_times = times + self._render_shift_s  # the samples' time line
+        index = hold(samples, render_times)
         touch = np.zeros(n, dtype=TOUCH_DTYPE)
         known = index >= 0
         held = index[known]
@@ -591,8 +632,10 @@ class DeviceSimulation:
         touch["y_mm"][known] = samples.y[held]
         touch["contact"][known] = samples.contact[held]
         touch["t_s"] = np.nan
-        touch["t_s"][known] = samples.t[held]
-        speed_est = predicted_speed(samples, times, self._options.dead_reckoning_s) * 1e-3
+        touch["t_s"][known] = samples.t[held] - self._render_shift_s
+        speed_est = (
+            predicted_speed(samples, render_times, self._options.dead_reckoning_s) * 1e-3
+        )
         self._history = samples.tail(4)
         corners = self.force_sensors.measure(truth.fn_n, truth.x_mm, truth.y_mm)
         fn_est = np.maximum(corners.sum(axis=1), 0.0)
@@ -694,7 +737,7 @@ class DeviceSimulation:
         if self._streaming:
             return (*self._pop_stream(n), neutral)
         if self._stream is not None:
-            frames = self._stream.render(n)
+            frames = self._stream.render(n, time_shift_s=self._render_shift_s)
             return frames.uv, frames.ev, frames.texture.astype(np.int32)
         return np.ones(n), np.ones(n), neutral
 

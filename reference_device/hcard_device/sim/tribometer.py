@@ -25,8 +25,9 @@ below run the physics of their own model, not the calibration effect's formula:
   began, ``friction_initial = mu0``, ``friction_occluded = mu0 (1 + gain)``,
   ``occlusion_time = time_constant``;
 - ``charge-leakage``: the voltage acting on the finger is the exact discrete high pass of
-  :meth:`ChargeLeakage.simulate` (Eqs. 3.19-3.23) of the applied voltage, ``tau_d =
-  time_constant``; the recording's voltage column is the applied voltage;
+  :meth:`ChargeLeakage.simulate` (Eqs. 3.19-3.23) of the applied voltage, a constant ``tau_d =
+  time_constant`` (``tau_d_exponent = 0``); the recording's voltage column is the applied
+  voltage;
 - ``air-layer``: ``F_e`` from :class:`AirLayer` (Eq. 3.17, with the contact layers of the
   device's Kaczmarek model) at ``air_gap = air_gap * (1 N / Fn)``;
 - ``actuator-bandwidth``: the plate amplitude follows the commanded amplitude through a
@@ -61,7 +62,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.signal import lfilter
 
 from hcard.calibration.measurement import Measurement
 from hcard.physics import Parameter, PredictorError
@@ -320,6 +320,7 @@ def _drift(n: int, sample_rate_hz: float, size: float, rng: np.random.Generator)
         return np.zeros(n)
     walk = np.cumsum(rng.normal(size=n))
     a = math.exp(-1.0 / (max(n / sample_rate_hz / 20.0, 0.5) * sample_rate_hz))
+    from scipy.signal import lfilter  # here: scipy.signal costs ~0.6 s to import
     smooth = lfilter([1.0 - a], [1.0, -a], walk - walk[0])
     smooth -= smooth.mean()
     span = float(np.ptp(smooth))
@@ -440,11 +441,12 @@ def synthesize(
         if uv_ok and "actuator-bandwidth" in chosen:
             tau = chosen["actuator-bandwidth"]["time_constant"]
             a = math.exp(-1.0 / (protocol.sample_rate_hz * tau))
+            from scipy.signal import lfilter  # here: scipy.signal costs ~0.6 s to import
             amplitude = lfilter([0.0, 1.0 - a], [1.0, -a], s.amplitude)
         voltage = s.voltage if ev_model is not None else np.zeros(n)
         if ev_model is not None and "charge-leakage" in chosen:
-            leakage = ChargeLeakage(
-                tau_d=chosen["charge-leakage"]["time_constant"],
+            leakage = ChargeLeakage(  # a constant tau_d: Eq. 3.22 as the pure high pass
+                tau_d=chosen["charge-leakage"]["time_constant"], tau_d_exponent=0.0,
                 **{p.name: ev_model[p.name] for p in Kaczmarek.parameters},
             )
             voltage = leakage.simulate(s.t, s.voltage).effective_voltage
