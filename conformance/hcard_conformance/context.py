@@ -39,12 +39,12 @@ DEFAULT_VECTORS = Path(__file__).resolve().parents[2] / "spec" / "vectors"
 """The vectors of this repository (``spec/vectors``)."""
 
 ECHO_MARGIN_PERIODS = 2
-"""Report periods subtracted from the echo-based clock offset of :func:`reported_frames` (whose
-A1 lag search absorbs a later mapping; the device level, with no lag search, uses one): one
-because a sample is applied up to a period before the first report that echoes it, one because
-a protocol 1.1 device places a sample by the fastest transport it has seen over all sessions
-(PO2), which may be up to a period faster than this session's fastest (seen over USB/IP: a
-dense grating mapped 0.5 ms early fails A1 at 0.10, whose lag search only goes forward)."""
+"""For a device before protocol 1.3 (no echo age, rule PI3): report periods subtracted from the
+echo-based clock offset of :func:`reported_frames` (whose A1 lag search absorbs a later mapping;
+the device level, with no lag search, uses one): one because a sample is applied up to a period
+before the first report that echoes it, one because such a device places a sample by the
+fastest transport it has seen over all sessions (PO2), which may be up to a period faster than
+this session's fastest."""
 
 Renderer = Callable[[pb.Card, FingerTrack, RenderOptions], Frames]
 
@@ -57,14 +57,9 @@ def reported_frames(states: list[State], track: FingerTrack,
     the device applied; ``host_us`` are the host times sent with the track's samples
     (:attr:`hcard_device.drivers.play.PlayResult.host_us`; by default the track's own times),
     so an echo names the sample of this session it applied, and an echo of an earlier session
-    (a device that stays powered between runs) names none. The device clock's offset from the
-    track clock is estimated as the smallest delay between a sample's time and the first
-    report echoing it, less one report period (a sample is applied at most one period before
-    the first report that echoes it). Report times shifted by that offset are therefore never
-    earlier than the truth, and at most one report period plus the transport delay later: a
-    constant lag that the lag search of metric A1 (up to 10 ms) absorbs. Transport delay is
-    judged by the device level's latency check, not here. Reports before the first applied
-    sample of the session are left out.
+    (a device that stays powered between runs) names none. Reports before the first applied
+    sample of the session are left out. Report times are those of :func:`session_times`:
+    exact on a protocol 1.3 device, never earlier than the truth on an older one.
     """
     keep, t = session_times(states, track, host_us, ECHO_MARGIN_PERIODS)
     uv = np.array([s.target_uv for s in states], dtype=float)
@@ -78,8 +73,17 @@ def reported_frames(states: list[State], track: FingerTrack,
 def session_times(states: list[State], track: FingerTrack, host_us: np.ndarray | None = None,
                   margin_periods: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """Which reports belong to the session (from the first that echoes one of its samples on)
-    and every report's time on the track's time base, s: the echo-based offset less
-    ``margin_periods`` report periods (see :func:`reported_frames`)."""
+    and every report's time on the track's time base, s.
+
+    A protocol 1.3 device says how long before each report it placed the sample it echoes
+    (``echo_age_us``, rule PI3): the report's time is that sample's track time plus the age,
+    exactly, even where the device's clock offset (PO2) moved within the session. An older
+    device does not, and the offset is estimated: the smallest delay between a sample's time
+    and the first report echoing it, less ``margin_periods`` report periods (a sample is
+    applied up to one period before the first report that echoes it), so that mapped times
+    are never earlier than the truth and at most about a period plus the transport delay later
+    (a lag that the lag search of metric A1 absorbs; see :data:`ECHO_MARGIN_PERIODS`).
+    """
     from hcard_device.drivers.recording import HOST_TIME_MODULO, echoed_samples, unwrapped_times
 
     if host_us is None:
@@ -92,6 +96,13 @@ def session_times(states: list[State], track: FingerTrack, host_us: np.ndarray |
         return np.zeros(len(states), dtype=bool), device_t
     keep = np.arange(len(states)) >= np.flatnonzero(applied)[0]
     echo_s = track.t[np.maximum(sample, 0)]
+    ages = [s.echo_age_s for s, ok in zip(states, applied, strict=True) if ok]
+    if all(age is not None for age in ages):
+        exact = echo_s[applied] + np.array(ages, dtype=float)
+        offset = float(np.median(device_t[applied] - exact))
+        t = device_t - offset  # reports that echo no sample of the session: not kept
+        t[applied] = exact
+        return keep, t
     first = np.flatnonzero(applied & np.concatenate(([True], sample[1:] != sample[:-1])))
     period = float(np.median(np.diff(device_t))) if len(states) > 1 else 0.0
     offset = float(np.min(device_t[first] - echo_s[first])) - margin_periods * period

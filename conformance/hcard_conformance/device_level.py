@@ -8,9 +8,11 @@ reads STATE input reports (spec/device-protocol.md). Thresholds (spec/conformanc
     *measured* actuation (plate amplitude, EV voltage, normal force in STATE) through the
     forward map of the device's physics profile (:func:`device_profile_for`), at the finger
     speed of the track the host drove; the target is :func:`hcard.render.render` of the card
-    along that track (hybrid, 10 kframes/s). Reports within :data:`SETTLE_S` of touch-down or
-    of a step of the target larger than the JND are left out (the loop settling; boundary
-    placement is judged by the renderer level). Metric: RMS relative error
+    along that track (hybrid, 10 kframes/s). Reports before the device has the stroke's
+    second touch sample (its first speed estimate, from the echo; transport delay is judged
+    by ``device.latency``) plus :data:`PLATE_SETTLE_S`, and within :data:`SETTLE_S` of
+    touch-down or of a step of the target larger than the JND, are left out (the loop
+    settling; boundary placement is judged by the renderer level). Metric: RMS relative error
     ``(rendered - target) / target``; threshold :data:`FRICTION_JND` (8 %).
 ``device.dynamics`` (D1 bandwidth, D2 rise time)
     Direct streaming of sinusoidal and step UV targets while the host's finger slides at
@@ -54,11 +56,19 @@ from hcard.v1 import card_pb2 as pb
 from hcard_conformance.context import Context, session_times
 from hcard_conformance.registry import check
 from hcard_conformance.result import CannotAssess, CheckResult, guarded
-from hcard_conformance.streaming import FINGER_PERIOD_S, lead_frames, require_fed, stream
+from hcard_conformance.streaming import FINGER_PERIOD_S, lead_frames, require_fed, stream_fed
 from hcard_conformance.timing import needs_real_time_host, timing_class
 from hcard_device.drivers.base import Driver
 from hcard_device.drivers.play import PlayResult, play
-from hcard_device.protocol import Capability, DeviceInfo, DeviceKind, FaultBits, Limits, State
+from hcard_device.protocol import (
+    Capability,
+    DeviceInfo,
+    DeviceKind,
+    FaultBits,
+    Finger,
+    Limits,
+    State,
+)
 from hcard_device.sim import DeviceConfig
 from hcard_device.sim.models import device_profile
 
@@ -68,11 +78,26 @@ FRICTION_JND = 0.08
 SETTLE_S = 0.025
 """Reports this long after touch-down or a target step are left out of the friction error, s:
 one 20 ms touch period plus the plate's ~5 ms settling."""
+PLATE_SETTLE_S = 0.005
+"""Reports this long after the device has the stroke's second touch sample are left out too,
+s: before it the device has no speed for its velocity compensation (a touch-down is one
+sample), and the plate then needs ~5 ms to settle. A second sample that the transport delayed
+(9 ms once over USB/IP on a busy host) would otherwise count as a friction error; the delay
+itself is judged by ``device.latency``."""
+STEP_LEAD_S = 0.002
+"""Reports this long before a target step are left out too, s: with report times exact (echo
+age, device protocol 1.3) a crossing the device dead-reckoned a report early shows there (0.12
+mm at 60 mm/s: a placement judged by A5 at the renderer level, not a friction level; one such
+report of 0.5 relative error put coarse-taxtels at 0.02 RMS on the reference)."""
 STROKE_SPEED_MM_S = 60.0
 """Speed of the device-level strokes (moderate class of section 5.4), mm/s."""
 STROKE_S = 0.6
 """Duration of the device-level strokes, s."""
 LATENCY_TRIALS = 10
+READ_CATCH_UP_S = 5.0
+SEND_READ_BATCH = 10
+"""Reports a sending loop reads at a time between two FINGER reports (:func:`_read_briefly`)."""
+"""Longest a measurement reads on while the host catches up with its reports, s."""
 OFF_AMPLITUDE_M = 50e-9
 """Plate amplitude counted as off, m (the E-ViTa loop's 50 nm amplitude tolerance)."""
 BANDWIDTH_TOLERANCE = 0.05
@@ -200,17 +225,41 @@ def rendered_friction(result: PlayResult,
     return t, uv * ev, contact
 
 
+def speed_known_s(result: PlayResult) -> float:
+    """Track time (s) of the first report that echoes a touch sample after the stroke's first:
+    from it the device has two samples, so a speed; +inf when no report does."""
+    from hcard_device.drivers.recording import echoed_samples
+
+    keep, t = session_times(result.states, result.track, result.host_us)
+    echo = np.array([s.host_time_echo_us for s in result.states], dtype=np.int64)
+    later = keep & (echoed_samples(result.host_us, echo) >= 1)
+    return float(t[later][0]) if later.any() else math.inf
+
+
 def measure_friction(driver: Driver, card: pb.Card, track: FingerTrack) -> FrictionMeasurement:
     """Play ``card`` along ``track`` and compare rendered with target friction."""
     profile = device_profile_for(driver.info())
     result = play(driver, card, track)
     t, rendered, contact = rendered_friction(result, profile)
+    return friction_error(t, rendered, contact, card, track,
+                          start_s=speed_known_s(result) + PLATE_SETTLE_S)
+
+
+def friction_error(t: np.ndarray, rendered: np.ndarray, contact: np.ndarray, card: pb.Card,
+                   track: FingerTrack, lead_s: float = STEP_LEAD_S,
+                   start_s: float = -math.inf) -> FrictionMeasurement:
+    """Rendered friction at track times ``t`` (s) against the card's target along ``track``,
+    over the settled reports in contact: after :data:`SETTLE_S` of the stroke and at or after
+    ``start_s`` (track time, s; :func:`measure_friction` passes the time the device had a
+    speed plus :data:`PLATE_SETTLE_S`), outside ``[step - lead_s, step + SETTLE_S)`` of every
+    target step."""
     golden = render(card, track)
     target = np.interp(t, golden.t, golden.friction)
-    settled = contact & (t >= track.t[0] + SETTLE_S) & (t <= track.t[-1])
+    settled = (contact & (t >= max(track.t[0] + SETTLE_S, start_s))
+               & (t <= track.t[-1]))
     steps = golden.t[1:][np.abs(np.diff(golden.friction)) > FRICTION_JND]
     for step in steps:
-        settled &= ~((t >= step) & (t < step + SETTLE_S))
+        settled &= ~((t >= step - lead_s) & (t < step + SETTLE_S))
     error = (rendered[settled] - target[settled]) / target[settled]
     rms = float(np.sqrt(np.mean(error**2))) if error.size else math.nan
     return FrictionMeasurement(rms, int(error.size), t[settled], rendered[settled],
@@ -283,9 +332,9 @@ def amplitude_gain(driver: Driver, frequency_hz: float, duration_s: float = 0.6)
     the reference frequency are those of the plate loop."""
     rate = driver.info().frame_rate_hz
     t = np.arange(round((duration_s + FINGER_SETTLE_S) * rate)) / rate
-    session = stream(driver, BANDWIDTH_UV_MEAN
-                     + BANDWIDTH_UV_SWING * np.sin(2 * np.pi * frequency_hz * t))
-    session.require_fed(f"the {frequency_hz:g} Hz sine")
+    session = stream_fed(driver, BANDWIDTH_UV_MEAN
+                         + BANDWIDTH_UV_SWING * np.sin(2 * np.pi * frequency_hz * t),
+                         what=f"the {frequency_hz:g} Hz sine")
     target, amp = session.column("target_uv"), session.column("amplitude_m")
     playing = np.flatnonzero(np.abs(target - BANDWIDTH_UV_MEAN) <= 2 * BANDWIDTH_UV_SWING)
     if playing.size < 10:
@@ -394,8 +443,7 @@ def measure_rise_time(driver: Driver, max_rise_s: float) -> float:
     three times ``max_rise_s`` (at least 20 ms)."""
     rate = driver.info().frame_rate_hz
     hold_s = max(0.02, 3 * max_rise_s)
-    session = stream(driver, rise_stimulus(rate, hold_s))
-    session.require_fed("the rise-time steps")
+    session = stream_fed(driver, rise_stimulus(rate, hold_s), what="the rise-time steps")
     return rise_time(session.t_s, session.column("target_uv"), session.column("amplitude_m"),
                      1.0 / rate, hold_s)
 
@@ -428,9 +476,33 @@ def check_dynamics(ctx: Context) -> Iterator[CheckResult]:
 
 # ---------------------------------------------------------------------- (c) latency
 
-def measure_latency(driver: Driver, trials: int = LATENCY_TRIALS) -> list[float]:
-    """Latencies (s) from a FINGER report moving onto a UV 0.4 taxtel to the measured plate
-    amplitude crossing half its settled value (method of bench/bench_device_latency.py)."""
+@dataclass(frozen=True)
+class LatencyRun:
+    """What :func:`measure_latency` saw.
+
+    Attributes:
+        latencies_s: per trial, the time from the first FINGER report on the new texture to
+            the first report past half the amplitude change, s (NaN: never crossed).
+        read_lag_s: per report, how long after its own time on the host clock (PI3: echoed
+            sample's host time + echo age) the host read it, s: the host's read backlog
+            (with the fastest one-way transit). Empty when the device does not date its
+            reports (protocol before 1.3).
+    """
+
+    latencies_s: list[float]
+    read_lag_s: list[float]
+
+
+def measure_latency(driver: Driver, trials: int = LATENCY_TRIALS, *,
+                    dated: bool = False) -> LatencyRun:
+    """Latencies from a FINGER report moving onto a UV 0.4 taxtel to the measured plate
+    amplitude crossing half its settled value (method of bench/bench_device_latency.py).
+
+    A report is timed when the host reads it, or with ``dated`` (a host that cannot read in
+    real time, timing class ``software-emulation``) at its own time on the host clock (echoed
+    sample + echo age, PI3), which leaves out the host's read backlog and also the fastest
+    one-way transit of a FINGER report (the device's clock offset, PO2). Each position is held
+    until the host has read the reports of the whole hold, however late it reads them."""
     info = driver.info()
     width, height = info.surface_width_10um * 0.01, info.surface_height_10um * 0.01
     card = build.card(width, height, taxtel_mm=(width / 2, height), textures=[
@@ -440,53 +512,104 @@ def measure_latency(driver: Driver, trials: int = LATENCY_TRIALS) -> list[float]
     driver.upload_card(card)
     driver.set_touch_source(host=True)
     driver.start()
+    read_lag: list[float] = []
 
     def hold(x: float, seconds: float, poll_s: float = 0.0005) -> list[tuple[State, float]]:
-        """Send the finger at ``x`` (twice: zero velocity) every 10 ms for ``seconds``;
-        returns each report with the driver time since the first send when it was seen."""
+        """Send the finger at ``x`` (twice: zero velocity) every 10 ms until the host has read
+        the reports of ``seconds`` after the first send (at most :data:`READ_CATCH_UP_S`
+        more); the reports that echo a sample of this hold (the device applied it: those
+        still echoing an earlier one, read late, belong to an earlier position), each with
+        its time since the first send, s."""
         seen: list[tuple[State, float]] = []
         start = driver.clock()
+        start_us = Finger.from_si(start, 0.0, 0.0, 0.0, False).host_time_us
+        sent: set[int] = set()
         next_send = start
-        while driver.clock() < start + seconds:
-            if driver.clock() >= next_send:
-                t = driver.clock()
+        covered = -math.inf  # time since the first send that the reports read reach, s
+        while True:
+            now = driver.clock()
+            if now >= next_send:
+                t = start if next_send == start else now
                 driver.send_finger(t, x, y, 0.5, True)
                 driver.send_finger(t, x, y, 0.5, True)
+                sent.add(Finger.from_si(t, 0.0, 0.0, 0.0, False).host_time_us)
                 next_send += 0.01
-            states = driver.collect_until(driver.clock() + poll_s)
-            seen += [(s, driver.clock() - start) for s in states]
-        return seen
+            for state in driver.collect_until(driver.clock() + poll_s):
+                read = driver.clock() - start
+                own = _host_time_since(state, start_us)
+                if own is not None:
+                    read_lag.append(read - own)
+                if state.host_time_echo_us in sent:
+                    seen.append((state, own if dated and own is not None else read))
+                    covered = max(covered, seen[-1][1])
+            if covered >= seconds or now >= start + seconds + READ_CATCH_UP_S:
+                # dated reports past the hold were read early; read times past it are lag
+                return [(s, t) for s, t in seen if t <= seconds] if dated else seen
 
     latencies: list[float] = []
     hold(left, 0.05)
     for _ in range(trials):
-        seen = hold(right, 0.06)
-        settled = float(np.mean([s.amplitude_m for s, _ in seen[-10:]]))
+        seen = sorted((pair for pair in hold(right, 0.06) if pair[1] >= 0.0),
+                      key=lambda pair: pair[1])
+        settled = float(np.mean([s.amplitude_m for s, _ in seen[-10:]])) if seen else math.nan
         half = next((dt for s, dt in seen if s.amplitude_m >= settled / 2), math.nan)
         latencies.append(half)
         hold(left, 0.04)
     driver.stop()
-    return latencies
+    return LatencyRun(latencies, read_lag)
+
+
+def _host_time_since(state: State, start_us: int) -> float | None:
+    """The report's time on the host clock (PI3: echoed sample's host time + echo age) less
+    the host time ``start_us``, s (modulo the 32-bit host time; within +-35 min); None when
+    the device does not say (no echo yet, or protocol before 1.3)."""
+    age = state.echo_age_s
+    if age is None or state.host_time_echo_us == 0:
+        return None
+    modulo = 1 << 32
+    since_us = (state.host_time_echo_us - start_us + modulo // 2) % modulo - modulo // 2
+    return since_us * 1e-6 + age
 
 
 @check(name="device.latency", level=LEVEL,
        description="finger move to friction change, median within 10 ms (real-time host)")
 def check_latency(ctx: Context) -> Iterator[CheckResult]:
-    """End-to-end latency from a host finger update to the plate's change."""
+    """End-to-end latency from a host finger update to the plate's change, and (case
+    ``host-read-lag``) how late the host read the device's reports."""
     if ctx.open_driver is None:
         return
     open_driver = ctx.open_driver
     timing = timing_class(ctx)
+    runs: list[LatencyRun] = []
 
     def measure() -> Iterator[CheckResult]:
         with open_driver() as driver:
-            lat = measure_latency(driver)
-        median = float(np.median(lat)) * 1e3
-        yield _result("device.latency", "boundary-move", "median_latency", median,
-                      timing.latency_s * 1e3, "ms",
-                      f"{len(lat)} moves, max {np.nanmax(lat) * 1e3:.1f} ms; {timing.why}")
+            run = measure_latency(driver, dated=not timing.keeps_real_time)
+        runs.append(run)
+        lat = run.latencies_s
+        timed = ("reports timed on the host clock by the device (PI3), without the host's "
+                 "read backlog or the fastest transit" if not timing.keeps_real_time
+                 else "reports timed when the host read them")
+        yield _result("device.latency", "boundary-move", "median_latency",
+                      float(np.median(lat)) * 1e3, timing.latency_s * 1e3, "ms",
+                      f"{len(lat)} moves, max {np.nanmax(lat) * 1e3:.1f} ms; {timed}; "
+                      f"{timing.why}")
+
+    def read_lag() -> Iterator[CheckResult]:
+        if not runs:
+            raise CannotAssess("the latency run did not complete")
+        if not runs[0].read_lag_s:
+            raise CannotAssess("the device does not date its reports (echo age, protocol 1.3 "
+                               "PI3)")
+        lags = np.asarray(runs[0].read_lag_s)
+        yield _result("device.latency", "host-read-lag", "median_read_lag",
+                      float(np.median(lags)) * 1e3, timing.read_lag_s * 1e3, "ms",
+                      f"{lags.size} reports, 90th percentile {np.percentile(lags, 90) * 1e3:.1f}"
+                      f" ms (read time less the report's own time on the host clock, PI3); "
+                      f"{timing.why}")
 
     yield from guarded("device.latency", LEVEL, ["boundary-move"], measure)
+    yield from guarded("device.latency", LEVEL, ["host-read-lag"], read_lag)
 
 
 # ---------------------------------------------------------------------- (d) safety
@@ -759,7 +882,10 @@ def measure_watchdog(driver: Driver) -> tuple[float, bool, float]:
     """Stroke the host finger over a UV 0.3 card for 0.2 s, then go silent.
 
     Returns the time (s) from the last host report to outputs off (inf when they never go
-    off), whether WATCHDOG was reported, and the plate amplitude before the silence (m)."""
+    off), whether WATCHDOG was reported, and the plate amplitude before the silence (m). The
+    silence is timed by the reports that echo the last FINGER report: by their echo age (the
+    device's own account, PI3), or when read on a device without one; a host that reads its
+    reports late keeps reading until they cover the silence (:data:`READ_CATCH_UP_S`)."""
     info = driver.info()
     w, h = info.surface_width_10um * 0.01, info.surface_height_10um * 0.01
     card = build.card(w, h, taxtel_mm=(w, h), textures=[build.texture(0.3, channel="uv")])
@@ -767,23 +893,52 @@ def measure_watchdog(driver: Driver) -> tuple[float, bool, float]:
     driver.set_touch_source(host=True)
     driver.start()
     start = driver.clock()
-    before: list[State] = []
+    read: list[tuple[State, float]] = []  # each report and when it was read
+    sent: list[int] = []
     last = start
     while driver.clock() < start + 0.2:
         last = driver.clock()
         driver.send_finger(last, w / 4 + STROKE_SPEED_MM_S * (last - start), h / 2, 0.5, True)
-        before += driver.collect_until(last + 0.02)
-    driven = float(np.median([s.amplitude_m for s in before[-10:]]))
-    seen: list[tuple[State, float]] = []
-    while driver.clock() < last + info.watchdog_ms * 1e-3 + 0.2:
-        seen += [(s, driver.clock() - last) for s in driver.collect_until(driver.clock() + 5e-4)]
+        sent.append(Finger.from_si(last, 0.0, 0.0, 0.0, False).host_time_us)
+        read += [(s, driver.clock()) for s in _read_briefly(driver, 0.02)]
+    silence_s = info.watchdog_ms * 1e-3 + 0.2
+
+    def since_last(batch: list[tuple[State, float]]) -> list[tuple[State, float]]:
+        """The reports of ``batch`` after the last FINGER report, each with its time since
+        it, s."""
+        return [(s, s.echo_age_s if s.echo_age_s is not None else t - last)
+                for s, t in batch if s.host_time_echo_us == sent[-1]]
+
+    seen = since_last(read)
+    covered = max((t for _, t in seen), default=-math.inf)  # silence the reports read cover
+    catch_up = driver.clock() + silence_s + READ_CATCH_UP_S
+    while driver.clock() < catch_up and covered < silence_s:
+        batch = [(s, driver.clock()) for s in driver.collect_until(driver.clock() + 5e-4)]
+        read += batch
+        new = since_last(batch)
+        seen += new
+        covered = max([covered, *(t for _, t in new)])
     driver.stop()
+    stroke = set(sent[:-1])
+    driven_states = [s for s, _ in read if s.host_time_echo_us in stroke][-10:]
+    driven = float(np.median([s.amplitude_m for s in driven_states])) if driven_states else 0.0
     watchdog = any(s.faults & FaultBits.WATCHDOG for s, _ in seen)
     on = [t for s, t in seen if s.amplitude_m > OFF_AMPLITUDE_M or s.voltage_v > 1.0]
     off = max(on, default=0.0)
     if not seen or seen[-1][0].amplitude_m > OFF_AMPLITUDE_M or seen[-1][0].voltage_v > 1.0:
         off = math.inf
     return off, watchdog, driven
+
+
+def _read_briefly(driver: Driver, seconds: float) -> list[State]:
+    """The reports read for ``seconds``, in batches of :data:`SEND_READ_BATCH`, so that a
+    host with a backlog of reports (software emulation) returns on time to send its next
+    FINGER report rather than drain the backlog while the device's watchdog runs out."""
+    end = driver.clock() + seconds
+    states: list[State] = []
+    while (remaining := end - driver.clock()) > 0:
+        states += driver.read_inputs(remaining, max_count=SEND_READ_BATCH)
+    return states
 
 
 @check(name="device.watchdog", level=LEVEL,

@@ -59,6 +59,8 @@ class Signal:
         contact: finger on the surface.
         texture: active palette index (-1 neutral), or None when not known.
         uv, ev: channel targets, or None when not known.
+        events: times of golden discontinuities besides contact and texture changes, s (the
+            speed onset of each contact, :func:`speed_onsets`), or None.
     """
 
     t: np.ndarray
@@ -67,6 +69,7 @@ class Signal:
     texture: np.ndarray | None = None
     uv: np.ndarray | None = None
     ev: np.ndarray | None = None
+    events: np.ndarray | None = None
 
     @classmethod
     def of(cls, frames: Any) -> Signal:
@@ -158,15 +161,31 @@ def exact_error(impl: Signal, golden: Signal, tol: Tolerances) -> tuple[Metric, 
 # ---------------------------------------------------------------------------------- A-sel
 
 
+def speed_onsets(track: FingerTrack) -> np.ndarray:
+    """Times of the second touch sample of every contact, s: the first speed estimate, where
+    a renderer's dead reckoning and odometer start to move (spec A-sel). Before it the golden
+    holds the touch-down position, at it the position and the texture phase jump (by about
+    speed x touch period); an implementation shows the jump when the sample reaches it, one
+    transport delay later, which D3 judges."""
+    contact = np.asarray(track.contact, dtype=bool)
+    previous = np.concatenate(([False], contact[:-1]))
+    second = np.flatnonzero(contact & previous & ~np.concatenate(([False, False], contact[:-2])))
+    return np.asarray(track.t, dtype=float)[second]
+
+
 def compared_frames(impl: Signal, golden: Signal, tol: Tolerances) -> np.ndarray:
     """A-sel: frames in contact in both signals and at least ``guard_s`` from every golden
-    discontinuity (a change of golden contact or texture)."""
+    discontinuity (a change of golden contact or texture, or an event of ``golden.events``:
+    the speed onsets)."""
     fs = frame_rate(golden)
     mask = golden.contact & impl.contact
     change = np.zeros(len(golden), dtype=bool)
     change[1:] = golden.contact[1:] != golden.contact[:-1]
     if golden.texture is not None:
         change[1:] |= golden.texture[1:] != golden.texture[:-1]
+    if golden.events is not None and len(golden):
+        at = np.searchsorted(golden.t, np.asarray(golden.events, dtype=float))
+        change[at[at < len(golden)]] = True
     guard = round(tol.guard_s * fs)
     where = np.flatnonzero(change)
     if where.size:

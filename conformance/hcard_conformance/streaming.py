@@ -37,6 +37,12 @@ sliding finger; a still finger gives zero UV friction at any amplitude)."""
 STARVED_FRACTION = 0.05
 """Fraction of a streaming session's reports with an empty queue beyond which a dynamics
 measurement is not assessed (the reference over usbip in real time: 0-3 of ~700)."""
+FED_ATTEMPTS = 3
+"""Times :func:`stream_fed` plays a stimulus whose queue the host let run dry before it keeps
+the attempt with the fewest empty reports. Under the starved bound a few empty reports still
+corrupt a measurement: the device plays neutral frames there and the plate drops out (seen on
+the reference over usbip on a busy machine: 19 empty of ~700 put a 400 Hz gain 6 dB low, the
+-3 dB point at 378 Hz instead of 400)."""
 
 @dataclass(frozen=True)
 class StreamSession:
@@ -65,6 +71,23 @@ class StreamSession:
         """:func:`require_fed` over this session's span (lead :attr:`lead_frames`)."""
         require_fed(self.underruns, len(self.states),
                     f"{what} (lead {self.lead_frames} frames)")
+
+
+def stream_fed(driver: Driver, uv: np.ndarray, ev: np.ndarray | None = None, *,
+               what: str) -> StreamSession:
+    """:func:`stream` again, up to :data:`FED_ATTEMPTS` times, while the host let the queue run
+    dry; the attempt with the fewest empty reports, which must pass :func:`require_fed`. A
+    device is measured on a stimulus it was given whole, not on the host's stalls."""
+    best: StreamSession | None = None
+    for _ in range(FED_ATTEMPTS):
+        session = stream(driver, uv, ev)
+        if best is None or session.underruns < best.underruns:
+            best = session
+        if best.underruns == 0:
+            break
+    assert best is not None
+    best.require_fed(what)
+    return best
 
 
 def require_fed(empty: int, reports: int, what: str) -> None:

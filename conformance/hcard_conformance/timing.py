@@ -32,6 +32,8 @@ class TimingClass:
         latency_s: largest median finger-to-plate latency of D3, s.
         host_report_loss: largest fraction of STATE reports the host may fail to read
             (the device itself must drop none it could deliver).
+        read_lag_s: largest median delay from a report's own time on the host clock (PI3) to
+            the host reading it, s (case ``host-read-lag`` of D3).
         keeps_real_time: the host can stream frames and finger samples without stalls; the
             checks that measure the device through host timing (``device.friction``,
             ``device.dynamics``) apply only then.
@@ -41,16 +43,17 @@ class TimingClass:
     name: str
     latency_s: float
     host_report_loss: float
+    read_lag_s: float
     keeps_real_time: bool
     why: str
 
 
 REAL_TIME = TimingClass(
-    "real-time", 0.010, 0.001, True,
+    "real-time", 0.010, 0.001, 0.010, True,
     "real-time host (bench PC): D3 10 ms keeps v_max * L within A4/A5 (spec 4.3); at most "
     "1 report in 1000 lost, as on a USB full-speed interrupt pipe with a polling host")
 SOFTWARE_EMULATION = TimingClass(
-    "software-emulation", 0.250, 0.75, False,
+    "software-emulation", 0.250, 0.75, 2.0, False,
     "software-emulated host (QEMU TCG guest tier): the guest's Python runs 10-20x slower and "
     "stalls for tens to hundreds of ms; median latency bounded at 250 ms and host-side "
     "report loss at 75 % (measured idle: 40-80 ms median, ~50 % lost); rendered friction and "

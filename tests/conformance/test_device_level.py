@@ -7,6 +7,7 @@ regression in the device or in a check's method shows as a number, not only as a
 from __future__ import annotations
 
 import pytest
+from late_transport import LateSecondSampleDriver
 
 from hcard_conformance import device_level as dl
 from hcard_conformance.context import Context
@@ -14,6 +15,7 @@ from hcard_conformance.registry import all_checks
 from hcard_conformance.result import CheckResult
 from hcard_conformance.runner import run_suite
 from hcard_device.drivers import open_device
+from hcard_device.drivers.play import play
 
 DEVICE_CHECKS = {"device.friction", "device.dynamics", "device.latency", "device.safety",
                  "device.watchdog", "device.upload-integrity", "device.report-loss",
@@ -88,7 +90,53 @@ def test_rendered_friction_follows_the_measured_plate() -> None:
     assert abs(m.rendered.mean() - m.target.mean()) < 0.02
 
 
+def test_a_crossing_a_report_early_is_placement_not_a_friction_error() -> None:
+    """The same coarse-taxtel stroke with every report mapped 1 ms early (each crossing then
+    shows a report before the golden one): judged like the exact one, because A5 judges where
+    a crossing falls; 30 ms early (1.8 mm at 60 mm/s) still fails."""
+    with open_device("sim://") as driver:
+        info = driver.info()
+        _, card, track = dl.friction_cases(info)[0]
+        result = dl.play(driver, card, track)
+    t, rendered, contact = dl.rendered_friction(result, dl.device_profile_for(info))
+    exact = dl.friction_error(t, rendered, contact, card, track)
+    early = dl.friction_error(t - 0.001, rendered, contact, card, track)
+    assert exact.rms_relative_error < 0.02
+    assert early.rms_relative_error < 0.02
+    # without the lead the report before each step counts, about 0.5 relative each
+    unguarded = dl.friction_error(t - 0.001, rendered, contact, card, track, lead_s=0.0)
+    assert unguarded.rms_relative_error > early.rms_relative_error + 0.01
+    assert dl.friction_error(t - 0.030, rendered, contact, card, track).rms_relative_error > 0.08
+
+
 def test_no_driver_means_no_device_results() -> None:
     report = run_suite(Context.for_driver("reference"), levels=("device",))
     assert report.results == []
     assert set(report.not_applicable) >= DEVICE_CHECKS
+
+
+def test_a_late_second_sample_is_latency_not_a_friction_error() -> None:
+    """Before its second touch sample a device has no finger speed for its velocity
+    compensation, so it drives the plate for a finger at rest; the check leaves out the
+    reports until the device has that sample (from the echo) plus the plate's settling, so a
+    transport delay (judged by device.latency) does not count as a friction error, while the
+    friction once the speed is known is still measured against the card."""
+    driver = LateSecondSampleDriver("sim://")
+    cases = {name: (card, track) for name, card, track in dl.friction_cases(driver.info())}
+    card, track = cases["coarse-taxtels"]
+    profile = dl.device_profile_for(driver.info())
+    with driver:
+        result = play(driver, card, track)
+    t, rendered, contact = dl.rendered_friction(result, profile)
+    known = dl.speed_known_s(result)
+    # the second sample (taken at 20 ms) reaches the device 9 ms late: the first report that
+    # echoes it comes a report period or less after that
+    assert 0.029 <= known <= 0.0305
+    # counted from touch-down alone, the 20 ms sample interval plus 5 ms of settling, the
+    # reports of a plate still driven for a finger at rest (about twice the friction) count
+    naive = dl.friction_error(t, rendered, contact, card, track)
+    assert naive.rms_relative_error > dl.FRICTION_JND
+    measured = dl.friction_error(t, rendered, contact, card, track,
+                                 start_s=known + dl.PLATE_SETTLE_S)
+    assert measured.rms_relative_error < 0.01
+    assert measured.reports >= naive.reports - 10  # only the unsettled start is left out
