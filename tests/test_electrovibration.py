@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy.integrate import dblquad
 
 from hcard.physics import Predictor, PredictorError
 from hcard_builtins.physics.electrovibration import (
@@ -137,6 +138,26 @@ def finger() -> FingerGeometry:
     return FingerGeometry()
 
 
+def pad_force(volts: float, gap: float) -> float:
+    """Eq. 3.18 as an integral, written here independently of the model's patch mesh: Eq. 3.17
+    over the Table 3.2 pad, a surface of revolution of the a x b ellipse (sag
+    ``(b/2)(1 - sqrt(1 - (r/(a/2))^2))``) with raised-cosine ridges of period R_w and depth R_h
+    averaged over their phase (R_w is small against the pad), by adaptive quadrature."""
+    a, b, ridge = 16.68e-3, 12.79e-3, 0.15e-3
+    d_sc, eps_sc, d_i, eps_i = 0.2e-3, 1650.0, 0.09e-3, 3.35
+    radius = a / 2
+
+    def density(phase: float, r: float) -> float:
+        sag = (b / 2) * (1 - math.sqrt(max(0.0, 1 - (r / radius) ** 2)))
+        d_a = gap + sag + ridge * (1 - math.cos(phase)) / 2
+        per_area = 8.8542e-12 * volts**2 / (2 * (d_sc / eps_sc + d_a + d_i / eps_i)
+                                             * (d_sc + d_a + d_i))
+        return per_area * r  # 2 pi r dr, averaged over the 2 pi of ridge phase
+
+    value, _ = dblquad(density, 0.0, radius, 0.0, 2 * math.pi, epsabs=1e-12, epsrel=1e-7)
+    return value
+
+
 def test_geometry_falls_with_distance_more_slowly_than_flat(finger):
     near, far = 0.25e-3, 0.5e-3
     flat = AirLayer()
@@ -144,9 +165,11 @@ def test_geometry_falls_with_distance_more_slowly_than_flat(finger):
     geo = finger.forward(voltage=2000, air_gap=[near, far])
     geo_ratio = geo[1] / geo[0]
     assert flat_ratio == pytest.approx(1.28 / 3.55, rel=0.01)
-    assert geo_ratio == pytest.approx(0.594, abs=0.01)
+    # The ratio of the integral written above: the patch mesh agrees with it.
+    assert geo_ratio == pytest.approx(pad_force(2000, far) / pad_force(2000, near), rel=1e-3)
+    # Fig. 3.11b: Eq. 3.17 "fails to describe the change of the imposed electrostatic force
+    # with varying the plate distance"; the curved finger loses much less force per doubling.
     assert geo_ratio > flat_ratio + 0.2
-    # Over the whole Fig. 3.11b range the curved finger loses less force per doubling.
     gaps = np.array([0.1e-3, 0.2e-3, 0.4e-3, 0.8e-3])
     geo_steps = finger.coefficient(gaps[1:]) / finger.coefficient(gaps[:-1])
     flat_steps = flat.coefficient(gaps[1:]) / flat.coefficient(gaps[:-1])
@@ -154,10 +177,15 @@ def test_geometry_falls_with_distance_more_slowly_than_flat(finger):
 
 
 def test_geometry_forces_are_of_the_measured_order(finger):
+    cases = [(2000.0, 0.25e-3), (2000.0, 0.5e-3), (1414.0, 0.25e-3)]  # Table 3.4
+    force = finger.forward(voltage=[v for v, _ in cases], air_gap=[g for _, g in cases])
+    np.testing.assert_allclose(force, [pad_force(v, g) for v, g in cases], rtol=1e-3)
     # Table 3.3: 0.54 to 4.42 mN over eleven participants and the three cases of Table 3.4.
-    force = finger.forward(voltage=[2000, 2000, 1414], air_gap=[0.25e-3, 0.5e-3, 0.25e-3])
-    np.testing.assert_allclose(force * 1e3, [2.10, 1.25, 1.05], rtol=0.01)
     assert np.all((force > 0.54e-3) & (force < 4.42e-3))
+    # Touching (no air gap, rigid pad) the integral and the mesh still agree.
+    assert float(finger.forward(voltage=2000, air_gap=0.0)) == pytest.approx(
+        pad_force(2000, 0.0), rel=1e-3
+    )
 
 
 def test_geometry_flat_disc_limit_is_eq_3_17():
@@ -224,19 +252,26 @@ def test_geometry_vectorised_and_inverse(finger):
 # -- charge leakage (Eqs. 3.19-3.23, Figs. 3.13, 3.16) -------------------------------------
 @pytest.fixture(scope="module")
 def leak() -> ChargeLeakage:
-    return ChargeLeakage()
+    """Constant tau_d = 7.7 ms: Eq. 3.22 as the pure first-order high pass of the equations."""
+    return ChargeLeakage(tau_d_exponent=0.0)
 
 
-def test_section_3_6_capacitances(leak):
-    assert leak.insulator_capacitance == pytest.approx(33e-12, rel=0.02)
-    assert leak.sc_capacitance == pytest.approx(6.9e-9, rel=0.02)
-    # tau_d = (C_i + C_sc) R_sc (Eq. 3.19) and ~ eps0 eps_sc rho_sc when C_sc >> C_i.
-    total = leak.insulator_capacitance + leak.sc_capacitance
-    assert total * leak.sc_resistance == pytest.approx(7.7e-3, rel=1e-12)
-    assert EPSILON_0 * 1560 * leak.sc_resistivity == pytest.approx(7.7e-3, rel=0.01)
-    assert leak.static_model().forward(voltage=300.0) == pytest.approx(
-        leak.coefficient * 300.0**2, rel=1e-12
-    )
+def test_section_3_6_1_circuit_values(leak):
+    # Section 3.6.1: "C_i = 32pF where eps_i = 3.35, d_i = 90 um ... A = 1cm^2. For the stratum
+    # corneum, C_sc = 6.9nF with d_sc = 200 um and eps_sc = 1560". eps0 eps A / d gives
+    # 32.96 pF for the film: the thesis truncates it to 32 pF (3 %).
+    assert leak.insulator_capacitance == pytest.approx(32e-12, rel=0.035)
+    assert leak.sc_capacitance == pytest.approx(6.9e-9, rel=0.005)
+    # "It is possible to assume C_sc >> C_i, which leads to tau_d ~ C_sc R_sc = eps0 eps_sc
+    # rho_sc": with the thesis' two capacitances that approximation is within C_i/C_sc = 0.5 %.
+    rho = leak.sc_resistivity
+    assert 8.8542e-12 * 1560 * rho == pytest.approx(7.7e-3, rel=32e-12 / 6.9e-9 + 1e-3)
+    # Eq. 3.20 R = rho d / A and Eq. 3.19 tau_d = (C_i + C_sc) R_sc, both written out here.
+    r_sc = rho * 200e-6 / 1e-4
+    assert (32.96e-12 + 6.9e-9) * r_sc == pytest.approx(7.7e-3, rel=2e-3)
+    # Eq. 3.12 written out at 300 V for the section 3.6.1 layers.
+    k = 8.8542e-12 * 1e-4 / (2 * (200e-6 / 1560 + 90e-6 / 3.35) * (200e-6 + 90e-6))
+    assert leak.static_model().forward(voltage=300.0) == pytest.approx(k * 300.0**2, rel=1e-4)
 
 
 def test_step_force_decays_to_zero_with_half_tau_d(leak):
@@ -351,23 +386,45 @@ def test_tau_d_curve_interpolates_in_log_log():
     np.testing.assert_allclose(
         model.tau_d_at([0.0, 1.0, 1e5]), [7.7e-3, 7.7e-3, 6.116e-5], rtol=1e-3
     )
-    # Without a curve, the constant parameter everywhere.
-    np.testing.assert_allclose(ChargeLeakage(tau_d=3e-3).tau_d_at([0.0, 1e4]), 3e-3)
-
-
-def test_fig_3_13_trend_gives_the_fig_3_16_shape():
-    constant = ChargeLeakage()
-    curved = ChargeLeakage(tau_d_curve=FIG_3_13_TREND)
-    f = np.array([100.0, 1e3, 1e4])
-    np.testing.assert_allclose(curved.force_response(f), [0.482, 0.788, 0.937], atol=0.002)
-    sweep = curved.force_response(np.logspace(1, 5, 41))
-    assert np.all(np.diff(sweep) > 0)
-    assert sweep[-1] > 0.99
-    # The constant tau_d is already saturated at 100 Hz; the curve rises across the band.
-    assert constant.force_response(100.0) > 0.95
-    assert curved.forward(voltage=1000.0, frequency=100.0) < 0.55 * constant.forward(
-        voltage=1000.0, frequency=100.0
+    # Without a curve and with exponent 0, the constant parameter everywhere.
+    np.testing.assert_allclose(
+        ChargeLeakage(tau_d=3e-3, tau_d_exponent=0.0).tau_d_at([0.0, 1e4]), 3e-3
     )
+
+
+def fig_3_16_response(frequency: np.ndarray, exponent: float = -0.7) -> np.ndarray:
+    """|H(f)|^2 of Eq. 3.22 with tau_d(f) = 7.7 ms (f / 10 Hz)^exponent, written out."""
+    tau = 7.7e-3 * (np.maximum(frequency, 10.0) / 10.0) ** exponent
+    wt = 2 * np.pi * frequency * tau
+    return wt**2 / (1 + wt**2)
+
+
+def test_default_tau_d_follows_fig_3_13_and_gives_the_fig_3_16_shape():
+    """Fig. 3.16 as the text reads it (section 3.6.3; the figure's data are not printed): the
+    force Meyer et al. measured from 100 to 10000 Hz rises, then saturates. As numbers: the
+    force response rises monotonically over the band, is at most 0.6 of its plateau at 100 Hz
+    and within 0.1 of it at 10 kHz; tau_d is 7.7 ms for slow drive (section 3.6.3)."""
+    model = ChargeLeakage()
+    band = np.logspace(2, 4, 41)
+    response = model.force_response(band)
+    np.testing.assert_allclose(response, fig_3_16_response(band), rtol=1e-12)
+    assert np.all(np.diff(response) > 0)
+    assert response[0] <= 0.6 and response[-1] >= 0.9
+    assert float(model.tau_d_at(1.0)) == float(model.tau_d_at(10.0)) == 7.7e-3
+    # The force itself (Eq. 3.23) at 1000 V: the static Eq. 3.12 force times |H|^2.
+    k = 8.8542e-12 * 1e-4 / (2 * (200e-6 / 1560 + 90e-6 / 3.35) * (200e-6 + 90e-6))
+    np.testing.assert_allclose(
+        model.forward(voltage=1000.0, frequency=band), k * 1000.0**2 * fig_3_16_response(band),
+        rtol=1e-4,
+    )
+    # The constant tau_d of the pure high pass fails the reading: saturated already at 100 Hz,
+    # so leakage does nothing to a carrier above ~100 Hz.
+    constant = ChargeLeakage(tau_d_exponent=0.0).force_response(band)
+    assert constant[0] > 0.95
+    np.testing.assert_allclose(constant, fig_3_16_response(band, 0.0), rtol=1e-12)
+    # The explicit curve of the same law gives the same response inside 10 Hz - 10 kHz.
+    curved = ChargeLeakage(tau_d_curve=FIG_3_13_TREND, tau_d_exponent=0.0)
+    np.testing.assert_allclose(curved.force_response(band), response, rtol=1e-9)
 
 
 def test_curve_simulation_uses_the_dominant_frequency():

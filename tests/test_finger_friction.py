@@ -132,9 +132,34 @@ def test_occlusion_time_is_a_parameter_and_decrease_is_allowed(finger):
     assert values[1] < values[0]
 
 
-def test_preset_default_matches_defaults():
-    assert FingerFriction.preset("occlusion-smith-scott").params == FingerFriction().params
-    assert set(PRESETS) == {"occlusion-smith-scott", "fig-2.32-cycle-1", "fig-2.32-cycle-10"}
+def test_presets_give_the_thesis_forces():
+    """Each preset against the thesis' numbers, the force written out here:
+    F_l = mu(t) g(U) Fn^n with mu(t) = mu_occ - (mu_occ - mu_0) exp(-t / 20 s) and
+    g(U) = 1 - 0.3 + 0.3 * 2 (U/40 mm/s) / (1 + (U/40 mm/s)^2)."""
+    thesis = {
+        # Smith and Scott [46] (Fig. 1.11): 0.36 -> 0.79; n = 0.91 (Fig. 2.32, 10th cycle).
+        "occlusion-smith-scott": (0.36, 0.79, 0.91),
+        # Section 2.9.2.2, Fig. 2.32: k_f = 0.49, n = 1.05 (1st cycle); 0.52, 0.91 (10th).
+        "fig-2.32-cycle-1": (0.49, 0.49, 1.05),
+        "fig-2.32-cycle-10": (0.52, 0.52, 0.91),
+    }
+    assert set(PRESETS) == set(thesis)
+    fn = np.array([0.2, 0.5, 1.0, 2.0])[:, None, None]
+    speed = np.array([0.01, 0.04, 0.12])[None, :, None]
+    time = np.array([0.0, 20.0, 90.0])[None, None, :]
+    ratio = speed / 0.040
+    g = 0.7 + 0.3 * 2 * ratio / (1 + ratio**2)
+    for name, (mu_0, mu_occ, n) in thesis.items():
+        mu = mu_occ - (mu_occ - mu_0) * np.exp(-time / 20.0)
+        expected = mu * g * fn**n
+        got = FingerFriction.preset(name).forward(normal_force=fn, speed=speed, contact_time=time)
+        np.testing.assert_allclose(got, expected, rtol=1e-12)
+    # The default finger is the Smith-Scott occlusion preset.
+    got = FingerFriction().forward(normal_force=fn, speed=speed, contact_time=time)
+    mu_0, mu_occ, n = thesis["occlusion-smith-scott"]
+    np.testing.assert_allclose(
+        got, (mu_occ - (mu_occ - mu_0) * np.exp(-time / 20.0)) * g * fn**n, rtol=1e-12
+    )
     with pytest.raises(PredictorError, match="preset"):
         FingerFriction.preset("nope")
 

@@ -230,23 +230,29 @@ def test_dimensionless_group_formula() -> None:
 
 
 def test_dimensionless_group_presets() -> None:
-    assert {name: p.psi_star for name, p in PSI_STAR_PRESETS.items()} == {
-        "fe": 2.38, "in_vivo": 4.69, "probe": 0.70, "population": 1.80
+    """Each preset carries the thesis' Psi* through the whole forward map: at the amplitude
+    that makes the Eq. 2.30 group k Psi* (worked out here), mu' = 1 - exp(-k) (Eq. 2.33)."""
+    thesis = {  # Psi* at Fn: Figs. 2.24 (2.38), 2.36 (4.69), 2.37 (0.70), 2.39 (1.80 - 0.094 Fn)
+        "fe": lambda fn: 2.38,
+        "in_vivo": lambda fn: 4.69,
+        "probe": lambda fn: 0.70,
+        "population": lambda fn: 1.80 - 0.094 * fn,
     }
-    assert DimensionlessGroup.from_preset("probe")["psi_star"] == 0.70
-    population = DimensionlessGroup.from_preset("population", mu0=0.4)
-    assert population["mu0"] == 0.4
-    np.testing.assert_allclose(
-        population.psi_star_at(np.array([0.2, 1.0, 2.0])), [1.7812, 1.706, 1.612], rtol=1e-12
-    )
-    psi = population.psi(amplitude=2 * UM, normal_force=1.0)
-    assert float(population.forward(amplitude=2 * UM, normal_force=1.0)) == pytest.approx(
-        1 - math.exp(-float(psi) / 1.706)
-    )
+    assert set(PSI_STAR_PRESETS) == set(thesis)
+    speed, frequency, mu0, nu = 40 * MM_S, 30 * KHZ, 0.4, 0.33
+    for name, psi_star in thesis.items():
+        model = DimensionlessGroup.from_preset(name, mu0=mu0)
+        for fn in (0.2, 1.0, 2.0):
+            for k in (0.5, 1.0, 2.0):
+                w = speed / (k * psi_star(fn) * frequency * mu0 * (1 + nu))
+                got = model.forward(amplitude=w, speed=speed, frequency=frequency,
+                                    normal_force=fn)
+                assert float(got) == pytest.approx(1 - math.exp(-k), rel=1e-12), (name, fn, k)
     with pytest.raises(PredictorError, match="unknown preset 'finger'"):
         DimensionlessGroup.from_preset("finger")
+    # Fig. 2.39's line crosses zero at 1.80 / 0.094 = 19.1 N: no Psi* beyond it.
     with pytest.raises(PredictorError, match="not positive at normal_force = 20"):
-        population.forward(amplitude=2 * UM, normal_force=20.0)
+        DimensionlessGroup.from_preset("population").forward(amplitude=2 * UM, normal_force=20.0)
 
 
 def test_dimensionless_group_inverse_is_velocity_compensation() -> None:
@@ -407,9 +413,10 @@ def test_bad_inputs_name_the_input(
     model: Predictor, name: str, value: object, message: str
 ) -> None:
     inputs = {"amplitude": 2 * UM, name: value}
-    if name == "normal_force" and isinstance(model, DimensionlessGroup):
-        message = "input normal_force must be finite"  # Psi* only: 0 N is allowed
-        inputs[name] = np.nan
+    if name == "normal_force" and isinstance(model, DimensionlessGroup | SpringSlider):
+        # Psi* only / the vanishing-load limit mu' = 1: 0 N is allowed, a negative one is not.
+        message = "input normal_force must be >= 0 N"
+        inputs[name] = -0.1
     with pytest.raises(PredictorError, match=f"{model.name}: {message}"):
         model.forward(**inputs)
 

@@ -19,10 +19,16 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.ndimage import median_filter
 
+from hcard.calibration.contact import (
+    check_threshold,
+    contact_warning,
+    default_contact_threshold,
+    in_contact,
+)
 from hcard.calibration.effects import recent_change, time_since_change
 from hcard.calibration.measurement import Measurement, MeasurementError
+from hcard.calibration.noise import NoiseModel, measure_noise
 from hcard.calibration.splits import (
     CONTACT_THRESHOLD_N,
     split_by_stroke,
@@ -78,6 +84,16 @@ class CalibrationData:
             e.g. a table of measurements): the loop then ignores structure in sample order.
         zeroing: per recording re-zeroed, ``(lifts, drift)``: the number of lifts at which the
             lateral-force zero was measured and the peak-to-peak of that zero, N.
+        contact_threshold_n: per recording, the normal force at and above which a sample is in
+            contact, N (:mod:`hcard.calibration.contact`).
+        warnings: what a reader must know about the data (e.g. a stroke column that disagrees
+            with the forces), one sentence each.
+        noise: the lateral-force sensor's noise (AR(1)) measured on the samples out of contact
+            after re-zeroing (:func:`~hcard.calibration.noise.measure_noise`), or None without
+            lifts long enough to measure it.
+        strokes: a stroke number per sample, unique over all recordings (-1 out of contact),
+            shape (n,); empty when not known (each run of fitted samples is then one stroke,
+            :meth:`stroke_labels`).
     """
 
     inputs: dict[str, np.ndarray]
@@ -92,6 +108,19 @@ class CalibrationData:
     conditions: tuple[dict, ...] = field(default_factory=tuple)
     time_ordered: bool = True
     zeroing: tuple[tuple[int, float], ...] = ()
+    contact_threshold_n: tuple[float, ...] = ()
+    warnings: tuple[str, ...] = ()
+    strokes: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    noise: NoiseModel | None = None
+
+    def stroke_labels(self) -> np.ndarray:
+        """A stroke number per sample (-1 where not fitted), unique over all recordings:
+        :attr:`strokes` when known, else each run of consecutive fitted samples."""
+        if self.strokes.shape == self.observed.shape:
+            return np.where(self.used, self.strokes, -1)
+        used = self.used.astype(np.int8)
+        starts = np.diff(np.concatenate([[0], used])) == 1
+        return np.where(self.used, np.cumsum(starts) - 1, -1)
 
     def __len__(self) -> int:
         return int(self.observed.shape[0])
@@ -157,6 +186,8 @@ def smoothed_within(values: np.ndarray, t: np.ndarray, runs: np.ndarray,
     half = round(window_s / step / 2) if step > 0 else 0
     if half < 1:
         return out
+    from scipy.ndimage import median_filter  # here: scipy.ndimage costs ~0.25 s to import
+
     edges = np.flatnonzero(np.diff(np.concatenate([[0], runs.astype(np.int8), [0]])))
     for start, end in zip(edges[::2], edges[1::2], strict=True):
         out[start:end] = median_filter(out[start:end], size=2 * half + 1, mode="nearest")
@@ -252,6 +283,7 @@ def prepare(
     seed: int = 0,
     rest_s: float = REST_S,
     rezero: bool = True,
+    contact_threshold_n: float | None = None,
 ) -> CalibrationData:
     """Concatenate ``measurements`` into a :class:`CalibrationData` with a held-out split.
 
@@ -266,6 +298,11 @@ def prepare(
         rest_s: pause that rests the finger, s (see :func:`strokes_since_rest`).
         rezero: subtract the lateral-force sensor's zero, measured at every lift
             (:func:`sensor_zero`), so that its drift is not taken for friction.
+        contact_threshold_n: normal force at and above which a sample is in contact, N
+            (default: per recording,
+            :func:`~hcard.calibration.contact.default_contact_threshold`, at least 10 mN). The
+            forces decide contact even where a ``stroke`` column says otherwise; a column that
+            disagrees gives a warning (:attr:`CalibrationData.warnings`).
 
     Raises:
         MeasurementError: no recordings, recordings with different actuation columns, a
@@ -310,18 +347,38 @@ def prepare(
     rates: list[float] = []
     labels: list[str] = []
     zeroing: list[tuple[int, float]] = []
+    thresholds: list[float] = []
+    warnings: list[str] = []
+    stroke_parts: list[np.ndarray] = []
+    lifted_parts: list[np.ndarray] = []
+    lifted_force: list[np.ndarray] = []
+    if contact_threshold_n is not None:
+        contact_threshold_n = check_threshold(contact_threshold_n)
     for index, m in enumerate(measurements):
         label = _label(m, index)
-        ids = stroke_ids(m)
+        threshold = (
+            default_contact_threshold(m.normal_force)
+            if contact_threshold_n is None
+            else contact_threshold_n
+        )
+        thresholds.append(threshold)
+        disagreement = contact_warning(m, threshold, label)
+        if disagreement:
+            warnings.append(disagreement)
+        ids = stroke_ids(m, contact_threshold_n=threshold)
         keep = ids >= 0
+        offset = max((int(part.max(initial=-1)) for part in stroke_parts), default=-1) + 1
+        stroke_parts.append(np.where(keep, ids + offset, -1))
         if not keep.any():
-            raise MeasurementError(f"{label}: no sample in contact (fn >= 0.01 N)")
+            raise MeasurementError(
+                f"{label}: no sample in contact (fn >= {threshold * 1e3:.3g} mN)"
+            )
         n = len(m)
         train = np.zeros(n, dtype=bool)
         test = np.zeros(n, dtype=bool)
         try:
             if split == "stroke":
-                train_idx, test_idx = split_by_stroke(m, test_fraction, seed + index)
+                train_idx, test_idx = split_by_stroke(m, test_fraction, seed + index, threshold)
             else:
                 train_idx, test_idx = split_by_time_fraction(m, test_fraction)
         except MeasurementError as exc:
@@ -341,11 +398,13 @@ def prepare(
             lateral = lateral - zero
             zeroing.append((lifts, float(np.ptp(zero))))
         force = friction_force(lateral, speed, keep)
+        lifted_parts.append(~in_contact(m, threshold))
+        lifted_force.append(lateral)
         pressure = m.conditions.get("ambient_pressure_pa") or ATMOSPHERE_PA
         frequency = m.plate_frequency
         if frequency is None and m.conditions.get("plate_frequency_hz"):
             frequency = np.full(n, float(m.conditions["plate_frequency_hz"]))
-        contact = m.in_contact
+        contact = in_contact(m, threshold)
         starts = np.flatnonzero(np.diff(contact.astype(np.int8), prepend=0) == 1)
         began = np.zeros(n, dtype=np.int64)
         began[starts] = starts
@@ -368,6 +427,9 @@ def prepare(
             "amplitude": m.amplitude,
             "voltage": m.voltage,
             "speed": None if speed is None else np.abs(speed),
+            # the sliding direction: a friction that differs between the two directions shows
+            # against it, not only "in time"
+            "direction": None if speed is None else np.sign(speed),
             "plate_frequency": frequency,
             "x": m.x,
             "y": m.y,
@@ -405,6 +467,7 @@ def prepare(
     regressor_names = (
         "normal_force",
         "speed",
+        "direction",
         "amplitude",
         "voltage",
         "pressure",
@@ -440,4 +503,8 @@ def prepare(
         split=how,
         conditions=tuple(dict(m.conditions) for m in measurements),
         zeroing=tuple(zeroing),
+        contact_threshold_n=tuple(thresholds),
+        warnings=tuple(warnings),
+        strokes=np.concatenate(stroke_parts),
+        noise=measure_noise(np.concatenate(lifted_force), np.concatenate(lifted_parts)),
     )

@@ -6,8 +6,10 @@ stratum corneum, a load index, occlusion, the actuator's rise time, ... It names
 against which its absence leaves structure in a residual (:attr:`Effect.signature`), carries its
 own parameters (unit, default, bounds, thesis source), and changes a model by transforming the
 model's inputs before the base forward map (:meth:`Effect.transform_inputs`, e.g. the voltage
-becomes the effective voltage behind the skin's high-pass) and/or its output after it
-(:meth:`Effect.transform_output`, e.g. the force is multiplied by a load factor).
+becomes the effective voltage behind the skin's high-pass), the base model's parameters per
+sample (:meth:`Effect.transform_params`, e.g. the dry friction coefficient ``mu0`` drifts with
+occlusion and enters the ultrasonic group ``Psi = U / (w f mu0 (1 + nu))`` of Eq. 2.30) and/or its
+output after it (:meth:`Effect.transform_output`, e.g. the force is multiplied by a load factor).
 
 :func:`augment` builds from a base predictor and a list of effects a new predictor whose
 parameters are the base's plus each effect's (named ``"<effect>.<parameter>"``), so that
@@ -18,6 +20,8 @@ Regressor names used in signatures (all 1-D arrays aligned with the samples, SI 
 - ``normal_force`` (N), ``speed`` (m/s), ``amplitude`` (m), ``voltage`` (V), ``pressure`` (Pa);
 - ``time`` (s): time since the recording began (lifts included);
 - ``stroke`` (count): the stroke number of each sample;
+- ``contact`` (flag, an input rather than a regressor): 1 while the finger touches the
+  surface, 0 out of contact (:func:`touchdowns`);
 - ``voltage_history`` (s): time since the voltage last changed (:func:`time_since_change`);
 - ``amplitude_history`` (m): change of the amplitude over the last few time constants
   (:func:`recent_change`), signed.
@@ -26,10 +30,11 @@ Regressor names used in signatures (all 1-D arrays aligned with the samples, SI 
 from __future__ import annotations
 
 import abc
+import copy
 import itertools
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeAlias
 
 import numpy as np
 from scipy.signal import lfilter
@@ -42,14 +47,54 @@ KIND = "calibration-effect"
 SEPARATOR = "."
 """Between an effect's name and its parameter's name in an augmented predictor."""
 
+ParameterValue: TypeAlias = float | np.ndarray
+"""A base parameter's value as :meth:`Effect.transform_params` passes it: one number, or an
+array aligned with the samples (a value per sample)."""
+
+SAMPLEWISE_PARAMETERS: dict[str, frozenset[str]] = {
+    "dimensionless-group": frozenset(
+        {"mu0", "poisson_ratio", "psi_star", "psi_star_normal_force_slope"}
+    ),
+    "spring-slider": frozenset(
+        {"normal_stiffness", "lateral_stiffness", "mu0", "lateral_recovery_speed"}
+    ),
+    "ev-air-layer": frozenset(
+        {
+            "area",
+            "sc_thickness",
+            "sc_permittivity",
+            "insulator_thickness",
+            "insulator_permittivity",
+            "air_permittivity",
+        }
+    ),
+    "finger-friction": frozenset(
+        {
+            "friction_initial",
+            "friction_occluded",
+            "occlusion_time",
+            "load_index",
+            "peak_speed",
+            "speed_sensitivity",
+        }
+    ),
+}
+"""Built-in predictors (by name) whose forward map reads these parameters at call time and
+broadcasts them with the inputs, so that a value per sample gives each sample's output exactly
+(tests/calibration/test_effect_forms_params.py checks each against one evaluation per sample).
+A vendor predictor declares the same with a class attribute ``samplewise_parameters``. Any other
+parameter given per sample is evaluated once per distinct value (:func:`forward_per_sample`):
+exact, and slower by the number of distinct values."""
+
 
 class Effect:
     """Base class of calibration effects.
 
-    Subclasses set the class attributes and override :meth:`transform_inputs` and/or
-    :meth:`transform_output`; both receive ``params``, the effect's own parameter values by
-    their short names (units of :attr:`parameters`). With an effect's parameters at values that
-    switch it off (documented per effect) the augmented model equals the base.
+    Subclasses set the class attributes and override :meth:`transform_inputs`,
+    :meth:`transform_params` and/or :meth:`transform_output`; each receives the effect's own
+    parameter values by their short names (units of :attr:`parameters`). With an effect's
+    parameters at their :attr:`neutral` values the augmented model equals the base exactly (the
+    effect bypasses itself there; tests/calibration/test_effect_forms_neutral.py).
 
     Attributes:
         kind: ``"calibration-effect"``.
@@ -67,9 +112,9 @@ class Effect:
             for an effect on the ultrasonic reduction); empty: any output.
         instantaneous: inputs it needs as instantaneous values rather than a carrier's
             envelope (e.g. ``("voltage",)`` for a high-pass of the voltage).
-        neutral: parameter values (short names) that switch the effect off, or come as close
-            to it as the bounds allow (e.g. the shortest time constant of a low-pass); a fit
-            started there starts from the base model.
+        neutral: parameter values (short names) that switch the effect off exactly (e.g. a
+            time constant at the bound that stands for "no filter"); a fit started there
+            starts from the base model.
     """
 
     kind: ClassVar[str] = KIND
@@ -106,6 +151,26 @@ class Effect:
     ) -> dict[str, np.ndarray]:
         """The inputs the base model sees (default: unchanged). SI units in and out."""
         return dict(inputs)
+
+    def transform_params(
+        self,
+        params: Mapping[str, ParameterValue],
+        inputs: Mapping[str, np.ndarray],
+        effect_params: Mapping[str, float],
+        per_sample: frozenset[str] = frozenset(),
+    ) -> dict[str, ParameterValue]:
+        """The base model's parameter values the forward map uses (default: unchanged).
+
+        ``params`` are the base's parameters by name (their units), each one number or an
+        array aligned with the samples (an earlier effect's output); ``inputs`` are the
+        (transformed) inputs; ``effect_params`` the effect's own values by short name;
+        ``per_sample`` the base parameters its forward map broadcasts
+        (:func:`samplewise_parameters`). A value returned as an array is the parameter's value
+        per sample (e.g. ``mu0`` drifting over contact time); :func:`forward_per_sample`
+        evaluates the base with it, fast for a name in ``per_sample`` and once per distinct
+        value otherwise (an effect may prefer another form there).
+        """
+        return dict(params)
 
     def transform_output(
         self, output: np.ndarray, inputs: Mapping[str, np.ndarray], params: Mapping[str, float]
@@ -159,9 +224,11 @@ def augment(base: Predictor, effects: Sequence[Effect]) -> Predictor:
       ``"<effect name>.<parameter name>"``, at the base's current values and the effects'
       defaults;
     - inputs: the base's, then each effect's extra inputs not already present (all optional);
-    - forward: each effect's :meth:`Effect.transform_inputs` in order, the base forward map on
-      the base's inputs, then each effect's :meth:`Effect.transform_output` in order (given the
-      transformed inputs);
+    - forward: each effect's :meth:`Effect.transform_inputs` in order, then each effect's
+      :meth:`Effect.transform_params` in order (starting from the base's values), the base
+      forward map on the base's inputs at those parameter values (:func:`forward_per_sample`),
+      then each effect's :meth:`Effect.transform_output` in order (given the transformed
+      inputs);
     - output: the base's; name ``"<base>+<effect>+..."``.
 
     With no effects the forward map is the base's exactly, and so is the inverse; with effects
@@ -196,6 +263,7 @@ def augment(base: Predictor, effects: Sequence[Effect]) -> Predictor:
                 extra.append(var)
                 seen.add(var.name)
     base_input_names = tuple(v.name for v in base.inputs)
+    per_sample = samplewise_parameters(base)
     prototype = base
 
     class Augmented(Predictor):
@@ -229,7 +297,12 @@ def augment(base: Predictor, effects: Sequence[Effect]) -> Predictor:
             arrays: dict[str, np.ndarray] = dict(inputs)
             for effect, values in zip(effects, self._effect_values, strict=True):
                 arrays = effect.transform_inputs(arrays, values)
-            out = self._base.forward(**{k: arrays[k] for k in base_input_names})
+            base_values: dict[str, ParameterValue] = dict(self._base.params)
+            for effect, own in zip(effects, self._effect_values, strict=True):
+                base_values = effect.transform_params(base_values, arrays, own, per_sample)
+            out = forward_per_sample(
+                self._base, base_values, {k: arrays[k] for k in base_input_names}
+            )
             for effect, values in zip(effects, self._effect_values, strict=True):
                 out = effect.transform_output(out, arrays, values)
             return out
@@ -239,6 +312,107 @@ def augment(base: Predictor, effects: Sequence[Effect]) -> Predictor:
 
     Augmented.__name__ = Augmented.__qualname__ = f"Augmented_{type(base).__name__}"
     return Augmented()
+
+
+# -- the base model with parameters per sample -----------------------------------------------
+def samplewise_parameters(base: Predictor) -> frozenset[str]:
+    """The parameters of ``base`` its forward map broadcasts per sample: the class attribute
+    ``samplewise_parameters`` when it sets one, else :data:`SAMPLEWISE_PARAMETERS` by name."""
+    declared = getattr(type(base), "samplewise_parameters", None)
+    if declared is not None:
+        return frozenset(declared)
+    return SAMPLEWISE_PARAMETERS.get(base.name, frozenset())
+
+
+def _checked_values(
+    base: Predictor, changed: Mapping[str, ParameterValue]
+) -> dict[str, np.ndarray]:
+    """The changed parameters as float arrays, or :class:`PredictorError` naming the parameter
+    when a value is not finite or below the parameter's lower bound (its physical domain, e.g.
+    a positive ``mu0``; the upper bound only limits a fit's search, and a drift may pass it)."""
+    lows = {p.name: p.bounds[0] for p in base.parameters}
+    out = {}
+    for name, value in changed.items():
+        array = np.asarray(value, dtype=np.float64)
+        bad = ~np.isfinite(array)
+        if bad.any():
+            raise PredictorError(
+                f"{base.name}: parameter {name} per sample must be finite, got "
+                f"{array[bad].flat[0]}"
+            )
+        if np.any(array < lows[name]):
+            raise PredictorError(
+                f"{base.name}: parameter {name} per sample must be >= {lows[name]:g}, got "
+                f"{float(np.min(array)):g}"
+            )
+        out[name] = array
+    return out
+
+
+def forward_per_sample(
+    base: Predictor, params: Mapping[str, ParameterValue], inputs: Mapping[str, Any]
+) -> np.ndarray:
+    """``base``'s output at parameter values that may differ from sample to sample.
+
+    ``params`` maps base parameter names to one number or an array aligned with the samples
+    (broadcast with the inputs); names not given keep ``base``'s values. Where every value is
+    ``base``'s own, this is ``base.forward(**inputs)`` exactly; where every changed value is one
+    number, the base at those values (bounds checked). Parameters the base broadcasts
+    (:func:`samplewise_parameters`) are handed to its forward map as arrays; otherwise the base
+    is evaluated once per distinct combination of the per-sample values (exact, slower).
+
+    Per-sample values are checked for being finite and above the parameters' lower bounds, not
+    against the upper bounds (a drifting ``mu0`` may leave the range a fit searches).
+
+    Raises:
+        PredictorError: an unknown parameter, a non-finite value or one below its lower bound,
+            or values whose shape does not broadcast with the inputs.
+    """
+    known = {p.name for p in base.parameters}
+    unknown = sorted(set(params) - known)
+    if unknown:
+        raise PredictorError(f"{base.name}: unknown parameter(s) {', '.join(unknown)}")
+    changed = {
+        name: value
+        for name, value in params.items()
+        if not (np.ndim(value) == 0 and float(value) == base[name])
+    }
+    if not changed:
+        return base.forward(**inputs)
+    if all(np.ndim(value) == 0 for value in changed.values()):
+        return base.with_params(**{k: float(v) for k, v in changed.items()}).forward(**inputs)
+    arrays = _checked_values(base, changed)
+    if set(arrays) <= samplewise_parameters(base):
+        view = copy.copy(base)
+        view._values = {**base.params, **arrays}  # type: ignore[assignment]
+        return view.forward(**inputs)
+    return _forward_by_distinct_values(base, arrays, inputs)
+
+
+def _forward_by_distinct_values(
+    base: Predictor, arrays: Mapping[str, np.ndarray], inputs: Mapping[str, Any]
+) -> np.ndarray:
+    """:func:`forward_per_sample` for a base that does not broadcast its parameters: one
+    evaluation per distinct combination of parameter values, on the samples that have it."""
+    given = {k: np.asarray(v, dtype=np.float64) for k, v in inputs.items()}
+    names = list(arrays)
+    try:
+        shaped = np.broadcast_arrays(*arrays.values(), *given.values())
+    except ValueError:
+        shapes = ", ".join(f"{k} {np.shape(v)}" for k, v in {**arrays, **given}.items())
+        raise PredictorError(
+            f"{base.name}: parameters per sample do not broadcast with the inputs: {shapes}"
+        ) from None
+    values = np.stack([a.ravel() for a in shaped[: len(names)]], axis=1)
+    flat_inputs = {k: a.ravel() for k, a in zip(given, shaped[len(names) :], strict=True)}
+    combos, which = np.unique(values, axis=0, return_inverse=True)
+    which = which.ravel()
+    out = np.empty(values.shape[0])
+    for index, combo in enumerate(combos):
+        rows = which == index
+        model = base.with_params(**{n: float(v) for n, v in zip(names, combo, strict=True)})
+        out[rows] = model.forward(**{k: v[rows] for k, v in flat_inputs.items()})
+    return out.reshape(shaped[0].shape)
 
 
 # -- helpers for effects and regressors -----------------------------------------------------
@@ -258,13 +432,57 @@ def _series(x: Any, t: Any) -> tuple[np.ndarray, np.ndarray] | None:
     return x_arr, t_arr
 
 
-def _segments(t: np.ndarray) -> list[slice]:
-    """The runs of increasing time in ``t``: one per concatenated recording."""
-    starts = [0, *(np.flatnonzero(np.diff(t) < 0) + 1).tolist(), t.size]
+def _segments(t: np.ndarray, restart: np.ndarray | None = None) -> list[slice]:
+    """The runs of increasing time in ``t`` (one per concatenated recording), split again at
+    every sample where ``restart`` (boolean, aligned with ``t``) is true."""
+    cuts = np.diff(t) < 0
+    if restart is not None:
+        cuts = cuts | restart[1:]
+    starts = [0, *(np.flatnonzero(cuts) + 1).tolist(), t.size]
     return [slice(a, b) for a, b in itertools.pairwise(starts)]
 
 
-def high_pass(x: Any, t: Any, tau: float, step_offset: float = 0.5) -> np.ndarray:
+def _restart_mask(restart: Any, size: int) -> np.ndarray | None:
+    """``restart`` as a boolean array of ``size`` samples (None: no restarts)."""
+    if restart is None:
+        return None
+    mask = np.asarray(restart)
+    if mask.ndim == 0:
+        return None
+    if mask.shape != (size,):
+        raise PredictorError(
+            f"restart must be one flag per sample ({size}), got shape {mask.shape}"
+        )
+    return mask.astype(bool)
+
+
+def touchdowns(contact: Any, t: Any = None) -> np.ndarray | None:
+    """Where the finger touches down: a boolean array, true at the first sample of every
+    contact, from the ``contact`` input (1 while the finger touches the surface, 0 out of
+    contact). A contact starts where ``contact`` turns on after a sample off, at the first
+    sample if it is on, and where time ``t`` (s) decreases (a new recording). A new stroke
+    without a lift between (a reversal, the finger still on the surface) is no touch-down.
+    None when ``contact`` is one number (no contact column: one contact throughout)."""
+    on = np.asarray(contact, dtype=np.float64)
+    if on.ndim == 0:
+        return None
+    if on.ndim != 1:
+        raise PredictorError(f"contact must be one flag per sample (1-D), got shape {on.shape}")
+    if np.any(np.isnan(on)):
+        raise PredictorError("contact must not be NaN (1 in contact, 0 out of contact)")
+    touching = on > 0.5
+    start = np.zeros(on.size, dtype=bool)
+    if on.size:
+        start[0] = touching[0]
+        start[1:] = touching[1:] & ~touching[:-1]
+    if t is not None and np.ndim(t) == 1 and np.size(t) == on.size:
+        start[1:] |= touching[1:] & (np.diff(np.asarray(t, dtype=np.float64)) < 0)
+    return start
+
+
+def high_pass(
+    x: Any, t: Any, tau: float, step_offset: float = 0.5, restart: Any = None
+) -> np.ndarray:
     """First-order high-pass of ``x`` sampled at times ``t`` (s), time constant ``tau`` (s).
 
     ``e_k = a_k e_{k-1} + a_k^theta (x_k - x_{k-1})`` with ``a_k = exp(-(t_k - t_{k-1})/tau)``
@@ -275,23 +493,41 @@ def high_pass(x: Any, t: Any, tau: float, step_offset: float = 0.5) -> np.ndarra
     at that sample). The recording starts from rest, the drive switched on the same ``theta``
     of the first interval before the first sample (``e_0 = a_1^theta x_0``). The discrete form
     of ``tau s / (1 + tau s)`` (Eq. 3.22); as ``tau -> inf`` it passes ``x`` unchanged, and as
-    ``tau -> 0`` it vanishes when ``theta > 0``. Without a time axis (scalar or constant ``t``)
-    the input is returned unchanged. Where time decreases a new recording starts, from rest.
+    ``tau -> 0`` it vanishes when ``theta > 0``; ``tau = inf`` passes ``x`` unchanged exactly.
+    Without a time axis (scalar or constant ``t``) the input is returned unchanged. Where time
+    decreases a new recording starts, from rest; so does every sample where ``restart`` (one
+    boolean per sample, e.g. :func:`touchdowns`) is true: the filter restarts from rest there,
+    the drive switched on ``theta`` of the interval before that sample.
     """
-    series = _series(x, t)
-    if series is None:
-        return np.asarray(x, dtype=np.float64)
-    x_arr, t_arr = series
-    if not (math.isfinite(tau) and tau > 0):
+    if not (tau > 0) or math.isnan(tau):
         raise PredictorError(f"time constant must be positive, got {tau}")
     if not 0.0 <= step_offset <= 1.0:
         raise PredictorError(f"step offset must lie in [0, 1], got {step_offset}")
-    parts = _segments(t_arr)
-    return np.concatenate([_high_pass(x_arr[p], t_arr[p], tau, step_offset) for p in parts])
+    series = _series(x, t)
+    if series is None or math.isinf(tau):
+        return np.array(np.asarray(x, dtype=np.float64))
+    x_arr, t_arr = series
+    parts = _segments(t_arr, _restart_mask(restart, t_arr.size))
+    return np.concatenate(
+        [_high_pass(x_arr[p], t_arr[p], tau, step_offset, _lead(t_arr, p)) for p in parts]
+    )
 
 
-def _high_pass(x_arr: np.ndarray, t_arr: np.ndarray, tau: float, theta: float) -> np.ndarray:
-    """:func:`high_pass` of one recording (time increasing strictly), step offset ``theta``.
+def _lead(t_arr: np.ndarray, part: slice) -> float | None:
+    """The interval before a segment's first sample (s) when the segment restarts within a
+    run of increasing time, else None (a recording's first sample: no interval before it)."""
+    a = part.start
+    if a == 0 or t_arr[a] < t_arr[a - 1]:
+        return None
+    return float(t_arr[a] - t_arr[a - 1])
+
+
+def _high_pass(
+    x_arr: np.ndarray, t_arr: np.ndarray, tau: float, theta: float, lead: float | None = None
+) -> np.ndarray:
+    """:func:`high_pass` of one recording (time increasing strictly), step offset ``theta``;
+    ``lead`` (s): the interval before the first sample, in which the drive switched on (None:
+    the first interval of the recording stands in for it).
 
     Vectorised by runs of equal sample interval (one IIR filter per run, its state carried
     over), so that a recording with gaps (a training split without its held-out strokes)
@@ -302,8 +538,11 @@ def _high_pass(x_arr: np.ndarray, t_arr: np.ndarray, tau: float, theta: float) -
         return out
     dt = np.diff(t_arr)
     decay = np.exp(-dt / tau)
-    # The drive is switched on theta of the first interval before the first sample.
-    out[0] = x_arr[0] * (decay[0] ** theta if dt.size else 1.0)
+    # The drive is switched on theta of the interval before the first sample.
+    if lead is not None:
+        out[0] = x_arr[0] * math.exp(-lead / tau) ** theta
+    else:
+        out[0] = x_arr[0] * (decay[0] ** theta if dt.size else 1.0)
     if x_arr.size == 1:
         return out
     drive = np.power(decay, theta) * np.diff(x_arr)
@@ -320,17 +559,22 @@ def _high_pass(x_arr: np.ndarray, t_arr: np.ndarray, tau: float, theta: float) -
     return out
 
 
-def low_pass(x: Any, t: Any, tau: float, step_offset: float = 0.5) -> np.ndarray:
+def low_pass(
+    x: Any, t: Any, tau: float, step_offset: float = 0.5, restart: Any = None
+) -> np.ndarray:
     """First-order low-pass of ``x`` at times ``t`` (s), time constant ``tau`` (s):
-    ``x - high_pass(x, t, tau, step_offset)``, starting from rest (``y_0 = 0``). With
-    ``step_offset = 0`` (steps at the sample instants) this is
-    ``y_k = a_k y_{k-1} + (1 - a_k) x_{k-1}``. Without a time axis the input is returned
-    unchanged (the steady state)."""
+    ``x - high_pass(x, t, tau, step_offset, restart)``, starting from rest (``y_0 = 0``) at
+    the first sample and at every sample where ``restart`` is true. With ``step_offset = 0``
+    (steps at the sample instants) this is ``y_k = a_k y_{k-1} + (1 - a_k) x_{k-1}``.
+    ``tau = 0`` passes ``x`` unchanged exactly, and so does a missing time axis (the steady
+    state)."""
+    if tau == 0:
+        return np.array(np.asarray(x, dtype=np.float64))
     series = _series(x, t)
     if series is None:
         return np.asarray(x, dtype=np.float64)
     x_arr, t_arr = series
-    return x_arr - high_pass(x_arr, t_arr, tau, step_offset)
+    return x_arr - high_pass(x_arr, t_arr, tau, step_offset, restart)
 
 
 def time_since_change(x: Any, t: Any) -> np.ndarray:

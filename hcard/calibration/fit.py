@@ -11,7 +11,7 @@ from the training split into the held-out one: the split masks are the caller's 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,9 +20,12 @@ from scipy.optimize import least_squares
 from hcard.physics import Predictor, PredictorError
 
 UNIDENTIFIABLE = 1e-8
+"""Relative singular value of the scaled Jacobian below which a direction is not identifiable."""
 COST_TOLERANCE = 1e-8
 """A fit stops when an iteration lowers the training cost by less than this fraction of it."""
-"""Relative singular value of the scaled Jacobian below which a direction is not identifiable."""
+PROBE_STEP = 1e-3
+"""Relative step (of the parameter's scale) with which :func:`fit_predictor` probes whether a
+free parameter moves any training residual before it fits."""
 
 
 @dataclass(frozen=True)
@@ -49,6 +52,9 @@ class FitResult:
             ``1 / UNIDENTIFIABLE`` some free parameters are not separately identifiable.
         success: whether the optimiser reported convergence.
         message: the optimiser's message.
+        held: free parameters that move no training residual at all (a UV parameter on a
+            recording without plate vibration, say): held at their start values, not counted
+            as fitted, uncertainty ``inf``.
     """
 
     predictor: Predictor
@@ -65,11 +71,12 @@ class FitResult:
     condition_number: float
     success: bool
     message: str
+    held: tuple[str, ...] = ()
 
     @property
     def n_free(self) -> int:
-        """Number of fitted parameters."""
-        return len(self.free)
+        """Number of fitted parameters (the free ones less those :attr:`held`)."""
+        return len(self.free) - len(self.held)
 
     @property
     def identifiable(self) -> bool:
@@ -183,6 +190,7 @@ def fit_predictor(
     test: np.ndarray | None = None,
     dynamic: bool = False,
     max_evaluations: int | None = None,
+    weights: np.ndarray | None = None,
 ) -> FitResult:
     """Fit ``predictor``'s free parameters to ``observed`` by bounded least squares.
 
@@ -205,6 +213,11 @@ def fit_predictor(
             outputs. Default: evaluate on the training samples alone (faster).
         max_evaluations: most evaluations of the model (each Jacobian counts once); the fit
             ends there, converged or not (default: scipy's, 100 per free parameter).
+        weights: non-negative weight of each sample in the training sum of squares, shape
+            ``(n,)`` (default: 1 each); samples of weight 0 leave the training split. A
+            stroke-block bootstrap (:mod:`hcard.calibration.bootstrap`) passes how many times
+            each stroke was drawn. ``train_rmse`` and the uncertainties are then of the
+            weighted sum.
 
     Returns:
         A :class:`FitResult`.
@@ -257,6 +270,15 @@ def fit_predictor(
     predictor._inputs(arrays)  # unknown or missing input names fail here, before fitting
 
     train_mask, test_mask = _splits(train, test, n)
+    root_weight = np.ones(n)
+    if weights is not None:
+        w = np.asarray(weights, dtype=np.float64)
+        if w.shape != (n,):
+            raise PredictorError(f"weights has shape {w.shape}, expected ({n},)")
+        if not np.all(np.isfinite(w)) or np.any(w < 0):
+            raise PredictorError("weights must be finite and non-negative")
+        train_mask &= w > 0
+        root_weight = np.sqrt(w)
     n_train = int(np.count_nonzero(train_mask))
     if n_train <= len(names):
         raise PredictorError(
@@ -265,6 +287,7 @@ def fit_predictor(
         )
     train_inputs = {key: value[train_mask] for key, value in arrays.items()}
     y_train = y[train_mask]
+    w_train = root_weight[train_mask]
 
     start = predictor.params
     scales = np.array([_scale(start[name], known[name].bounds) for name in names])
@@ -294,18 +317,40 @@ def fit_predictor(
         if not np.all(np.isfinite(r)):
             shown = ", ".join(f"{k}={v:.6g}" for k, v in physical(x).items())
             raise PredictorError(f"fit failed: model gives non-finite output at {shown}")
-        return r
+        return r * w_train
 
-    solution = least_squares(residual, x0, bounds=(low, high), method="trf", x_scale=1.0,
-                             ftol=COST_TOLERANCE, max_nfev=max_evaluations)
-    x = np.clip(solution.x, low, high)
+    active = ~_held_parameters(residual, x0, low, high)
+    held = tuple(name for name, on in zip(names, active, strict=True) if not on)
+
+    def active_residual(xa: np.ndarray) -> np.ndarray:
+        x = x0.copy()
+        x[active] = xa
+        return residual(x)
+
+    if active.any():
+        solution = least_squares(active_residual, x0[active], bounds=(low[active], high[active]),
+                                 method="trf", x_scale=1.0, ftol=COST_TOLERANCE,
+                                 max_nfev=max_evaluations)
+        x = x0.copy()
+        x[active] = np.clip(solution.x, low[active], high[active])
+        success, message = bool(solution.success), str(solution.message)
+        jac = np.asarray(solution.jac, dtype=np.float64)
+    else:
+        x, success, message = x0.copy(), True, "no free parameter moves the training residual"
+        jac = np.zeros((n_train, 0))
     fitted = predictor.with_params(**physical(x))
 
     residuals = y - model(x, arrays, n)
-    rss = float(np.sum(residuals[train_mask] ** 2))
-    dof = n_train - len(names)
-    covariance, condition = _covariance(np.asarray(solution.jac, dtype=np.float64), scales)
-    covariance = covariance * (rss / dof)
+    rss = float(np.sum((residuals[train_mask] * w_train) ** 2))
+    dof = n_train - int(np.count_nonzero(active))
+    covariance = np.full((len(names), len(names)), np.nan)
+    np.fill_diagonal(covariance, math.inf)
+    condition = math.inf
+    if active.any():
+        inner, condition = _covariance(jac, scales[active])
+        covariance[np.ix_(active, active)] = inner * (rss / dof)
+        if held:
+            condition = math.inf
     uncertainties = {
         name: float(math.sqrt(covariance[i, i])) if np.isfinite(covariance[i, i]) else math.inf
         for i, name in enumerate(names)
@@ -331,6 +376,40 @@ def fit_predictor(
         test_rmse=test_rmse,
         at_bounds=at_bounds,
         condition_number=condition,
-        success=bool(solution.success),
-        message=str(solution.message),
+        success=success,
+        message=message,
+        held=held,
     )
+
+
+def _held_parameters(residual: Callable[[np.ndarray], np.ndarray], x0: np.ndarray,
+                     low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """Which parameters (scaled optimiser coordinates ``x0`` inside ``[low, high]``) move no
+    training residual at all: a step of :data:`PROBE_STEP` changes no residual, both at ``x0``
+    and at a second point with every other parameter stepped too. The second point keeps free
+    a parameter that only matters once another moves (a time constant behind a gain that starts
+    at 0); a parameter of a physics the data never exercise (a UV parameter on a recording
+    without plate vibration) moves nothing at either, and a least-squares fit that keeps it
+    free crawls along its flat direction for hundreds of iterations without converging.
+    """
+    step = np.where(x0 + PROBE_STEP <= high, PROBE_STEP, -PROBE_STEP)
+    step = np.where((x0 + step >= low) & (x0 + step <= high), step, 0.0)
+    moved = np.clip(x0 + step, low, high)
+
+    def inert_at(base: np.ndarray) -> np.ndarray:
+        """Parameters whose step changes no residual at ``base`` (none if it fails there)."""
+        out = np.zeros(x0.size, dtype=bool)
+        try:
+            reference = residual(base)
+            for i in np.flatnonzero(step != 0.0):
+                probe = base.copy()
+                probe[i] = moved[i] if base[i] == x0[i] else x0[i]
+                out[i] = bool(np.array_equal(residual(probe), reference))
+        except PredictorError:  # a probe the model cannot evaluate: keep everything free
+            out[:] = False
+        return out
+
+    inert = inert_at(x0)
+    if inert.any():
+        inert &= inert_at(moved)
+    return inert

@@ -195,6 +195,7 @@ def _model_dict(step: ModelFit) -> dict[str, Any]:
         "score": step.score,
         "free": list(fit.free),
         "at_bounds": list(fit.at_bounds),
+        "held": list(fit.held),
         "condition_number": fit.condition_number,
         "success": fit.success,
         "parameters": parameter_table(fit),
@@ -229,6 +230,20 @@ def report_dict(
             }
             for name in result.after.effects
         ],
+        "uncertainty_method": result.uncertainty_method,
+        "bootstrap": None
+        if result.bootstrap is None
+        else {
+            "samples": result.bootstrap.samples,
+            "requested": result.bootstrap.requested,
+            "capped": result.bootstrap.capped,
+            "held": list(result.bootstrap.held),
+            "seed": result.bootstrap.seed,
+            "strokes": result.bootstrap.strokes,
+            "uncertainties": result.bootstrap.uncertainties,
+            "intervals_95": result.bootstrap.intervals,
+            "jacobian_uncertainties": result.after.fit.uncertainties,
+        },
         "criterion": result.settings.criterion(),
         "settings": asdict(result.settings),
         "data": {
@@ -243,9 +258,18 @@ def report_dict(
                 for source, (lifts, drift) in zip(data.sources, data.zeroing, strict=False)
             ],
             "regressors": list(data.regressors),
+            "contact_threshold_n": list(data.contact_threshold_n),
         },
+        "warnings": list(data.warnings),
         "library": list(result.library),
         "candidates": [asdict(c) for c in result.candidates],
+        "runner_up": None
+        if result.comparison is None
+        else {
+            **asdict(result.comparison),
+            "description": result.comparison.describe(),
+            "separation": result.settings.separation().describe(),
+        },
         "skipped": dict(result.skipped),
         "structure": {
             "regressors": [
@@ -255,6 +279,20 @@ def report_dict(
             "in_time": result.structure.in_time,
             "dominant_frequency_hz": result.structure.dominant_frequency_hz,
             "description": result.structure.describe(),
+            "small": [
+                {"name": n, "eta2": e, "p_value": p} for n, e, p in result.structure.small
+            ],
+            "small_description": result.structure.describe_small(),
+            "time_threshold": result.structure.time_threshold,
+            "noise": None
+            if result.structure.noise is None
+            else {
+                "sigma_n": result.structure.noise.sigma,
+                "lag1": result.structure.noise.lag1,
+                "samples": result.structure.noise.samples,
+                "runs": result.structure.noise.runs,
+            },
+            "detectable_eta2_at_80_percent_power": dict(result.structure.detectable),
         },
         "residuals": {
             "before": _analysis_dict(result.before.analysis),
@@ -328,6 +366,10 @@ def report_markdown(
     else:
         lines.append("- No effect added.")
     lines += ["", result.summary, ""]
+    if data.warnings:
+        lines += ["## Warnings", ""]
+        lines += [f"- {text}" for text in data.warnings]
+        lines.append("")
 
     lines += ["## Selection criterion", "", result.settings.criterion() + ".", ""]
     s = result.settings
@@ -354,6 +396,11 @@ def report_markdown(
                 else "no lift to measure it (a constant offset is fitted)"
             )
             for source, (lifts, drift) in zip(data.sources, data.zeroing, strict=False)
+        ),
+        *(
+            f"- Contact of {source}: normal force ≥ {threshold * 1e3:.3g} mN (the larger of "
+            "10 mN and 5 standard deviations of the lifted normal-force noise, unless given)"
+            for source, threshold in zip(data.sources, data.contact_threshold_n, strict=False)
         ),
         f"- Sample rate: {data.sample_rate_hz:.4g} Hz",
         f"- Regressors: {', '.join(data.regressors) or 'none'}",
@@ -391,6 +438,36 @@ def report_markdown(
         lines.append("No effect could be tried.")
     lines.append("")
 
+    lines += ["## Runner-up", ""]
+    comparison = result.comparison
+    if comparison is None:
+        lines.append("No other model of as many effects was fitted.")
+    else:
+        chosen, runner = comparison.names()
+        lines += _table(
+            ["model", "held-out RMSE (mN)", "held-out criterion H margin"],
+            [
+                [chosen + " (final)", _mn(comparison.chosen_rmse), "0"],
+                [runner + " (runner-up)", _mn(comparison.runner_up_rmse),
+                 f"{comparison.criterion_margin:+.1f}"],
+            ],
+        )
+        lines += [
+            "",
+            f"Margin: held-out RMSE {100 * comparison.rmse_margin:+.1f} %, criterion "
+            f"{comparison.criterion_margin:+.1f}; {result.settings.separation().describe()}: "
+            + ("**not separated**." if comparison.ambiguous else "separated."),
+        ]
+        if comparison.separating_regressor is not None:
+            lines.append(
+                f"Their predictions differ most against {comparison.separating_regressor} "
+                f"(eta² {comparison.separating_eta2:.3f}, up to "
+                f"{100 * comparison.largest_difference:+.2g} % near "
+                f"{comparison.at_value:.3g}); to separate them, record "
+                f"{comparison.measurement}."
+            )
+    lines.append("")
+
     lines += ["## Effects skipped", ""]
     if result.skipped:
         lines += [f"- {name}: {why}" for name, why in result.skipped.items()]
@@ -401,6 +478,24 @@ def report_markdown(
         "## Structure left",
         "",
         f"Structure in the final residual: {result.structure.describe()}.",
+        "",
+    ]
+    structure = result.structure
+    if structure.small:
+        lines += [f"Also {structure.describe_small()}.", ""]
+    lines += [
+        "Noise model: "
+        + (structure.noise.describe() if structure.noise is not None
+           else "no lift long enough to measure the sensor noise")
+        + f"; the residual counts as structured in time at a lag-1 autocorrelation of "
+        f"{structure.time_threshold:.2f} or more (at least {s.min_autocorrelation:g}, and "
+        "less than half of the noise's own decorrelation left).",
+        "",
+        f"Power: with {after.analysis.effective_samples:.0f} effectively independent samples "
+        f"the F-tests detect, with 80 % probability at alpha {s.alpha:g}, structure explaining "
+        "eta² of at least: "
+        + ", ".join(f"{name} {eta2:.3g}" for name, eta2 in structure.detectable)
+        + ".",
         "",
     ]
 
@@ -418,13 +513,28 @@ def report_markdown(
         lines += ["", f"Lag-1 autocorrelation {t.lag1_autocorrelation:.3f}."]
     lines.append("")
 
-    lines += ["## Parameters", "", "Uncertainties are standard uncertainties of the fit.", ""]
+    lines += ["## Parameters", "", f"Uncertainties: {result.uncertainty_method}.", ""]
+    if result.bootstrap is not None:
+        boot = result.bootstrap
+        lines += _table(
+            ["parameter", "value", "bootstrap σ", "95 % interval", "Jacobian σ"],
+            [
+                [name, _g(after.fit.params[name], ".4g"), _g(boot.uncertainties[name], ".2g"),
+                 f"{_g(low, '.4g')} to {_g(high, '.4g')}",
+                 _g(after.fit.uncertainties.get(name), ".2g")]
+                for name, (low, high) in boot.intervals.items()
+            ],
+        )
+        lines += ["", "The tables below give the fit's own (Jacobian) uncertainties.", ""]
     lines += ["### Base model fit", ""]
     lines += _table(["parameter", "value", "fitted"], _parameter_rows(parameter_table(before.fit)))
     lines += ["", "### Final model fit", ""]
     lines += _table(["parameter", "value", "fitted"], _parameter_rows(parameter_table(after.fit)))
     if after.fit.at_bounds:
         lines += ["", f"At a bound (uncertainty not meaningful): {', '.join(after.fit.at_bounds)}"]
+    if after.fit.held:
+        lines += ["", "Held at their start values (no training sample moves when they do, so "
+                  f"these recordings say nothing about them): {', '.join(after.fit.held)}"]
     lines += ["", f"The fitted profile is in [{PROFILE}]({PROFILE}).", ""]
 
     if figures:

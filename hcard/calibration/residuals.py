@@ -153,7 +153,7 @@ class ResidualReport:
         return "\n".join(lines)
 
 
-def _groups(x: np.ndarray, bins: int) -> np.ndarray:
+def bin_labels(x: np.ndarray, bins: int) -> np.ndarray:
     """Bin label of each sample: by distinct value when there are at most ``bins`` of them,
     else by quantile bins (ties kept together)."""
     distinct = np.unique(x)
@@ -166,7 +166,7 @@ def _groups(x: np.ndarray, bins: int) -> np.ndarray:
 def _regressor_stats(
     name: str, residual: np.ndarray, x: np.ndarray, bins: int, n_eff: float
 ) -> RegressorStats:
-    labels = _groups(x, bins)
+    labels = bin_labels(x, bins)
     present = np.unique(labels)
     centres = np.array([np.median(x[labels == k]) for k in present])
     means = np.array([residual[labels == k].mean() for k in present])
@@ -212,6 +212,61 @@ def _regressor_stats(
         spearman_p=rho_p,
         monotonic=monotonic,
     )
+
+
+@dataclass(frozen=True)
+class JointStats:
+    """The residual against the cells of several regressors binned together.
+
+    Attributes:
+        names: the regressors, in order.
+        cells: cells with at least :data:`MIN_BIN_COUNT` samples (the ANOVA's groups).
+        eta2: share of the residual's variance between the cells.
+        adjusted_eta2: ``eta2`` less what ``cells`` groups explain by chance at the effective
+            sample count, ``(eta2 - c) / (1 - c)`` with ``c = (cells - 1) / n_eff``, at least 0.
+        p_value: of the F-test, corrected for autocorrelation like the per-regressor ones.
+    """
+
+    names: tuple[str, ...]
+    cells: int
+    eta2: float
+    adjusted_eta2: float
+    p_value: float
+
+
+def joint_structure(residual: np.ndarray, regressors: Mapping[str, np.ndarray],
+                    n_eff: float, bins: int = DEFAULT_BINS) -> JointStats:
+    """``residual`` against the cells of ``regressors`` binned together (each as in
+    :func:`analyse_residuals`: by distinct value when it has at most ``bins``, else by quantile
+    bins), for a structure that lives in their combination: an effect on the electrostatic
+    force that grows with the load shows only where there is voltage, so binned on the load
+    alone the samples without voltage dilute it (eta2 0.009 where the effect cut the held-out
+    error by 9 %)."""
+    r = np.asarray(residual, dtype=np.float64)
+    names = tuple(regressors)
+    label = np.zeros(r.size, dtype=np.int64)
+    for name in names:
+        groups = bin_labels(np.asarray(regressors[name], dtype=np.float64), bins)
+        label = label * (int(groups.max()) + 1) + groups
+    _, cell = np.unique(label, return_inverse=True)
+    counts = np.bincount(cell)
+    used = [r[cell == k] for k in np.flatnonzero(counts >= MIN_BIN_COUNT)]
+    if len(used) < 2:
+        return JointStats(names, len(used), 0.0, 0.0, 1.0)
+    pooled = np.concatenate(used)
+    between = sum(g.size * (g.mean() - pooled.mean()) ** 2 for g in used)
+    within = sum(float(np.sum((g - g.mean()) ** 2)) for g in used)
+    if between + within <= 0:
+        return JointStats(names, len(used), 0.0, 0.0, 1.0)
+    eta2 = float(between / (between + within))
+    chance = min((len(used) - 1) / max(n_eff, 1.0), 0.999)
+    adjusted = max((eta2 - chance) / (1.0 - chance), 0.0)
+    if within > 0:
+        f_stat = float(stats.f_oneway(*used).statistic)
+        p_value = _corrected_f_p(f_stat, len(used), pooled.size, n_eff)
+    else:
+        p_value = 0.0
+    return JointStats(names, len(used), eta2, adjusted, p_value)
 
 
 def _corrected_f_p(f_stat: float, groups: int, n: int, n_eff: float) -> float:

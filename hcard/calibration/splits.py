@@ -26,8 +26,11 @@ def stroke_ids(
 ) -> np.ndarray:
     """The stroke number of every sample, shape (M,), int; -1 marks samples out of contact.
 
-    With a ``stroke`` column its values are returned as they are (no sample is -1 unless the
-    file says so). Without one, strokes are derived (rule S2): a sample is out of contact when
+    With a ``stroke`` column its values are kept where the finger touches by the forces
+    (``normal_force >= contact_threshold_n`` and the ``contact`` column) and are -1 elsewhere:
+    a column that carries the stroke number through the lifts does not put samples with
+    ``fn ~ 0`` in contact (:mod:`hcard.calibration.contact` reports the disagreement). Without
+    one, strokes are derived (rule S2): a sample is out of contact when
     ``normal_force < contact_threshold_n`` (N) or, with a ``contact`` column, where that column
     is 0, and gets -1; a new stroke starts at the first
     contact sample after a lift, after a time gap longer than ``gap_factor`` times the median
@@ -35,12 +38,12 @@ def stroke_ids(
     changes (a back-and-forth stroke reverses; zero speeds carry the previous sign). Strokes
     are numbered 0, 1, 2, ... in time order.
     """
-    if m.stroke is not None:
-        return np.asarray(m.stroke, dtype=np.int64).copy()
     n = len(m)
     contact = m.normal_force >= contact_threshold_n
     if m.contact is not None:
         contact &= m.contact
+    if m.stroke is not None:
+        return np.where(contact, np.asarray(m.stroke, dtype=np.int64), -1).astype(np.int64)
     start = np.zeros(n, dtype=bool)
     if n:
         start[0] = True
@@ -60,19 +63,23 @@ def stroke_ids(
 
 
 def split_by_stroke(
-    m: Measurement, test_fraction: float = 0.25, seed: int = 0
+    m: Measurement,
+    test_fraction: float = 0.25,
+    seed: int = 0,
+    contact_threshold_n: float = CONTACT_THRESHOLD_N,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Sample indices ``(train_idx, test_idx)`` holding out whole strokes.
 
     ``round(test_fraction * K)`` of the K strokes (at least 1, at most K-1) are drawn without
     replacement by ``numpy.random.default_rng(seed)``; every sample of a drawn stroke is in the
     test set, every sample of the others in the training set. Samples with stroke -1 (out of
-    contact) are in neither. Indices are sorted ascending. Raises :class:`MeasurementError` with
+    contact, normal force below ``contact_threshold_n``, N) are in neither. Indices are sorted
+    ascending. Raises :class:`MeasurementError` with
     fewer than two strokes or a fraction outside (0, 1).
     """
     if not 0.0 < test_fraction < 1.0:
         raise MeasurementError(f"test_fraction must lie in (0, 1), got {test_fraction}")
-    ids = stroke_ids(m)
+    ids = stroke_ids(m, contact_threshold_n=contact_threshold_n)
     strokes = np.unique(ids[ids >= 0])
     if strokes.size < 2:
         raise MeasurementError(

@@ -15,6 +15,7 @@ report (Markdown, JSON, PNG figures) and the fitted device profile go to the out
 from __future__ import annotations
 
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -23,7 +24,7 @@ from typing import Any
 import click
 
 from hcard.calibration.dataset import SPLITS, prepare
-from hcard.calibration.loop import NOT_EXPLAINED, LoopSettings, calibrate
+from hcard.calibration.loop import NOT_EXPLAINED, LoopSettings, calibrate, with_bootstrap
 from hcard.calibration.measurement import Measurement, MeasurementError, read_measurement
 from hcard.calibration.plan import (
     DEFAULT_DURATION_S,
@@ -73,6 +74,17 @@ def _fraction(text: str, what: str) -> float:
         ) from None
     if not 0.0 < value < 1.0:
         raise CalibrateUsageError(f"{what} {text!r}: must lie between 0 and 1 (0 % and 100 %)")
+    return value
+
+
+def _contact_threshold(text: str | None) -> float | None:
+    """``--contact-threshold`` in N (``"15mN"`` -> 0.015), or None for the per-recording
+    default; checked before any recording is read."""
+    if text is None:
+        return None
+    value = quantity(text, "N", "--contact-threshold")
+    if not math.isfinite(value) or value <= 0.0:
+        raise CalibrateUsageError(f"--contact-threshold {text!r}: must be a positive force")
     return value
 
 
@@ -277,6 +289,14 @@ def _verification_files(measurements: list[Measurement], card: Path | None,
 @click.option("--no-rezero", is_flag=True,
               help="Do not re-measure the lateral-force zero at each lift (spec/calibration.md "
                    "K4).")
+@click.option("--contact-threshold", "contact_threshold", metavar="FORCE",
+              help="Normal force at and above which the finger touches, e.g. 15mN (default: "
+                   "per recording, the larger of 10 mN and 5 standard deviations of the lifted "
+                   "normal-force noise).")
+@click.option("--bootstrap", "bootstrap", default=50, show_default=True,
+              type=click.IntRange(min=0),
+              help="Stroke-block bootstrap refits for the final model's uncertainties (0: the "
+                   "fit's Jacobian uncertainties only).")
 @click.option("--strict", is_flag=True,
               help="Exit with status 2 when structure is left that no effect explains.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress lines, only the summary.")
@@ -301,6 +321,8 @@ def calibrate_command(
     timeout: float,
     no_figures: bool,
     no_rezero: bool,
+    contact_threshold: str | None,
+    bootstrap: int,
     strict: bool,
     quiet: bool,
 ) -> None:
@@ -314,7 +336,10 @@ def calibrate_command(
     and with the fitted profile, measured by its force sensor.
     """
     started = time.perf_counter()
+    if bootstrap == 1:
+        raise CalibrateUsageError("--bootstrap needs at least 2 refits (0: none)")
     held_out = _fraction(test_fraction, "--test-fraction")
+    threshold_n = _contact_threshold(contact_threshold)
     settings = LoopSettings(
         min_improvement=_fraction(min_improvement, "--min-improvement"),
         max_effects=max_effects,
@@ -361,8 +386,14 @@ def calibrate_command(
     say(f"read {len(paths)} recording(s), {sum(len(m) for m in measurements)} samples; base "
         f"{'profile ' + base_profile.name if base_profile else 'model ' + base.name}")
     prepared = prepare(measurements, split=split, test_fraction=held_out, seed=seed,
-                       rezero=not no_rezero)
+                       rezero=not no_rezero,
+                       contact_threshold_n=threshold_n)
+    for text in prepared.warnings:
+        click.echo(f"warning: {text}", err=True)
     result = calibrate(prepared, base, candidates, free=free, settings=settings, progress=say)
+    if bootstrap >= 2:
+        say(f"stroke-block bootstrap of the final model: {bootstrap} refits")
+        result = with_bootstrap(result, bootstrap, seed=seed, progress=say)
     profile = profile_of(result, base_profile, voltage_form=voltage_form)
     rendering: dict[str, Any] | None = None
     if verify_uri is not None:

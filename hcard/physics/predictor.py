@@ -9,7 +9,7 @@ can be saved, reloaded and checked.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -66,6 +66,22 @@ class Variable:
     default: float | None = None
 
 
+_INPUT_TABLES: dict[int, tuple[Sequence[Variable], dict[str, Variable]]] = {}
+"""``id(inputs)`` -> (inputs, their table) of the predictor classes met so far."""
+
+
+def _input_table(inputs: Sequence[Variable]) -> dict[str, Variable]:
+    """The inputs of a predictor class by name, built once per class (do not modify it)."""
+    cached = _INPUT_TABLES.get(id(inputs))
+    if cached is not None and cached[0] is inputs:
+        return cached[1]
+    if len(_INPUT_TABLES) >= 4096:  # classes made on the fly (calibration): start afresh
+        _INPUT_TABLES.clear()
+    table = {v.name: v for v in inputs}
+    _INPUT_TABLES[id(inputs)] = (inputs, table)  # keeps ``inputs`` alive, so its id stays
+    return table
+
+
 class Predictor:
     """Base class of physics predictors.
 
@@ -110,9 +126,9 @@ class Predictor:
         return type(self)(**{**self._values, **changes})
 
     def _inputs(self, given: Mapping[str, Any]) -> dict[str, np.ndarray]:
-        names = {v.name: v for v in self.inputs}
-        unknown = sorted(set(given) - set(names))
-        if unknown:
+        names = _input_table(self.inputs)
+        if not given.keys() <= names.keys():
+            unknown = sorted(set(given) - set(names))
             raise PredictorError(
                 f"{self.name}: unknown input(s) {', '.join(unknown)}; inputs: {', '.join(names)}"
             )
@@ -127,6 +143,13 @@ class Predictor:
             arrays[name] = np.asarray(value, dtype=np.float64)
         return arrays
 
+    def _trusted_inputs(self, given: dict[str, Any]) -> Mapping[str, Any]:
+        """The inputs of a ``*_trusted`` call: ``given`` itself when it names every input (the
+        caller's float64 arrays or floats), else :meth:`_inputs` (defaults filled in)."""
+        if given.keys() == _input_table(self.inputs).keys():
+            return given
+        return self._inputs(given)
+
     def forward(self, **inputs: Any) -> np.ndarray:
         """The output for inputs broadcast together (SI units); vectorised."""
         return self._forward(**self._inputs(inputs))
@@ -140,6 +163,21 @@ class Predictor:
         arrays = self._inputs(given)
         del arrays[self.inverse_input]
         return self._inverse(np.asarray(target, dtype=np.float64), **arrays)
+
+    def forward_trusted(self, **inputs: Any) -> np.ndarray:
+        """:meth:`forward` for inputs its caller has already checked: float64 arrays (or
+        floats) that broadcast together, finite, and inside the model's domain (every value
+        :meth:`forward` accepts). A model whose input checks cost more than its arithmetic
+        (on the few frames of a real-time block) skips them here; checks that depend on its
+        parameters stay. The result is :meth:`forward`'s, bit for bit. By default this is
+        :meth:`forward`, checks included."""
+        return self.forward(**inputs)
+
+    def inverse_trusted(self, target: Any, **inputs: Any) -> np.ndarray:
+        """:meth:`inverse` for a target and inputs its caller has already checked (as for
+        :meth:`forward_trusted`; the target inside the range the inverse accepts). By
+        default this is :meth:`inverse`, checks included."""
+        return self.inverse(target, **inputs)
 
     def _forward(self, **inputs: np.ndarray) -> np.ndarray:
         raise PredictorError(f"{self.name}: no forward map")

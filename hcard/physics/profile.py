@@ -361,6 +361,8 @@ class DeviceProfile:
 
     def effects_on(self, channel: str) -> tuple[FittedEffect, ...]:
         """The effects acting on ``channel`` (``"uv"``, ``"ev"`` or ``"finger"``), in order."""
+        if not self.effects:
+            return ()
         return tuple(fitted for fitted in self.effects if fitted.channel == channel)
 
     def replace(self, **changes: Any) -> DeviceProfile:
@@ -416,6 +418,14 @@ class DeviceProfile:
         into :attr:`load_capacitance` would draw more than ``max_current`` (``I = 2 pi f C V``,
         the envelope taken as slow against the carrier).
         """
+        cached = self.__dict__.get("_voltage_limit")  # frozen: worked out once
+        if cached is not None:
+            return cached
+        cached = self.__dict__["_voltage_limit"] = self._binding_voltage_limit()
+        return cached
+
+    def _binding_voltage_limit(self) -> tuple[float, str]:
+        """:attr:`voltage_limit`, worked out."""
         limits = self.rendering_limits()
         capacitance = self.load_capacitance
         if capacitance is None:  # no EV channel: nothing draws current
@@ -463,6 +473,8 @@ class DeviceProfile:
         voltage: Any,
         speed: Any,
         normal_force: Any,
+        *,
+        trusted: bool = False,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Relative friction per channel rendered by actuator commands (Eq. 4.1 factors).
 
@@ -471,6 +483,10 @@ class DeviceProfile:
             voltage: peak EV voltage envelope of the sinusoidal carrier, V.
             speed: finger speed, m/s.
             normal_force: finger normal force, N (> 0 where EV acts).
+            trusted: the caller has checked the inputs: float64 arrays of one shape, finite
+                and >= 0. The channels' models then skip their own input checks
+                (:meth:`~hcard.physics.predictor.Predictor.forward_trusted`); the numbers are
+                the same.
 
         Returns:
             ``(uv, ev)``: ``uv = mu(w)/mu0`` from the UV channel at the plate frequency, and
@@ -481,29 +497,43 @@ class DeviceProfile:
             profile's effects on it in their steady state (effects on the bare finger scale
             the friction with and without modulation alike, so they are not in these ratios).
         """
-        amplitude, voltage, speed, normal_force = np.broadcast_arrays(
-            *(np.asarray(a, dtype=np.float64) for a in (amplitude, voltage, speed, normal_force))
-        )
-        uv = np.ones(amplitude.shape)
-        if self.uv_model is not None:
-            uv = np.broadcast_to(self.uv_for(amplitude, speed, normal_force), uv.shape)
-        ev = np.ones(amplitude.shape)
-        if self.ev_model is not None:
-            force = self.force_for(voltage, normal_force)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                ev = np.where(normal_force > 0, 1.0 + force / normal_force, 1.0)
-        return np.array(uv, dtype=np.float64), np.array(ev, dtype=np.float64)
+        if not trusted:
+            amplitude, voltage, speed, normal_force = np.broadcast_arrays(
+                *(np.asarray(a, dtype=np.float64)
+                  for a in (amplitude, voltage, speed, normal_force))
+            )
+        shape = amplitude.shape if trusted else np.shape(amplitude)
+        if self._uv_channel is not None:
+            uv = self._uv_value(amplitude, speed, normal_force, trusted)
+            if np.shape(uv) != shape:
+                uv = np.broadcast_to(uv, shape)
+        else:
+            uv = np.ones(shape)
+        if self._ev_channel is not None:
+            force = self._force(voltage, normal_force, trusted)
+            # 1 + F_e / F_n where F_n > 0, else 1 (no division where F_n = 0)
+            ratio = np.zeros(shape)
+            np.divide(force, normal_force, out=ratio, where=normal_force > 0)
+            ev = np.add(1.0, ratio, out=ratio)
+        else:
+            ev = np.ones(shape)
+        if not (trusted and _owned(uv, shape)):
+            uv = np.array(uv, dtype=np.float64)  # the model's output may be a view or an input
+        return uv, ev
 
     def _plate_frequency(self) -> float | None:
         return None if self.limits is None else self.limits.plate_frequency
 
-    def _uv_inputs(self, speed: Any, normal_force: Any) -> dict[str, Any]:
-        """Inputs of the UV channel: finger state and the plate frequency (those it takes)."""
-        names = {v.name for v in self._channel("uv").inputs}
-        given: dict[str, Any] = {"speed": speed, "normal_force": normal_force}
-        if self._plate_frequency() is not None:
-            given["frequency"] = self._plate_frequency()
-        return {k: v for k, v in given.items() if k in names}
+    def _uv_call(self, speed: Any, normal_force: Any) -> tuple[Predictor, dict[str, Any]]:
+        """The UV channel's model and its inputs: finger state and the plate frequency (those
+        it takes)."""
+        model, given, takes_speed, takes_force = self._channel_call("uv")
+        given = dict(given)
+        if takes_speed:
+            given["speed"] = speed
+        if takes_force:
+            given["normal_force"] = normal_force
+        return model, given
 
     def _channel(self, channel: str) -> Predictor:
         model = self._uv_channel if channel == "uv" else self._ev_channel
@@ -511,36 +541,69 @@ class DeviceProfile:
             raise ProfileError(f"profile {self.name!r} has no {channel.upper()} channel")
         return model
 
+    def _channel_call(self, channel: str) -> tuple[Predictor, dict[str, float], bool, bool]:
+        """The channel's model, its fixed inputs (the plate frequency for UV, the carrier
+        frequency for EV, when it takes ``frequency``), and whether it takes ``speed`` and
+        ``normal_force``; worked out once per model (the profile is immutable)."""
+        model = self._uv_channel if channel == "uv" else self._ev_channel
+        cache = self.__dict__.get("_channel_calls")  # frozen: not a field
+        if cache is None:
+            cache = self.__dict__["_channel_calls"] = {}
+        cached = cache.get(channel)
+        if cached is None or cached[0] is not model:
+            model = self._channel(channel)  # ProfileError without the channel
+            names = {v.name for v in model.inputs}
+            fixed: dict[str, float] = {}
+            if "frequency" in names:
+                if channel == "ev":
+                    fixed["frequency"] = self.rendering_limits().carrier_frequency
+                elif self.limits is not None:
+                    fixed["frequency"] = self.limits.plate_frequency
+            cached = cache[channel] = (model, fixed, "speed" in names, "normal_force" in names)
+        return cached
+
     def uv_for(self, amplitude: Any, speed: Any, normal_force: Any) -> np.ndarray:
         """UV relative friction ``mu(w)/mu0`` for peak-to-peak amplitude ``w`` (m) at the
         plate frequency, finger speed (m/s) and normal force (N)."""
-        model = self._channel("uv")
-        return model.forward(amplitude=amplitude, **self._uv_inputs(speed, normal_force))
+        return self._uv_value(amplitude, speed, normal_force, False)
 
-    def amplitude_for(self, uv: Any, speed: Any, normal_force: Any) -> np.ndarray:
+    def _uv_value(self, amplitude: Any, speed: Any, normal_force: Any,
+                  trusted: bool) -> np.ndarray:
+        """:meth:`uv_for`; ``trusted``: inputs checked by the caller (see :meth:`forward`)."""
+        model, inputs = self._uv_call(speed, normal_force)
+        if trusted:
+            return model.forward_trusted(amplitude=amplitude, **inputs)
+        return model.forward(amplitude=amplitude, **inputs)
+
+    def amplitude_for(self, uv: Any, speed: Any, normal_force: Any, *,
+                      trusted: bool = False) -> np.ndarray:
         """Peak-to-peak plate amplitude (m) giving UV relative friction ``uv`` at the finger
         speed (m/s) and normal force (N): the UV model's inverse, not clipped. With effects on
         the UV channel the forward map is inverted numerically (it falls with the amplitude)
-        over ``[0, AMPLITUDE_SEARCH_FACTOR * max_amplitude]``."""
+        over ``[0, AMPLITUDE_SEARCH_FACTOR * max_amplitude]``.
+
+        ``trusted``: the caller has checked the inputs (float64 arrays of one shape, ``uv`` in
+        (0, 1], speed and force finite and >= 0): the model's inverse skips its input checks
+        (:meth:`~hcard.physics.predictor.Predictor.inverse_trusted`); same numbers."""
         if not self.effects_on("uv"):
-            model = self._channel("uv")
-            return model.inverse(uv, **self._uv_inputs(speed, normal_force))
+            model, inputs = self._uv_call(speed, normal_force)
+            if trusted:
+                return model.inverse_trusted(uv, **inputs)
+            return model.inverse(uv, **inputs)
         target, speed_a, force_a = np.broadcast_arrays(
             *(np.asarray(a, dtype=np.float64) for a in (uv, speed, normal_force))
         )
         high = AMPLITUDE_SEARCH_FACTOR * self.rendering_limits().max_amplitude
         return solve_decreasing(lambda w: self.uv_for(w, speed_a, force_a), target, high)
 
-    def _ev_inputs(self, normal_force: Any) -> dict[str, Any]:
-        """Extra inputs of the EV channel: the carrier frequency when it takes ``frequency``,
-        the normal force when an effect needs it."""
-        names = {v.name for v in self._channel("ev").inputs}
-        given: dict[str, Any] = {}
-        if "frequency" in names:
-            given["frequency"] = self.rendering_limits().carrier_frequency
-        if "normal_force" in names and normal_force is not None:
-            given["normal_force"] = normal_force
-        return given
+    def _ev_call(self, normal_force: Any) -> tuple[Predictor, dict[str, Any]]:
+        """The EV channel's model and its extra inputs: the carrier frequency when it takes
+        ``frequency``, the normal force when an effect needs it (the dict is shared: do not
+        modify it)."""
+        model, given, _, takes_force = self._channel_call("ev")
+        if takes_force and normal_force is not None:
+            given = {**given, "normal_force": normal_force}
+        return model, given
 
     def force_for(self, voltage: Any, normal_force: Any = None) -> np.ndarray:
         """Carrier-averaged EV force, N, for a peak envelope ``voltage`` (V) on a finger
@@ -549,21 +612,31 @@ class DeviceProfile:
         ``<F(g V sin)> = F(g V / sqrt 2)`` for a force going as ``v^2`` (mean of ``sin^2`` is
         1/2; ``g`` the leakage gain at the carrier, Eq. 3.22).
         """
-        model = self._channel("ev")
-        effective = self.carrier_gain * np.asarray(voltage, dtype=np.float64) / math.sqrt(2.0)
-        return np.asarray(
-            model.forward(voltage=effective, **self._ev_inputs(normal_force)), dtype=np.float64
-        )
+        return self._force(voltage, normal_force, False)
 
-    def voltage_for(self, force: Any, normal_force: Any = None) -> np.ndarray:
+    def _force(self, voltage: Any, normal_force: Any, trusted: bool) -> np.ndarray:
+        """:meth:`force_for`; ``trusted``: inputs checked by the caller (see :meth:`forward`)."""
+        model, inputs = self._ev_call(normal_force)
+        effective = self._carrier_gain * np.asarray(voltage, dtype=np.float64) / math.sqrt(2.0)
+        if trusted:
+            return np.asarray(model.forward_trusted(voltage=effective, **inputs),
+                              dtype=np.float64)
+        return np.asarray(model.forward(voltage=effective, **inputs), dtype=np.float64)
+
+    def voltage_for(self, force: Any, normal_force: Any = None, *,
+                    trusted: bool = False) -> np.ndarray:
         """Peak envelope voltage, V, whose carrier-averaged EV force is ``force`` (N): the
         inverse of :meth:`force_for`, not clipped. With effects on the EV channel the force
         still goes as ``v^2`` (checked when the profile is built), so the voltage is that of a
-        reference force scaled by ``sqrt(force / F(V_ref))``."""
+        reference force scaled by ``sqrt(force / F(V_ref))``.
+
+        ``trusted``: the caller has checked the inputs (float64 arrays of one shape, finite
+        and >= 0): the model's inverse skips its input checks; same numbers."""
         if not self.effects_on("ev"):
-            model = self._channel("ev")
-            effective = np.asarray(model.inverse(force, **self._ev_inputs(None)),
-                                   dtype=np.float64)
+            model, inputs = self._ev_call(None)
+            solved = model.inverse_trusted(force, **inputs) if trusted \
+                else model.inverse(force, **inputs)
+            effective = np.asarray(solved, dtype=np.float64)
             return effective * math.sqrt(2.0) / self.carrier_gain
         force_a = np.asarray(force, dtype=np.float64)
         reference = self.force_for(np.full(force_a.shape, REFERENCE_VOLTAGE), normal_force)
@@ -756,6 +829,15 @@ def _check_observation(raw: Mapping[str, Any] | None, source: str) -> None:
                 value):
             raise ProfileError(f"{source}: observation.parameters.{name}.value: expected a "
                                "finite number")
+
+
+def _owned(values: Any, shape: tuple[int, ...]) -> bool:
+    """``values`` is a float64 array of ``shape`` that owns its memory (a model's new result,
+    not a view of an input): the caller may have it without a copy."""
+    return (
+        type(values) is np.ndarray and values.dtype == np.float64 and values.shape == shape
+        and values.base is None and values.flags.writeable
+    )
 
 
 def read_json(file: Path) -> Any:

@@ -12,7 +12,11 @@ values and uncertainties). Each effect acts on one part of the device's physics
 - ``"finger"``: the bare finger's friction, for an effect on the friction force as a whole (load
   index, occlusion, skin recovery). It scales the friction with and without modulation alike,
   so it leaves the relative friction a card asks for unchanged; it is part of the fitted
-  lateral-force model, not of the rendering.
+  lateral-force model, not of the rendering. One exception in the physics: occlusion raises
+  the dry friction coefficient ``mu0``, which also enters the ultrasonic group ``Psi`` (Eq. 2.30)
+  through :meth:`~hcard.calibration.effects.Effect.transform_params`, in the share
+  ``psi_share`` of its rise; augmenting a UV model with it (:func:`with_effects`) carries that,
+  while a model that applies finger effects to the total alone sees only the scaling.
 
 :func:`with_effects` builds a channel model with its effects (:func:`hcard.calibration.effects.
 augment`, imported when needed: the calibration package builds on this one), and

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -69,10 +69,60 @@ class CompiledCard:
     textures: tuple[CompiledTexture, ...]
     channel_groups: tuple[int, ...]
     """Channel groups (GROUP_UV, GROUP_EV, GROUP_BIPOLAR) that some texture of the card uses."""
+    size_mm: np.ndarray = field(init=False, repr=False, compare=False)
+    """(2,) surface width and height, mm."""
+    taxtel_mm: np.ndarray = field(init=False, repr=False, compare=False)
+    """(2,) taxtel width and height, mm."""
+    last_cell: np.ndarray = field(init=False, repr=False, compare=False)
+    """(2,) last grid column and row, as floats."""
+    cell_strides: np.ndarray = field(init=False, repr=False, compare=False)
+    """(2,) flat-index step of a column and of a row of the grid: ``(1, cols)``."""
+    texture_columns: tuple[TextureColumns, ...] = field(init=False, repr=False, compare=False)
+    """Per texture, its arrays restricted to :attr:`channel_groups` (the kernel's columns)."""
+    _max_components: int = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        # Frozen dataclass: the derived arrays are set once, here.
+        rows, cols = self.grid.shape
+        columns = list(self.channel_groups)
+        derived = {
+            "size_mm": np.array([self.width_mm, self.height_mm], dtype=np.float64),
+            "taxtel_mm": np.array([self.taxtel_width_mm, self.taxtel_height_mm],
+                                  dtype=np.float64),
+            "last_cell": np.array([cols - 1, rows - 1], dtype=np.float64),
+            "cell_strides": np.array([1, cols], dtype=np.intp),
+            "_max_components": max((t.n_components for t in self.textures), default=0),
+            "texture_columns": tuple(
+                TextureColumns(
+                    baseline=t.baseline_deviation[columns],
+                    weighted_groups=t.weighted_groups[:, columns],
+                    group_matrix=t.group_matrix[:, columns],
+                )
+                for t in self.textures
+            ),
+        }
+        for name, value in derived.items():
+            object.__setattr__(self, name, value)
 
     @property
     def max_components(self) -> int:
-        return max((t.n_components for t in self.textures), default=0)
+        return self._max_components
+
+
+@dataclass(frozen=True)
+class TextureColumns:
+    """A texture's arrays restricted to the channel groups its card uses (the columns of the
+    kernel's per-frame deviation), made once per card instead of once per block.
+
+    Attributes:
+        baseline: (G,) baseline - 1 per used group.
+        weighted_groups: (C, G) float32 ``amplitude * group_matrix`` of the used groups.
+        group_matrix: (C, G) one-hot group of each component among the used groups.
+    """
+
+    baseline: np.ndarray
+    weighted_groups: np.ndarray
+    group_matrix: np.ndarray
 
 
 def velocity_locked(component: pb.Component, locking: int, options: RenderOptions) -> bool:

@@ -184,17 +184,29 @@ class RenderStream:
         )
         self._table = self._table.concat(new)
 
-    def render(self, n_frames: int, *, with_phase: bool = False) -> Frames:
-        """Render the next ``n_frames`` frames."""
+    def render(self, n_frames: int, *, with_phase: bool = False,
+               time_shift_s: float = 0.0) -> Frames:
+        """Render the next ``n_frames`` frames.
+
+        ``time_shift_s``: the frames are rendered at their frame times plus this (s), on the
+        time line of the pushed samples. A device that times the host's samples on the host's
+        clock renders on that time line (spec/device-protocol.md PO2): when its estimate of
+        the clock offset moves, the frames move with it, and velocity, odometer and the
+        temporal phase stay those of the samples' own spacing. The returned frames carry the
+        shifted times.
+        """
         if self.t0 is None:
             raise TrackError("stream: push a touch sample before rendering")
-        times = self.renderer.frame_times(self.t0, self.next_frame, n_frames)
+        times = self.renderer.frame_times(self.t0, self.next_frame, n_frames) + time_shift_s
         frames = self.renderer._block(self._table, times, with_phase)
         self.next_frame += n_frames
         # Keep only the samples later frames can still use: the last one at or before the
-        # next frame time and everything after it.
+        # next frame time (less one dead-reckoning horizon, for a shift that moves back) and
+        # everything after it.
         if len(self._table):
-            keep = max(int(np.searchsorted(self._table.t, self.next_time, side="right")) - 1, 0)
+            horizon = self.renderer.options.dead_reckoning_s
+            earliest = self.next_time + time_shift_s - horizon
+            keep = max(int(np.searchsorted(self._table.t, earliest, side="right")) - 1, 0)
             if keep:
                 self._table = self._table.tail(keep)
         return frames

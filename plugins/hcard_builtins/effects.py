@@ -16,7 +16,13 @@ from typing import ClassVar
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
-from hcard.calibration.effects import Effect, high_pass, low_pass
+from hcard.calibration.effects import (
+    Effect,
+    ParameterValue,
+    high_pass,
+    low_pass,
+    touchdowns,
+)
 from hcard.physics import Parameter, Variable
 from hcard.plugins.hookspecs import hookimpl
 from hcard_builtins.physics.electrovibration import geometry as pad_geometry
@@ -57,6 +63,30 @@ FLATTENING_SAMPLES = 257
 TIME = Variable("time", "s", "time since the recording (and the contact) began", 0.0)
 """The recording's time axis; its default (0, no time axis) makes time effects the identity."""
 
+STROKE = Variable(
+    "stroke", "", "strokes since the finger last rested (inf: steady state)", math.inf
+)
+"""Strokes since the finger last rested, per sample; its default is the steady state."""
+
+CONTACT = Variable(
+    "contact", "", "1 while the finger touches the surface, 0 out of contact (lifts)", 1.0
+)
+"""Contact flag per sample: filters with state restart where it turns on
+(:func:`~hcard.calibration.effects.touchdowns`); its default (1) is one contact throughout."""
+
+MU0_NAMES = ("mu0", "uv_mu0")
+"""Names of the dry (no vibration) friction coefficient in the built-in ultrasonic models:
+``mu0`` of the dimensionless group (Eq. 2.30) and the spring-slider (Eq. 2.22), ``uv_mu0`` of
+the coupled model (Eq. 4.1)."""
+
+NO_LEAKAGE_TIME_CONSTANT = 10.0
+"""Upper bound of the charge-leakage time constant, s; at it the effect is off exactly (it stands
+for ``tau_d = inf``: no leakage). Three decades above the 7.7 ms of section 3.6.3."""
+
+INSTANT_ACTUATOR_TIME_CONSTANT = 1e-5
+"""Lower bound of the actuator time constant, s; at it the effect is off exactly (an instant
+plate). Two decades below the 1.5 ms of section 4.3."""
+
 
 class LoadIndex(Effect):
     """Non-Coulomb friction: ``F = k Fn^n`` (Eq. 2.35), so the output is scaled by
@@ -87,19 +117,36 @@ class LoadIndex(Effect):
     def transform_output(
         self, output: np.ndarray, inputs: Mapping[str, np.ndarray], params: Mapping[str, float]
     ) -> np.ndarray:
-        """``output * (Fn / 1 N)^(n - 1)``."""
+        """``output * (Fn / 1 N)^(n - 1)``; ``n = 1``: ``output`` unchanged."""
+        if params["load_index"] == 1.0:
+            return output
         force = np.maximum(inputs["normal_force"], 1e-12) / REFERENCE_FORCE
         return output * np.power(force, params["load_index"] - 1.0)
 
 
 class OcclusionDrift(Effect):
-    """Occlusion: friction rises with contact time to a plateau (Fig. 1.11), the output scaled by
-    ``1 + g (1 - exp(-t / tau_o))``. ``g = 0`` switches it off."""
+    """Occlusion: the dry friction coefficient rises with contact time to a plateau
+    (Fig. 1.11), ``mu0(t) = mu0 (1 + g (1 - exp(-t / tau_o)))``. ``g = 0`` switches it off.
+
+    It acts where ``mu0`` acts. On a base with a dry friction coefficient (:data:`MU0_NAMES`)
+    that it takes per sample (:func:`~hcard.calibration.effects.samplewise_parameters`: the
+    dimensionless group and the spring-slider), ``mu0`` drifts per sample inside the model,
+    so it enters ``Psi = U / (w f mu0 (1 + nu))`` (Eq. 2.30) as well: with a share ``s``
+    (``psi_share``) of the rise, ``mu0_Psi(t) = mu0 (1 + s g (1 - exp(-t / tau_o)))``.
+    ``s = 1`` (the default) is the thesis form, the coefficient of the Coulomb cap itself
+    rising; ``s = 0`` scales the friction force alone (a rise outside the ultrasonic contact,
+    the form of earlier versions); a fit of ``s`` says which the data hold. The
+    relative-friction output is scaled by the whole factor: the augmented output is
+    ``mu / mu0`` with ``mu0`` the initial coefficient, which is what the lateral force
+    ``F = mu0 Fn mu'`` of a tribometer (:mod:`hcard.calibration.observation`) needs. On any
+    other base (a finger friction force, an electrostatic force, the coupled model, whose
+    sub-models hold ``uv_mu0`` as one number) the output is scaled by the factor and ``s``
+    has no effect."""
 
     name: ClassVar[str] = "occlusion-drift"
     description: ClassVar[str] = (
-        "Occlusion drift: output * (1 + g (1 - exp(-t/tau_o))), sweat trapped in the contact "
-        "(Fig. 1.11)"
+        "Occlusion drift: mu0 * (1 + g (1 - exp(-t/tau_o))), sweat trapped in the contact "
+        "(Fig. 1.11), inside Psi (Eq. 2.30) where the model has mu0"
     )
     reason: ClassVar[str] = (
         "moisture accumulates under the sliding finger and plasticises the stratum corneum, so "
@@ -124,15 +171,52 @@ class OcclusionDrift(Effect):
             "Fig. 1.11b (Pasumarty et al. [48]); ~20 s",
             "first-order time constant tau_o of the occlusion rise",
         ),
+        Parameter(
+            "psi_share",
+            "",
+            1.0,
+            (0.0, 1.0),
+            "Eq. 2.30 (mu0 in Psi); section 1.4.2.2 (occlusion grows the real contact); "
+            "1 = the thesis form",
+            "share s of the rise that raises mu0 inside the ultrasonic group Psi "
+            "(0: the friction force scales alone)",
+        ),
     )
     inputs: ClassVar[tuple[Variable, ...]] = (TIME,)
+
+    @staticmethod
+    def factor(time: np.ndarray, params: Mapping[str, float]) -> np.ndarray:
+        """``1 + g (1 - exp(-t / tau_o))`` with ``t`` (s) clipped at 0."""
+        t = np.maximum(time, 0.0)
+        return 1.0 + params["gain"] * -np.expm1(-t / params["time_constant"])
+
+    def transform_params(
+        self,
+        params: Mapping[str, ParameterValue],
+        inputs: Mapping[str, np.ndarray],
+        effect_params: Mapping[str, float],
+        per_sample: frozenset[str] = frozenset(),
+    ) -> dict[str, ParameterValue]:
+        """``mu0`` (or ``uv_mu0``) times ``1 + s g (1 - exp(-t / tau_o))``, per sample, where
+        the base takes it per sample (``per_sample``); elsewhere unchanged (the output form)."""
+        out = dict(params)
+        share = effect_params["psi_share"] * effect_params["gain"]
+        if share == 0.0:
+            return out
+        for name in MU0_NAMES:
+            if name in out and name in per_sample:
+                shared = {**effect_params, "gain": share}
+                out[name] = out[name] * self.factor(inputs["time"], shared)
+                break
+        return out
 
     def transform_output(
         self, output: np.ndarray, inputs: Mapping[str, np.ndarray], params: Mapping[str, float]
     ) -> np.ndarray:
-        """``output * (1 + g (1 - exp(-t / tau_o)))``, ``t`` clipped at 0."""
-        t = np.maximum(inputs["time"], 0.0)
-        return output * (1.0 + params["gain"] * -np.expm1(-t / params["time_constant"]))
+        """``output * (1 + g (1 - exp(-t / tau_o)))``; ``g = 0``: ``output`` unchanged."""
+        if params["gain"] == 0.0:
+            return output
+        return output * self.factor(inputs["time"], params)
 
 
 class SkinRecovery(Effect):
@@ -171,16 +255,15 @@ class SkinRecovery(Effect):
             "number of strokes k_r over which the deficit decays by 1/e",
         ),
     )
-    inputs: ClassVar[tuple[Variable, ...]] = (
-        Variable(
-            "stroke", "", "strokes since the finger last rested (inf: steady state)", math.inf
-        ),
-    )
+    inputs: ClassVar[tuple[Variable, ...]] = (STROKE,)
 
     def transform_output(
         self, output: np.ndarray, inputs: Mapping[str, np.ndarray], params: Mapping[str, float]
     ) -> np.ndarray:
-        """``output * (1 - D exp(-k / k_r))``, ``k`` clipped at 0."""
+        """``output * (1 - D exp(-k / k_r))``, ``k`` clipped at 0; ``D = 0``: ``output``
+        unchanged."""
+        if params["depth"] == 0.0:
+            return output
         k = np.maximum(inputs["stroke"], 0.0)
         return output * (1.0 - params["depth"] * np.exp(-k / params["strokes"]))
 
@@ -192,7 +275,12 @@ class ActuatorBandwidth(Effect):
     when it changes relative to the force sampling is a second parameter, the step offset
     ``theta`` of :func:`~hcard.calibration.effects.low_pass`: 0 when the command steps at the
     sample that first shows it (no response there yet, the default), up to 1 a full sample
-    earlier. ``tau_a -> 0`` with ``theta = 1`` is the base model exactly (the neutral values)."""
+    earlier. ``tau_a`` at its lower bound (:data:`INSTANT_ACTUATOR_TIME_CONSTANT`) is the base
+    model exactly (the neutral values).
+
+    The filter runs through lifts, it does not restart at touch-down: the plate vibrates
+    whether a finger is on it or not, so at touch-down the amplitude is the command low-passed
+    through the lift (the state carried over), not a plate starting from rest."""
 
     name: ClassVar[str] = "actuator-bandwidth"
     description: ClassVar[str] = (
@@ -204,13 +292,16 @@ class ActuatorBandwidth(Effect):
         "amplitude step the friction lags the commanded value"
     )
     signature: ClassVar[tuple[str, ...]] = ("amplitude_history",)
-    neutral: ClassVar[dict[str, float]] = {"time_constant": 1e-5, "step_offset": 1.0}
+    neutral: ClassVar[dict[str, float]] = {
+        "time_constant": INSTANT_ACTUATOR_TIME_CONSTANT,
+        "step_offset": 1.0,
+    }
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter(
             "time_constant",
             "s",
             1.5e-3,
-            (1e-5, 1.0),
+            (INSTANT_ACTUATOR_TIME_CONSTANT, 1.0),
             "section 4.3 (mechanical time response 1.5 ms; 15 ms for the plate of [86])",
             "first-order time constant tau_a of the vibration envelope",
         ),
@@ -230,8 +321,11 @@ class ActuatorBandwidth(Effect):
     def transform_inputs(
         self, inputs: Mapping[str, np.ndarray], params: Mapping[str, float]
     ) -> dict[str, np.ndarray]:
-        """``amplitude`` replaced by its low-pass over ``time`` (unchanged without a time axis)."""
+        """``amplitude`` replaced by its low-pass over ``time`` (unchanged without a time axis,
+        and at the neutral time constant)."""
         out = dict(inputs)
+        if params["time_constant"] <= INSTANT_ACTUATOR_TIME_CONSTANT:
+            return out
         out["amplitude"] = low_pass(
             inputs["amplitude"],
             inputs["time"],
@@ -243,7 +337,15 @@ class ActuatorBandwidth(Effect):
 
 class ChargeLeakage(Effect):
     """Charge leakage through the stratum corneum: the force follows the effective voltage
-    ``v_e = tau_d s / (1 + tau_d s) v`` (Eqs. 3.19-3.23), not the applied one."""
+    ``v_e = tau_d s / (1 + tau_d s) v`` (Eqs. 3.19-3.23), not the applied one. It acts on the
+    voltage before the EV model (:meth:`transform_inputs`).
+
+    The filter restarts at every touch-down (:func:`~hcard.calibration.effects.touchdowns` of
+    the ``contact`` input; a reversal without a lift is no touch-down): the skin arrives
+    uncharged, so at contact the whole voltage acts
+    (the filter from rest) and then leaks with ``tau_d``; charge leaked in an earlier contact
+    is gone with the lift. ``tau_d`` at its upper bound (:data:`NO_LEAKAGE_TIME_CONSTANT`)
+    stands for ``tau_d = inf``: no leakage, the base exactly (the neutral value)."""
 
     name: ClassVar[str] = "charge-leakage"
     description: ClassVar[str] = (
@@ -256,28 +358,32 @@ class ChargeLeakage(Effect):
         "depends on the time since the voltage last changed"
     )
     signature: ClassVar[tuple[str, ...]] = ("voltage_history",)
-    neutral: ClassVar[dict[str, float]] = {"time_constant": 10.0}
+    neutral: ClassVar[dict[str, float]] = {"time_constant": NO_LEAKAGE_TIME_CONSTANT}
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter(
             "time_constant",
             "s",
             7.7e-3,
-            (1e-5, 10.0),
+            (1e-5, NO_LEAKAGE_TIME_CONSTANT),
             "Eq. 3.22; section 3.6.3 (tau_d = 7.7 ms), Fig. 3.13",
             "leakage time constant tau_d = (C_i + C_sc) R_sc",
         ),
     )
-    inputs: ClassVar[tuple[Variable, ...]] = (TIME,)
+    inputs: ClassVar[tuple[Variable, ...]] = (TIME, CONTACT)
     requires: ClassVar[tuple[str, ...]] = ("voltage",)
     instantaneous: ClassVar[tuple[str, ...]] = ("voltage",)
 
     def transform_inputs(
         self, inputs: Mapping[str, np.ndarray], params: Mapping[str, float]
     ) -> dict[str, np.ndarray]:
-        """``voltage`` replaced by the effective voltage of Eq. 3.22 (unchanged without a time
-        axis)."""
+        """``voltage`` replaced by the effective voltage of Eq. 3.22, restarted from rest at
+        every touch-down (unchanged without a time axis, and at the neutral time constant)."""
         out = dict(inputs)
-        out["voltage"] = high_pass(inputs["voltage"], inputs["time"], params["time_constant"])
+        tau = params["time_constant"]
+        if tau >= NO_LEAKAGE_TIME_CONSTANT:
+            return out
+        restart = touchdowns(inputs["contact"], inputs["time"])
+        out["voltage"] = high_pass(inputs["voltage"], inputs["time"], tau, restart=restart)
         return out
 
 
@@ -317,7 +423,10 @@ class AirLayer(Effect):
     def transform_output(
         self, output: np.ndarray, inputs: Mapping[str, np.ndarray], params: Mapping[str, float]
     ) -> np.ndarray:
-        """``output * d_e d / ((d_e + d_a/eps_a)(d + d_a))`` with ``d_a = d_a1 (1 N / Fn)``."""
+        """``output * d_e d / ((d_e + d_a/eps_a)(d + d_a))`` with ``d_a = d_a1 (1 N / Fn)``;
+        ``d_a1 = 0``: ``output`` unchanged."""
+        if params["air_gap"] == 0.0:
+            return output
         force = np.maximum(inputs["normal_force"], 1e-12) / REFERENCE_FORCE
         gap = params["air_gap"] / force
         return output * (
@@ -362,7 +471,10 @@ class UltrasonicSpeed(Effect):
     def transform_output(
         self, output: np.ndarray, inputs: Mapping[str, np.ndarray], params: Mapping[str, float]
     ) -> np.ndarray:
-        """``1 - (1 - mu') (U / U_ref)^a``, the reduction capped at 1 (mu' >= 0)."""
+        """``1 - (1 - mu') (U / U_ref)^a``, the reduction capped at 1 (mu' >= 0); ``a = 0``:
+        ``output`` unchanged."""
+        if params["speed_exponent"] == 0.0:
+            return output
         speed = np.maximum(np.abs(inputs["speed"]), 1e-9) / REFERENCE_SPEED
         reduction = (1.0 - output) * np.power(speed, params["speed_exponent"])
         return 1.0 - np.minimum(reduction, 1.0)
@@ -402,7 +514,10 @@ class SqueezeFilmShare(Effect):
     def transform_output(
         self, output: np.ndarray, inputs: Mapping[str, np.ndarray], params: Mapping[str, float]
     ) -> np.ndarray:
-        """``1 - (1 - mu') (1 - s (1 - p / p0))``, ``p0`` = 101 325 Pa."""
+        """``1 - (1 - mu') (1 - s (1 - p / p0))``, ``p0`` = 101 325 Pa; ``s = 0``: ``output``
+        unchanged."""
+        if params["share"] == 0.0:
+            return output
         gamma = 1.0 - params["share"] * (1.0 - inputs["pressure"] / ATMOSPHERE)
         return 1.0 - (1.0 - output) * gamma
 

@@ -58,6 +58,16 @@ def test_calibrate_writes_a_report_that_leads_with_the_held_out_error(
     )
     assert "measured at" in (out / "report.md").read_text()  # the sensor zero, rule K4
     assert report["data"]["sensor_zero"][0]["lifts"] >= 3
+    # Uncertainties from a stroke-block bootstrap by default (50 refits), stated as such; the
+    # interval holds the hidden exponent, and its spread exceeds the Jacobian's.
+    boot = report["bootstrap"]
+    assert boot["samples"] == 50 and report["uncertainty_method"].startswith("stroke-block")
+    low, high = boot["intervals_95"]["ultrasonic-speed.speed_exponent"]
+    assert low <= -0.6 <= high
+    sigma = boot["uncertainties"]["ultrasonic-speed.speed_exponent"]
+    assert sigma > boot["jacobian_uncertainties"]["ultrasonic-speed.speed_exponent"]
+    assert "Uncertainties: stroke-block bootstrap" in (out / "report.md").read_text()
+    assert "bootstrap 50/50" in result.stderr
     for figure in ("residuals.png", "fit.png"):
         assert (out / figure).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # The fitted profile loads back into the same model.
@@ -106,6 +116,8 @@ def test_calibrate_strict_exits_2_when_structure_is_left(recorded: Path, tmp_pat
             "--quiet",
             "--no-figures",
             "--no-rezero",
+            "--bootstrap",
+            "0",
             "-o",
             str(tmp_path),
         ],
@@ -128,6 +140,9 @@ def test_calibrate_strict_exits_2_when_structure_is_left(recorded: Path, tmp_pat
         ),
         (["--model", "dimensionless-group", "--param", "mu0=abc"], "--param mu0"),
         (["--model", "dimensionless-group", "--test-fraction", "150%"], "between 0 and 1"),
+        (["--model", "dimensionless-group", "--bootstrap", "1"], "--bootstrap needs at least 2"),
+        (["--model", "dimensionless-group", "--contact-threshold", "-5mN"],
+         "--contact-threshold '-5mN': must be a positive force"),
     ],
 )
 def test_calibrate_user_errors_are_one_line(

@@ -245,3 +245,55 @@ def test_p_values_count_autocorrelated_samples_once() -> None:
     # Samples that are not a time series (a table) count as independent.
     table = analyse_residuals(residual, {"time": time}, time_ordered=False)
     assert table.effective_samples == 20_000
+
+
+def _lateral(effects: tuple[str, ...] = ()):
+    from hcard.calibration.effects import augment
+    from hcard.calibration.observation import lateral_force_model
+    from hcard.plugins.registry import get_registry
+
+    registry = get_registry()
+    base = registry.get("predictor", "dimensionless-group")
+    if effects:
+        base = augment(base, [registry.calibration_effects[name] for name in effects])
+    return lateral_force_model(base)
+
+
+def test_parameters_the_data_never_move_are_held_and_the_rest_converge() -> None:
+    # No plate vibration: mu' = 1 at any psi_star (Eq. 2.33, Psi -> inf), so the lateral
+    # force is mu0 Fn + offset and the ultrasonic parameters move nothing. Kept free they
+    # left the optimiser crawling; held, the fit is ordinary least squares in mu0 and the
+    # offset, checked here against a straight-line fit of the force on the load.
+    rng = np.random.default_rng(4)
+    n = 3000
+    fn = rng.uniform(0.2, 1.5, n)
+    inputs = {"amplitude": np.zeros(n), "frequency": np.full(n, 30e3),
+              "speed": rng.uniform(0.01, 0.1, n), "normal_force": fn}
+    observed = 0.42 * fn + 0.003 + rng.normal(0.0, 2e-3, n)
+    result = fit_predictor(_lateral(), inputs, observed)
+    assert set(result.held) == {"poisson_ratio", "psi_star", "psi_star_normal_force_slope"}
+    assert result.success and result.n_free == 2
+    assert all(math.isinf(result.uncertainties[name]) for name in result.held)
+    slope, intercept = np.polyfit(fn, observed, 1)
+    assert result.params["mu0"] == pytest.approx(slope, rel=1e-6)
+    assert result.params["force_offset"] == pytest.approx(intercept, abs=1e-7)
+    assert math.isfinite(result.uncertainties["mu0"])
+    assert result.params["psi_star"] == DimensionlessGroup().params["psi_star"]  # untouched
+
+
+def test_a_time_constant_behind_a_gain_that_starts_at_zero_stays_free() -> None:
+    # Occlusion from its neutral value (gain 0): at the start its time constant moves nothing,
+    # but it does once the gain moves, so it is fitted (probed at a second point).
+    rng = np.random.default_rng(5)
+    n = 4000
+    t = np.arange(n) / 100.0  # 40 s at 100 Hz
+    fn = rng.uniform(0.2, 1.5, n)
+    inputs = {"amplitude": np.zeros(n), "frequency": np.full(n, 30e3),
+              "speed": np.full(n, 0.05), "normal_force": fn, "time": t}
+    observed = 0.4 * (1.0 + 0.3 * (1.0 - np.exp(-t / 8.0))) * fn + rng.normal(0.0, 1e-3, n)
+    model = _lateral(("occlusion-drift",)).with_params(**{"occlusion-drift.gain": 0.0})
+    free = ["mu0", "force_offset", "occlusion-drift.gain", "occlusion-drift.time_constant"]
+    result = fit_predictor(model, inputs, observed, free=free, dynamic=True)
+    assert result.held == ()
+    assert result.params["occlusion-drift.gain"] == pytest.approx(0.3, rel=0.05)
+    assert result.params["occlusion-drift.time_constant"] == pytest.approx(8.0, rel=0.05)

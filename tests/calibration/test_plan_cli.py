@@ -146,12 +146,29 @@ def test_calibrate_takes_the_profile_the_recording_names(device_recording, tmp_p
     assert profile.limits == DeviceProfile.coupled_stimulator().limits
     assert profile.observation["finger"]["model"] == "finger-friction"
     assert "held-out model error:" in result.output
+    # an EV recording has no plate vibration: the profile's UV parameter moves no sample, so
+    # it is held (fitted, it left the optimiser crawling at its evaluation cap) and says so
+    report = json.loads((tmp_path / "report.json").read_text(encoding="utf-8"))
+    assert "uv_psi_star" in report["after"]["held"]
+    assert report["after"]["success"]
+    # refits converge from the optimum (kept free, it capped 47 of 50 on a 30 s recording);
+    # the few that crawl along a shallow direction are counted and stated
+    boot = report["bootstrap"]
+    assert boot["capped"] <= 0.2 * boot["samples"]
+    assert (f"{boot['capped']} of the refits stopped" in report["uncertainty_method"]) == (
+        boot["capped"] > 0)
+    # the bootstrap does not resample it (a spread of 0 would read as exactly known)
+    assert report["bootstrap"]["held"] == report["after"]["held"]
+    assert report["bootstrap"]["uncertainties"]["uv_psi_star"] is None  # inf: JSON null
+    assert "uv_psi_star" not in report["bootstrap"]["intervals_95"]
+    assert "Held at their start values" in (tmp_path / "report.md").read_text(encoding="utf-8")
     # the same with --profile, and a bare predictor with --model
     own = tmp_path / "own.json"
     DeviceProfile.from_dict(read_measurement(device_recording / "recording.csv")
                             .conditions["profile"]["content"]).save(own)
     again = run("calibrate", device_recording / "recording.csv", "--profile", own, "-o",
-                tmp_path / "again", "-q", "--no-figures", "--effect", "air-layer")
+                tmp_path / "again", "-q", "--no-figures", "--effect", "air-layer",
+                "--bootstrap", "0")
     assert again.exit_code == 0, again.output
     assert DeviceProfile.load(tmp_path / "again" / "profile.json").calibration["base"][
         "kind"] == "profile"

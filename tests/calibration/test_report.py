@@ -223,3 +223,43 @@ def test_profile_missing_file_and_bad_json(tmp_path):
     bad.write_text("{not json", encoding="utf-8")
     with pytest.raises(PredictorError, match=r"bad-profile\.json"):
         DeviceProfile.load(bad)
+
+
+def test_report_states_the_runner_up_noise_model_power_and_uncertainty(result, report):
+    text = report.markdown.read_text(encoding="utf-8")
+    content = json.loads(report.json.read_text(encoding="utf-8"))
+    comparison = result.comparison
+    assert comparison is not None
+    _chosen, runner = comparison.names()
+    assert "## Runner-up" in text and f"{runner} (runner-up)" in text
+    assert f"{100 * comparison.rmse_margin:+.1f} %" in text
+    # the margin is the two models' held-out RMSEs, recomputed here from the table's numbers
+    assert content["runner_up"]["rmse_margin"] == pytest.approx(
+        content["runner_up"]["runner_up_rmse"] / result.after.test_rmse - 1.0
+    )
+    # the noise model is measured (the recording is in contact throughout: none) and stated
+    assert "Noise model: no lift long enough" in text
+    assert content["structure"]["noise"] is None
+    assert "Power: with" in text and "80 % probability" in text
+    detectable = content["structure"]["detectable_eta2_at_80_percent_power"]
+    assert set(detectable) == set(result.after.analysis.regressors)
+    # without a bootstrap the report says the uncertainties are the Jacobian's, and why
+    assert "Uncertainties: sigma^2 (J^T J)^-1 of the fit" in text
+    assert content["bootstrap"] is None
+
+
+def test_report_with_a_bootstrap_states_it(result, tmp_path):
+    from hcard.calibration.loop import with_bootstrap
+
+    lines: list[str] = []
+    booted = with_bootstrap(result, 4, seed=3, progress=lines.append)
+    assert lines[-1].startswith("bootstrap 4/4")
+    files = write_report(booted, tmp_path / "boot", figures=False)
+    text = files.markdown.read_text(encoding="utf-8")
+    assert "Uncertainties: stroke-block bootstrap" in text and "4 times (seed 3)" in text
+    content = json.loads(files.json.read_text(encoding="utf-8"))
+    name = "ultrasonic-speed.speed_exponent"
+    values = booted.bootstrap.values[name]
+    assert content["bootstrap"]["uncertainties"][name] == pytest.approx(np.std(values, ddof=1))
+    _value, sigma, _ = booted.effect_parameters("ultrasonic-speed")["speed_exponent"]
+    assert sigma == pytest.approx(np.std(values, ddof=1))

@@ -173,12 +173,20 @@ class FingerFriction(Predictor):
         """``mu(t)``: the friction coefficient at 1 N and the peak speed after ``t`` s of
         sliding (first-order rise from ``friction_initial`` to ``friction_occluded``)."""
         t = _check("contact_time", np.asarray(contact_time, dtype=np.float64), "s", allow_inf=True)
+        return self._occlusion(t)
+
+    def _occlusion(self, t: np.ndarray) -> np.ndarray:
+        """:meth:`occlusion` of checked contact times ``t`` (s)."""
         mu0, mu_occ = self["friction_initial"], self["friction_occluded"]
         return mu_occ - (mu_occ - mu0) * np.exp(-t / self["occlusion_time"])
 
     def speed_factor(self, speed: Any) -> np.ndarray:
         """``g(U)``: friction relative to its value at the peak speed (<= 1, Fig. 1.12)."""
         u = _check("speed", np.asarray(speed, dtype=np.float64), "m/s")
+        return self._speed_factor(u)
+
+    def _speed_factor(self, u: np.ndarray) -> np.ndarray:
+        """:meth:`speed_factor` of checked speeds ``u`` (m/s)."""
         x = u / self["peak_speed"]
         s = self["speed_sensitivity"]
         return 1.0 - s + s * 2.0 * x / (1.0 + x * x)
@@ -191,6 +199,13 @@ class FingerFriction(Predictor):
             raise PredictorError("normal_force: the friction coefficient needs Fn > 0")
         return self._forward(**arrays) / force
 
+    def friction_coefficient_trusted(self, **inputs: Any) -> np.ndarray:
+        """:meth:`friction_coefficient` for inputs already checked (finite; ``normal_force``
+        > 0, ``speed`` and ``contact_time`` >= 0): the same numbers without the checks."""
+        arrays = self._trusted_inputs(inputs)
+        force = arrays["normal_force"]
+        return self._lateral(force, arrays["speed"], arrays["contact_time"]) / force
+
     # -- forward and inverse ----------------------------------------------------------------
     def _prefactor(self, speed: np.ndarray, contact_time: np.ndarray) -> np.ndarray:
         return self.occlusion(contact_time) * self.speed_factor(speed) * REFERENCE_FORCE
@@ -198,6 +213,19 @@ class FingerFriction(Predictor):
     def _forward(self, **inputs: np.ndarray) -> np.ndarray:
         force = _check("normal_force", inputs["normal_force"], "N")
         prefactor = self._prefactor(inputs["speed"], inputs["contact_time"])
+        return prefactor * np.power(force / REFERENCE_FORCE, self["load_index"])
+
+    def forward_trusted(self, **inputs: Any) -> np.ndarray:
+        """:meth:`forward` for inputs already checked (finite, >= 0; ``contact_time`` may be
+        ``inf``): the same numbers without the input checks."""
+        arrays = self._trusted_inputs(inputs)
+        return self._lateral(arrays["normal_force"], arrays["speed"], arrays["contact_time"])
+
+    def _lateral(self, force: np.ndarray, speed: np.ndarray,
+                 contact_time: np.ndarray) -> np.ndarray:
+        """``F_l`` (N) of checked inputs: :meth:`occlusion` (Fig. 1.11) times
+        :meth:`speed_factor` (Fig. 1.12) times the load power law (Eqs. 1.7/2.35)."""
+        prefactor = self._occlusion(contact_time) * self._speed_factor(speed) * REFERENCE_FORCE
         return prefactor * np.power(force / REFERENCE_FORCE, self["load_index"])
 
     def _inverse(self, target: np.ndarray, **inputs: np.ndarray) -> np.ndarray:

@@ -19,7 +19,7 @@ corneum and only the high-passed part of ``v`` acts (Eq. 3.22, :mod:`.leakage`).
 from __future__ import annotations
 
 from abc import ABCMeta, abstractmethod
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -66,12 +66,32 @@ class _LayeredForce(Predictor, metaclass=ABCMeta):
     def coefficient(self) -> float:
         """``F_e / v^2`` in N/V^2 (defined by each force law)."""
 
+    @property
+    def _coefficient(self) -> float:
+        """:attr:`coefficient`, computed once per set of parameter values (N/V^2)."""
+        cached = self.__dict__.get("_coefficient_cache")
+        if cached is not None and cached[0] is self._values:
+            return cached[1]
+        value = self.coefficient
+        self.__dict__["_coefficient_cache"] = (self._values, value)
+        return value
+
     def _forward(self, **inputs: np.ndarray) -> np.ndarray:
         voltage = check_finite("voltage", inputs["voltage"])
-        return self.coefficient * np.square(voltage)
+        return self._coefficient * np.square(voltage)
 
     def _inverse(self, target: np.ndarray, **inputs: np.ndarray) -> np.ndarray:
-        return voltage_for_force(target, np.asarray(self.coefficient))
+        return voltage_for_force(target, np.asarray(self._coefficient))
+
+    def forward_trusted(self, **inputs: Any) -> np.ndarray:
+        """:meth:`forward` for a finite ``voltage`` (V) already checked: ``coefficient v^2``
+        (N) without the input checks."""
+        return self._coefficient * np.square(np.asarray(inputs["voltage"], dtype=np.float64))
+
+    def inverse_trusted(self, target: Any, **inputs: Any) -> np.ndarray:
+        """:meth:`inverse` for a finite force ``target`` >= 0 (N) already checked: the voltage
+        amplitude ``sqrt(F / coefficient)`` (V) without the input checks."""
+        return np.sqrt(np.asarray(target, dtype=np.float64) / np.asarray(self._coefficient))
 
 
 class StrongTroxel(_LayeredForce):

@@ -25,11 +25,20 @@ fit ``Psi*(Fn) = 1.80 - 0.094 Fn`` (Fn in N, Fig. 2.39). The predictor carries `
 The inverse is closed form: the amplitude giving a target ``mu'`` at the current speed,
 ``w = U / (Psi f mu0 (1 + nu))`` with ``Psi = -Psi* ln(1 - mu')``; it is what velocity-compensated
 rendering uses.
+
+Range. The thesis states the correlation for amplitudes above 1 um only: "the data at smaller
+amplitudes diverge from the correlation since there is a significant dependence on [Young's
+moduli and normal force] that is not taken into account" (section 2.7.1) and "the vibrational
+amplitude must be > 1 um for the range of frequencies examined" (section 2.10).
+:data:`EQ_2_33_MIN_AMPLITUDE` carries that bound; :func:`hcard.physics.actuation.actuate`
+flags every frame whose chosen amplitude falls below it. The spring-slider
+(:mod:`.spring_slider`, Eqs. 2.19-2.28) has no such bound and an amplitude inverse of its own.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
@@ -37,6 +46,10 @@ from scipy.optimize import minimize_scalar
 
 from hcard.physics import Parameter, Predictor, PredictorError, Variable
 from hcard_builtins.physics.ultrasonic._checks import check_inputs
+
+EQ_2_33_MIN_AMPLITUDE = 1e-6
+"""Smallest peak-to-peak amplitude, m, for which the thesis states Eq. 2.33 (sections 2.7.1,
+2.10: w > 1 um)."""
 
 
 class PsiStarPreset(NamedTuple):
@@ -140,6 +153,9 @@ class DimensionlessGroup(Predictor):
     )
     output: ClassVar[Variable] = Variable("relative_friction", "", "mu' = mu / mu0")
     inverse_input: ClassVar[str | None] = "amplitude"
+    valid_amplitude_min: ClassVar[float] = EQ_2_33_MIN_AMPLITUDE
+    """Below this amplitude (m) the model is outside its stated range (sections 2.7.1, 2.10)."""
+    valid_amplitude_source: ClassVar[str] = "Eq. 2.33 holds for w > 1 um (sections 2.7.1, 2.10)"
 
     @classmethod
     def from_preset(cls, preset: str, **params: float) -> DimensionlessGroup:
@@ -174,6 +190,11 @@ class DimensionlessGroup(Predictor):
         force = check_inputs(self.name, {"normal_force": normal_force}, positive=())[
             "normal_force"
         ]
+        return self._psi_star(force)
+
+    def _psi_star(self, force: np.ndarray) -> np.ndarray:
+        """``Psi*(Fn)`` (Fig. 2.39) at checked forces ``force`` (N); :class:`PredictorError`
+        where it is not positive."""
         value = self["psi_star"] + self["psi_star_normal_force_slope"] * force
         if np.any(value <= 0):
             bad = force[value <= 0].flat[0]
@@ -184,22 +205,54 @@ class DimensionlessGroup(Predictor):
             )
         return value
 
+    def _psi_star_trusted(self, force: np.ndarray) -> np.ndarray | float:
+        """:meth:`_psi_star` for finite forces: without a force slope ``Psi*`` is the constant
+        ``psi_star`` (``psi_star + 0 Fn`` is exactly that, and its bounds keep it positive)."""
+        values = self._values
+        slope, psi_star = values["psi_star_normal_force_slope"], values["psi_star"]
+        if isinstance(slope, float) and slope == 0.0 and isinstance(psi_star, float):
+            return psi_star
+        return self._psi_star(force)
+
     def _checked(self, arrays: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         return check_inputs(self.name, arrays)
 
-    def _psi(self, arrays: dict[str, np.ndarray]) -> np.ndarray:
-        denominator = (
-            arrays["amplitude"] * arrays["frequency"] * self["mu0"] * (1 + self["poisson_ratio"])
+    def _psi(self, arrays: Mapping[str, np.ndarray]) -> np.ndarray:
+        """Eq. 2.30 of checked inputs: ``U / (w f mu0 (1 + nu))``, ``inf`` where ``w f = 0``
+        (no division there)."""
+        values = self._values
+        denominator = np.asarray(  # an array even for scalar inputs (0-d)
+            arrays["amplitude"] * arrays["frequency"] * values["mu0"]
+            * (1 + values["poisson_ratio"])
         )
-        with np.errstate(divide="ignore", invalid="ignore"):
-            value = arrays["speed"] / denominator
-        return np.where(denominator > 0, value, np.inf)
+        speed = arrays["speed"]
+        shape = denominator.shape
+        speed_shape = getattr(speed, "shape", ())
+        if speed_shape != shape:
+            shape = np.broadcast_shapes(speed_shape, shape)
+        psi = np.empty(shape)
+        if denominator.size and np.minimum.reduce(denominator, axis=None) > 0:
+            return np.divide(speed, denominator, out=psi)  # vibrating everywhere
+        psi.fill(np.inf)
+        np.divide(speed, denominator, out=psi, where=denominator > 0)
+        return psi
 
     # -- maps ------------------------------------------------------------------------------
     def _forward(self, **inputs: np.ndarray) -> np.ndarray:
         arrays = self._checked(inputs)
         psi_star = self.psi_star_at(arrays["normal_force"])
         return -np.expm1(-self._psi(arrays) / psi_star)
+
+    def forward_trusted(self, **inputs: Any) -> np.ndarray:
+        """:meth:`forward` (Eqs. 2.30, 2.33) for inputs already checked (finite, >= 0; see
+        :meth:`Predictor.forward_trusted`): the same numbers without the input checks."""
+        arrays = self._trusted_inputs(inputs)
+        psi_star = self._psi_star_trusted(arrays["normal_force"])
+        mu = self._psi(arrays)  # a new array: computed in place, as -expm1(-Psi / Psi*)
+        np.negative(mu, out=mu)
+        np.divide(mu, psi_star, out=mu)
+        np.expm1(mu, out=mu)
+        return np.negative(mu, out=mu)
 
     def _inverse(self, target: np.ndarray, **inputs: np.ndarray) -> np.ndarray:
         """Amplitude (m) for a target ``mu'`` in (0, 1]: ``w = U / (Psi f mu0 (1 + nu))`` with
@@ -215,8 +268,24 @@ class DimensionlessGroup(Predictor):
         goal = arrays.pop("target")
         if np.any(arrays["frequency"] <= 0):
             raise PredictorError(f"{self.name}: input frequency must be > 0 Hz for the inverse")
-        psi_star = self.psi_star_at(arrays["normal_force"])
+        return self._amplitude(goal, arrays, self.psi_star_at(arrays["normal_force"]))
+
+    def inverse_trusted(self, target: Any, **inputs: Any) -> np.ndarray:
+        """:meth:`inverse` for a target in (0, 1] and inputs already checked (finite, >= 0,
+        frequency > 0; see :meth:`Predictor.inverse_trusted`): the same numbers without the
+        input checks."""
+        arrays = self._trusted_inputs({**inputs, "amplitude": 0.0})
+        return self._amplitude(np.asarray(target, dtype=np.float64), arrays,
+                               self._psi_star_trusted(arrays["normal_force"]))
+
+    def _amplitude(self, goal: np.ndarray, arrays: Mapping[str, np.ndarray],
+                   psi_star: np.ndarray | float) -> np.ndarray:
+        """The inverse of Eq. 2.33 through Eq. 2.30: ``w = U / (Psi f mu0 (1 + nu))`` with
+        ``Psi = -Psi* ln(1 - mu')`` (m) for checked ``goal`` (mu') and inputs."""
         with np.errstate(divide="ignore"):
             psi = -psi_star * np.log1p(-goal)
-        scale = arrays["frequency"] * self["mu0"] * (1 + self["poisson_ratio"])
+        frequency = arrays["frequency"]
+        if np.ndim(frequency) == 0:  # one plate frequency: the same product, in floats
+            frequency = float(frequency)
+        scale = frequency * self["mu0"] * (1 + self["poisson_ratio"])
         return arrays["speed"] / (psi * scale)

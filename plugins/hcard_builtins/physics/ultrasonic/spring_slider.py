@@ -80,6 +80,11 @@ _NEWTON_ITERATIONS = 60
 _NEWTON_TOLERANCE = 1e-13
 _FIXED_POINT_BISECTIONS = 36
 
+INVERSE_DOUBLINGS = 40
+"""Doublings of the amplitude above ``w_c`` tried to bracket a target (up to ``w_c 2^40``)."""
+INVERSE_BISECTIONS = 26
+"""Halvings of the one-octave bracket in ``log w``: amplitude to a relative 1e-8."""
+
 
 def contact_offset(ratio: Any) -> np.ndarray:
     """The normalised preload ``s = h / (w/2)`` for ``rho = Fn / (kn w/2)`` (Eq. 2.28).
@@ -220,9 +225,9 @@ def _contact(
 ) -> tuple[np.ndarray, _Contact]:
     """Mask of intermittent points (input shape) and their :class:`_Contact` (flattened)."""
     half = amplitude / 2
-    with np.errstate(divide="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore"):  # 0/0 at w = Fn = 0
         ratio = normal_force / (normal_stiffness * half)
-    mask = (ratio < 1) & (frequency > 0)
+    mask = (ratio > 0) & (ratio < 1) & (frequency > 0)  # Fn = 0: the vanishing-load limit, 1
     s = contact_offset(ratio[mask])
     recovery = lateral_recovery_speed[mask]
     contact = _Contact(
@@ -243,7 +248,7 @@ def _checked(model: str, inputs: dict[str, Any]) -> dict[str, np.ndarray]:
     return check_inputs(
         model,
         inputs,
-        positive=("normal_force", "normal_stiffness", "lateral_stiffness", "mu0"),
+        positive=("normal_stiffness", "lateral_stiffness", "mu0"),
     )
 
 
@@ -282,7 +287,9 @@ def relative_friction(
     All arguments broadcast together, parameters included, so a calibration can vary them per
     point. Units: amplitude (peak-to-peak) m, frequency Hz, speed m/s, normal force N,
     stiffnesses N/m, recovery speed m/s (0: instantaneous, Eq. 2.26). ``mu' = 1`` in full
-    contact (``w/2 <= Fn/kn``) and for ``f = 0``.
+    contact (``w/2 <= Fn/kn``), for ``f = 0``, and for ``Fn = 0``, the limit of a vanishing
+    load (the contact shrinks to the top of the stroke, where the slider slips throughout:
+    ``mu'`` is already 1 below ~1e-4 N at 20 mm/s, 38 kHz, 2 um).
     """
     arrays = _checked(
         "spring-slider",
@@ -342,7 +349,7 @@ class SpringSlider(Predictor):
         Variable("normal_force", "N", "applied normal force Fn (Fig. 2.25: 0.5 N)", 0.5),
     )
     output: ClassVar[Variable] = Variable("relative_friction", "", "mu' = mu / mu0")
-    inverse_input: ClassVar[str | None] = None
+    inverse_input: ClassVar[str | None] = "amplitude"
 
     samples: ClassVar[int] = SAMPLES
     """Phase samples per contact interval."""
@@ -352,6 +359,75 @@ class SpringSlider(Predictor):
 
     def _forward(self, **inputs: np.ndarray) -> np.ndarray:
         return relative_friction(**inputs, **self._params(), samples=self.samples)
+
+    def _inverse(self, target: np.ndarray, **inputs: np.ndarray) -> np.ndarray:
+        """Peak-to-peak amplitude (m) giving the target ``mu'`` in (0, 1], found numerically.
+
+        Unlike the dimensionless group (Eq. 2.33, stated for w > 1 um) this holds at any
+        amplitude, so velocity compensation through it is valid over the whole range a device
+        plays. ``mu' = 1`` needs no vibration (0 m). Below the critical amplitude
+        ``w_c = 2 Fn / kn`` (Eq. 2.20) contact is never lost and ``mu' = 1``; above it ``mu'``
+        falls with the amplitude, so the answer is bracketed between ``w_c`` and ``w_c``
+        doubled until ``mu'`` is at or below the target, then bisected in ``log w``
+        (:data:`INVERSE_BISECTIONS` halvings: relative precision 1e-8). At a slow finger
+        ``mu'`` drops at ``w_c`` from 1 straight to a value well below 1 (0.29 at 5 mm/s,
+        38.2 kHz, 0.5 N with the defaults): targets inside that gap cannot be rendered at any
+        amplitude, and the amplitude whose friction is nearer (0 or just above ``w_c``) is
+        returned; :func:`hcard.physics.actuation.actuate` reports such frames as unreachable.
+        """
+        goal = np.asarray(target, dtype=np.float64)
+        outside = ~((goal > 0) & (goal <= 1))
+        if np.any(outside):
+            raise PredictorError(
+                f"{self.name}: target relative_friction must be in (0, 1], got "
+                f"{goal[outside].flat[0]:g} (mu' = 0 needs an infinite amplitude)"
+            )
+        arrays = _checked(self.name, {**inputs, "target": goal, **self._params()})
+        goal = arrays.pop("target")
+        # At Fn = 0 there is no friction to lower and mu' = 1 at any amplitude: no vibration.
+        wanted = (goal < 1) & (arrays["normal_force"] > 0)
+        moving = (arrays["speed"] > 0) & (arrays["frequency"] > 0)
+        if np.any(wanted & ~moving):
+            raise PredictorError(
+                f"{self.name}: inputs speed and frequency must be > 0 for a target below 1 "
+                "(a resting finger under vibration has mu' = 0 at any amplitude above w_c)"
+            )
+        out = np.zeros(goal.shape)
+        if not np.any(wanted):
+            return out
+        picked = {name: value[wanted] for name, value in arrays.items()}
+        picked.pop("amplitude", None)
+        aim = goal[wanted]
+        critical = 2.0 * picked["normal_force"] / picked["normal_stiffness"]
+
+        def friction(amplitude: np.ndarray) -> np.ndarray:
+            return relative_friction(amplitude, **{
+                k: v for k, v in picked.items() if k != "lateral_recovery_speed"
+            }, lateral_recovery_speed=picked["lateral_recovery_speed"], samples=self.samples)
+
+        low = np.log(critical)
+        high = np.log(2.0 * critical)
+        for _ in range(INVERSE_DOUBLINGS):
+            above = friction(np.exp(high)) > aim
+            if not above.any():
+                break
+            low = np.where(above, high, low)
+            high = np.where(above, high + math.log(2.0), high)
+        else:
+            raise PredictorError(
+                f"{self.name}: no amplitude up to {math.exp(float(high.max())):g} m reaches "
+                f"target relative_friction {float(aim.min()):g}"
+            )
+        for _ in range(INVERSE_BISECTIONS):
+            middle = 0.5 * (low + high)
+            above = friction(np.exp(middle)) > aim
+            low = np.where(above, middle, low)
+            high = np.where(above, high, middle)
+        # mu' jumps at w_c (from 1 to well below at a slow finger): a target inside the jump is
+        # reached by neither side; give the side nearer to it (no vibration, or just above w_c).
+        reached = friction(np.exp(high))
+        out[wanted] = np.where(1.0 - aim < np.abs(reached - aim), 0.0, np.exp(high))
+        return out
 
     def _prepared(
         self, inputs: dict[str, Any]
