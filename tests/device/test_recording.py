@@ -135,3 +135,30 @@ def test_an_uploaded_profile_is_named_by_its_digest():
     assert record["source"] == "host" and record["name"] == "fitted"
     assert record["sha256"] == hashlib.sha256(data).hexdigest()
     assert record["content"]["format"] == "hcard-device-profile/2"
+
+
+@pytest.mark.parametrize("enabled_before", [True, False])
+def test_the_collector_rests_while_the_session_streams_and_is_restored(enabled_before):
+    """A full collection in a large process pauses the host for 0.5 s, longer than the 32 ms
+    of reports the device keeps: play() keeps the cyclic collector off while it streams and
+    leaves it as it found it."""
+    import gc
+
+    seen: list[bool] = []
+    with open_device("sim://evita") as driver:
+        send = driver.send_finger
+
+        def watched_send(*args, **kwargs):
+            seen.append(gc.isenabled())
+            return send(*args, **kwargs)
+
+        driver.send_finger = watched_send
+        (gc.enable if enabled_before else gc.disable)()
+        try:
+            result = play(driver, CARD, back_and_forth())
+            after = gc.isenabled()
+        finally:
+            gc.enable()
+    assert len(seen) == 61 and not any(seen)
+    assert after is enabled_before
+    assert len(result.states) > 500
