@@ -62,11 +62,12 @@ class CalibrationData:
     Attributes:
         inputs: model inputs by name, SI units, each shape (n,): ``normal_force`` (N),
             ``time`` (s since the recording began), ``contact_time`` (s since the finger last
-            touched down, 0 out of contact), ``stroke`` (strokes since the finger last
-            rested), ``pressure`` (Pa), and when recorded ``amplitude`` (m, peak-to-peak),
-            ``voltage`` (V), ``speed`` (m/s, magnitude), ``plate_frequency`` (Hz: the plate's
-            vibration frequency, from the ``frequency`` column or the sidecar; a model's
-            ``frequency`` input when the model takes an ``amplitude``).
+            touched down, 0 out of contact), ``occlusion_time`` (s in contact since the
+            recording began, lifts excluded: the occlusion clock), ``stroke`` (strokes since
+            the finger last rested), ``pressure`` (Pa), and when recorded ``amplitude`` (m,
+            peak-to-peak), ``voltage`` (V), ``speed`` (m/s, magnitude), ``plate_frequency``
+            (Hz: the plate's vibration frequency, from the ``frequency`` column or the
+            sidecar; a model's ``frequency`` input when the model takes an ``amplitude``).
         observed: lateral (friction) force opposing the motion, N, shape (n,): the recorded
             force signed by the direction of the speed when there is a speed column, else
             its magnitude.
@@ -172,6 +173,15 @@ finger's load changes slowly or in steps, and a model fed the raw force carries 
 its prediction, where it correlates with the recorded force (errors in the variables) and shows
 as residual structure against the normal force. A median keeps the steps of a load that
 changes from stroke to stroke where a mean would smear them."""
+
+
+def accumulated_contact_time(t: np.ndarray, contact: np.ndarray) -> np.ndarray:
+    """Time spent in contact up to each sample, s: the sum of the sample intervals that end in
+    contact (the dynamic occlusion time of Fig. 1.11b, which stops while the finger is
+    lifted). ``t`` in s, ascending; ``contact`` boolean, same shape."""
+    t = np.asarray(t, dtype=np.float64)
+    steps = np.diff(t, prepend=t[:1]) * np.asarray(contact, dtype=bool)
+    return np.cumsum(steps)
 
 
 def smoothed_within(values: np.ndarray, t: np.ndarray, runs: np.ndarray,
@@ -410,6 +420,7 @@ def prepare(
         began[starts] = starts
         began = np.maximum.accumulate(began)
         contact_time = np.where(contact, m.t - m.t[began], 0.0)
+        occlusion_time = accumulated_contact_time(m.t, contact)
         columns_of = {
             # Out of contact the recorded force is sensor noise around 0, which some models
             # refuse (Eq. 4.1 divides by Fn): those samples, never fitted, take the threshold.
@@ -420,6 +431,7 @@ def prepare(
             ),
             "time": t,
             "contact_time": contact_time,
+            "occlusion_time": occlusion_time,
             "stroke": strokes_since_rest(m.t, ids, rest_s).astype(np.float64),
             "pressure": np.full(n, float(pressure)),
             "observed": force,
@@ -456,6 +468,7 @@ def prepare(
         "normal_force",
         "time",
         "contact_time",
+        "occlusion_time",
         "stroke",
         "pressure",
         "amplitude",
@@ -473,6 +486,7 @@ def prepare(
         "pressure",
         "plate_frequency",
         "time",
+        "occlusion_time",
         "stroke",
         "amplitude_history",
         "voltage_history",

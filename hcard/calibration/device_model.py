@@ -202,6 +202,7 @@ def _model_class(profile: DeviceProfile, effects: tuple[Effect, ...], envelope: 
             for fitted in self._finger_effects:
                 arrays = fitted.effect.transform_inputs(arrays, fitted.values)
             fn = arrays["normal_force"]
+            reaction = fn
             total = np.ones(np.broadcast(*arrays.values()).shape)
             if self._uv is not None:
                 total = total * self._uv.forward(**_take(self._uv, arrays))
@@ -214,10 +215,15 @@ def _model_class(profile: DeviceProfile, effects: tuple[Effect, ...], envelope: 
                 force = self._ev.forward(**_take(self._ev, effective))
                 with np.errstate(divide="ignore", invalid="ignore"):
                     total = total * np.where(fn > 0, 1.0 + force / fn, 1.0)
+                reaction = fn + force  # Eq. 3.1: the attraction adds to the normal force
             if self._finger is not None:
                 total = total * self._finger.forward(**_take(self._finger, arrays))
+            # the finger's effects act on the friction as a whole, a load index on the
+            # reaction force Fn + F_e (Eq. 2.35 with Eq. 3.1)
+            finger_inputs = {**arrays, "reaction_force": reaction}
             for fitted in self._finger_effects:
-                total = fitted.effect.transform_output(total, arrays, fitted.values)
+                total = fitted.effect.transform_output_of(
+                    output_variable.name, total, finger_inputs, fitted.values)
             return total
 
     ProfileModel.__name__ = ProfileModel.__qualname__ = f"ProfileModel_{base.name}"

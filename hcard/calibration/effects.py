@@ -178,6 +178,21 @@ class Effect:
         """The augmented output from the base output (default: unchanged), output unit."""
         return output
 
+    def transform_output_of(
+        self,
+        quantity: str,
+        output: np.ndarray,
+        inputs: Mapping[str, np.ndarray],
+        params: Mapping[str, float],
+    ) -> np.ndarray:
+        """:meth:`transform_output` for a base whose output is ``quantity`` (its
+        :class:`~hcard.physics.Variable` name, e.g. ``"electrostatic_force"``): what the hosts
+        call. An effect whose form depends on what the output is (a load index acts on the
+        reaction force ``Fn + F_e``, which an electrostatic-force output is part of) overrides
+        this; the default is :meth:`transform_output`. Hosts that know the reaction force
+        pass it in ``inputs`` as ``reaction_force`` (N)."""
+        return self.transform_output(output, inputs, params)
+
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name!r}>"
 
@@ -227,8 +242,8 @@ def augment(base: Predictor, effects: Sequence[Effect]) -> Predictor:
     - forward: each effect's :meth:`Effect.transform_inputs` in order, then each effect's
       :meth:`Effect.transform_params` in order (starting from the base's values), the base
       forward map on the base's inputs at those parameter values (:func:`forward_per_sample`),
-      then each effect's :meth:`Effect.transform_output` in order (given the transformed
-      inputs);
+      then each effect's :meth:`Effect.transform_output_of` in order (given the base's output
+      name and the transformed inputs);
     - output: the base's; name ``"<base>+<effect>+..."``.
 
     With no effects the forward map is the base's exactly, and so is the inverse; with effects
@@ -265,6 +280,7 @@ def augment(base: Predictor, effects: Sequence[Effect]) -> Predictor:
     base_input_names = tuple(v.name for v in base.inputs)
     per_sample = samplewise_parameters(base)
     prototype = base
+    quantity = base.output.name
 
     class Augmented(Predictor):
         kind: ClassVar[str] = prototype.kind
@@ -304,7 +320,7 @@ def augment(base: Predictor, effects: Sequence[Effect]) -> Predictor:
                 self._base, base_values, {k: arrays[k] for k in base_input_names}
             )
             for effect, values in zip(effects, self._effect_values, strict=True):
-                out = effect.transform_output(out, arrays, values)
+                out = effect.transform_output_of(quantity, out, arrays, values)
             return out
 
         def _inverse(self, target: np.ndarray, **inputs: np.ndarray) -> np.ndarray:

@@ -24,6 +24,8 @@ MEASUREMENTS: dict[str, str] = {
     "time": "a longer recording with long rests out of contact (time runs on through a rest "
             "while the stroke count restarts)",
     "contact_time": "strokes of several durations",
+    "occlusion_time": "long rests out of contact between runs of strokes (the occlusion time "
+                      "stops in a rest while the time runs on)",
     "normal_force": "strokes at several normal forces, over a wider range",
     "speed": "strokes at several speeds, over a wider range",
     "amplitude": "strokes at several vibration amplitudes",

@@ -45,7 +45,13 @@ def test_calibrate_writes_a_report_that_leads_with_the_held_out_error(
     assert result.exit_code == 0, result.output
     lines = result.stdout.splitlines()
     assert lines[0].startswith("held-out RMSE ") and "Added to dimensionless-group" in lines[0]
-    assert lines[1].strip().startswith("ultrasonic-speed: speed_exponent = -0.6")
+    effect_line = lines[1].strip()
+    assert effect_line.startswith("ultrasonic-speed: speed_exponent = ")
+    # the hidden law is (U / 20 mm/s)^-0.6: both its exponent and its anchor come back
+    exponent = float(effect_line.split("speed_exponent = ")[1].split()[0])
+    anchor = float(effect_line.split("reference_speed = ")[1].split()[0])
+    assert exponent == pytest.approx(-0.6, abs=0.01)
+    assert anchor == pytest.approx(0.020, rel=0.02)
     assert "round 1: ultrasonic-speed" in result.stderr  # progress, one line per fit
     report = json.loads((out / "report.json").read_text())
     before, after = report["held_out_rmse_n"]["before"], report["held_out_rmse_n"]["after"]

@@ -63,11 +63,13 @@ def test_effects_go_to_their_channels_and_come_back_as_a_profile():
     assert [(f.name, f.channel) for f in profile.effects] == [("air-layer", "ev"),
                                                                ("load-index", "finger")]
     assert profile.predictor["ev_area"] == pytest.approx(8e-5)
-    # the model's total is the profile's relative friction times the finger effect (Eq. 2.35)
+    # the model's total is the profile's relative friction times the finger effect: Eq. 2.35
+    # on the reaction force R = Fn + F_e = Fn ev (Eq. 3.1), not on Fn alone
     voltage, fn = np.array([800.0, 1600.0]), np.array([0.3, 0.9])
     uv, ev = profile.forward(0.0, voltage, 0.05, fn)
+    assert np.all(ev > 1.01)
     total = fitted.forward(amplitude=0.0, voltage=voltage, speed=0.05, normal_force=fn)
-    np.testing.assert_allclose(total, uv * ev * fn ** (0.8 - 1.0), rtol=1e-9)
+    np.testing.assert_allclose(total, uv * ev * (fn * ev) ** (0.8 - 1.0), rtol=1e-9)
 
 
 def test_what_a_profile_model_refuses():

@@ -12,6 +12,7 @@ import math
 import numpy as np
 import pytest
 
+from hcard.calibration.dataset import accumulated_contact_time
 from hcard.calibration.effects import (
     SAMPLEWISE_PARAMETERS,
     augment,
@@ -21,8 +22,9 @@ from hcard.calibration.fit import fit_predictor
 from hcard.calibration.observation import lateral_force_model
 from hcard.physics import Predictor, PredictorError
 from hcard.plugins.registry import get_registry
-from hcard_builtins.effects import OcclusionDrift
+from hcard_builtins.effects import LoadIndex, OcclusionDrift
 from hcard_builtins.physics.coupled import Coupled
+from hcard_builtins.physics.electrovibration import Kaczmarek
 from hcard_builtins.physics.ultrasonic import DimensionlessGroup
 
 PLATE_HZ = 27_500.0
@@ -126,7 +128,8 @@ def thesis_recording(seed: int, noise_n: float) -> tuple[dict[str, np.ndarray], 
     psi = speed[vibrating] / (amplitude[vibrating] * PLATE_HZ * mu0_t[vibrating] * (1 + POISSON))
     reduction[vibrating] = 1.0 - np.exp(-psi / TRUTH["psi_star"])
     lateral = mu0_t * force * reduction + rng.normal(0.0, noise_n, N)
-    inputs = {"time": t, "amplitude": amplitude, "speed": speed, "normal_force": force}
+    # the finger never lifts: its occlusion time is the recording time
+    inputs = {"occlusion_time": t, "amplitude": amplitude, "speed": speed, "normal_force": force}
     return inputs, lateral
 
 
@@ -215,5 +218,40 @@ def test_occlusion_keeps_the_output_form_on_a_base_that_holds_mu0_as_one_number(
     inputs = {"amplitude": np.full(3, 2e-6), "speed": np.full(3, 0.05),
               "normal_force": np.full(3, 0.5), "voltage": np.full(3, 200.0)}
     factor = 1.0 + 0.5 * (1.0 - np.exp(-t / 10.0))
-    assert np.allclose(model.forward(time=t, **inputs), base.forward(**inputs) * factor,
+    assert np.allclose(model.forward(occlusion_time=t, **inputs), base.forward(**inputs) * factor,
                        rtol=1e-12, atol=0)
+
+
+@pytest.mark.parametrize("index", [0.67, 0.85, 1.2])
+def test_the_load_index_on_an_electrostatic_base_is_a_power_of_the_whole_reaction(index):
+    """Eq. 2.35 on R = Fn + F_e (Eq. 3.1): the lateral force of an EV model with a load index
+    is k R^n; the output-only form mu (Fn + F_e Fn^(n-1)) is off by several per cent here."""
+    base = Kaczmarek()
+    model = lateral_force_model(augment(base, [LoadIndex()])).with_params(
+        **{"load-index.load_index": index, "friction_coefficient": 0.6})
+    voltage = np.array([0.0, 200.0, 500.0, 1000.0, 1500.0])
+    fn = np.array([0.05, 0.1, 0.08, 0.15, 0.3])  # N, light touches
+    attraction = base.forward(voltage=voltage)
+    assert np.max(attraction / fn) > 0.2  # the attraction is a large share of the reaction
+    expected = 0.6 * np.power(fn + attraction, index)  # k R^n, with 1 N as the force unit
+    got = model.forward(voltage=voltage, normal_force=fn)
+    np.testing.assert_allclose(got, expected, rtol=1e-12)
+    output_only = 0.6 * (fn + attraction * np.power(fn, index - 1.0))
+    assert np.max(np.abs(output_only / expected - 1.0)) > 0.02
+
+
+def test_the_occlusion_clock_stops_while_the_finger_is_lifted():
+    """Accumulated contact time (Fig. 1.11b's dynamic occlusion time), counted by hand: 0.1 s
+    samples, in contact for 3 intervals, lifted for 4, in contact again for 2."""
+    t = np.arange(10) * 0.1
+    contact = np.array([1, 1, 1, 1, 0, 0, 0, 0, 1, 1], dtype=bool)
+    clock = accumulated_contact_time(t, contact)
+    np.testing.assert_allclose(clock, [0, 0.1, 0.2, 0.3, 0.3, 0.3, 0.3, 0.3, 0.4, 0.5],
+                               atol=1e-12)
+    model = augment(DimensionlessGroup(), [OcclusionDrift()]).with_params(
+        **{"occlusion-drift.gain": 1.0, "occlusion-drift.time_constant": 1.0,
+           "occlusion-drift.psi_share": 0.0})
+    steady = {"amplitude": np.zeros(10), "speed": np.full(10, 0.05),
+              "normal_force": np.full(10, 0.5), "frequency": np.full(10, 30e3)}
+    drift = model.forward(occlusion_time=clock, **steady) / model.base.forward(**steady)
+    np.testing.assert_allclose(drift, 2.0 - np.exp(-clock), rtol=1e-12)

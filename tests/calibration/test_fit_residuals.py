@@ -289,7 +289,8 @@ def test_a_time_constant_behind_a_gain_that_starts_at_zero_stays_free() -> None:
     t = np.arange(n) / 100.0  # 40 s at 100 Hz
     fn = rng.uniform(0.2, 1.5, n)
     inputs = {"amplitude": np.zeros(n), "frequency": np.full(n, 30e3),
-              "speed": np.full(n, 0.05), "normal_force": fn, "time": t}
+              "speed": np.full(n, 0.05), "normal_force": fn,
+              "occlusion_time": t}  # in contact throughout
     observed = 0.4 * (1.0 + 0.3 * (1.0 - np.exp(-t / 8.0))) * fn + rng.normal(0.0, 1e-3, n)
     model = _lateral(("occlusion-drift",)).with_params(**{"occlusion-drift.gain": 0.0})
     free = ["mu0", "force_offset", "occlusion-drift.gain", "occlusion-drift.time_constant"]

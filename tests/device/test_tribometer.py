@@ -213,7 +213,22 @@ def test_load_index_and_occlusion_follow_finger_friction():
         "uv", {"occlusion-drift": {"gain": 1.0, "time_constant": 4.0}}, protocol=SHORT, **CLEAN
     )
     ratio = o.lateral_force[on] / clean.lateral_force[on]
-    np.testing.assert_allclose(ratio, 2.0 - np.exp(-o.t[on] / 4.0), rtol=1e-12)
+    # occlusion runs on the time in contact (Fig. 1.11b): it pauses through the rests
+    in_contact = np.cumsum(np.diff(o.t, prepend=o.t[0]) * on)
+    np.testing.assert_allclose(ratio, 2.0 - np.exp(-in_contact[on] / 4.0), rtol=1e-12)
+    assert o.t[on][-1] - in_contact[on][-1] > 1.0  # the rests are long enough to tell
+
+
+def test_the_load_index_acts_on_the_reaction_force_with_electrovibration():
+    """Eq. 2.35 on R = Fn + F_e (Eq. 3.1): with the clean lateral force mu0 R, the ratio of the
+    load-index recording to it is (R / 1 N)^(n - 1), not (Fn / 1 N)^(n - 1)."""
+    clean = synthesize("ev", protocol=SHORT, **CLEAN)[0]
+    on = _contact(clean)
+    (m,) = synthesize("ev", {"load-index": {"load_index": 0.8}}, protocol=SHORT, **CLEAN)
+    reaction = friction(clean)[on] / DeviceConfig.coupled().mu0
+    assert np.max(reaction / m.normal_force[on]) > 1.05  # F_e is a visible share of R
+    np.testing.assert_allclose(friction(m)[on] / friction(clean)[on], reaction ** -0.2,
+                               rtol=1e-9)
 
 
 def test_plugin_effects_and_surface_patch():

@@ -20,10 +20,11 @@ Effects (name -> true parameter values; missing values take the effect's default
 below run the physics of their own model, not the calibration effect's formula:
 
 - ``load-index``: ``mu_f`` from :class:`FingerFriction` with ``load_index = n`` (friction
-  ``mu0`` at 1 N, no occlusion, ``speed_sensitivity = 0``);
-- ``occlusion-drift``: :class:`FingerFriction` occlusion over the time since the recording
-  began, ``friction_initial = mu0``, ``friction_occluded = mu0 (1 + gain)``,
-  ``occlusion_time = time_constant``;
+  ``mu0`` at 1 N, no occlusion, ``speed_sensitivity = 0``) at the reaction force ``Fn + F_e``
+  (Eq. 2.35 with Eq. 3.1), so ``F_l = k (Fn + F_e)^n mu'``;
+- ``occlusion-drift``: :class:`FingerFriction` occlusion over the time in contact since the
+  recording began (lifts excluded, Fig. 1.11b), ``friction_initial = mu0``,
+  ``friction_occluded = mu0 (1 + gain)``, ``occlusion_time = time_constant``;
 - ``charge-leakage``: the voltage acting on the finger is the exact discrete high pass of
   :meth:`ChargeLeakage.simulate` (Eqs. 3.19-3.23) of the applied voltage, a constant ``tau_d =
   time_constant`` (``tau_d_exponent = 0``); the recording's voltage column is the applied
@@ -491,15 +492,18 @@ def synthesize(
             force_e = np.zeros(n)
 
         fn_phys = total_in["normal_force"]
+        reaction = fn_phys + force_e  # Eq. 3.1: the attraction presses the skin as well
         if finger is None:
             mu_f = np.full(n, config.mu0)
         else:
+            # Eq. 2.35 on the reaction force; occlusion over the time in contact (Fig. 1.11b)
+            occlusion_time = np.cumsum(np.diff(s.t, prepend=s.t[:1]) * s.contact)
             mu_f = finger.friction_coefficient(
-                normal_force=fn_phys,
+                normal_force=np.maximum(reaction, 1e-9),
                 speed=np.abs(total_in["speed"]),
-                contact_time=np.maximum(total_in["time"], 0.0),
+                contact_time=occlusion_time,
             )
-        lateral = mu_f * mu_uv * (fn_phys + force_e)
+        lateral = mu_f * mu_uv * reaction
         lateral = _apply_output(on_total, lateral, total_in)
         if SURFACE_PATCH in chosen:
             patch = chosen[SURFACE_PATCH]
