@@ -67,9 +67,9 @@ def test_load_index_reproduces_eq_2_35() -> None:
 def test_ultrasonic_reduction_is_eq_2_33_with_eq_2_30() -> None:
     m = ir.generate(ir.Scenario("uv"), 5, noise=QUIET)
     moving = (m.normal_force > 0) & (m.amplitude > 0)
-    psi = np.abs(m.speed) / (m.amplitude * 30e3 * 0.5 * 1.33)
-    expected = 0.5 * m.normal_force * (1 - np.exp(-psi / 2.38))
-    assert np.abs(m.lateral_force[moving]) == pytest.approx(expected[moving], rel=1e-9)
+    psi = np.abs(m.speed[moving]) / (m.amplitude[moving] * 30e3 * 0.5 * 1.33)
+    expected = 0.5 * m.normal_force[moving] * (1 - np.exp(-psi / 2.38))
+    assert np.abs(m.lateral_force[moving]) == pytest.approx(expected, rel=1e-9)
     # the lateral force is signed by the direction of motion
     assert np.all(np.sign(m.lateral_force[moving]) == np.sign(m.speed[moving]))
 

@@ -231,17 +231,21 @@ class DimensionlessGroup(Predictor):
         if speed_shape != shape:
             shape = np.broadcast_shapes(speed_shape, shape)
         psi = np.empty(shape)
-        if denominator.size and np.minimum.reduce(denominator, axis=None) > 0:
-            return np.divide(speed, denominator, out=psi)  # vibrating everywhere
-        psi.fill(np.inf)
-        np.divide(speed, denominator, out=psi, where=denominator > 0)
+        # an amplitude so small that U / (w f ...) overflows is Psi = inf, the limit of no
+        # vibration (mu' = 1): exact, not worth a warning
+        with np.errstate(over="ignore"):
+            if denominator.size and np.minimum.reduce(denominator, axis=None) > 0:
+                return np.divide(speed, denominator, out=psi)  # vibrating everywhere
+            psi.fill(np.inf)
+            np.divide(speed, denominator, out=psi, where=denominator > 0)
         return psi
 
     # -- maps ------------------------------------------------------------------------------
     def _forward(self, **inputs: np.ndarray) -> np.ndarray:
         arrays = self._checked(inputs)
         psi_star = self.psi_star_at(arrays["normal_force"])
-        return -np.expm1(-self._psi(arrays) / psi_star)
+        with np.errstate(over="ignore"):  # Psi near the float limit: Psi / Psi* = inf, mu' = 1
+            return -np.expm1(-self._psi(arrays) / psi_star)
 
     def forward_trusted(self, **inputs: Any) -> np.ndarray:
         """:meth:`forward` (Eqs. 2.30, 2.33) for inputs already checked (finite, >= 0; see
