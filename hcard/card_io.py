@@ -17,6 +17,7 @@ from google.protobuf import json_format
 
 from hcard import limits
 from hcard.atomic import write_atomically
+from hcard.bounded_read import InputTooLarge, read_bounded
 from hcard.errors import CardError, CardValidationError
 from hcard.v1 import card_pb2 as pb
 from hcard.validate import errors_of, validate
@@ -109,12 +110,9 @@ def read_card_file(path: str | os.PathLike[str]) -> bytes:
     """The bytes of a card file; :class:`CardError` when missing, unreadable or too large."""
     file = Path(path)
     try:
-        size = file.stat().st_size
-        if size > limits.MAX_CARD_BYTES:
-            raise CardError(
-                f"{size} bytes exceed the card size limit of {limits.MAX_CARD_BYTES}", source=file
-            )
-        data = file.read_bytes()
+        data = read_bounded(file, limits.MAX_CARD_BYTES)
+    except InputTooLarge as exc:
+        raise CardError(f"{exc} (the card size limit, rule F6)", source=file) from None
     except IsADirectoryError:
         raise CardError("is a directory, not a card file", source=file) from None
     except FileNotFoundError:

@@ -11,6 +11,7 @@ import io
 import os
 from pathlib import Path
 
+from hcard.bounded_read import MAX_TEXT_FILE_BYTES, InputTooLarge, read_bounded
 from hcard.errors import HcardError
 
 
@@ -24,12 +25,19 @@ def data_rows(text: str) -> list[tuple[int, list[str]]]:
 
 
 def read_csv_text(path: str | os.PathLike[str], error: type[HcardError]) -> str:
-    """The text of the CSV file ``path`` (UTF-8, a leading byte-order mark dropped); a missing
-    or unreadable file raises ``error`` naming it."""
+    """The text of the CSV file ``path`` (UTF-8, a leading byte-order mark dropped); a missing,
+    unreadable or too large file (:data:`~hcard.bounded_read.MAX_TEXT_FILE_BYTES`, whatever
+    kind of file it is) raises ``error`` naming it."""
     file = Path(path)
     try:
-        return file.read_text(encoding="utf-8-sig")
+        return read_bounded(file, MAX_TEXT_FILE_BYTES).decode("utf-8-sig")
     except FileNotFoundError:
         raise error(f"{file}: no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise error(f"{file}: cannot read ({exc})") from None
+    except IsADirectoryError:
+        raise error(f"{file}: is a directory, not a CSV file") from None
+    except InputTooLarge as exc:
+        raise error(f"{file}: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise error(f"{file}: cannot read (not UTF-8: {exc.reason} at byte {exc.start})") from None
+    except OSError as exc:
+        raise error(f"{file}: cannot read ({exc.strerror or exc})") from None

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from hcard.atomic import write_atomically
+from hcard.bounded_read import MAX_JSON_FILE_BYTES, InputTooLarge, read_bounded
 from hcard.csv_rows import data_rows, read_csv_text
 from hcard.errors import HcardError
 
@@ -206,9 +207,11 @@ def read_measurement(path: str | os.PathLike[str]) -> Measurement:
 def _read_sidecar(path: Path) -> dict[str, Any]:
     source = str(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = read_bounded(path, MAX_JSON_FILE_BYTES).decode("utf-8")
     except FileNotFoundError:
         raise MeasurementError(f"{source}: no such file (the conditions sidecar)") from None
+    except InputTooLarge as exc:
+        raise MeasurementError(f"{source}: {exc} (the conditions sidecar)") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise MeasurementError(f"{source}: cannot read ({exc})") from None
     try:

@@ -278,12 +278,15 @@ def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Pat
 
 def read_profile_bytes(path: Path) -> bytes:
     """The bytes of a profile file; a missing or unreadable file is a one-line error."""
+    from hcard.bounded_read import MAX_JSON_FILE_BYTES, InputTooLarge, read_bounded
     from hcard.physics.profile import ProfileError
 
     try:
-        return path.read_bytes()
+        return read_bounded(path, MAX_JSON_FILE_BYTES)
     except FileNotFoundError:
         raise ProfileError(f"{path}: no such file") from None
+    except InputTooLarge as exc:
+        raise ProfileError(f"{path}: {exc} (a device profile)") from None
     except OSError as exc:
         raise ProfileError(f"{path}: cannot read ({exc.strerror or exc})") from None
 

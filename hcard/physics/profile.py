@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from hcard.atomic import write_atomically
+from hcard.bounded_read import MAX_JSON_FILE_BYTES, InputTooLarge, read_bounded
 from hcard.errors import HcardError
 from hcard.physics.predictor import Predictor, PredictorError
 from hcard.physics.profile_effects import (
@@ -843,9 +844,11 @@ def _owned(values: Any, shape: tuple[int, ...]) -> bool:
 def read_json(file: Path) -> Any:
     """The JSON content of ``file``; :class:`ProfileError` naming the file otherwise."""
     try:
-        return json.loads(file.read_text(encoding="utf-8"))
+        return json.loads(read_bounded(file, MAX_JSON_FILE_BYTES).decode("utf-8"))
     except FileNotFoundError:
         raise ProfileError(f"{file}: no such file") from None
+    except InputTooLarge as exc:
+        raise ProfileError(f"{file}: {exc} (a device profile)") from None
     except IsADirectoryError:
         raise ProfileError(f"{file}: is a directory, not a profile") from None
     except UnicodeDecodeError:

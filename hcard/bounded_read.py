@@ -1,0 +1,64 @@
+"""Reading a file from a stranger with a bound on how much of it is read.
+
+``Path.read_bytes`` trusts ``stat``: a regular file's size is known before reading, but a
+character device (``/dev/zero``), a FIFO or a ``/proc`` file reports 0 and is read until memory
+runs out (``hcard validate /dev/zero`` ended in MemoryError). :func:`read_bounded` reads at
+most one byte past the limit whatever the file is, so the memory a reader spends is bounded by
+the limit of its format (spec/README.md section 4, "Limits").
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+from pathlib import Path
+
+MAX_TEXT_FILE_BYTES = 512 * 1024 * 1024
+"""Largest finger-track or measurement CSV file a reader accepts, bytes (512 MiB: an hour of
+a 1 kHz tribometer recording with 12 columns is about 300 MB)."""
+MAX_JSON_FILE_BYTES = 16 * 1024 * 1024
+"""Largest JSON side file (a device profile, a measurement's conditions sidecar) a reader
+accepts, bytes (16 MiB, the card file limit)."""
+
+
+class InputTooLarge(ValueError):
+    """A file holds more than a reader's limit.
+
+    Attributes:
+        limit: the limit, bytes.
+        size: the file's size when ``stat`` knows it (a regular file), else None (a device or
+            a pipe: more than ``limit`` bytes were offered).
+    """
+
+    def __init__(self, limit: int, size: int | None) -> None:
+        self.limit = limit
+        self.size = size
+        if size is not None:
+            text = f"{size} bytes exceed the limit of {limit} bytes"
+        else:
+            text = (f"more than {limit} bytes (not a regular file: a device or a pipe, read "
+                    "up to the limit)")
+        super().__init__(text)
+
+
+def read_bounded(path: str | os.PathLike[str], limit: int) -> bytes:
+    """The bytes of ``path``, at most ``limit`` of them.
+
+    A regular file larger than ``limit`` is refused before anything is read; any other file
+    (a device, a FIFO) is read up to ``limit + 1`` bytes and refused if it offers more.
+
+    Raises:
+        InputTooLarge: the file holds more than ``limit`` bytes.
+        OSError: the file cannot be opened or read (missing, a directory, no permission).
+    """
+    with Path(path).open("rb") as file:
+        info = os.fstat(file.fileno())
+        if stat.S_ISDIR(info.st_mode):
+            raise IsADirectoryError(21, "Is a directory", str(path))
+        regular = stat.S_ISREG(info.st_mode)
+        if regular and info.st_size > limit:
+            raise InputTooLarge(limit, info.st_size)
+        data = file.read(limit + 1)
+    if len(data) > limit:
+        raise InputTooLarge(limit, None if not regular else len(data))
+    return data
