@@ -16,6 +16,7 @@ from hcard.card_io import (
     read_card_file,
 )
 from hcard.describe import describe_card
+from hcard.terminal_text import printable
 from hcard.validate import validate
 
 CARD = click.Path(dir_okay=False, path_type=Path)
@@ -28,9 +29,9 @@ def info(card: Path) -> None:
     data = read_card_file(card)
     loaded = parse_card(data, source=card)
     form = "JSON" if looks_like_json(data) else "binary"
-    click.echo(f"{card}: hcard card, {form}, {len(data)} bytes")
+    click.echo(printable(f"{card}: hcard card, {form}, {len(data)} bytes"))
     for line in describe_card(loaded):
-        click.echo(line)
+        click.echo(printable(line))
 
 
 @click.command(name="validate")
@@ -63,17 +64,18 @@ def validate_cmd(card: Path, as_json: bool, strict: bool) -> None:
         )
     else:
         for p in problems:
-            click.echo(f"{card}: {p.severity}: {p}", err=True)
+            click.echo(printable(f"{card}: {p.severity}: {p}"), err=True)
         if not failing:
             form = "JSON" if format_for_path(card) == "json" or looks_like_json(data) else "binary"
-            click.echo(
+            click.echo(printable(
                 f"{card}: valid hcard {parsed.version.major}.{parsed.version.minor} card ({form}, "
                 f"{len(parsed.textures)} textures, {parsed.grid.cols} x {parsed.grid.rows} taxtels)"
-            )
+            ))
     if failing:
         errors = sum(p.severity == "error" for p in failing)
         if not as_json:
-            click.echo(f"{card}: invalid: {len(failing)} problem(s), {errors} error(s)", err=True)
+            click.echo(printable(f"{card}: invalid: {len(failing)} problem(s), {errors} error(s)"),
+                       err=True)
         raise SystemExit(1)
 
 

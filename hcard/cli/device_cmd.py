@@ -14,6 +14,7 @@ import click
 
 from hcard.card_io import load
 from hcard.errors import HcardError
+from hcard.terminal_text import printable
 from hcard.track import read_track_csv
 
 DEFAULT_LIST_HOST = "127.0.0.1:3240"
@@ -210,7 +211,7 @@ def synthesize(device_class: str, uri: str | None, effect_names: tuple[str, ...]
         raise HcardError(f"{path}: cannot write ({exc.strerror or exc})") from None
     click.echo(f"{path}: {len(result.states)} reports")
     for line in summary(result):
-        click.echo(f"  {line}")
+        click.echo(printable(f"  {line}"))
 
 
 @click.command("play")
@@ -273,7 +274,7 @@ def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Pat
         raise HcardError(f"{output}: cannot write ({exc.strerror or exc})") from None
     click.echo(f"{output}: {len(result.states)} reports from {uri}")
     for line in summary(result):
-        click.echo(f"  {line}")
+        click.echo(printable(f"  {line}"))
 
 
 def read_profile_bytes(path: Path) -> bytes:

@@ -7,6 +7,7 @@ from typing import Any
 import click
 
 from hcard.errors import HcardError
+from hcard.terminal_text import printable
 
 
 class UserErrorGroup(click.Group):
@@ -16,4 +17,4 @@ class UserErrorGroup(click.Group):
         try:
             return super().invoke(ctx)
         except HcardError as exc:
-            raise click.ClickException(str(exc)) from None
+            raise click.ClickException(printable(str(exc))) from None
