@@ -19,12 +19,11 @@ import json
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from hcard.calibration.measurement import MeasurementError
-from hcard.calibration.rendering import RenderingError, rendering_error
 from hcard.card_io import to_bytes
 from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb
@@ -41,6 +40,9 @@ from hcard_device.protocol import (
     Limits,
     State,
 )
+
+if TYPE_CHECKING:
+    from hcard.calibration.rendering import RenderingError
 
 TAIL_S = 0.05
 """Reports collected after the last track sample before STOP, s."""
@@ -266,6 +268,10 @@ def clip_text(clip: ClipReport) -> str:
 
 def result_rendering_error(result: PlayResult) -> RenderingError | str:
     """The rendered friction error of ``result``, or why there is none (a phrase)."""
+    # imported here: the rendering error builds on the calibration dataset, whose filters
+    # import scipy.signal (1.6 s on a host, over a minute under TCG), which a play never needs
+    from hcard.calibration.rendering import rendering_error
+
     try:
         return rendering_error(recording(result))
     except (MeasurementError, ValueError) as exc:

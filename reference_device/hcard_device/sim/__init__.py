@@ -11,10 +11,33 @@ Usage (the firmware's view)::
     block = sim.step(1000)              # 0.1 s of 10 kHz frames: a SimBlock of arrays
 """
 
-from hcard_device.sim.clip import ClipItem, ClipReport
-from hcard_device.sim.config import DeviceConfig
-from hcard_device.sim.faults import Faults
-from hcard_device.sim.simulation import TOUCH_DTYPE, DeviceSimulation, Limits, SimBlock
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_EXPORTS = {
+    "ClipItem": "hcard_device.sim.clip",
+    "ClipReport": "hcard_device.sim.clip",
+    "DeviceConfig": "hcard_device.sim.config",
+    "Faults": "hcard_device.sim.faults",
+    "TOUCH_DTYPE": "hcard_device.sim.simulation",
+    "DeviceSimulation": "hcard_device.sim.simulation",
+    "Limits": "hcard_device.sim.simulation",
+    "SimBlock": "hcard_device.sim.simulation",
+}
+"""Where each exported name lives. Resolved on first use (PEP 562), so a host that needs only
+the configuration (``hcard_device.sim.config``, the conformance suite's device classes) does not
+import the simulation, its plate filters and scipy.signal (over a minute under TCG)."""
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _EXPORTS:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(_EXPORTS[name]), name)
+    globals()[name] = value
+    return value
+
 
 __all__ = [
     "TOUCH_DTYPE",

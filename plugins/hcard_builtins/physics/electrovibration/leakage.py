@@ -75,7 +75,6 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
-from scipy.signal import lfilter
 
 from hcard.physics import Parameter, Predictor, PredictorError, Variable
 
@@ -360,6 +359,10 @@ class ChargeLeakage(Predictor):
         g = tau * -math.expm1(-dt / tau) / dt
         # State chosen so that v_e[0] = v[0]: the step from 0 at t[0] passes undiminished.
         initial = ((1.0 - g) * volts[..., :1]).astype(np.float64)
+        # imported here: a host that only describes a device (a conformance run under TCG)
+        # never pays for scipy.signal; a simulated device has it from its plate already
+        from scipy.signal import lfilter
+
         effective, _ = lfilter([g, -g], [1.0, -a], volts, axis=-1, zi=initial)
         force = self.coefficient * np.square(effective)
         return LeakageResult(
