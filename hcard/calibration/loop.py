@@ -17,11 +17,10 @@ on its training split, then repeats:
    pair of the library's usable effects and move to the best pair by ``H``; with more, try
    removing each accepted effect and swapping it for each unused one (a move never brings in
    an effect whose signature's structure a dominant foreign regressor explains, see (c)
-   below); then drop
-   any effect that no longer earns its place (lower ``H`` and ``min_improvement`` of held-out
-   RMSE against the same model without it). Greedy addition alone named skin-recovery +
-   load-index at 5.40 mN where occlusion + load-index, in the library, reached the truth's
-   5.01 mN.
+   below); then drop any effect that no longer earns its place (lower ``H`` and
+   ``min_improvement`` of held-out RMSE against the same model without it). Greedy addition
+   alone named skin-recovery + load-index at 5.40 mN where occlusion + load-index, in the
+   library, reached the truth's 5.01 mN.
 
 **Runner-up.** The final model is compared with the best other fitted model of as many effects
 (:mod:`hcard.calibration.selection`): the margin in ``H`` and in held-out RMSE is reported, and
@@ -45,8 +44,9 @@ against the effect's signature (F-test p < ``alpha`` with ``eta^2 >= signature_e
 one of its regressors or, chance-adjusted, against the joint cells of all of them): an effect
 is never credited for an error it does not explain where it says it would. When the residual
 holds structure against a *foreign* regressor, one no model input or effect signature covers
-(the sliding direction, the position, the recording), (c) is judged with that structure taken
-out (:func:`_beyond_foreign_structure`).
+(the sliding direction, the position, the recording), and that structure is at least
+:data:`FOREIGN_DOMINANCE` times the signature's, (c) is judged with it taken out
+(:func:`_beyond_foreign_structure`).
 
 **Verdicts.** When no candidate passes, the residual of the final model is analysed once more.
 Structure left against a regressor (p < ``alpha`` and ``eta^2 >= min_eta2``) or in time
