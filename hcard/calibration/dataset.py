@@ -31,6 +31,7 @@ from hcard.calibration.measurement import Measurement, MeasurementError
 from hcard.calibration.noise import NoiseModel, measure_noise
 from hcard.calibration.splits import (
     CONTACT_THRESHOLD_N,
+    SPLITS,
     split_by_stroke,
     stroke_ids,
 )
@@ -46,8 +47,6 @@ count since rest (the ``stroke`` input) restarts at 0."""
 HISTORY_WINDOW_S = 0.01
 """Window of the ``amplitude_history`` regressor (signed amplitude change), s."""
 
-SPLITS = ("stroke", "time")
-"""Held-out split kinds: whole strokes, or the last time block of each recording."""
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,9 @@ import numpy as np
 
 from hcard.calibration.measurement import CONTACT_THRESHOLD_N, Measurement, MeasurementError
 
+SPLITS = ("stroke", "time")
+"""Held-out split kinds: whole strokes, or the last time block of each recording."""
+
 #: A new stroke starts after a time gap longer than this many median sample intervals.
 GAP_FACTOR = 5.0
 

@@ -23,8 +23,6 @@ from typing import Any
 
 import click
 
-from hcard.calibration.dataset import SPLITS, prepare
-from hcard.calibration.loop import NOT_EXPLAINED, LoopSettings, calibrate, with_bootstrap
 from hcard.calibration.measurement import Measurement, MeasurementError, read_measurement
 from hcard.calibration.plan import (
     DEFAULT_DURATION_S,
@@ -34,8 +32,7 @@ from hcard.calibration.plan import (
     protocol,
     verification,
 )
-from hcard.calibration.profile import profile_of
-from hcard.calibration.report import write_report
+from hcard.calibration.splits import SPLITS
 from hcard.cli.errors import UserErrorGroup
 from hcard.errors import HcardError
 from hcard.physics import Predictor
@@ -335,6 +332,13 @@ def calibrate_command(
     with --verify it also gives the friction the device rendered on held-out textures without
     and with the fitted profile, measured by its force sensor.
     """
+    # imported here: the loop, its filters (scipy.signal, scipy.stats) and the report
+    # (matplotlib) cost about a second, which every other hcard command need not pay
+    from hcard.calibration.dataset import prepare
+    from hcard.calibration.loop import NOT_EXPLAINED, LoopSettings, calibrate, with_bootstrap
+    from hcard.calibration.profile import profile_of
+    from hcard.calibration.report import write_report
+
     started = time.perf_counter()
     if bootstrap == 1:
         raise CalibrateUsageError("--bootstrap needs at least 2 refits (0: none)")
