@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import array
-import faulthandler
 import fcntl
 import json
 import os
@@ -30,6 +29,7 @@ import select
 import shutil
 import subprocess
 import sys
+import threading
 import time
 import traceback
 from pathlib import Path
@@ -69,6 +69,25 @@ send the finger samples late and in bursts."""
 CATCH_UP_S = 3.0
 """Longest the hcard mode reads on after the track for the reports the guest has not read yet, s."""
 STALL_DUMP_S = 60.0  # s; the stacks of a payload still running after this long are logged
+
+
+def log_stacks_while_running(done: threading.Event, period_s: float = STALL_DUMP_S) -> None:
+    """Every ``period_s`` until ``done`` is set, log where each thread is (a stalled payload
+    shows where). A Python thread that holds the GIL reads the frames; faulthandler's
+    watchdog read them without it and crashed the interpreter (exit 139) when it caught the
+    main thread in the middle of a call under TCG."""
+    while not done.wait(period_s):
+        main = threading.main_thread().ident
+        for ident, frame in sys._current_frames().items():
+            if ident == threading.get_ident():
+                continue
+            who = "main thread" if ident == main else f"thread {ident}"
+            log(f"still running after {time.monotonic() - STARTED_S:.0f} s; {who}:")
+            for line in traceback.format_stack(frame):
+                print(line, end="", flush=True)
+
+
+STARTED_S = time.monotonic()
 
 
 def log(message: str) -> None:
@@ -500,7 +519,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="conformance mode: comma-separated check names (default: all)")
     args = parser.parse_args(argv)
     # A payload that stalls shows where: every STALL_DUMP_S the stacks go to the console log.
-    faulthandler.dump_traceback_later(STALL_DUMP_S, repeat=True, file=sys.stdout)
+    done = threading.Event()
+    threading.Thread(target=log_stacks_while_running, args=(done,), daemon=True).start()
     t0 = time.monotonic()
     try:
         result = MODES[args.mode](args)
@@ -509,7 +529,7 @@ def main(argv: list[str] | None = None) -> int:
         for line in kernel_log()[-40:]:
             log(f"dmesg: {line}")
         result = {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
-    faulthandler.cancel_dump_traceback_later()
+    done.set()
     result["mode"] = args.mode
     result["kernel"] = platform.release()
     result["payload_s"] = round(time.monotonic() - t0, 3)
