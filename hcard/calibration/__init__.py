@@ -1,2 +1,2 @@
 """Closing the loop with measured data: measurement files, fits, residual analysis
-(DESIGN.md section 8)."""
+(spec/calibration.md)."""

@@ -1,4 +1,4 @@
-"""Calibration effects: physical effects a fitted model may lack (issue 7, item 4).
+"""Calibration effects: physical effects a fitted model may lack (spec/calibration.md).
 
 An :class:`Effect` (plugin kind ``"calibration-effect"``, hook ``hcard_calibration_effects``) is a
 physical effect that a base :class:`~hcard.physics.Predictor` may lack: charge leakage through the

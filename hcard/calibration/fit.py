@@ -1,4 +1,4 @@
-"""Bounded nonlinear least-squares fit of any predictor's parameters (issue 7, item 2).
+"""Bounded nonlinear least-squares fit of any predictor's parameters (spec/calibration.md).
 
 :func:`fit_predictor` fits the free parameters of a :class:`~hcard.physics.Predictor` to observed
 outputs with :func:`scipy.optimize.least_squares`, inside the parameters' bounds, on a training

@@ -1,5 +1,5 @@
 """The calibration loop: fit, analyse the residual, add the effect that explains it, repeat
-(issue 7, item 5; DESIGN.md section 8).
+(spec/calibration.md).
 
 :func:`calibrate` fits a base predictor (wrapped to output the measured lateral force,
 :mod:`hcard.calibration.observation`) to a :class:`~hcard.calibration.dataset.CalibrationData`

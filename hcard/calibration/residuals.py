@@ -1,4 +1,4 @@
-"""Residual analysis: is structure left in a fit's residual, and against what (issue 7, item 3).
+"""Residual analysis: is structure left in a fit's residual, and against what (spec/calibration.md).
 
 :func:`analyse_residuals` takes a residual (``observed - predicted``, in the output unit) and the
 regressors the data has (amplitude in m, voltage in V, speed in m/s, normal force in N, time in
