@@ -213,7 +213,9 @@ def test_guest_device_level_conforms_over_hid_under_software_emulation(tmp_path:
     assert 0.0 < latency["value"] <= latency["threshold"]
     read_lag = by_case[("device.latency", "host-read-lag")]
     assert read_lag["threshold"] == SOFTWARE_EMULATION.read_lag_s * 1e3
-    assert 20.0 < read_lag["value"] <= read_lag["threshold"]  # ms: the backlog, bounded
+    # ms: a report is read after it was sent (> 0), and the backlog stays within the class's
+    # bound; how long it is depends on the machine (12 ms to 1 s seen), so no floor above 0
+    assert 0.0 < read_lag["value"] <= read_lag["threshold"]
     loss = by_case[("device.report-loss", "loss-fraction")]
     assert loss["threshold"] == SOFTWARE_EMULATION.host_report_loss * 100  # % of reports
     assert 0.0 <= loss["value"] <= loss["threshold"]
