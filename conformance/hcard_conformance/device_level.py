@@ -95,14 +95,14 @@ STROKE_S = 0.6
 """Duration of the device-level strokes, s."""
 LATENCY_TRIALS = 10
 READ_CATCH_UP_S = 5.0
+"""Longest a measurement reads on while the host catches up with its reports, s."""
 SEND_READ_BATCH = 10
 """Reports a sending loop reads at a time between two FINGER reports (:func:`_read_briefly`)."""
-"""Longest a measurement reads on while the host catches up with its reports, s."""
 OFF_AMPLITUDE_M = 50e-9
 """Plate amplitude counted as off, m (the E-ViTa loop's 50 nm amplitude tolerance)."""
 BANDWIDTH_TOLERANCE = 0.05
 """Measurement tolerance of D1: the swept -3 dB point may fall this fraction below the class
-bandwidth (a 6-point sweep interpolated in log f; spec/conformance.md 4.1)."""
+bandwidth (an 8-point sweep interpolated in log f; spec/conformance.md 4.1)."""
 WATCHDOG_ALLOWANCE_S = 0.050
 """Time allowed after ``watchdog_ms`` for the 10 ms ramp and the plate's decay, s."""
 
@@ -132,10 +132,25 @@ CLASS_DYNAMICS = {
 }
 """Required plate dynamics by device class (``--option device_class=...``; by default from
 DEVICE_INFO.device_kind: 1 e-vita, 2 coupled)."""
-BANDWIDTH_FREQUENCIES_HZ = (50.0, 100.0, 200.0, 300.0, 400.0, 450.0)
-"""Sweep of D1, Hz (under the 500 Hz Nyquist frequency of 1 kHz STATE reports, where a
-sinusoid sampled at its zero crossings has no measurable amplitude)."""
+BANDWIDTH_FREQUENCIES_HZ = (50.0, 110.0, 190.0, 290.0, 350.0, 390.0, 430.0, 470.0)
+"""Sweep of D1, Hz: under the 500 Hz Nyquist frequency of 1 kHz STATE reports, and none a
+simple fraction of the report rate. The plate's response to a sine carries harmonics (the UV
+map is nonlinear, and the loop's drive saturates on fast swings); sampled at 1 kHz, the k-th
+harmonic of f folds onto f itself when k f = +-f mod 1 kHz. At 400 Hz the 4th and 6th do, and
+the fitted 400 Hz amplitude then depends on the phase at which the sine starts against the report
+clock: measured on the reference over usbip, 0.1333-0.1366 from session to session (1 %
+spread, 0.25 dB), where 390 Hz gave 0.13667 +- 0.009 %. Here no harmonic up to the 12th folds
+within 10 Hz of its fundamental (:func:`folded_harmonics`)."""
 BANDWIDTH_REFERENCE_HZ = 25.0
+"""Reference of D1, Hz: the plate loop's gain there is its DC gain to 0.02 dB."""
+GAIN_WINDOW_S = 0.04
+"""Shortest window of one sinusoid fit of D1, s (whole periods of the stimulus)."""
+UNDERRUN_GUARD_S = 0.010
+"""Reports left out of D1 after a report with an empty stream queue, s: the device played
+neutral frames there and the plate needs a few time constants (0.6 ms on the E-ViTa) to return
+to the stimulus; 1 ms before it as well (the queue may have emptied since the last report)."""
+MIN_CLEAN_WINDOW_FRACTION = 0.5
+"""Fraction of D1's windows that must be clear of empty-queue reports for a gain to count."""
 BANDWIDTH_UV_MEAN, BANDWIDTH_UV_SWING = 0.25, 0.05
 """Streamed UV target of D1, ``mean + swing sin``: about 2 um of plate amplitude at
 60 mm/s and 0.5 N on the E-ViTa, the operating point of its 400 Hz bandwidth."""
@@ -300,36 +315,76 @@ def _fit_sinusoid(t: np.ndarray, y: np.ndarray, frequency_hz: float) -> tuple[fl
     return float(np.hypot(coef[0], coef[1])), float(coef[2])
 
 
+def folded_harmonics(frequency_hz: float, report_rate_hz: float = 1000.0,
+                     highest: int = 12, within_hz: float = 10.0) -> list[int]:
+    """Harmonics ``k`` (2..``highest``) of ``frequency_hz`` that reports at ``report_rate_hz``
+    fold to within ``within_hz`` of the fundamental (an alias a sinusoid fit cannot tell from
+    it)."""
+    folded = []
+    for k in range(2, highest + 1):
+        alias = (k * frequency_hz) % report_rate_hz
+        alias = min(alias, report_rate_hz - alias)
+        if abs(alias - frequency_hz) < within_hz:
+            folded.append(k)
+    return folded
+
+
 @dataclass(frozen=True)
 class Gain:
     """The plate amplitude's response to a streamed sinusoid.
 
     Attributes:
-        amplitude_m: fitted amplitude of the plate amplitude at the stimulus frequency, m.
-        mean_m: fitted mean of the plate amplitude, m.
-        reports: reports fitted.
+        relative: median over the clean windows of the fitted oscillation at the stimulus
+            frequency divided by the fitted mean amplitude. The velocity compensation scales
+            both with the finger speed the firmware estimates; their ratio is the plate loop's
+            alone (its gain at DC is 1).
+        windows: clean windows fitted (whole periods, at least :data:`GAIN_WINDOW_S` each).
+        skipped: windows left out for an empty stream queue (:data:`UNDERRUN_GUARD_S`).
         underruns: reports in the stream with an empty queue (the host fell behind).
     """
 
-    amplitude_m: float
-    mean_m: float
-    reports: int
+    relative: float
+    windows: int
+    skipped: int
     underruns: int
 
-    @property
-    def relative(self) -> float:
-        """The oscillation relative to the mean: the velocity compensation scales both with
-        the finger speed the firmware estimates, which varies by ~1 % from run to run in real
-        time; their ratio is the plate loop's alone (its gain at DC is 1)."""
-        return self.amplitude_m / self.mean_m if self.mean_m > 0 else 0.0
+
+def windowed_gain(t_s: np.ndarray, amplitude_m: np.ndarray, empty: np.ndarray,
+                  frequency_hz: float, start_s: float, end_s: float) -> tuple[float, int, int]:
+    """Median relative oscillation ``A / mean`` of ``amplitude_m`` at ``frequency_hz`` over
+    windows of whole periods (at least :data:`GAIN_WINDOW_S`) tiling ``[start_s, end_s]``,
+    each fitted on its own, and the numbers of windows used and skipped. A window with a report
+    in the guard of an ``empty`` one (:data:`UNDERRUN_GUARD_S`) is skipped: the device played
+    neutral frames there and resumed the sine late, at another phase, which one fit over the
+    whole record reads as a lower gain (19 empty reports of ~700 once put a 400 Hz gain 6 dB
+    low)."""
+    period = 1.0 / frequency_hz
+    width = math.ceil(GAIN_WINDOW_S / period - 1e-9) * period
+    disturbed = np.zeros(t_s.shape[0], dtype=bool)
+    for t_empty in t_s[empty]:
+        disturbed |= (t_s >= t_empty - 0.001) & (t_s <= t_empty + UNDERRUN_GUARD_S)
+    ratios, skipped = [], 0
+    begin = start_s
+    while begin + width <= end_s + 1e-9:
+        inside = (t_s >= begin) & (t_s < begin + width)
+        begin += width
+        if disturbed[inside].any():
+            skipped += 1
+            continue
+        if np.count_nonzero(inside) < 4:
+            continue
+        oscillation, mean = _fit_sinusoid(t_s[inside], amplitude_m[inside], frequency_hz)
+        if mean > 0:
+            ratios.append(oscillation / mean)
+    return (float(np.median(ratios)) if ratios else 0.0), len(ratios), skipped
 
 
 def amplitude_gain(driver: Driver, frequency_hz: float, duration_s: float = 0.6) -> Gain:
     """The plate amplitude's response at ``frequency_hz`` to a streamed UV target
-    :data:`BANDWIDTH_UV_MEAN` + :data:`BANDWIDTH_UV_SWING` sin. The stimulus is found in the
-    targets the device reports (session-relative); its first :data:`FINGER_SETTLE_S` are left
-    out. The UV model is a static map before the plate's linear dynamics, so gains relative to
-    the reference frequency are those of the plate loop."""
+    :data:`BANDWIDTH_UV_MEAN` + :data:`BANDWIDTH_UV_SWING` sin (:func:`windowed_gain`). The
+    stimulus is found in the targets the device reports (session-relative); its first
+    :data:`FINGER_SETTLE_S` are left out. The UV model is a static map before the plate's linear
+    dynamics, so gains relative to the reference frequency are those of the plate loop."""
     rate = driver.info().frame_rate_hz
     t = np.arange(round((duration_s + FINGER_SETTLE_S) * rate)) / rate
     session = stream_fed(driver, BANDWIDTH_UV_MEAN
@@ -341,9 +396,13 @@ def amplitude_gain(driver: Driver, frequency_hz: float, duration_s: float = 0.6)
         raise CannotAssess(f"the device reported the streamed {frequency_hz:g} Hz target "
                                f"in {playing.size} reports (target_uv of STATE)")
     t0, t1 = session.t_s[playing[0]], session.t_s[playing[-1]]
-    keep = (session.t_s >= t0 + FINGER_SETTLE_S) & (session.t_s <= t1)
-    oscillation, mean = _fit_sinusoid(session.t_s[keep], amp[keep], frequency_hz)
-    return Gain(oscillation, mean, int(keep.sum()), session.underruns)
+    empty = session.column("stream_queued") == 0
+    relative, windows, skipped = windowed_gain(session.t_s, amp, empty, frequency_hz,
+                                               t0 + FINGER_SETTLE_S, t1)
+    if windows < MIN_CLEAN_WINDOW_FRACTION * (windows + skipped) or windows == 0:
+        raise CannotAssess(f"the {frequency_hz:g} Hz sine: {skipped} of {windows + skipped} "
+                           "windows hold reports with an empty stream queue")
+    return Gain(relative, windows, skipped, session.underruns)
 
 
 def measure_bandwidth(open_driver: Callable[[], Driver]) -> tuple[float, int]:

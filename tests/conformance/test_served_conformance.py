@@ -14,12 +14,15 @@ across, the safety check leaves the limits as it found them, and no case is drop
 
 from __future__ import annotations
 
+import pytest
+from plate_loop import plate_loop_bandwidth_hz
 from served_device import served_device
 
 from hcard_conformance.context import Context
 from hcard_conformance.registry import all_checks
 from hcard_conformance.runner import run_suite
 from hcard_device.drivers import open_device
+from hcard_device.sim import DeviceConfig
 
 
 def test_the_reference_conforms_at_every_level_twice_against_one_running_server():
@@ -42,6 +45,10 @@ def test_the_reference_conforms_at_every_level_twice_against_one_running_server(
         cases = {(r.check, r.case) for r in report.results}
         assert expected <= cases  # every case of the reference is judged, none dropped
         assert device_checks == {r.check for r in report.results if r.level == "device"}
+        # D1 measures the plate loop, computed from its difference equations: 399.6 Hz
+        bandwidth = next(r for r in report.results if r.case == "bandwidth")
+        assert bandwidth.value == pytest.approx(plate_loop_bandwidth_hz(DeviceConfig.evita()),
+                                                rel=0.01)
         assert {("device.dynamics", "bandwidth"), ("device.dynamics", "rise-time"),
                 ("device.safety", "limits-while-driven"),
                 ("device.session-ownership", "second-host-refused")} <= cases

@@ -93,26 +93,26 @@ def stalling_host(stalls: int, stall_s: float = 0.08) -> StallingHost:
 
 
 def test_a_stream_the_host_let_run_dry_is_played_again() -> None:
-    """80 ms of host stall outlasts the 50 ms lead: the queue runs dry and the 400 Hz gain
+    """80 ms of host stall outlasts the 50 ms lead: the queue runs dry and the 390 Hz gain
     measures low. stream_fed plays the sine again and keeps the attempt the host fed whole,
     whose gain is that of a host that never stalled."""
-    sine = BANDWIDTH_UV_MEAN + BANDWIDTH_UV_SWING * np.sin(2 * np.pi * 400.0 * np.arange(7000)
+    sine = BANDWIDTH_UV_MEAN + BANDWIDTH_UV_SWING * np.sin(2 * np.pi * 390.0 * np.arange(7000)
                                                           / 1e4)
     with stalling_host(stalls=1) as host:
         starved = stream(host, sine)
     assert starved.underruns >= 25  # ~30 ms of empty queue, one report per ms
     starved.require_fed("under the starved bound")  # which alone would judge it
     with stalling_host(stalls=0) as steady:
-        fed_gain = amplitude_gain(steady, 400.0)
+        fed_gain = amplitude_gain(steady, 390.0)
     with stalling_host(stalls=1) as host:
-        again = amplitude_gain(host, 400.0)
+        again = amplitude_gain(host, 390.0)
         assert host.starts == 2
     assert again.underruns == 0
     assert again.relative == pytest.approx(fed_gain.relative, rel=0.01)
     # a host that stalls 200 ms in every attempt: starved past the bound, not assessed
     with stalling_host(stalls=FED_ATTEMPTS, stall_s=0.2) as hopeless:
         with pytest.raises(CannotAssess, match="queue empty"):
-            amplitude_gain(hopeless, 400.0)
+            amplitude_gain(hopeless, 390.0)
         assert hopeless.starts == FED_ATTEMPTS
 
 
