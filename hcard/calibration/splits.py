@@ -41,21 +41,37 @@ def stroke_ids(
     changes (a back-and-forth stroke reverses; zero speeds carry the previous sign). Strokes
     are numbered 0, 1, 2, ... in time order.
     """
-    n = len(m)
     contact = m.normal_force >= contact_threshold_n
     if m.contact is not None:
         contact &= m.contact
     if m.stroke is not None:
         return np.where(contact, np.asarray(m.stroke, dtype=np.int64), -1).astype(np.int64)
+    return stroke_numbers(m.t, contact, m.speed, gap_factor=gap_factor)
+
+
+def stroke_numbers(
+    t: np.ndarray,
+    contact: np.ndarray,
+    speed: np.ndarray | None = None,
+    *,
+    gap_factor: float = GAP_FACTOR,
+) -> np.ndarray:
+    """Rule S2 on arrays: the stroke number of every sample, -1 where ``contact`` is False.
+
+    A new stroke starts at the first sample, at the first contact sample after a lift, after a
+    time gap (``t``, s) longer than ``gap_factor`` times the median interval, and where the sign
+    of ``speed`` changes (zero speeds carry the previous sign). Numbered 0, 1, 2, ... in time
+    order."""
+    n = t.shape[0]
     start = np.zeros(n, dtype=bool)
     if n:
         start[0] = True
     if n > 1:
-        dt = np.diff(m.t)
+        dt = np.diff(t)
         start[1:] |= dt > gap_factor * float(np.median(dt))
         start[1:] |= contact[1:] & ~contact[:-1]
-    if m.speed is not None and n > 1:
-        sign = np.sign(m.speed)
+    if speed is not None and n > 1:
+        sign = np.sign(speed)
         # Zero speeds carry the previous non-zero sign (forward fill).
         last = np.maximum.accumulate(np.where(sign != 0, np.arange(n), 0))
         sign = sign[last]

@@ -4,6 +4,7 @@ the device and the host know."""
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 
@@ -12,6 +13,7 @@ import pytest
 
 from hcard import build
 from hcard.calibration.measurement import read_measurement, write_measurement
+from hcard.calibration.splits import split_by_stroke, stroke_ids
 from hcard.card_io import to_bytes
 from hcard.physics.profile import DeviceProfile
 from hcard.track import make_track, straight_stroke
@@ -41,8 +43,9 @@ def test_the_recording_is_the_measurement_format_and_reads_back(tmp_path):
     write_measurement(m, tmp_path / "rec.csv")
     back = read_measurement(tmp_path / "rec.csv")
     header = (tmp_path / "rec.csv").read_text().splitlines()[0].split(",")
-    assert header[:8] == ["t_s", "amplitude_m", "x_m", "y_m", "speed_m_s", "fn_n", "fl_n",
-                          "contact"]
+    assert header[:9] == ["t_s", "amplitude_m", "x_m", "y_m", "speed_m_s", "fn_n", "fl_n",
+                          "stroke", "contact"]
+    np.testing.assert_array_equal(back.stroke, m.stroke)
     assert "voltage_v" not in header  # the E-ViTa has no EV channel (rule M5)
     for name in ("sequence", "faults", "target_uv", "texture", "echo", "f_tl", "current"):
         np.testing.assert_array_equal(back.column(name), m.column(name), err_msg=name)
@@ -95,6 +98,31 @@ def test_two_sessions_on_one_device_each_echo_their_own_samples():
         named = sample[sample >= 0]
         assert named.size > 150 and np.all(np.diff(named) >= 0)  # in order, this session's
     assert two.host_us[0] > one.host_us[-1]  # later on the host's clock
+
+
+def test_strokes_follow_the_track_whatever_reports_are_lost():
+    """Reports lost in transit leave gaps in the device's time stamps, which rule S2 reads as
+    new strokes; the recording takes each report's stroke from the track sample it echoes, so
+    the strokes, and the split that holds whole strokes out, are those of the finger."""
+    track = back_and_forth()
+    with open_device("sim://evita") as driver:
+        result = play(driver, CARD, track)
+    whole = recording(result)
+    lost = np.zeros(len(result.states), dtype=bool)
+    lost[[*range(100, 140), *range(300, 320), *range(480, 530)]] = True  # 10-50 ms gaps
+    lossy = recording(dataclasses.replace(
+        result, states=[s for s, gone in zip(result.states, lost, strict=True) if not gone]))
+    # independent: the track goes 2 -> 18 mm (stroke 0), then back (stroke 1)
+    touching = whole.stroke >= 0
+    assert set(whole.stroke[touching].tolist()) == {0, 1}
+    assert np.all(whole.speed[whole.stroke == 0] >= 0)
+    assert np.all(whole.speed[whole.stroke == 1] <= 0)
+    np.testing.assert_array_equal(lossy.stroke, whole.stroke[~lost])
+    assert stroke_ids(dataclasses.replace(lossy, stroke=None)).max() + 1 >= 4  # S2 on the gaps
+    # the split holds out the same stroke, whatever was lost
+    _, test_whole = split_by_stroke(whole, seed=3)
+    _, test_lossy = split_by_stroke(lossy, seed=3)
+    assert set(whole.stroke[test_whole].tolist()) == set(lossy.stroke[test_lossy].tolist())
 
 
 def test_track_speeds_of_a_lift_are_zero():
