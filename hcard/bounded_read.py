@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 import stat
 from pathlib import Path
+from typing import BinaryIO
 
 MAX_TEXT_FILE_BYTES = 512 * 1024 * 1024
 """Largest finger-track or measurement CSV file a reader accepts, bytes (512 MiB: an hour of
@@ -61,4 +62,20 @@ def read_bounded(path: str | os.PathLike[str], limit: int) -> bytes:
         data = file.read(limit + 1)
     if len(data) > limit:
         raise InputTooLarge(limit, None if not regular else len(data))
+    return data
+
+
+STDIN = "-"
+"""The name that stands for standard input (and output) on the command line."""
+
+
+def read_bounded_stream(stream: BinaryIO, limit: int) -> bytes:
+    """At most ``limit`` bytes of ``stream`` (standard input, a pipe).
+
+    Raises:
+        InputTooLarge: the stream offers more than ``limit`` bytes.
+    """
+    data = stream.read(limit + 1)
+    if len(data) > limit:
+        raise InputTooLarge(limit, None)
     return data

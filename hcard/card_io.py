@@ -8,8 +8,8 @@ subclass :class:`CardValidationError`) naming the file, the field and the reason
 
 from __future__ import annotations
 
-import json
 import os
+import sys
 from pathlib import Path
 from typing import Literal
 
@@ -17,8 +17,9 @@ from google.protobuf import json_format
 
 from hcard import limits
 from hcard.atomic import write_atomically
-from hcard.bounded_read import InputTooLarge, read_bounded
+from hcard.bounded_read import STDIN, InputTooLarge, read_bounded, read_bounded_stream
 from hcard.errors import CardError, CardValidationError
+from hcard.json_text import JsonInputError, check_message_json, parse_json
 from hcard.v1 import card_pb2 as pb
 from hcard.validate import errors_of, validate
 
@@ -62,12 +63,18 @@ def card_from_bytes(data: bytes, *, source: str | os.PathLike[str] | None = None
 
 def _card_from_json_bytes(data: bytes, source: str | os.PathLike[str] | None) -> pb.Card:
     try:
-        text = data.decode("utf-8-sig")
-        obj = json.loads(text)
-    except (UnicodeDecodeError, ValueError) as exc:
+        obj = parse_json(data.decode("utf-8-sig"))
+    except UnicodeDecodeError as exc:
+        raise CardError(f"not valid UTF-8 ({exc.reason} at byte {exc.start})",
+                        source=source) from None
+    except JsonInputError as exc:
         raise CardError(f"not valid JSON ({exc})", source=source) from None
     if not isinstance(obj, dict):
         raise CardError("JSON card must be an object", source=source)
+    try:
+        check_message_json(obj, pb.Card.DESCRIPTOR)
+    except JsonInputError as exc:
+        raise CardError(f"JSON does not match the card schema ({exc})", source=source) from None
     card = pb.Card()
     try:
         # Unknown fields are those of a newer minor version: ignored, per the versioning rules.
@@ -107,7 +114,13 @@ def parse_card(
 
 
 def read_card_file(path: str | os.PathLike[str]) -> bytes:
-    """The bytes of a card file; :class:`CardError` when missing, unreadable or too large."""
+    """The bytes of a card file (``-``: standard input); :class:`CardError` when missing,
+    unreadable or too large."""
+    if str(path) == STDIN:
+        try:
+            return read_bounded_stream(sys.stdin.buffer, limits.MAX_CARD_BYTES)
+        except InputTooLarge as exc:
+            raise CardError(f"{exc} (the card size limit, rule F6)", source="<stdin>") from None
     file = Path(path)
     try:
         data = read_bounded(file, limits.MAX_CARD_BYTES)

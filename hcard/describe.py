@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import math
-from collections import Counter
+from typing import Any
+
+import numpy as np
 
 from hcard import limits
 from hcard.v1 import card_pb2 as pb
@@ -48,8 +50,20 @@ def describe_component(component: pb.Component, locking: int) -> str:
     )
 
 
+def taxtel_counts(card: pb.Card, shown: int) -> np.ndarray:
+    """How many taxtels play each of the first ``shown`` textures (numpy: a card may hold
+    millions of indices)."""
+    if not card.grid.texture_index or shown == 0:
+        return np.zeros(shown, dtype=np.int64)
+    indices = np.fromiter(card.grid.texture_index, dtype=np.int64,
+                          count=len(card.grid.texture_index))
+    return np.bincount(indices[indices < shown], minlength=shown)
+
+
 def describe_card(card: pb.Card) -> list[str]:
-    """Lines of a readable summary of ``card``."""
+    """Lines of a readable summary of ``card``. Bounded for an invalid card too: at most
+    :data:`~hcard.limits.MAX_TEXTURES` textures and :data:`~hcard.limits.MAX_COMPONENTS_PER_TEXTURE`
+    components each are listed, the rest counted."""
     meta, surface, grid = card.metadata, card.surface, card.grid
     lines = [f"format version {card.version.major}.{card.version.minor}"]
     for label, value in (
@@ -66,17 +80,57 @@ def describe_card(card: pb.Card) -> list[str]:
         f"grid: {grid.cols} x {grid.rows} taxtels of {grid.taxtel_width_mm:g} x "
         f"{grid.taxtel_height_mm:g} mm"
     )
-    counts = Counter(grid.texture_index)
-    n_components = sum(len(t.components) for t in card.textures)
-    lines.append(f"textures: {len(card.textures)} ({n_components} components in all)")
-    for i, texture in enumerate(card.textures):
+    textures = card.textures
+    shown = min(len(textures), limits.MAX_TEXTURES)
+    counts = taxtel_counts(card, shown)
+    n_components = sum(len(t.components) for t in textures) if shown == len(textures) else None
+    lines.append(f"textures: {len(textures)}"
+                 + (f" ({n_components} components in all)" if n_components is not None else ""))
+    for i in range(shown):
+        texture = textures[i]
         name = f" '{texture.name}'" if texture.name else ""
+        n = len(texture.components)
         lines.append(
             f"  [{i}]{name}: baseline {texture.baseline:.4g}, "
             f"{enum_name(CHANNEL_NAMES, texture.channel)}, "
             f"{enum_name(LOCKING_NAMES, texture.locking)} locking, "
-            f"{len(texture.components)} component(s), on {counts.get(i, 0)} taxtel(s)"
+            f"{n} component(s), on {int(counts[i])} taxtel(s)"
         )
-        for component in texture.components:
-            lines.append("      " + describe_component(component, texture.locking))
+        for c in range(min(n, limits.MAX_COMPONENTS_PER_TEXTURE)):
+            lines.append("      " + describe_component(texture.components[c], texture.locking))
+        if n > limits.MAX_COMPONENTS_PER_TEXTURE:
+            lines.append(f"      ... {n - limits.MAX_COMPONENTS_PER_TEXTURE} more not shown")
+    if len(textures) > shown:
+        lines.append(f"  ... {len(textures) - shown} more textures not shown")
     return lines
+
+
+def card_summary(card: pb.Card) -> dict[str, Any]:
+    """The content of ``card`` as plain data for ``hcard info --json``: the same bounds as
+    :func:`describe_card` (textures and components past the limits are counted, not listed)."""
+    meta, surface, grid = card.metadata, card.surface, card.grid
+    textures = card.textures
+    shown = min(len(textures), limits.MAX_TEXTURES)
+    counts = taxtel_counts(card, shown)
+    listed = []
+    for i in range(shown):
+        texture = textures[i]
+        listed.append({
+            "index": i,
+            "name": texture.name,
+            "baseline": texture.baseline,
+            "channel": enum_name(CHANNEL_NAMES, texture.channel),
+            "locking": enum_name(LOCKING_NAMES, texture.locking),
+            "components": len(texture.components),
+            "taxtels": int(counts[i]),
+        })
+    return {
+        "format_version": f"{card.version.major}.{card.version.minor}",
+        "metadata": {name: getattr(meta, name)
+                     for name in ("title", "author", "licence", "generator", "description")},
+        "surface_mm": [surface.width_mm, surface.height_mm],
+        "grid": {"cols": grid.cols, "rows": grid.rows,
+                 "taxtel_mm": [grid.taxtel_width_mm, grid.taxtel_height_mm]},
+        "texture_count": len(textures),
+        "textures": listed,
+    }

@@ -24,11 +24,13 @@ class Problem:
         reason: what is wrong, in words.
         severity: ``"error"`` (the card must be rejected) or ``"warning"`` (it renders, but not
             as written, for example a UV texture whose swing is clipped at 1).
+        rule: the rule of spec/README.md broken (``"T4"``), empty when none applies.
     """
 
     path: str
     reason: str
     severity: str = "error"
+    rule: str = ""
 
     def __str__(self) -> str:
         return f"{self.path}: {self.reason}" if self.path else self.reason

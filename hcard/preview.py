@@ -426,7 +426,17 @@ def render_preview(card: pb.Card, path: str | os.PathLike[str], *, dpi: int = 12
         CardValidationError: the card is invalid.
         OSError: the file cannot be written.
     """
+    write_atomically(path, preview_png(card, dpi=dpi))
+
+
+def preview_png(card: pb.Card, *, dpi: int = 120) -> bytes:
+    """The preview of ``card`` as PNG bytes (:func:`render_preview` without the file), so a
+    caller can render it before it replaces anything.
+
+    Raises:
+        CardValidationError: the card is invalid.
+    """
     fig = preview_figure(card, dpi=dpi)
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=dpi, metadata={"Software": f"hcard {__version__}"})
-    write_atomically(path, buffer.getvalue())
+    return buffer.getvalue()

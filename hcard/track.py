@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hcard.csv_rows import data_rows, read_csv_text
+from hcard.csv_rows import numeric_table, read_csv_text
 from hcard.errors import TrackError
 
 DEFAULT_NORMAL_FORCE_N = 0.5
@@ -103,32 +103,20 @@ def read_track_csv(path: str | os.PathLike[str]) -> FingerTrack:
 
 
 def parse_track_csv(text: str, *, source: str = "track") -> FingerTrack:
-    """Parse the CSV text of a track."""
-    rows = data_rows(text)
-    if not rows:
-        raise TrackError(f"{source}: empty track (no header row)")
-    header_line, header = rows[0]
-    names = [cell.strip() for cell in header]
-    missing = [name for name in REQUIRED_COLUMNS if name not in names]
-    if missing:
-        raise TrackError(
-            f"{source}:{header_line}: header lacks column(s) {', '.join(missing)} "
-            f"(found {', '.join(names) or 'nothing'})"
-        )
+    """Parse the CSV text of a track (:func:`hcard.csv_rows.numeric_table`)."""
+
+    def check_header(names: list[str], line: int) -> None:
+        missing = [name for name in REQUIRED_COLUMNS if name not in names]
+        if missing:
+            raise TrackError(
+                f"{source}:{line}: header lacks column(s) {', '.join(missing)} "
+                f"(found {', '.join(names) or 'nothing'})"
+            )
+
+    _, names, values, _ = numeric_table(text, source, TrackError, check_header)
     wanted = [name for name in (*REQUIRED_COLUMNS, *OPTIONAL_COLUMNS) if name in names]
-    positions = {name: names.index(name) for name in wanted}
-    data = {name: [] for name in wanted}
-    for number, row in rows[1:]:
-        for name, col in positions.items():
-            try:
-                data[name].append(float(row[col]))
-            except IndexError:
-                raise TrackError(f"{source}:{number}: missing value for {name}") from None
-            except ValueError:
-                raise TrackError(
-                    f"{source}:{number}: {name} = {row[col].strip()!r} is not a number"
-                ) from None
-    if not data["t_s"]:
+    data = {name: values[:, names.index(name)] for name in wanted}
+    if not data["t_s"].size:
         raise TrackError(f"{source}: no samples after the header")
     return make_track(
         data["t_s"],

@@ -86,6 +86,17 @@ def test_validate_lists_field_paths_and_exits_non_zero(tmp_path):
 
 @pytest.mark.parametrize("command", ["info", "validate", "preview"])
 def test_corrupt_and_missing_cards_give_one_line(command, tmp_path):
+    """One line: ``Error: ...``, or for validate the file's one finding with its rule."""
+    if command == "validate":
+        def one_line_error(result, *fragments):
+            assert result.exit_code == 1
+            lines = [line for line in result.output.splitlines() if line.strip()]
+            assert len(lines) == 1, lines
+            assert any(f": error {rule}: " in lines[0] for rule in ("F7", "V1")), lines
+            for fragment in fragments:
+                assert fragment in lines[0]
+    else:
+        one_line_error = globals()["one_line_error"]
     corrupt = tmp_path / "corrupt.hcard"
     corrupt.write_bytes(b"\x0a\xff\x01")
     extra = ["-o", tmp_path / "p.png"] if command == "preview" else []
@@ -126,14 +137,21 @@ def test_render_npz_and_position_only(card_file, track_file, tmp_path):
     ("text", "message"),
     [
         ("t_s,x_mm\n0,1\n", "header lacks column(s) y_mm"),
-        ("t_s,x_mm,y_mm\n0,1,1\n0.01,abc,1\n", "x_mm = 'abc' is not a number"),
+        ("t_s,x_mm,y_mm\n0,1,1\n0.01,abc,1\n", "bad.csv:3: column x_mm: 'abc' is not a number"),
+        ("t_s,x_mm,y_mm\n0,1,1\n0.01,\u0662,1\n", "column x_mm: '\u0662' is not a number"),
+        ("t_s,x_mm,y_mm\n0,1,1\n0.01,0.0_2,1\n", "column x_mm: '0.0_2' is not a number"),
+        ("t_s,x_mm,y_mm\n0,1,1\n0.01,1\n", "bad.csv:3: row has 2 fields, the header has 3"),
+        ("t_s,t_s,x_mm,y_mm\n0,1,1,1\n", "column 't_s' appears twice in the header"),
+        ("t_s;x_mm;y_mm\n0;1;1\n", "the columns are separated by semicolons"),
+        ("t_s,x_mm,y_mm\n0," + "x" * 200_000 + ",1\n", "a cell may hold at most 131072"),
         ("t_s,x_mm,y_mm\n0,1,1\n0,2,1\n", "time must increase strictly"),
         ("t_s,x_mm,y_mm\n0,1,1\n0.02,nan,1\n", "non-finite value"),
         ("t_s,x_mm,y_mm,contact\n0,1,1,2\n", "only 0 or 1"),
-        ("# nothing\n", "empty track"),
+        ("# nothing\n", "empty file (no header row)"),
     ],
 )
 def test_bad_tracks_give_one_line(card_file, tmp_path, text, message):
+    """(Cases of every bad-input class of the track reader; the huge cell is 200,000 chars.)"""
     track = tmp_path / "bad.csv"
     track.write_text(text)
     one_line_error(run("render", card_file, "--track", track, "-o", tmp_path / "o.csv"), message)
@@ -154,3 +172,40 @@ def test_console_script_reports_user_errors_without_traceback(tmp_path):
     assert proc.returncode == 1
     assert proc.stderr.strip() == f"Error: {missing}: no such file"
     assert "Traceback" not in proc.stderr
+
+
+def test_version_names_the_card_format_the_tool_implements() -> None:
+    from hcard import __version__
+    from hcard.limits import FORMAT_MAJOR, FORMAT_MINOR
+
+    result = CliRunner().invoke(cli, ["--version"])
+    assert result.exit_code == 0
+    assert result.output.strip() == (
+        f"hcard {__version__} (card format {FORMAT_MAJOR}.{FORMAT_MINOR})")
+
+
+def test_exit_statuses_tell_invalid_input_from_usage_and_from_a_bug(tmp_path, monkeypatch) -> None:
+    """0 ok, 1 invalid input or a failed check, 2 usage, 3 internal error (a bug)."""
+    from hcard import build, card_io
+    from hcard.cli import card_cmds
+
+    good = tmp_path / "good.hcard"
+    card_io.save(build.card(10.0, 10.0, taxtel_mm=10.0, textures=[build.texture(0.5,
+                                                                                  channel="uv")]),
+                 good)
+    bad = tmp_path / "bad.hcard"
+    bad.write_bytes(b"\xff\xff\xff")
+    runner = CliRunner()
+    assert runner.invoke(cli, ["validate", str(good)]).exit_code == 0
+    assert runner.invoke(cli, ["validate", str(bad)]).exit_code == 1
+    assert runner.invoke(cli, ["validate", str(tmp_path / "missing.hcard")]).exit_code == 1
+    assert runner.invoke(cli, ["validate", "--no-such-option", str(good)]).exit_code == 2
+
+    def broken(card):
+        raise ZeroDivisionError("injected")
+
+    monkeypatch.setattr(card_cmds, "validate", broken)
+    crashed = runner.invoke(cli, ["validate", str(good)])
+    assert crashed.exit_code == 3
+    assert "internal error (ZeroDivisionError): this is a bug" in crashed.output
+    assert "Traceback" in crashed.output

@@ -208,12 +208,10 @@ def test_preview_is_written_through_hcard_preview(tmp_path: Path):
 def test_preview_that_cannot_be_written_is_a_one_line_error(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ):
-    import hcard.preview
-
-    def refuse(card: pb.Card, path: Path) -> None:
+    def refuse(path: Path, data: bytes) -> None:
         raise PermissionError(13, "Permission denied")
 
-    monkeypatch.setattr(hcard.preview, "render_preview", refuse)
+    monkeypatch.setattr(encode_cmd, "write_atomically", refuse)
     image = grating_png(tmp_path / "g.png")
     result = run(image, "-o", tmp_path / "g.hcard", "--preview", tmp_path / "p.png")
     assert_one_line_error(result, "cannot write the preview", "Permission denied")

@@ -19,8 +19,9 @@ import numpy as np
 
 from hcard.atomic import write_atomically
 from hcard.bounded_read import MAX_JSON_FILE_BYTES, InputTooLarge, read_bounded
-from hcard.csv_rows import data_rows, read_csv_text
+from hcard.csv_rows import numeric_table, read_csv_text
 from hcard.errors import HcardError
+from hcard.json_text import JsonInputError, parse_json
 
 #: Accepted unit suffixes per quantity: suffix -> scale to the SI unit (rule M4).
 UNITS: dict[str, dict[str, float]] = {
@@ -215,11 +216,10 @@ def _read_sidecar(path: Path) -> dict[str, Any]:
     except (OSError, UnicodeDecodeError) as exc:
         raise MeasurementError(f"{source}: cannot read ({exc})") from None
     try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise MeasurementError(
-            f"{source}:{exc.lineno}:{exc.colno}: bad sidecar JSON ({exc.msg})"
-        ) from None
+        data = parse_json(text)
+    except JsonInputError as exc:
+        where = source if exc.line is None else f"{source}:{exc.line}:{exc.column}"
+        raise MeasurementError(f"{where}: bad sidecar JSON ({exc.reason})") from None
     if not isinstance(data, dict):
         raise MeasurementError(f"{source}: bad sidecar JSON (the top level must be an object)")
     if not isinstance(data.get("device"), str) or not data["device"].strip():
@@ -256,43 +256,35 @@ def _read_sidecar(path: Path) -> dict[str, Any]:
 
 
 def _parse(text: str, source: str, conditions: dict[str, Any]) -> Measurement:
-    rows = data_rows(text)
-    if not rows:
-        raise MeasurementError(f"{source}: empty file (no header row)")
-    header_line, header = rows[0]
-    names = [cell.strip() for cell in header]
     columns: dict[str, tuple[int, float, str]] = {}
-    for position, name in enumerate(names):
-        quantity, scale = _split_header(name, source, header_line)
-        if quantity in columns:
+
+    def check_header(names: list[str], header_line: int) -> None:
+        for position, name in enumerate(names):
+            quantity, scale = _split_header(name, source, header_line)
+            if quantity in columns:
+                raise MeasurementError(
+                    f"{source}:{header_line}: column {name!r} duplicates "
+                    f"{columns[quantity][2]!r} (both are {quantity})"
+                )
+            columns[quantity] = (position, scale, name)
+        missing = [f"{q}_{SI_SUFFIX[q]}" for q in REQUIRED if q not in columns]
+        if missing:
             raise MeasurementError(
-                f"{source}:{header_line}: column {name!r} duplicates "
-                f"{columns[quantity][2]!r} (both are {quantity})"
+                f"{source}:{header_line}: missing column(s) {', '.join(missing)} "
+                f"(found {', '.join(names)})"
             )
-        columns[quantity] = (position, scale, name)
-    missing = [f"{q}_{SI_SUFFIX[q]}" for q in REQUIRED if q not in columns]
-    if missing:
-        raise MeasurementError(
-            f"{source}:{header_line}: missing column(s) {', '.join(missing)} "
-            f"(found {', '.join(names)})"
-        )
-    if not any(q in columns for q in ACTUATION):
-        raise MeasurementError(
-            f"{source}:{header_line}: missing column: an actuation column "
-            "(amplitude_<unit> or voltage_<unit>) is required"
-        )
-    body = rows[1:]
-    if not body:
+        if not any(q in columns for q in ACTUATION):
+            raise MeasurementError(
+                f"{source}:{header_line}: missing column: an actuation column "
+                "(amplitude_<unit> or voltage_<unit>) is required"
+            )
+
+    _, _, table, lines = numeric_table(text, source, MeasurementError, check_header)
+    if not table.shape[0]:
         raise MeasurementError(f"{source}: no samples after the header")
-    lines = np.array([number for number, _ in body])
-    for number, row in body:
-        if len(row) != len(names):
-            raise MeasurementError(
-                f"{source}:{number}: row has {len(row)} fields, the header has {len(names)}"
-            )
     values: dict[str, np.ndarray] = {}
     for quantity, (position, scale, name) in columns.items():
-        raw = _column_values([row[position] for _, row in body], lines, name, source)
+        raw = table[:, position]
         _check_finite(raw, lines, name, source)
         if UNITLESS.get(quantity, False):
             fractional = np.flatnonzero(raw != np.round(raw))
@@ -322,25 +314,6 @@ def _parse(text: str, source: str, conditions: dict[str, Any]) -> Measurement:
         kwargs["contact"] = kwargs["contact"].astype(bool)
     device = {q: values[q] for q in DEVICE_COLUMNS if q in values}
     return Measurement(conditions=conditions, device=device, **kwargs)
-
-
-def _column_values(cells: list[str], lines: np.ndarray, name: str, source: str) -> np.ndarray:
-    """The cells of one column as floats (an empty cell or ``nan`` is NaN, rule M6); a cell
-    that is not a number is an error naming its line."""
-    try:
-        return np.asarray(cells, dtype=np.float64)
-    except ValueError:
-        pass  # an empty or malformed cell: find it, one cell at a time
-    raw = np.empty(len(cells))
-    for i, cell in enumerate(cells):
-        text = cell.strip()
-        try:
-            raw[i] = float(text) if text else math.nan
-        except ValueError:
-            raise MeasurementError(
-                f"{source}:{lines[i]}: column {name}: {text!r} is not a number"
-            ) from None
-    return raw
 
 
 def _check_finite(raw: np.ndarray, lines: np.ndarray, name: str, source: str) -> None:

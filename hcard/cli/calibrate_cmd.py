@@ -33,7 +33,7 @@ from hcard.calibration.plan import (
     verification,
 )
 from hcard.calibration.splits import SPLITS
-from hcard.cli.errors import UserErrorGroup
+from hcard.cli.errors import EXIT_FAILED, UserErrorGroup
 from hcard.errors import HcardError
 from hcard.physics import Predictor
 from hcard.physics.profile import DeviceProfile
@@ -295,7 +295,8 @@ def _verification_files(measurements: list[Measurement], card: Path | None,
               help="Stroke-block bootstrap refits for the final model's uncertainties (0: the "
                    "fit's Jacobian uncertainties only).")
 @click.option("--strict", is_flag=True,
-              help="Exit with status 2 when structure is left that no effect explains.")
+              help="Exit with status 1 (a failed check) when structure is left that no effect "
+                   "explains.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress lines, only the summary.")
 def calibrate_command(
     data: tuple[Path, ...],
@@ -425,7 +426,7 @@ def calibrate_command(
         f"{', ' + ', '.join(p.name for p in files.figures) if files.figures else ''})"
     )
     if strict and result.verdict == NOT_EXPLAINED:
-        sys.exit(2)
+        sys.exit(EXIT_FAILED)
 
 
 def _error(value: float, unit: str) -> str:

@@ -10,6 +10,7 @@ from typing import Any
 import click
 
 from hcard import limits
+from hcard.atomic import write_atomically
 from hcard.card_io import format_for_path, save
 from hcard.errors import CardError, HcardError
 from hcard.v1 import card_pb2 as pb
@@ -174,14 +175,21 @@ def encode(
         ).checked()
     except ValueError as exc:
         raise click.UsageError(_option_names(str(exc))) from None
+    if output.suffix.lower() in IMAGE_SUFFIXES:
+        raise click.UsageError(
+            f"-o {output}: a card is not an image; name it .hcard (binary) or .hcard.json "
+            f"(the PNG preview is --preview {output})")
     try:
         _check_writable(output, "card")
         if preview is not None:
             _check_writable(preview, "preview")
         result = encode_image(image, options, progress=_progress)
+        # The preview is rendered before the card is saved: a preview that cannot be made
+        # leaves the previous card in place.
+        png = _preview_bytes(result.card) if preview is not None else None
         save(result.card, output)
-        if preview is not None:
-            _write_preview(result.card, preview)
+        if preview is not None and png is not None:
+            _write_preview(png, preview)
     except HcardError as exc:
         raise click.ClickException(str(exc)) from None
     summary = dict(result.stats)
@@ -197,6 +205,10 @@ def encode(
         for line in summary_lines(summary):
             click.echo(line)
 
+
+IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".gif", ".bmp", ".tif", ".tiff", ".webp"})
+"""Output names encode refuses for a card: a binary card written to ``card.png`` is a file
+that image viewers reject and card readers find only by content."""
 
 _OPTION_FIELDS = (
     "width_mm",
@@ -231,12 +243,17 @@ def _check_writable(path: Path, what: str) -> None:
         raise CardError(f"cannot write the {what}: directory {parent} does not exist", source=path)
 
 
-def _write_preview(card: pb.Card, path: Path) -> None:
-    """Write the PNG preview (hcard.preview, imported only when asked for: it loads matplotlib)."""
-    from hcard.preview import render_preview
+def _preview_bytes(card: pb.Card) -> bytes:
+    """The PNG preview (hcard.preview, imported only when asked for: it loads matplotlib)."""
+    from hcard.preview import preview_png
 
+    return preview_png(card)
+
+
+def _write_preview(png: bytes, path: Path) -> None:
+    """Write the rendered preview to ``path``, atomically."""
     try:
-        render_preview(card, path)
+        write_atomically(path, png)
     except OSError as exc:
         raise CardError(f"cannot write the preview ({exc.strerror or exc})", source=path) from None
 

@@ -10,10 +10,14 @@ import click
 
 from hcard import __version__
 from hcard.cli.errors import UserErrorGroup
+from hcard.limits import FORMAT_MAJOR, FORMAT_MINOR
 
 
 @click.group(cls=UserErrorGroup, context_settings={"help_option_names": ["-h", "--help"]})
-@click.version_option(__version__, prog_name="hcard")
+@click.version_option(
+    __version__, prog_name="hcard",
+    message=f"%(prog)s %(version)s (card format {FORMAT_MAJOR}.{FORMAT_MINOR})",
+)
 def cli() -> None:
     """hcard: the haptic-card toolkit for friction-modulation (UV/EV) touchscreens.
 

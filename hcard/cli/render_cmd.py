@@ -3,22 +3,30 @@ with ``--profile`` the actuator commands a device profile gives for them."""
 
 from __future__ import annotations
 
-import io
+import contextlib
+import math
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import click
 import numpy as np
 
-from hcard.atomic import write_atomically
 from hcard.card_io import load
 from hcard.errors import HcardError
+from hcard.physics.actuation import (
+    ChannelClipping,
+    UVModelRange,
+    combined_clipping,
+    combined_range,
+)
 from hcard.render import Frames, Renderer, RenderOptions
 from hcard.render.options import (
     DEFAULT_BAND_LIMIT_HZ,
     DEFAULT_DEAD_RECKONING_S,
     DEFAULT_FRAME_RATE_HZ,
 )
+from hcard.render.output import csv_rows, frame_writer
 from hcard.track import FingerTrack, read_track_csv
 
 if TYPE_CHECKING:
@@ -59,28 +67,10 @@ def _columns(frames: Frames, commands: ActuatorCommands | None) -> list[tuple[st
 
 def frames_to_csv(frames: Frames, commands: ActuatorCommands | None = None) -> bytes:
     """CSV bytes with columns t_s, uv, ev, friction, contact, texture (spec/track-format.md),
-    and with ``commands`` amplitude_m, voltage_v, rendered_uv, rendered_ev.
-
-    Floats are written in their shortest round-trip form (rule O1), so reading the CSV back
-    gives the rendered numbers exactly.
-    """
+    and with ``commands`` amplitude_m, voltage_v, rendered_uv, rendered_ev, in one piece (the
+    command writes block by block, :mod:`hcard.render.output`)."""
     columns = _columns(frames, commands)
-    cells = [map(str, values.tolist()) if values.dtype.kind == "i" else map(repr, values.tolist())
-             for _, values in columns]
-    rows = (",".join(row) for row in zip(*cells, strict=True))
-    header = ",".join(name for name, _ in columns)
-    return (header + "\n" + "\n".join(rows) + "\n").encode()
-
-
-def frames_to_npz(frames: Frames, commands: ActuatorCommands | None = None) -> bytes:
-    """NPZ bytes with arrays t_s, uv, ev, friction (float64), contact (bool), texture (int32),
-    and with ``commands`` amplitude_m, voltage_v, rendered_uv, rendered_ev (float64)."""
-    arrays = dict(_columns(frames, commands))
-    arrays["contact"] = frames.contact.astype(bool)
-    arrays["texture"] = frames.texture.astype(np.int32)
-    buffer = io.BytesIO()
-    np.savez_compressed(buffer, **arrays)
-    return buffer.getvalue()
+    return (",".join(name for name, _ in columns) + "\n" + csv_rows(columns)).encode()
 
 
 @click.command()
@@ -123,40 +113,94 @@ def render(card: Path, track_path: Path, output: Path, frame_rate: float, band_l
     except ValueError as exc:
         raise click.UsageError(str(exc)) from None
     renderer = Renderer(loaded, options)
-    total = int(track.duration_s * frame_rate) + 1
-    if total > PROGRESS_FRAMES:
-        stderr = click.get_text_stream("stderr")
-        with click.progressbar(length=total, label="rendering", file=stderr) as bar:
-            done = [0]
-
-            def advance(frames_done: int, _total: int) -> None:
-                bar.update(frames_done - done[0])
-                done[0] = frames_done
-
-            frames = renderer.render(track, progress=advance)
-    else:
-        frames = renderer.render(track)
-    commands = None
-    if profile is not None:
-        speed, force = finger_state(track, frames.t)
-        commands = profile.actuate(frames.uv, frames.ev, speed, force)
-    data = (frames_to_npz(frames, commands) if suffix == ".npz"
-            else frames_to_csv(frames, commands))
+    total = renderer.frame_count(track)  # the frame limit, before any work
+    summary = _RenderSummary()
     try:
-        write_atomically(output, data)
+        with frame_writer(output) as writer, _progress(total) as advance:
+            for frames in renderer.blocks(track):
+                commands = None
+                if profile is not None:
+                    speed, force = finger_state(track, frames.t)
+                    commands = profile.actuate(frames.uv, frames.ev, speed, force)
+                writer.write(_output_columns(frames, commands, npz=suffix == ".npz"))
+                summary.add(frames, commands)
+                advance(len(frames))
     except OSError as exc:
         raise HcardError(f"{output}: cannot write ({exc.strerror or exc})") from None
-    in_contact = float(np.mean(frames.contact)) if len(frames) else 0.0
     click.echo(
-        f"{output}: {len(frames)} frames at {frame_rate:g} Hz over {track.duration_s:.3f} s "
-        f"({mode}); finger on a texture {100 * in_contact:.0f}% of the time; friction "
-        f"{frames.friction.min():.3f}..{frames.friction.max():.3f}"
+        f"{output}: {summary.frames} frames at {frame_rate:g} Hz over {track.duration_s:.3f} s "
+        f"({mode}); finger on a texture {100 * summary.contact_fraction:.0f}% of the time; "
+        f"friction {summary.friction_min:.3f}..{summary.friction_max:.3f}"
     )
-    if commands is not None:
-        click.echo(f"  profile {profile.name}: amplitude up to {commands.amplitude.max() * 1e6:.3g}"
-                   f" um, voltage up to {commands.voltage.max():.4g} V")
-        for line in commands.summary().splitlines():
+    if profile is not None:
+        click.echo(f"  profile {profile.name}: amplitude up to {summary.amplitude_max * 1e6:.3g}"
+                   f" um, voltage up to {summary.voltage_max:.4g} V")
+        for line in summary.profile_lines():
             click.echo(f"  {line}")
+
+
+def _output_columns(frames: Frames, commands: ActuatorCommands | None,
+                    npz: bool) -> list[tuple[str, np.ndarray]]:
+    """The columns of one block: integers in the CSV, bool and int32 in the NPZ."""
+    columns = _columns(frames, commands)
+    if npz:
+        kinds = {"contact": frames.contact.astype(bool),
+                 "texture": frames.texture.astype(np.int32)}
+        columns = [(name, kinds.get(name, values)) for name, values in columns]
+    return columns
+
+
+@contextlib.contextmanager
+def _progress(total: int) -> Iterator[Callable[[int], None]]:
+    """A progress bar on stderr for renderings of more than :data:`PROGRESS_FRAMES` frames;
+    yields the function that advances it by a number of frames."""
+    if total <= PROGRESS_FRAMES:
+        yield lambda _frames: None
+        return
+    stderr = click.get_text_stream("stderr")
+    with click.progressbar(length=total, label="rendering", file=stderr) as bar:
+        yield bar.update
+
+
+class _RenderSummary:
+    """What the command prints about a rendering, gathered block by block."""
+
+    def __init__(self) -> None:
+        self.frames = 0
+        self.in_contact = 0
+        self.friction_min = math.inf
+        self.friction_max = -math.inf
+        self.amplitude_max = 0.0
+        self.voltage_max = 0.0
+        self._uv: list[ChannelClipping] = []
+        self._ev: list[ChannelClipping] = []
+        self._range: list[UVModelRange] = []
+
+    def add(self, frames: Frames, commands: ActuatorCommands | None) -> None:
+        if not len(frames):
+            return
+        friction = frames.friction
+        self.frames += len(frames)
+        self.in_contact += int(np.count_nonzero(frames.contact))
+        self.friction_min = min(self.friction_min, float(friction.min()))
+        self.friction_max = max(self.friction_max, float(friction.max()))
+        if commands is not None:
+            self.amplitude_max = max(self.amplitude_max, float(commands.amplitude.max()))
+            self.voltage_max = max(self.voltage_max, float(commands.voltage.max()))
+            self._uv.append(commands.uv_clipping)
+            self._ev.append(commands.ev_clipping)
+            self._range.append(commands.uv_range)
+
+    @property
+    def contact_fraction(self) -> float:
+        return self.in_contact / self.frames if self.frames else 0.0
+
+    def profile_lines(self) -> list[str]:
+        """The profile's clipping and range report over the whole rendering."""
+        if not self._uv:
+            return []
+        return [str(combined_clipping(self._uv)), str(combined_clipping(self._ev)),
+                *combined_range(self._range).warnings]
 
 
 COMMANDS = [render]

@@ -28,6 +28,7 @@ group: w > 1 um, sections 2.7.1, 2.10) has every frame whose amplitude falls bel
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, NamedTuple
 
@@ -244,6 +245,31 @@ class ActuatorCommands:
         """One line per channel (clipped frames, limit, worst shortfall), then one per
         :attr:`warnings` entry."""
         return "\n".join((str(self.uv_clipping), str(self.ev_clipping), *self.warnings))
+
+
+def combined_clipping(parts: Sequence[ChannelClipping]) -> ChannelClipping:
+    """The clipping of one channel over consecutive blocks of a rendering, as one report."""
+    return ChannelClipping(
+        parts[0].channel,
+        sum(p.frames for p in parts),
+        sum(p.clipped for p in parts),
+        next((p.limit for p in parts if p.limit), ""),
+        max(p.worst_shortfall for p in parts),
+    )
+
+
+def combined_range(parts: Sequence[UVModelRange]) -> UVModelRange:
+    """The UV range report over consecutive blocks of a rendering, as one report."""
+    return UVModelRange(
+        sum(p.frames for p in parts),
+        sum(p.below_amplitude_range for p in parts),
+        parts[0].amplitude_minimum,
+        parts[0].source,
+        sum(p.below_speed_floor for p in parts),
+        max(p.worst_speed_shortfall for p in parts),
+        sum(p.unreachable for p in parts),
+        max(p.worst_unreachable for p in parts),
+    )
 
 
 _REPORTS = ("uv_clipping", "ev_clipping", "uv_out_of_range", "uv_range", "uv_clipped",

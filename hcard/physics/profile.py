@@ -36,6 +36,7 @@ import numpy as np
 from hcard.atomic import write_atomically
 from hcard.bounded_read import MAX_JSON_FILE_BYTES, InputTooLarge, read_bounded
 from hcard.errors import HcardError
+from hcard.json_text import JsonInputError, parse_json
 from hcard.physics.predictor import Predictor, PredictorError
 from hcard.physics.profile_effects import (
     EffectError,
@@ -761,11 +762,11 @@ class DeviceProfile:
     ) -> DeviceProfile:
         """A profile from the bytes of a profile file (UTF-8 JSON)."""
         try:
-            raw = json.loads(data.decode("utf-8"))
+            raw = parse_json(data.decode("utf-8"))
         except UnicodeDecodeError:
             raise ProfileError(f"{source}: not a text (UTF-8) file") from None
-        except json.JSONDecodeError as exc:
-            raise ProfileError(f"{source}: not valid JSON ({exc.msg}, line {exc.lineno})") from None
+        except JsonInputError as exc:
+            raise ProfileError(f"{source}: not valid JSON ({exc})") from None
         return cls.from_dict(raw, source=source, registry=registry)
 
     @classmethod
@@ -844,7 +845,7 @@ def _owned(values: Any, shape: tuple[int, ...]) -> bool:
 def read_json(file: Path) -> Any:
     """The JSON content of ``file``; :class:`ProfileError` naming the file otherwise."""
     try:
-        return json.loads(read_bounded(file, MAX_JSON_FILE_BYTES).decode("utf-8"))
+        return parse_json(read_bounded(file, MAX_JSON_FILE_BYTES).decode("utf-8"))
     except FileNotFoundError:
         raise ProfileError(f"{file}: no such file") from None
     except InputTooLarge as exc:
@@ -853,8 +854,8 @@ def read_json(file: Path) -> Any:
         raise ProfileError(f"{file}: is a directory, not a profile") from None
     except UnicodeDecodeError:
         raise ProfileError(f"{file}: not a text (UTF-8) file") from None
-    except json.JSONDecodeError as exc:
-        raise ProfileError(f"{file}: not valid JSON ({exc.msg}, line {exc.lineno})") from None
+    except JsonInputError as exc:
+        raise ProfileError(f"{file}: not valid JSON ({exc})") from None
     except OSError as exc:
         raise ProfileError(f"{file}: cannot read ({exc.strerror or exc})") from None
 

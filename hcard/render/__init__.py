@@ -6,6 +6,14 @@ the taxtel's texture with phase integrated from the finger velocity.
 """
 
 from hcard.render.options import RenderMode, RenderOptions
-from hcard.render.renderer import Frames, Renderer, RenderStream, render
+from hcard.render.renderer import (
+    MAX_RENDER_FRAMES,
+    Frames,
+    Renderer,
+    RenderStream,
+    RenderTooLong,
+    render,
+)
 
-__all__ = ["Frames", "RenderMode", "RenderOptions", "RenderStream", "Renderer", "render"]
+__all__ = ["MAX_RENDER_FRAMES", "Frames", "RenderMode", "RenderOptions", "RenderStream",
+           "RenderTooLong", "Renderer", "render"]

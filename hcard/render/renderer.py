@@ -8,12 +8,12 @@ numbers of a batch rendering of the whole track.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
 
-from hcard.errors import CardValidationError, TrackError
+from hcard.errors import CardValidationError, HcardError, TrackError
 from hcard.render.compiled import CompiledCard, compile_card
 from hcard.render.kernel import Workspace, evaluate_frames, frame_state
 from hcard.render.options import RenderOptions
@@ -24,6 +24,14 @@ from hcard.validate import errors_of, validate
 
 BATCH_CHUNK_FRAMES = 1 << 15
 """Frames evaluated per kernel call in batch mode (keeps temporaries in cache)."""
+MAX_RENDER_FRAMES = 100_000_000
+"""Most frames one batch rendering may have (2.8 hours at the default 10 kHz; ~6 GB of CSV):
+checked before any work, so a track with a 100,000 s gap or ``--frame-rate 1e12`` is refused at
+once instead of ending in a MemoryError (spec/README.md section 4)."""
+
+
+class RenderTooLong(HcardError):
+    """A rendering would exceed :data:`MAX_RENDER_FRAMES` frames."""
 
 
 @dataclass(frozen=True)
@@ -93,6 +101,46 @@ class Renderer:
         )
         return Frames(times, uv, ev, state.texture >= 0, state.texture, phase)
 
+    def frame_count(self, track: FingerTrack) -> int:
+        """Frames of a batch rendering of ``track``: from its first to its last sample.
+
+        Raises:
+            RenderTooLong: more than :data:`MAX_RENDER_FRAMES` (checked before any work).
+        """
+        total = math.floor(track.duration_s * self.options.frame_rate_hz + 1e-9) + 1
+        if total > MAX_RENDER_FRAMES:
+            raise RenderTooLong(
+                f"the track spans {track.duration_s:.6g} s: {total:.4g} frames at "
+                f"{self.options.frame_rate_hz:g} Hz, over the limit of {MAX_RENDER_FRAMES:.0e} "
+                "(render a shorter track, or at a lower frame rate)")
+        return total
+
+    def blocks(
+        self,
+        track: FingerTrack,
+        *,
+        with_phase: bool = False,
+    ) -> Iterator[Frames]:
+        """The batch rendering of ``track`` in consecutive blocks of at most
+        :data:`BATCH_CHUNK_FRAMES` frames (each computed from the whole track, so the blocks
+        joined are :meth:`render`'s frames exactly): output of any length in bounded memory.
+
+        Raises:
+            RenderTooLong: the track needs more than :data:`MAX_RENDER_FRAMES` frames.
+        """
+        total = self.frame_count(track)
+        table = extend_table(
+            empty_table(),
+            track.t,
+            np.column_stack((track.x, track.y)),
+            track.contact,
+            self.options.dead_reckoning_s,
+        )
+        t0 = float(track.t[0])
+        for first in range(0, total, BATCH_CHUNK_FRAMES):
+            count = min(BATCH_CHUNK_FRAMES, total - first)
+            yield self._block(table, self.frame_times(t0, first, count), with_phase)
+
     def render(
         self,
         track: FingerTrack,
@@ -106,31 +154,27 @@ class Renderer:
             track: touch samples.
             with_phase: also return each component's unwrapped phase (diagnostics).
             progress: called as ``progress(frames_done, frames_total)`` after each chunk.
+
+        Raises:
+            RenderTooLong: the track needs more than :data:`MAX_RENDER_FRAMES` frames.
         """
-        table = extend_table(
-            empty_table(),
-            track.t,
-            np.column_stack((track.x, track.y)),
-            track.contact,
-            self.options.dead_reckoning_s,
-        )
-        total = math.floor(track.duration_s * self.options.frame_rate_hz + 1e-9) + 1
-        t0 = float(track.t[0])
+        total = self.frame_count(track)
         out = Frames(
-            self.frame_times(t0, 0, total),
+            self.frame_times(float(track.t[0]), 0, total),
             np.empty(total),
             np.empty(total),
             np.empty(total, dtype=bool),
             np.empty(total, dtype=np.int32),
             np.empty((total, self.compiled.max_components)) if with_phase else None,
         )
-        for first in range(0, total, BATCH_CHUNK_FRAMES):
-            part = self._block(table, out.t[first : first + BATCH_CHUNK_FRAMES], with_phase)
+        first = 0
+        for part in self.blocks(track, with_phase=with_phase):
             for name in ("uv", "ev", "contact", "texture", "phase"):
                 if getattr(part, name) is not None:
                     getattr(out, name)[first : first + len(part)] = getattr(part, name)
+            first += len(part)
             if progress is not None:
-                progress(first + len(part), total)
+                progress(first, total)
         return out
 
     def stream(self, t0: float | None = None) -> RenderStream:

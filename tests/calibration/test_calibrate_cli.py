@@ -107,7 +107,7 @@ def test_calibrate_writes_a_report_that_leads_with_the_held_out_error(
     assert np.sqrt(np.mean(residual[data.test] ** 2)) == pytest.approx(after, rel=1e-9)
 
 
-def test_calibrate_strict_exits_2_when_structure_is_left(recorded: Path, tmp_path: Path) -> None:
+def test_calibrate_strict_exits_1_when_structure_is_left(recorded: Path, tmp_path: Path) -> None:
     # Without the speed effect among the candidates the structure cannot be explained.
     result = CliRunner().invoke(
         cli,
@@ -128,7 +128,7 @@ def test_calibrate_strict_exits_2_when_structure_is_left(recorded: Path, tmp_pat
             str(tmp_path),
         ],
     )
-    assert result.exit_code == 2, result.output
+    assert result.exit_code == 1, result.output
     assert "Structured residual not explained by any known effect: against speed" in result.stdout
     assert result.stderr == ""
     assert not (tmp_path / "fit.png").exists()

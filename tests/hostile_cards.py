@@ -1,0 +1,66 @@
+"""Cards built byte by byte to the 16 MiB limit (spec/README.md F6) with a structure whose
+problems multiply: millions of empty textures, of empty components, of out-of-range texture
+indices. Each is a valid protobuf encoding of ``hcard.v1.Card``; none is a valid card."""
+
+from __future__ import annotations
+
+from hcard import build, card_io, limits
+
+
+def _varint(value: int) -> bytes:
+    out = bytearray()
+    while True:
+        byte, value = value & 0x7F, value >> 7
+        out.append(byte | (0x80 if value else 0))
+        if not value:
+            return bytes(out)
+
+
+def _field(number: int, payload: bytes) -> bytes:
+    """A length-delimited field."""
+    return _varint(number << 3 | 2) + _varint(len(payload)) + payload
+
+
+def _valid_head() -> bytes:
+    """version, metadata, surface and a 1 x 1 grid of a small valid card, without textures."""
+    card = build.card(10.0, 10.0, taxtel_mm=10.0, textures=[build.texture(0.5, channel="uv")])
+    del card.textures[:]
+    card.grid.ClearField("texture_index")
+    return card_io.to_bytes(card)
+
+
+def _room(head: bytes, slack: int = 16) -> int:
+    return limits.MAX_CARD_BYTES - len(head) - slack
+
+
+def empty_textures() -> bytes:
+    """As many empty textures (field 5, length 0: 2 bytes each) as fit: ~8.4 million."""
+    head = _valid_head()
+    return head + _field(5, b"")[:2] * (_room(head) // 2)
+
+
+def empty_components() -> bytes:
+    """One texture holding as many empty components as fit: ~8.4 million."""
+    head = _valid_head()
+    count = (_room(head) - 8) // 2
+    texture = b"\x2a\x00" * count  # Texture.components (field 5), empty
+    return head + _field(5, texture)
+
+
+def indices_out_of_range() -> bytes:
+    """One texture and as many texture indices equal to 1 (packed, 1 byte each) as fit:
+    ~16.8 million entries outside a palette of 1."""
+    card = build.card(10.0, 10.0, taxtel_mm=10.0, textures=[build.texture(0.5, channel="uv")])
+    card.grid.ClearField("texture_index")
+    head = card_io.to_bytes(card)
+    count = _room(head) - 16
+    grid_extra = _field(5, b"\x01" * count)  # TaxtelGrid.texture_index, packed
+    return head + _field(4, grid_extra)  # a second grid field merges into the first
+
+
+HOSTILE_CARDS = {
+    "empty-textures": empty_textures,
+    "empty-components": empty_components,
+    "indices-out-of-range": indices_out_of_range,
+}
+"""Name -> builder of each hostile card."""
