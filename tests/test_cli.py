@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import json
 import math
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -209,3 +211,13 @@ def test_exit_statuses_tell_invalid_input_from_usage_and_from_a_bug(tmp_path, mo
     assert crashed.exit_code == 3
     assert "internal error (ZeroDivisionError): this is a bug" in crashed.output
     assert "Traceback" in crashed.output
+
+
+def test_conformance_json_to_standard_output_holds_only_the_json() -> None:
+    result = CliRunner().invoke(cli, ["conformance", "--driver", "sim://", "--level", "format",
+                                      "--json", "-", "-q"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.stdout)
+    assert report["passed"] is True and report["totals"]["cases"] >= 40
+    assert "PASS" not in result.stdout.split("\n", 1)[0]  # the table went to stderr
+    assert not Path("-").exists()

@@ -13,6 +13,7 @@ from typing import Any
 
 import click
 
+from hcard.bounded_read import STDIN
 from hcard.errors import HcardError
 
 LEVEL_NAMES = ("format", "renderer", "device")
@@ -58,10 +59,13 @@ def _parse_options(pairs: tuple[str, ...]) -> dict[str, Any]:
               help="Level to run (repeatable); default: all levels.")
 @click.option("--check", "select", multiple=True, metavar="PREFIX",
               help="Only checks whose name starts with PREFIX (repeatable).")
-@click.option("--junit", "junit_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Write JUnit XML here (for CI).")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Write the JSON report here (for tools).")
+@click.option("--junit", "junit_path",
+              type=click.Path(dir_okay=False, allow_dash=True, path_type=Path),
+              help="Write JUnit XML here (for CI); - for standard output.")
+@click.option("--json", "json_path",
+              type=click.Path(dir_okay=False, allow_dash=True, path_type=Path),
+              help="Write the JSON report here (for tools); - for standard output, which "
+                   "then holds only the JSON (the table goes to standard error).")
 @click.option("--vectors", "vectors_dir", type=click.Path(file_okay=False, path_type=Path),
               help="Vectors directory (default: spec/vectors of this installation).")
 @click.option("--option", "option_pairs", multiple=True, metavar="KEY=VALUE",
@@ -78,9 +82,19 @@ def conformance(driver_name: str, levels: tuple[str, ...], select: tuple[str, ..
                 junit_path: Path | None, json_path: Path | None, vectors_dir: Path | None,
                 option_pairs: tuple[str, ...], timing: str | None, verbose: bool,
                 quiet: bool) -> None:
-    """Run the hcard conformance suite against an implementation (spec/conformance.md)."""
+    """Run the hcard conformance suite against an implementation (spec/conformance.md).
+
+    Exits 0 when every case passes, 1 when one fails, 2 when the driver or vectors cannot be
+    used.
+
+    \b
+    Examples:
+      hcard conformance --driver sim://
+      hcard conformance --driver usbip://127.0.0.1:3240/1-1 --junit results.xml
+      hcard conformance --driver sim:// --level format --json - | jq .totals
+    """
     from hcard_conformance.context import Context
-    from hcard_conformance.report import table, write_json, write_junit
+    from hcard_conformance.report import json_bytes, junit_xml, table, write_json, write_junit
     from hcard_conformance.runner import run_suite
 
     options = _parse_options(option_pairs)
@@ -117,9 +131,13 @@ def conformance(driver_name: str, levels: tuple[str, ...], select: tuple[str, ..
             f"no check of level(s) {', '.join(report.levels)} applies to {driver_name!r}"
             + (f" (not applicable: {', '.join(report.not_applicable)})"
                if report.not_applicable else ""))
-    click.echo(table(report, verbose=verbose), nl=False)
-    for path, write in ((junit_path, write_junit), (json_path, write_json)):
-        if path is not None:
+    to_stdout = STDIN in (str(junit_path), str(json_path))
+    click.echo(table(report, verbose=verbose), nl=False, err=to_stdout)
+    for path, write, text in ((junit_path, write_junit, junit_xml),
+                              (json_path, write_json, json_bytes)):
+        if path is not None and str(path) == STDIN:
+            click.echo(text(report).decode(), nl=False)
+        elif path is not None:
             try:
                 write(report, path)
             except OSError as exc:

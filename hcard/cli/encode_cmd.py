@@ -42,8 +42,9 @@ DEFAULT_MAX_PIXELS = 64_000_000  # same as hcard_builtins.image.DEFAULT_MAX_PIXE
 @click.option(
     "--dpi",
     type=float,
-    help="Resolution in dots per inch, instead of a size. Default: the DPI stored in the "
-    "image, else 254 (0.1 mm per pixel).",
+    help="Resolution in dots per inch (at most 25400), instead of a size. Default: the "
+    "resolution the image states in a physical unit (PNG pHYs, JPEG JFIF density, TIFF with "
+    "a resolution unit) when it lies in 10-25400 dpi, else 254 (0.1 mm per pixel).",
 )
 @click.option(
     "--taxtel-mm",

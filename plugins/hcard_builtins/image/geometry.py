@@ -26,6 +26,12 @@ from hcard.build import grid_count
 from hcard.errors import ImageError
 
 MM_PER_INCH = 25.4
+MAX_DPI = 25_400.0
+"""Finest resolution accepted, dots per inch (1 um pixels, far finer than a finger resolves and
+than any grating a card can hold at 50 cycles/mm)."""
+MIN_STORED_DPI = 10.0
+"""Coarsest resolution taken from an image's metadata, dots per inch (2.5 mm pixels); a stored
+value outside MIN_STORED_DPI..MAX_DPI is reported and the default assumed."""
 DEFAULT_DPI = 254.0
 """Resolution assumed when neither the options nor the file give one: 0.1 mm per pixel."""
 
@@ -179,12 +185,23 @@ def resolve_geometry(
     elif dpi is not None:
         ppx = ppy = dpi / MM_PER_INCH
         how = f"from --dpi {dpi:g}"
-    elif embedded_dpi is not None:
+    elif embedded_dpi is not None and all(
+            MIN_STORED_DPI <= value <= MAX_DPI for value in embedded_dpi):
         ppx, ppy = embedded_dpi[0] / MM_PER_INCH, embedded_dpi[1] / MM_PER_INCH
         how = f"from the DPI stored in the image ({embedded_dpi[0]:g} x {embedded_dpi[1]:g})"
+    elif embedded_dpi is not None:
+        ppx = ppy = DEFAULT_DPI / MM_PER_INCH
+        how = (f"assumed {DEFAULT_DPI:g} dpi: the image stores {embedded_dpi[0]:g} x "
+               f"{embedded_dpi[1]:g} dpi, outside {MIN_STORED_DPI:g}-{MAX_DPI:g}")
     else:
         ppx = ppy = DEFAULT_DPI / MM_PER_INCH
         how = f"assumed {DEFAULT_DPI:g} dpi: no size given and no DPI stored in the image"
+    finest = MAX_DPI / MM_PER_INCH
+    if max(ppx, ppy) > finest * (1 + 1e-9):
+        raise ImageError(
+            f"{str(source) + ': ' if str(source) else ''}pixels of {1e3 / max(ppx, ppy):.3g} um "
+            f"({how}) are finer than the {1e3 / finest:g} um ({MAX_DPI:g} dpi) an encoder "
+            "accepts; give a larger --width-mm/--height-mm or a lower --dpi")
     surface_w, surface_h = width_px / ppx, height_px / ppy
     prefix = f"{source}: " if str(source) else ""
     if max(surface_w, surface_h) > limits.MAX_SURFACE_MM:
@@ -203,8 +220,11 @@ def resolve_geometry(
             f"{cols} x {rows} grid, over the card limits ({limits.MAX_GRID_COLS} x "
             f"{limits.MAX_GRID_ROWS}, {limits.MAX_TAXTELS} taxtels); use a larger --taxtel-mm"
         )
-    tile_w = max(1, math.ceil(taxtel_mm * ppx - 1e-9))
-    tile_h = max(1, math.ceil(taxtel_mm * ppy - 1e-9))
+    # A tile never holds more than the image: a taxtel wider than the whole image at a high
+    # resolution (a stored 150,000 dpi, --dpi 1e6) once asked for a 29,528-pixel-square tile
+    # (6.5 GB) from a 32-pixel image.
+    tile_w = max(1, min(math.ceil(taxtel_mm * ppx - 1e-9), width_px))
+    tile_h = max(1, min(math.ceil(taxtel_mm * ppy - 1e-9), height_px))
     col_start, col_owned = _spans(cols, taxtel_mm * ppx, width_px, tile_w)
     row_start, row_owned = _spans(rows, taxtel_mm * ppy, height_px, tile_h)
     # Tiles end inside the image where it is large enough (see the module docstring).

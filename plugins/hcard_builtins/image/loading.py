@@ -200,8 +200,23 @@ def _upright(image: Image.Image) -> Image.Image:
     return ImageOps.exif_transpose(image)
 
 
+_TIFF_RESOLUTION_UNIT = 296
+"""TIFF tag ResolutionUnit: 1 none, 2 inch, 3 centimetre."""
+
+
 def _dpi_of(image: Image.Image) -> tuple[float, float] | None:
-    """The resolution stored in the file, when it is a usable positive number."""
+    """The resolution the file states in a physical unit, when it is a positive number; None
+    where the number is Pillow's rather than the file's: a JPEG without a JFIF density in dots
+    per inch or centimetre gets 72 dpi from Pillow whenever it carries EXIF, and a TIFF without
+    a ResolutionUnit of inch or centimetre has no physical resolution (Pillow then reports its
+    bare XResolution, 1 by default). Taken at face value those changed the surface of the same
+    pixels 3.5-fold with the metadata."""
+    if image.format == "JPEG" and image.info.get("jfif_unit") not in (1, 2):
+        return None
+    if image.format == "TIFF":
+        tags = getattr(image, "tag_v2", {})
+        if tags.get(_TIFF_RESOLUTION_UNIT) not in (2, 3):
+            return None
     dpi = image.info.get("dpi")
     try:
         x, y = (float(v) for v in dpi)  # type: ignore[union-attr]
