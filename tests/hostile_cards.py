@@ -33,27 +33,29 @@ def _room(head: bytes, slack: int = 16) -> int:
     return limits.MAX_CARD_BYTES - len(head) - slack
 
 
-def empty_textures() -> bytes:
-    """As many empty textures (field 5, length 0: 2 bytes each) as fit: ~8.4 million."""
+def empty_textures(count: int | None = None) -> bytes:
+    """``count`` empty textures (field 5, length 0: 2 bytes each); by default as many as fit
+    in the size limit, ~8.4 million."""
     head = _valid_head()
-    return head + _field(5, b"")[:2] * (_room(head) // 2)
+    return head + b"\x2a\x00" * (_room(head) // 2 if count is None else count)
 
 
-def empty_components() -> bytes:
-    """One texture holding as many empty components as fit: ~8.4 million."""
+def empty_components(count: int | None = None) -> bytes:
+    """One texture holding ``count`` empty components; by default as many as fit, ~8.4
+    million."""
     head = _valid_head()
-    count = (_room(head) - 8) // 2
+    count = (_room(head) - 8) // 2 if count is None else count
     texture = b"\x2a\x00" * count  # Texture.components (field 5), empty
     return head + _field(5, texture)
 
 
-def indices_out_of_range() -> bytes:
-    """One texture and as many texture indices equal to 1 (packed, 1 byte each) as fit:
-    ~16.8 million entries outside a palette of 1."""
+def indices_out_of_range(count: int | None = None) -> bytes:
+    """One texture and ``count`` texture indices equal to 1 (packed, 1 byte each), all outside
+    a palette of 1; by default as many as fit, ~16.8 million."""
     card = build.card(10.0, 10.0, taxtel_mm=10.0, textures=[build.texture(0.5, channel="uv")])
     card.grid.ClearField("texture_index")
     head = card_io.to_bytes(card)
-    count = _room(head) - 16
+    count = _room(head) - 16 if count is None else count
     grid_extra = _field(5, b"\x01" * count)  # TaxtelGrid.texture_index, packed
     return head + _field(4, grid_extra)  # a second grid field merges into the first
 

@@ -1,15 +1,19 @@
-"""Fuzzing the card reader: nothing but CardError ever escapes (issue 3 item 7)."""
+"""Fuzzing the card reader: nothing but CardError ever escapes, and repeated structure costs
+time in proportion to its bytes with a bounded report (spec/README.md section 4)."""
 
 from __future__ import annotations
 
 import contextlib
+import time
 
 from cards import two_texture_card
+from hostile_cards import HOSTILE_CARDS
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hcard.card_io import parse_card, to_bytes, to_json
+from hcard.card_io import card_from_bytes, parse_card, to_bytes, to_json
 from hcard.errors import CardError
+from hcard.validate import MAX_LISTED_PROBLEMS, errors_of, validate
 
 VALID = to_bytes(two_texture_card())
 VALID_JSON = to_json(two_texture_card()).encode()
@@ -59,3 +63,28 @@ def test_random_json_documents(document):
 
     read(json.dumps({"version": {"major": 1}, "grid": document}).encode())
     read(json.dumps(document).encode())
+
+
+SECONDS_PER_BYTE = 5e-7
+"""Time a read and validation may take per input byte, beyond :data:`BASE_SECONDS` (measured
+~6e-8 s/byte on the 16 MiB hostile cards: 1 s)."""
+BASE_SECONDS = 0.5
+
+
+@settings(max_examples=12, deadline=None)
+@given(st.sampled_from(sorted(HOSTILE_CARDS)), st.integers(1, 1_500_000))
+def test_repeated_structure_costs_time_in_proportion_and_a_bounded_report(kind, count):
+    """Whatever is repeated and how often: read and validation take time in proportion to the
+    bytes, and the report lists at most MAX_LISTED_PROBLEMS problems plus one count per rule."""
+    data = HOSTILE_CARDS[kind](count)
+    started = time.perf_counter()
+    try:
+        card = card_from_bytes(data)
+        problems = validate(card)
+    finally:
+        elapsed = time.perf_counter() - started
+    assert elapsed < BASE_SECONDS + SECONDS_PER_BYTE * len(data), (kind, count, elapsed)
+    assert errors_of(problems)
+    listed = [p for p in problems if p.path]
+    assert len(listed) <= MAX_LISTED_PROBLEMS
+    assert len(problems) - len(listed) <= len({p.rule for p in problems})
