@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy.integrate import trapezoid
 
 from hcard.physics import Predictor, PredictorError
 from hcard_builtins.physics.ultrasonic import (
@@ -322,7 +323,8 @@ def test_squeeze_film_reaches_zero_friction_at_a_finite_amplitude(film: SqueezeF
         amplitude = np.linspace(0, 1.5 * w0, 61)
         curve = film.forward(amplitude=amplitude, normal_force=force)
         assert curve[0] == 1.0 and np.all(np.diff(curve) <= 0)
-        assert np.all(curve[amplitude < 0.99 * w0] > 0) and np.all(curve[amplitude >= w0] == 0)
+        assert np.all(curve[amplitude < 0.99 * w0] > 0)
+        assert np.all(curve[amplitude >= w0] < 1e-12)  # 0 past the root, up to rounding
 
 
 def test_squeeze_film_gamma_is_half_at_half_pressure(film: SqueezeFilm) -> None:
@@ -370,8 +372,8 @@ def test_squeeze_film_double_integral_by_brute_force(film: SqueezeFilm) -> None:
         a = 1 + delta * np.cos(k * x)
         b = 1 + delta * math.cos(k / 2)
         edge = math.sqrt(b * b + 1.5 * eps * eps) / b
-        inner = [np.trapezoid(edge * a / (a + eps * math.cos(t)) - 1, x) for t in time]
-        mean = np.trapezoid(inner, time) / (2 * np.pi)
+        inner = [trapezoid(edge * a / (a + eps * math.cos(t)) - 1, x) for t in time]
+        mean = trapezoid(inner, time) / (2 * np.pi)
         force = float(film.levitation_force(amplitude=amplitude, pressure=1.0))
         assert force == pytest.approx(mean * l0 * l0, rel=1e-4)
 

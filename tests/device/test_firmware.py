@@ -731,3 +731,47 @@ def test_run_realtime_follows_the_clock_and_caps_the_lag() -> None:
     # 10 + 10 ms, then 480 ms due of which 50 ms are run (lag cap), then 1 ms
     assert fw.sim.time_s == pytest.approx(0.071, abs=1e-4)
     assert len(fw.take_input_reports(1000)) == 71
+
+
+def test_a_served_device_times_a_finger_by_its_running_clock_not_the_lagging_simulation():
+    """While run_realtime serves, the device's clock runs on between the simulation's wake-ups
+    (and while its process waits for the CPU). A FINGER arriving 40 ms after the simulation's
+    last step is timed at its true arrival; timed at the simulation's clock it fixed the host
+    clock offset (PO2) 40 ms short for good, and every later sample, arriving on time, was
+    placed 40 ms before it arrived."""
+    fw = make_fw()
+    wall = [0.0]
+    stop = threading.Event()
+    server = threading.Thread(target=fw.run_realtime, args=(stop,),
+                              kwargs={"clock": lambda: wall[0], "period_s": 0.001})
+    server.start()
+
+    def run_until(t: float) -> None:
+        while wall[0] < t - 1e-12:
+            wall[0] = min(wall[0] + 0.01, t)
+            while fw.sim.time_s < wall[0] - 0.0015:  # let the server catch up
+                stop.wait(0.001)
+
+    try:
+        run_until(0.2)
+        with fw.lock:  # the simulation cannot step: it lags the wall clock by 40 ms
+            wall[0] += 0.040
+            assert fw.device_now() == pytest.approx(0.240)
+            assert fw.sim.time_s == pytest.approx(0.2, abs=0.002)
+            fw.handle_output(Finger.from_si(10.000, 20.0, 20.0, 0.5, True).encode())
+        run_until(0.25)
+        # later samples arrive on time: host time 10.000 is device time 0.240
+        for k in range(1, 6):
+            run_until(0.240 + 0.010 * k)
+            fw.handle_output(Finger.from_si(10.000 + 0.010 * k, 20.0 + 0.2 * k, 20.0, 0.5,
+                                            True).encode())
+        run_until(0.300)
+    finally:
+        stop.set()
+        server.join()
+    assert fw.device_now() == fw.sim.time_s  # not serving: the simulation's own clock
+    last = [s for s in states(fw) if s.host_time_echo_us == round(10.050 * 1e6)]
+    assert last, "no report echoes the last sample"
+    for report in last:  # placed at its arrival, 0.290 s: the age counts from there
+        age_s = report.echo_age_us * 1e-6
+        assert age_s == pytest.approx(report.timestamp_us * 1e-6 - 0.290, abs=0.0015)
