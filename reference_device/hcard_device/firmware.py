@@ -317,7 +317,10 @@ class Firmware:
         self._expected_seq: int | None = None
         self._host_time_echo = 0
         self._echo_placed_us: int | None = None  # device time of the echoed sample (PO2)
-        self._realtime_now: Callable[[], float] | None = None  # see device_now
+        # run_realtime's clock, its origin and the device time granted so far (_follow_clock)
+        self._clock: Callable[[], float] | None = None
+        self._clock_origin = 0.0
+        self._served_s = 0.0
         self._clip_index = 0
         self._sequence = 0
         self.session = Session(self.config.watchdog_s)
@@ -445,39 +448,41 @@ class Firmware:
         Wakes every ``period_s`` and advances by the wall time elapsed; when the simulation
         falls more than :data:`REALTIME_MAX_LAG_S` behind, the excess is skipped (device time
         then runs slower than the wall clock instead of building up a backlog)."""
-        start = clock()
-        simulated = 0.0
-        skipped = [0.0]
-        self._realtime_now = lambda: clock() - start - skipped[0]
+        with self.lock:
+            self._clock = clock
+            self._clock_origin = clock()
+            self._served_s = 0.0
         try:
             while not stop_event.is_set():
-                due = clock() - start - skipped[0] - simulated
-                if due > REALTIME_MAX_LAG_S:
-                    skipped[0] += due - REALTIME_MAX_LAG_S
-                    due = REALTIME_MAX_LAG_S
-                if due > 0:
-                    self.advance(due)
-                    simulated += due
+                with self.lock:
+                    self._follow_clock()
                 stop_event.wait(period_s)
         finally:
-            self._realtime_now = None
+            with self.lock:
+                self._clock = None
 
-    def device_now(self) -> float:
-        """The device's time now, s: while :meth:`run_realtime` serves, the wall clock's (less
-        what it skipped), which runs on while the simulation waits for its next wake-up or its
-        process is descheduled; otherwise the simulation's own.
-
-        A report is timed by this clock on arrival. Timing FINGER reports by the simulation's
-        clock instead made them arrive up to REALTIME_MAX_LAG_S "early" whenever the host was
-        served before the simulation caught up; the host clock offset (PO2, the smallest
-        arrival - host time ever seen) then locked that error in for the rest of the device's
-        life, every later sample was placed tens of ms before it arrived, and the device
-        rendered from stale samples: on a loaded machine the served reference failed A1 on a
-        noisy stroke (0.11-0.18) and a bipolar card (0.24) in both runs against one server."""
-        now = self.sim.time_s
-        if self._realtime_now is not None:
-            now = max(now, self._realtime_now())
-        return now
+    def _follow_clock(self) -> None:
+        """While :meth:`run_realtime` serves: run the simulation up to the device's clock (the
+        wall clock's, less what was skipped). Called at every wake-up of the loop and before a
+        FINGER report is applied, so the finger is timed at the device's time on arrival (other
+        reports need no more than the loop's millisecond; a step per STREAM report slowed a
+        host's burst of them to 2.5 ms each). Applied at the simulation's last step instead, a
+        FINGER report that came while the
+        simulation lagged (its process waiting for the CPU) arrived up to
+        :data:`REALTIME_MAX_LAG_S` early on the device clock; the host clock offset (PO2, the
+        smallest arrival - host time ever seen) kept that error for the device's life, every
+        later sample was placed tens of ms before it arrived, and the device rendered from
+        stale samples: on a loaded machine the served reference failed A1 on a noisy stroke
+        (0.11-0.18) and a bipolar card (0.24) in both runs against one server."""
+        if self._clock is None:
+            return
+        due = self._clock() - self._clock_origin - self._served_s
+        if due > REALTIME_MAX_LAG_S:
+            self._clock_origin += due - REALTIME_MAX_LAG_S
+            due = REALTIME_MAX_LAG_S
+        if due > 0:
+            self.advance(due)
+            self._served_s += due
 
     # ---- features ---------------------------------------------------------------------------
 
@@ -679,8 +684,9 @@ class Firmware:
         """Carry out a decoded output report; False when it is refused (PO5)."""
         if isinstance(report, Finger):
             self._touch_source = TouchSource.HOST
+            self._follow_clock()  # timed on arrival at the device's clock (_follow_clock)
             placed_s = self.sim.host_finger(
-                self.device_now(), report.x_mm, report.y_mm, report.fn_n, report.contact,
+                self.sim.time_s, report.x_mm, report.y_mm, report.fn_n, report.contact,
                 host_time_s=report.host_time_us * TIME_UNIT_S,
             )
             if placed_s is not None:
