@@ -133,3 +133,17 @@ def test_encode_refuses_to_write_a_card_under_an_image_name(tmp_path: Path, name
     assert result.exit_code == 2
     assert "a card is not an image" in result.output and "--preview" in result.output
     assert not (tmp_path / name).exists()
+
+
+def test_encode_writes_the_card_to_standard_output_and_the_summary_to_stderr(
+        tmp_path: Path) -> None:
+    image = tmp_path / "in.png"
+    Image.fromarray((np.indices((40, 40)).sum(axis=0) % 2 * 255).astype(np.uint8)).save(image)
+    result = CliRunner().invoke(cli, ["encode", str(image), "-o", "-", "--width-mm", "40"])
+    assert result.exit_code == 0, result.output
+    card = card_io.card_from_bytes(result.stdout_bytes)
+    assert card.surface.width_mm == pytest.approx(40.0)
+    assert "wrote       <stdout> (binary" in result.stderr
+    assert not Path("-").exists()
+    piped = CliRunner().invoke(cli, ["info", "-"], input=result.stdout_bytes)
+    assert piped.exit_code == 0 and "surface: 40 x 40 mm" in piped.stdout

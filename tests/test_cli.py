@@ -221,3 +221,17 @@ def test_conformance_json_to_standard_output_holds_only_the_json() -> None:
     assert report["passed"] is True and report["totals"]["cases"] >= 40
     assert "PASS" not in result.stdout.split("\n", 1)[0]  # the table went to stderr
     assert not Path("-").exists()
+
+
+def test_global_quiet_leaves_out_progress_lines_and_quiet_with_verbose_is_usage(tmp_path):
+    runner = CliRunner()
+    args = ["conformance", "--driver", "sim://", "--level", "format"]
+    loud = runner.invoke(cli, args)
+    assert loud.exit_code == 0 and "case(s), ok" in loud.stderr
+    hushed = runner.invoke(cli, ["-q", *args])
+    assert hushed.exit_code == 0 and "case(s), ok" not in hushed.stderr
+    assert "PASS" in hushed.stdout or "passed" in hushed.stdout.lower()  # the result prints
+    listed = runner.invoke(cli, ["-v", *args])
+    assert len(listed.stdout.splitlines()) > len(hushed.stdout.splitlines())  # every case
+    both = runner.invoke(cli, ["-q", "-v", "validate", str(tmp_path / "b.hcard")])
+    assert both.exit_code == 2 and "give -q or -v, not both" in both.output

@@ -34,6 +34,7 @@ from hcard.calibration.plan import (
 )
 from hcard.calibration.splits import SPLITS
 from hcard.cli.errors import EXIT_FAILED, UserErrorGroup
+from hcard.cli.verbosity import quiet as global_quiet
 from hcard.errors import HcardError
 from hcard.physics import Predictor
 from hcard.physics.profile import DeviceProfile
@@ -367,6 +368,8 @@ def calibrate_command(
         raise CalibrateUsageError("--verify plays a device profile; it needs the recordings' "
                                   "profile or --profile, not --model")
     candidates = [library[name] for name in names if name not in set(excluded)]
+
+    quiet = quiet or global_quiet()
 
     def say(text: str) -> None:
         if not quiet:

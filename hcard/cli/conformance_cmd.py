@@ -14,6 +14,7 @@ from typing import Any
 import click
 
 from hcard.bounded_read import STDIN
+from hcard.cli.verbosity import QUIET, VERBOSE, verbosity
 from hcard.errors import HcardError
 
 LEVEL_NAMES = ("format", "renderer", "device")
@@ -97,6 +98,8 @@ def conformance(driver_name: str, levels: tuple[str, ...], select: tuple[str, ..
     from hcard_conformance.report import json_bytes, junit_xml, table, write_json, write_junit
     from hcard_conformance.runner import run_suite
 
+    quiet = quiet or verbosity() == QUIET
+    verbose = verbose or verbosity() == VERBOSE
     options = _parse_options(option_pairs)
     if timing is not None:
         options["timing"] = timing

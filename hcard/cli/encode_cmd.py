@@ -11,7 +11,9 @@ import click
 
 from hcard import limits
 from hcard.atomic import write_atomically
-from hcard.card_io import format_for_path, save
+from hcard.bounded_read import STDIN
+from hcard.card_io import format_for_path, parse_card, save, to_bytes
+from hcard.cli.verbosity import quiet
 from hcard.errors import CardError, HcardError
 from hcard.v1 import card_pb2 as pb
 
@@ -24,9 +26,10 @@ DEFAULT_MAX_PIXELS = 64_000_000  # same as hcard_builtins.image.DEFAULT_MAX_PIXE
     "-o",
     "--output",
     required=True,
-    type=click.Path(path_type=Path),
+    type=click.Path(allow_dash=True, path_type=Path),
     help="Card file to write: a name ending in .json gets the JSON form, any other the binary "
-    "form (.hcard).",
+    "form (.hcard); - writes the binary card to standard output (the summary then goes to "
+    "standard error).",
 )
 @click.option(
     "--width-mm",
@@ -153,6 +156,12 @@ def encode(
     --components gratings (frequency, orientation, amplitude, phase), and similar taxtels
     share a palette texture. Prints a summary: grid, textures, components, card size and the
     reconstruction error against the image (relative friction and multiples of the 8% JND).
+
+    \b
+    Examples:
+      hcard encode photo.png -o photo.hcard --width-mm 80
+      hcard encode map.png -o map.hcard.json --taxtel-mm 2 --channel ev --preview map-p.png
+      hcard encode photo.png -o - --dpi 300 | hcard info -
     """
     from hcard_builtins.image import EncodeOptions, encode_image
 
@@ -176,35 +185,43 @@ def encode(
         ).checked()
     except ValueError as exc:
         raise click.UsageError(_option_names(str(exc))) from None
+    to_stdout = str(output) == STDIN
     if output.suffix.lower() in IMAGE_SUFFIXES:
         raise click.UsageError(
             f"-o {output}: a card is not an image; name it .hcard (binary) or .hcard.json "
             f"(the PNG preview is --preview {output})")
     try:
-        _check_writable(output, "card")
+        if not to_stdout:
+            _check_writable(output, "card")
         if preview is not None:
             _check_writable(preview, "preview")
         result = encode_image(image, options, progress=_progress)
         # The preview is rendered before the card is saved: a preview that cannot be made
         # leaves the previous card in place.
         png = _preview_bytes(result.card) if preview is not None else None
-        save(result.card, output)
+        if to_stdout:
+            card_bytes = to_bytes(result.card)
+            parse_card(card_bytes, source="<stdout>")  # validated, as save() does
+            click.get_binary_stream("stdout").write(card_bytes)
+        else:
+            save(result.card, output)
+            card_bytes = b""
         if preview is not None and png is not None:
             _write_preview(png, preview)
     except HcardError as exc:
         raise click.ClickException(str(exc)) from None
     summary = dict(result.stats)
     summary.update(
-        output=str(output),
-        output_format=format_for_path(output),
-        output_bytes=output.stat().st_size,
+        output="<stdout>" if to_stdout else str(output),
+        output_format="binary" if to_stdout else format_for_path(output),
+        output_bytes=len(card_bytes) if to_stdout else output.stat().st_size,
         preview=str(preview) if preview is not None else None,
     )
     if as_json:
-        click.echo(json.dumps(summary, indent=2))
+        click.echo(json.dumps(summary, indent=2), err=to_stdout)
     else:
         for line in summary_lines(summary):
-            click.echo(line)
+            click.echo(line, err=to_stdout)
 
 
 IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".gif", ".bmp", ".tif", ".tiff", ".webp"})
@@ -232,7 +249,8 @@ def _option_names(message: str) -> str:
 
 
 def _progress(line: str) -> None:
-    click.echo(f"hcard encode: {line}", err=True)
+    if not quiet():
+        click.echo(f"hcard encode: {line}", err=True)
 
 
 def _check_writable(path: Path, what: str) -> None:

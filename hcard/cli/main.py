@@ -10,6 +10,7 @@ import click
 
 from hcard import __version__
 from hcard.cli.errors import UserErrorGroup
+from hcard.cli.verbosity import set_verbosity
 from hcard.limits import FORMAT_MAJOR, FORMAT_MINOR
 
 
@@ -18,7 +19,12 @@ from hcard.limits import FORMAT_MAJOR, FORMAT_MINOR
     __version__, prog_name="hcard",
     message=f"%(prog)s %(version)s (card format {FORMAT_MAJOR}.{FORMAT_MINOR})",
 )
-def cli() -> None:
+@click.option("-q", "--quiet", is_flag=True,
+              help="No progress lines on standard error (results and errors still print).")
+@click.option("-v", "--verbose", is_flag=True,
+              help="Every detail a command can list (e.g. every conformance case).")
+@click.pass_context
+def cli(context: click.Context, quiet: bool, verbose: bool) -> None:
     """hcard: the haptic-card toolkit for friction-modulation (UV/EV) touchscreens.
 
     A card (.hcard binary, or .json) describes a surface as a grid of taxtels, each playing a
@@ -28,6 +34,7 @@ def cli() -> None:
     physics to tribometer recordings (calibrate).
     """
     warnings.showwarning = _show_warning
+    set_verbosity(context, quiet, verbose)
 
 
 def _show_warning(message: Warning | str, category: type[Warning], *_args: Any, **_kw: Any) -> None:

@@ -13,6 +13,7 @@ import click
 import numpy as np
 
 from hcard.card_io import load
+from hcard.cli.verbosity import quiet
 from hcard.errors import HcardError
 from hcard.physics.actuation import (
     ChannelClipping,
@@ -97,7 +98,14 @@ def render(card: Path, track_path: Path, output: Path, frame_rate: float, band_l
     """Render CARD along a finger track into target relative friction per channel.
 
     With --profile, also the commands a device with that profile would play, the profile's
-    effects and limits included (the clipping is summarised).
+    effects and limits included (the clipping is summarised). Frames are written block by
+    block (any length in bounded memory), at most 1e8 of them.
+
+    \b
+    Examples:
+      hcard render card.hcard --track stroke.csv -o frames.csv
+      hcard render card.hcard --track stroke.csv -o frames.npz --frame-rate 20000
+      hcard render card.hcard --track stroke.csv -o cmds.csv --profile evita.profile.json
     """
     from hcard.physics.profile import DeviceProfile
 
@@ -154,7 +162,7 @@ def _output_columns(frames: Frames, commands: ActuatorCommands | None,
 def _progress(total: int) -> Iterator[Callable[[int], None]]:
     """A progress bar on stderr for renderings of more than :data:`PROGRESS_FRAMES` frames;
     yields the function that advances it by a number of frames."""
-    if total <= PROGRESS_FRAMES:
+    if total <= PROGRESS_FRAMES or quiet():
         yield lambda _frames: None
         return
     stderr = click.get_text_stream("stderr")
