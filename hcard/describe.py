@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
+if TYPE_CHECKING:
+    import numpy as np
 
 from hcard import limits
 from hcard.v1 import card_pb2 as pb
@@ -53,6 +54,8 @@ def describe_component(component: pb.Component, locking: int) -> str:
 def taxtel_counts(card: pb.Card, shown: int) -> np.ndarray:
     """How many taxtels play each of the first ``shown`` textures (numpy: a card may hold
     millions of indices)."""
+    import numpy as np  # here, not at import: card commands start without it
+
     if not card.grid.texture_index or shown == 0:
         return np.zeros(shown, dtype=np.int64)
     indices = np.fromiter(card.grid.texture_index, dtype=np.int64,

@@ -16,8 +16,6 @@ from __future__ import annotations
 import math
 from collections import Counter
 
-import numpy as np
-
 from hcard import limits
 from hcard.errors import Problem
 from hcard.v1 import card_pb2 as pb
@@ -171,6 +169,8 @@ def _check_texture_indices(grid: pb.TaxtelGrid, n_textures: int, out: Findings) 
     """Rule G6 for every entry, in numpy: only the entries that are listed become problems."""
     if not grid.texture_index:
         return
+    import numpy as np  # here, not at import: card commands start without it (0.1-0.2 s)
+
     indices = np.fromiter(grid.texture_index, dtype=np.int64, count=len(grid.texture_index))
     outside = np.flatnonzero(indices >= n_textures)
     shown = outside[: MAX_LISTED_PROBLEMS]

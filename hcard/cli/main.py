@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import sys
 import warnings
 from typing import Any
@@ -13,8 +14,33 @@ from hcard.cli.errors import UserErrorGroup
 from hcard.cli.verbosity import set_verbosity
 from hcard.limits import FORMAT_MAJOR, FORMAT_MINOR
 
+COMMAND_MODULES = {
+    "encode": "encode_cmd", "info": "card_cmds", "validate": "card_cmds",
+    "render": "render_cmd", "preview": "preview_cmd", "predict": "predict_cmd",
+    "plugins": "plugins_cmd", "device": "device_cmd", "play": "device_cmd",
+    "conformance": "conformance_cmd", "calibrate": "calibrate_cmd",
+}
+"""Each command's module under ``hcard.cli``, imported only when the command runs (or when
+``hcard --help`` lists them all): ``hcard validate`` loads the card modules and not the
+renderer, the calibration loop or the device drivers (bench/bench_cli_startup.py)."""
 
-@click.group(cls=UserErrorGroup, context_settings={"help_option_names": ["-h", "--help"]})
+
+class LazyCommandGroup(UserErrorGroup):
+    """The ``hcard`` group: commands listed from :data:`COMMAND_MODULES`, each module imported
+    when its command is asked for."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted(COMMAND_MODULES)
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        module_name = COMMAND_MODULES.get(cmd_name)
+        if module_name is None:
+            return None
+        module = importlib.import_module(f"hcard.cli.{module_name}")
+        return next(command for command in module.COMMANDS if command.name == cmd_name)
+
+
+@click.group(cls=LazyCommandGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(
     __version__, prog_name="hcard",
     message=f"%(prog)s %(version)s (card format {FORMAT_MAJOR}.{FORMAT_MINOR})",
@@ -42,23 +68,3 @@ def _show_warning(message: Warning | str, category: type[Warning], *_args: Any, 
     print(f"warning: {message}", file=sys.stderr)
 
 
-def _register_commands() -> None:
-    from hcard.cli import (
-        calibrate_cmd,
-        card_cmds,
-        conformance_cmd,
-        device_cmd,
-        encode_cmd,
-        plugins_cmd,
-        predict_cmd,
-        preview_cmd,
-        render_cmd,
-    )
-
-    for module in (encode_cmd, card_cmds, render_cmd, preview_cmd, predict_cmd, plugins_cmd,
-                   device_cmd, conformance_cmd, calibrate_cmd):
-        for command in module.COMMANDS:
-            cli.add_command(command)
-
-
-_register_commands()
