@@ -76,7 +76,14 @@ def hidden_effects(names: tuple[str, ...], assignments: tuple[str, ...]
 
 @click.group("device")
 def device() -> None:
-    """Serve the reference device over USB/IP, or list the devices that are reachable."""
+    """Serve the reference device over USB/IP, or list the devices that are reachable.
+
+    \b
+    Examples:
+      hcard device serve --device evita --port 3240
+      hcard device serve --device coupled --effect air-layer
+      hcard device list
+    """
 
 
 @device.command("serve")
@@ -244,6 +251,11 @@ def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Pat
     (device busy), when this session is lost to another host (taken over, or the card
     replaced; protocol 1.2, spec section 14) or when the device's reports stop, play exits
     with status 1 and the reason, and writes nothing (an earlier file at OUTPUT is kept).
+
+    \b
+    Examples:
+      hcard play card.hcard --device sim://evita --track stroke.csv -o rec.csv
+      hcard play card.hcard --device usbip://127.0.0.1:3240/1-1 --track stroke.csv -o rec.csv
     """
     from hcard.calibration.measurement import write_measurement
     from hcard.physics.profile import DeviceProfile

@@ -411,6 +411,12 @@ def predict(
 
     Without MODEL (or with --list), list the installed predictors. Values are SI unless a
     unit is given; the table and CSV are in SI units, the plot in readable units.
+
+    \b
+    Examples:
+      hcard predict --list
+      hcard predict squeeze-film --input amplitude=2um --input normal_force=0.5N
+      hcard predict squeeze-film --sweep amplitude=0:5um:51 -o sweep.csv --plot sweep.png
     """
     registry = get_registry()
     chosen = None if model is None else registry.get("predictor", model)  # error lists names
