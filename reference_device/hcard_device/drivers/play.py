@@ -170,6 +170,9 @@ def play(driver: Driver, card: pb.Card, track: FingerTrack, *, profile: bytes | 
     started = datetime.now(timezone.utc).isoformat(timespec="seconds")
     driver.start()
     start = driver.clock()
+    # losses of this session only: idle reports the host did not read while it uploaded the
+    # card are not the recording's (they fall before its first report)
+    lost_before = driver.reports_lost
     host_us = session_host_times(start, track)
     try:
         with collector_paused():
@@ -182,7 +185,8 @@ def play(driver: Driver, card: pb.Card, track: FingerTrack, *, profile: bytes | 
     _check_stream(driver, start + duration - last_report, duration)
     driver.stop()
     counters = driver.counters()
-    return PlayResult(states, duration, upload, info, counters, driver.reports_lost,
+    return PlayResult(states, duration, upload, info, counters,
+                      driver.reports_lost - lost_before,
                       driver.malformed_inputs, track, card_bytes, card.metadata.title, limits,
                       profile_record, str(driver.uri), started, host_us)
 
