@@ -31,7 +31,8 @@ MAX_CARD_BYTES = 16 * 1024 * 1024
 """Largest card file a reader must accept, bytes."""
 
 RELATIVE_FRICTION_JND = 0.08
-"""Just-noticeable difference of relative friction (thesis appendix B.2, DESIGN.md section 4)."""
+"""Just-noticeable difference of relative friction (thesis appendix B.1, Fig. B.2;
+spec/README.md section 10)."""
 AUTO_LOCKING_PERIOD_MM = 10.0
 """LOCKING_AUTO threshold: spatial periods below this are velocity-locked (thesis 5.3.3-5.5.3:
 position and texture control rate equal at a 1 cm grating; the hybrid boundary lies between the

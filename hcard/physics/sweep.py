@@ -2,7 +2,7 @@
 
 ``hcard predict`` takes ``--param kn=3.9MN/m``, ``--input speed=20mm/s`` and
 ``--sweep amplitude=0:5um:51``. Values carry optional units (:func:`hcard.physics.units.
-parse_quantity`); inside the code everything is SI (DESIGN.md section 9).
+parse_quantity`); inside the code everything is SI (:mod:`hcard.physics.units`).
 
 A sweep is ``START:STOP:COUNT`` with an optional fourth field ``lin`` (default, evenly spaced)
 or ``log`` (geometrically spaced, both ends > 0). When only one end carries a unit the other

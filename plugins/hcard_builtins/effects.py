@@ -1,5 +1,5 @@
-"""Built-in calibration effects (issue 7, item 4), registered through the ``hcard.plugins`` entry
-point ``builtin-effects`` like any vendor's plugin.
+"""Built-in calibration effects (spec/calibration.md), registered through the ``hcard.plugins``
+entry point ``builtin-effects`` like any vendor's plugin.
 
 Each effect is a :class:`~hcard.calibration.effects.Effect`: what it changes, why its absence
 leaves a residual, the regressors that residual shows against, and its parameters with the thesis
@@ -683,7 +683,7 @@ BUILTIN_EFFECTS: tuple[type[Effect], ...] = (
     SqueezeFilmShare,
     FingerGeometry,
 )
-"""The built-in effect classes, in the order of issue 7's list."""
+"""The built-in effect classes, in the order spec/calibration.md lists them."""
 
 
 @hookimpl
