@@ -23,7 +23,10 @@ import zipfile
 from collections.abc import Sequence
 from pathlib import Path
 from types import TracebackType
-from typing import BinaryIO
+from typing import TYPE_CHECKING, BinaryIO
+
+if TYPE_CHECKING:
+    from typing_extensions import Self
 
 import numpy as np
 
@@ -41,7 +44,28 @@ def csv_rows(columns: Sequence[Column]) -> str:
     return "".join(",".join(row) + "\n" for row in zip(*cells, strict=True))
 
 
-class CsvFrameWriter:
+class _FrameWriter:
+    """A writer used as a context manager: :meth:`close` when the block ends, :meth:`abandon`
+    (the output stays as it was) when an exception escapes it."""
+
+    def close(self) -> None:
+        raise NotImplementedError
+
+    def abandon(self) -> None:
+        raise NotImplementedError
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, value: BaseException | None,
+                 trace: TracebackType | None) -> None:
+        if kind is not None:
+            self.abandon()
+        else:
+            self.close()
+
+
+class CsvFrameWriter(_FrameWriter):
     """Writes blocks of columns as CSV rows to ``path`` (atomically, at :meth:`close`)."""
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
@@ -68,18 +92,8 @@ class CsvFrameWriter:
         dropped = RuntimeError("the rendering was abandoned")
         self._output.__exit__(RuntimeError, dropped, None)
 
-    def __enter__(self) -> CsvFrameWriter:
-        return self
 
-    def __exit__(self, kind: type[BaseException] | None, value: BaseException | None,
-                 trace: TracebackType | None) -> None:
-        if kind is not None:
-            self.abandon()
-        else:
-            self.close()
-
-
-class NpzFrameWriter:
+class NpzFrameWriter(_FrameWriter):
     """Writes blocks of columns into a deflated ``.npz`` at ``path`` (module docstring)."""
 
     COPY_BUFFER_BYTES = 1 << 20
@@ -132,16 +146,6 @@ class NpzFrameWriter:
             with contextlib.suppress(OSError):
                 spill.close()
         self._spill.cleanup()
-
-    def __enter__(self) -> NpzFrameWriter:
-        return self
-
-    def __exit__(self, kind: type[BaseException] | None, value: BaseException | None,
-                 trace: TracebackType | None) -> None:
-        if kind is not None:
-            self.abandon()
-        else:
-            self.close()
 
 
 def frame_writer(path: str | os.PathLike[str]) -> CsvFrameWriter | NpzFrameWriter:
