@@ -87,12 +87,12 @@ def test_a_rendering_past_the_frame_limit_is_refused_before_any_work(
                                       "--frame-rate", rate, "--band-limit", "1000"])
     assert time.perf_counter() - started < 5.0
     assert result.exit_code == 1
-    assert "over the limit of 1e+08" in result.output and "Traceback" not in result.output
+    assert f"over the limit of {MAX_RENDER_FRAMES:.0e}" in result.output
+    assert "Traceback" not in result.output
     assert out.read_text() == "previous\n"
     options = RenderOptions(frame_rate_hz=float(rate), band_limit_hz=1000.0)
     with pytest.raises(RenderTooLong):
         Renderer(CARD, options).frame_count(make_track(times, [5.0] * 3, [5.0] * 3, 0.5, True))
-    assert MAX_RENDER_FRAMES == 100_000_000
 
 
 def test_memory_does_not_grow_with_the_length_of_the_rendering(files: tuple[Path, Path],
