@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import click
 import numpy as np
 import pytest
 from cards import two_texture_card
@@ -235,3 +236,27 @@ def test_global_quiet_leaves_out_progress_lines_and_quiet_with_verbose_is_usage(
     assert len(listed.stdout.splitlines()) > len(hushed.stdout.splitlines())  # every case
     both = runner.invoke(cli, ["-q", "-v", "validate", str(tmp_path / "b.hcard")])
     assert both.exit_code == 2 and "give -q or -v, not both" in both.output
+
+
+def test_the_command_list_is_each_commands_own_first_sentence():
+    from hcard.cli.main import COMMAND_MODULES, COMMAND_SUMMARIES, cli
+
+    context = click.Context(cli)
+    assert sorted(COMMAND_SUMMARIES) == sorted(COMMAND_MODULES)
+    listing = run("--help").output
+    for name, summary in COMMAND_SUMMARIES.items():
+        help_text = " ".join(cli.get_command(context, name).help.split())
+        first_sentence = help_text.split(". ")[0].rstrip(".") + "."
+        assert summary == first_sentence, name
+        assert f"  {name}" in listing
+        assert len(summary) <= 64, (name, "one line of the 80-column listing")
+
+
+def test_the_command_list_imports_no_command_module():
+    code = ("import sys\nfrom hcard.cli.main import cli\n"
+            "try:\n    cli(['--help'], standalone_mode=False)\nexcept SystemExit:\n    pass\n"
+            "print(sorted(m for m in sys.modules if m.endswith('_cmd') or m == 'numpy'"
+            " or m.startswith('hcard.cli.card_cmds')))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=True)
+    assert done.stdout.strip().splitlines()[-1] == "[]"

@@ -11,13 +11,14 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from hcard.atomic import write_atomically
+from hcard.atomic import atomic_output, write_atomically
 from hcard.bounded_read import MAX_JSON_FILE_BYTES, InputTooLarge, read_bounded
 from hcard.csv_rows import numeric_table, read_csv_text
 from hcard.errors import HcardError
@@ -337,23 +338,43 @@ def _check_finite(raw: np.ndarray, lines: np.ndarray, name: str, source: str) ->
         )
 
 
-def measurement_to_csv(m: Measurement) -> str:
-    """The CSV text of ``m`` in SI column units (``t_s``, ``amplitude_m``, ...), full precision;
-    the columns of rule M3 first, then the device columns of rule M12."""
+def _present_columns(m: Measurement) -> list[tuple[str, np.ndarray]]:
+    """The columns ``m`` holds, by quantity name, in writing order: the columns of rule M3
+    first, then the device columns of rule M12."""
     present: list[tuple[str, np.ndarray]] = [
         (q, getattr(m, ATTRIBUTE[q])) for q in ATTRIBUTE if getattr(m, ATTRIBUTE[q]) is not None
     ]
-    present += [(q, m.device[q]) for q in DEVICE_COLUMNS if q in m.device]
-    names = [q if q in UNITLESS else f"{q}_{SI_SUFFIX[q]}" for q, _ in present]
+    return present + [(q, m.device[q]) for q in DEVICE_COLUMNS if q in m.device]
+
+
+def _csv_header(m: Measurement) -> str:
+    """The header line of ``m``'s CSV, SI unit suffixes (``t_s``, ``amplitude_m``, ...)."""
+    names = [q if q in UNITLESS else f"{q}_{SI_SUFFIX[q]}" for q, _ in _present_columns(m)]
+    return ",".join(names) + "\n"
+
+
+def _csv_rows(m: Measurement) -> str:
+    """The data lines of ``m``'s CSV, full precision (``repr``), each ending in a newline."""
     columns = []
-    for q, values in present:
+    for q, values in _present_columns(m):
         array = np.asarray(values)
         if UNITLESS.get(q, False):
             columns.append([str(int(v)) for v in array.astype(np.int64)])
         else:
             columns.append([repr(float(v)) for v in array.astype(np.float64)])
-    lines = [",".join(names), *(",".join(row) for row in zip(*columns, strict=True))]
-    return "\n".join(lines) + "\n"
+    return "".join(",".join(row) + "\n" for row in zip(*columns, strict=True))
+
+
+def measurement_to_csv(m: Measurement) -> str:
+    """The CSV text of ``m`` in SI column units (``t_s``, ``amplitude_m``, ...), full precision;
+    the columns of rule M3 first, then the device columns of rule M12."""
+    return _csv_header(m) + _csv_rows(m)
+
+
+def _sidecar_text(conditions: dict[str, Any]) -> str:
+    """The sidecar's JSON text; ValueError for NaN or infinity, TypeError for a value JSON
+    cannot hold."""
+    return json.dumps(conditions, indent=2, sort_keys=True, allow_nan=False) + "\n"
 
 
 def write_measurement(m: Measurement, path: str | os.PathLike[str]) -> None:
@@ -364,8 +385,39 @@ def write_measurement(m: Measurement, path: str | os.PathLike[str]) -> None:
     with ``repr`` precision, so the round trip is exact.
     """
     csv_bytes = measurement_to_csv(m).encode("utf-8")
-    sidecar = json.dumps(m.conditions, indent=2, sort_keys=True, allow_nan=False) + "\n"
+    sidecar = _sidecar_text(m.conditions)
     # Both texts are built before either file is touched: a bad sidecar leaves both files as
     # they were.
     write_atomically(path, csv_bytes)
     write_atomically(sidecar_path(path), sidecar.encode("utf-8"))
+
+
+def write_measurement_blocks(blocks: Iterable[Measurement], conditions: dict[str, Any],
+                             path: str | os.PathLike[str]) -> int:
+    """Write a recording given as consecutive blocks of samples (each a :class:`Measurement`
+    with the same columns; their own conditions are ignored) and its sidecar ``conditions``,
+    each file atomically, holding one block in memory at a time; returns the rows written.
+
+    The file is the one :func:`write_measurement` writes for the blocks joined. Raises
+    ``ValueError`` (before writing anything) when the conditions hold NaN or infinity, or when
+    there is no block or the blocks' columns differ (then the CSV is left as it was), and
+    ``TypeError`` when the conditions are not JSON-serialisable.
+    """
+    sidecar = _sidecar_text(conditions)
+    rows = 0
+    header: str | None = None
+    with atomic_output(path) as out:
+        for block in blocks:
+            block_header = _csv_header(block)
+            if header is None:
+                header = block_header
+                out.write(header.encode("utf-8"))
+            elif block_header != header:
+                raise ValueError(f"a block has the columns {block_header.strip()!r}, "
+                                 f"the recording {header.strip()!r}")
+            out.write(_csv_rows(block).encode("utf-8"))
+            rows += len(block)
+        if header is None:
+            raise ValueError("no samples to write")
+    write_atomically(sidecar_path(path), sidecar.encode("utf-8"))
+    return rows

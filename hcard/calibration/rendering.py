@@ -124,6 +124,15 @@ def _patches(m: Measurement, target: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return patch, contact
 
 
+def _members(patch: np.ndarray) -> list[np.ndarray]:
+    """The report indices of each patch (patch numbers >= 0, ascending), each in report order;
+    one sort, not one scan of the recording per patch (an hour's recording has thousands)."""
+    counted = np.flatnonzero(patch >= 0)
+    order = counted[np.argsort(patch[counted], kind="stable")]
+    starts = np.flatnonzero(np.diff(patch[order], prepend=-1) != 0)
+    return np.split(order, starts[1:]) if order.size else []
+
+
 def _local_reference(times: np.ndarray, contacts: np.ndarray, mus: np.ndarray,
                      plain: np.ndarray, fallback: float) -> np.ndarray:
     """``mu0`` at each patch: interpolated in time between the plain patches of its contact,
@@ -157,8 +166,7 @@ def rendering_error(m: Measurement) -> RenderingError:
     patch, contact = _patches(m, target)
     lateral = friction_force(m.lateral_force, m.speed, patch >= 0)
     mu = np.divide(lateral, fn, out=np.zeros_like(fn), where=fn > 0)
-    ids = np.unique(patch[patch >= 0])
-    members = [np.flatnonzero(patch == i) for i in ids]
+    members = _members(patch)
     times = np.array([m.t[k].mean() for k in members])
     contacts = np.array([contact[k[0]] for k in members])
     means = np.array([mu[k].mean() for k in members])

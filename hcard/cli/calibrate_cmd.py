@@ -100,7 +100,7 @@ class DefaultCommandGroup(UserErrorGroup):
 
 @click.group("calibrate", cls=DefaultCommandGroup)
 def calibrate_group() -> None:
-    """Fit a device's model to recordings, find the effects it lacks, verify the profile.
+    """Fit a model to recordings, find what it lacks, verify it.
 
     \b
     hcard calibrate plan --device uv|ev|coupled -o DIR   the protocol (card + track) and the

@@ -31,9 +31,10 @@ CARD = click.Path(dir_okay=False, allow_dash=True, path_type=Path)
               help="Print the summary as JSON on stdout: one object for one card, an array of "
                    "them for several.")
 def info(cards: tuple[Path, ...], as_json: bool) -> None:
-    """Print a readable summary of each CARD: metadata, surface, grid and every texture. A
-    CARD of - is read from standard input. An invalid card is still described, with a count of
-    its problems (hcard validate lists them), and the exit status is then 1.
+    """Describe each CARD: metadata, surface, grid and every texture.
+
+    A CARD of - is read from standard input. An invalid card is still described, with a count
+    of its problems (hcard validate lists them), and the exit status is then 1.
 
     \b
     Examples:
@@ -102,8 +103,10 @@ def check_card_file(card: Path) -> tuple[pb.Card | None, bytes, list[Problem]]:
                    "them for several.")
 @click.option("--strict", is_flag=True, help="Treat warnings as errors.")
 def validate_cmd(cards: tuple[Path, ...], as_json: bool, strict: bool) -> None:
-    """Check each CARD against the rules of the spec; list every problem with its rule and
-    field path. A CARD of - is read from standard input.
+    """Check each CARD against the spec; list problems by rule.
+
+    Each problem names its rule and the field it is in. A CARD of - is read from standard
+    input.
 
     Exits 0 when every card is valid, 1 when one has errors (or warnings, with --strict) or
     cannot be read.

@@ -83,7 +83,7 @@ def conformance(driver_name: str, levels: tuple[str, ...], select: tuple[str, ..
                 junit_path: Path | None, json_path: Path | None, vectors_dir: Path | None,
                 option_pairs: tuple[str, ...], timing: str | None, verbose: bool,
                 quiet: bool) -> None:
-    """Run the hcard conformance suite against an implementation (spec/conformance.md).
+    """Run the conformance suite against an implementation.
 
     Exits 0 when every case passes, 1 when one fails, 2 when the driver or vectors cannot be
     used.

@@ -76,7 +76,7 @@ def hidden_effects(names: tuple[str, ...], assignments: tuple[str, ...]
 
 @click.group("device")
 def device() -> None:
-    """Serve the reference device over USB/IP, or list the devices that are reachable.
+    """Serve the reference device over USB/IP, or list devices.
 
     \b
     Examples:
@@ -238,7 +238,7 @@ def synthesize(device_class: str, uri: str | None, effect_names: tuple[str, ...]
               help="Longest wait for any answer from the device, s.")
 def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Path | None,
          timeout: float) -> None:
-    """Upload CARD to a device, drive the finger track, record what the device reports.
+    """Play CARD on a device along a finger track and record it.
 
     The track is played in real time on hardware and USB/IP devices, as fast as possible on
     sim://. The recording is a measurement file (spec/measurement-format.md): one row per
@@ -257,12 +257,11 @@ def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Pat
       hcard play card.hcard --device sim://evita --track stroke.csv -o rec.csv
       hcard play card.hcard --device usbip://127.0.0.1:3240/1-1 --track stroke.csv -o rec.csv
     """
-    from hcard.calibration.measurement import write_measurement
     from hcard.physics.profile import DeviceProfile
     from hcard_device.drivers import open_device
     from hcard_device.drivers.play import play as play_track
     from hcard_device.drivers.play import summary
-    from hcard_device.drivers.recording import recording
+    from hcard_device.drivers.recording import write_recording
 
     if output.suffix.lower() != ".csv":
         raise click.BadParameter("the recording must end in .csv", param_hint="--output")
@@ -278,8 +277,7 @@ def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Pat
     with open_device(uri, timeout_s=timeout) as driver:
         result = play_track(driver, loaded, track, profile=profile_bytes)
     try:
-        write_measurement(recording(result, track_path=str(track_path), card_path=str(card)),
-                          output)
+        write_recording(result, output, track_path=str(track_path), card_path=str(card))
     except ValueError as exc:
         raise HcardError(f"{output}: {exc}") from None
     except OSError as exc:

@@ -20,9 +20,25 @@ COMMAND_MODULES = {
     "plugins": "plugins_cmd", "device": "device_cmd", "play": "device_cmd",
     "conformance": "conformance_cmd", "calibrate": "calibrate_cmd",
 }
-"""Each command's module under ``hcard.cli``, imported only when the command runs (or when
-``hcard --help`` lists them all): ``hcard validate`` loads the card modules and not the
-renderer, the calibration loop or the device drivers (bench/bench_cli_startup.py)."""
+"""Each command's module under ``hcard.cli``, imported only when the command runs: ``hcard
+validate`` loads the card modules and not the renderer, the calibration loop or the device
+drivers (bench/bench_cli_startup.py)."""
+
+COMMAND_SUMMARIES = {
+    "calibrate": "Fit a model to recordings, find what it lacks, verify it.",
+    "conformance": "Run the conformance suite against an implementation.",
+    "device": "Serve the reference device over USB/IP, or list devices.",
+    "encode": "Encode a grayscale IMAGE into a card: black grips, white slips.",
+    "info": "Describe each CARD: metadata, surface, grid and every texture.",
+    "play": "Play CARD on a device along a finger track and record it.",
+    "plugins": "List installed encoders, predictors, drivers, effects, checks.",
+    "predict": "Evaluate a physics predictor MODEL at a point or over a sweep.",
+    "preview": "Draw CARD as a PNG picture of its taxtels and textures.",
+    "render": "Render CARD along a finger track into target friction.",
+    "validate": "Check each CARD against the spec; list problems by rule.",
+}
+"""The first sentence of each command's help, which ``hcard --help`` lists without importing
+any command module (tests/test_cli_help.py checks them against the commands' own help)."""
 
 
 class LazyCommandGroup(UserErrorGroup):
@@ -31,6 +47,12 @@ class LazyCommandGroup(UserErrorGroup):
 
     def list_commands(self, ctx: click.Context) -> list[str]:
         return sorted(COMMAND_MODULES)
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        """The command list of ``hcard --help``, from :data:`COMMAND_SUMMARIES`."""
+        with formatter.section("Commands"):
+            formatter.write_dl([(name, COMMAND_SUMMARIES[name])
+                                for name in self.list_commands(ctx)])
 
     def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
         module_name = COMMAND_MODULES.get(cmd_name)

@@ -407,7 +407,7 @@ def predict(
     profile_path: Path | None,
     list_only: bool,
 ) -> None:
-    """Evaluate the physics predictor MODEL at a point or over a sweep.
+    """Evaluate a physics predictor MODEL at a point or over a sweep.
 
     Without MODEL (or with --list), list the installed predictors. Values are SI unless a
     unit is given; the table and CSV are in SI units, the plot in readable units.

@@ -95,7 +95,7 @@ def frames_to_csv(frames: Frames, commands: ActuatorCommands | None = None) -> b
                    "the friction it predicts for them (rendered_uv, rendered_ev).")
 def render(card: Path, track_path: Path, output: Path, frame_rate: float, band_limit: float,
            dead_reckoning: float, mode: str, profile_path: Path | None) -> None:
-    """Render CARD along a finger track into target relative friction per channel.
+    """Render CARD along a finger track into target friction.
 
     With --profile, also the commands a device with that profile would play, the profile's
     effects and limits included (the clipping is summarised). Frames are written block by

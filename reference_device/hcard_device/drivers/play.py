@@ -29,7 +29,8 @@ from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb
 from hcard_device.drivers.base import Driver, UploadOutcome
 from hcard_device.drivers.errors import DeviceError, SessionLost
-from hcard_device.drivers.recording import HOST_TIME_MODULO, recording
+from hcard_device.drivers.recording import HOST_TIME_MODULO, force_recording
+from hcard_device.drivers.state_log import StateLog
 from hcard_device.protocol import (
     FRICTION_SCALE,
     Capability,
@@ -38,7 +39,6 @@ from hcard_device.protocol import (
     DeviceInfo,
     FaultBits,
     Limits,
-    State,
 )
 
 if TYPE_CHECKING:
@@ -56,7 +56,7 @@ class PlayResult:
     """What :func:`play` saw.
 
     Attributes:
-        states: every STATE report, in arrival order.
+        states: every STATE report, in arrival order, packed (:class:`StateLog`).
         duration_s: driver clock time from START to the end of collection, s.
         upload: the upload outcome (status, clip report).
         info: DEVICE_INFO.
@@ -76,7 +76,7 @@ class PlayResult:
             echo names one sample of this session and never one of an earlier session.
     """
 
-    states: list[State]
+    states: StateLog
     duration_s: float
     upload: UploadOutcome
     info: DeviceInfo
@@ -92,6 +92,10 @@ class PlayResult:
     started: str = ""
     host_us: np.ndarray | None = None
 
+    def __post_init__(self) -> None:
+        if not isinstance(self.states, StateLog):  # reports given as a list of State
+            object.__setattr__(self, "states", StateLog(self.states))
+
     def sent_host_us(self) -> np.ndarray:
         """:attr:`host_us`, or the track's own times for a result built without them."""
         if self.host_us is not None:
@@ -101,10 +105,7 @@ class PlayResult:
     @property
     def faults(self) -> FaultBits:
         """Every fault seen in the reports or latched by the device."""
-        bits = self.counters.latched_faults
-        for state in self.states:
-            bits |= state.faults
-        return FaultBits(bits)
+        return FaultBits(self.counters.latched_faults | self.states.faults_seen)
 
 
 def _profile_record(driver: Driver, info: DeviceInfo, profile: bytes | None) -> dict[str, Any]:
@@ -166,7 +167,7 @@ def play(driver: Driver, card: pb.Card, track: FingerTrack, *, profile: bytes | 
     if info.capabilities & Capability.HOST_FINGER:
         driver.set_touch_source(host=True)
     keepalive_s = max(info.watchdog_ms / 2000.0, 0.005)
-    states: list[State] = []
+    states = StateLog()
     started = datetime.now(timezone.utc).isoformat(timespec="seconds")
     driver.start()
     start = driver.clock()
@@ -209,7 +210,7 @@ def collector_paused() -> Iterator[None]:
 
 
 def _drive(driver: Driver, track: FingerTrack, host_us: np.ndarray, start: float,
-           keepalive_s: float, tail_s: float, states: list[State]) -> float:
+           keepalive_s: float, tail_s: float, states: StateLog) -> float:
     """Send the track's FINGER reports at their times (relative to ``start`` on the driver's
     clock, s) with KEEPALIVEs in long gaps, appending every STATE report to ``states``;
     returns the driver clock when the last report arrived (``start`` if none), s."""
@@ -277,7 +278,7 @@ def result_rendering_error(result: PlayResult) -> RenderingError | str:
     from hcard.calibration.rendering import rendering_error
 
     try:
-        return rendering_error(recording(result))
+        return rendering_error(force_recording(result))
     except (MeasurementError, ValueError) as exc:
         return str(exc)
 

@@ -18,15 +18,26 @@ state derives it (``hcard_device.sim.finger.HostFinger``), signed by the directi
 from __future__ import annotations
 
 import hashlib
-import math
+import os
+from collections.abc import Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from hcard.calibration.measurement import Measurement
+from hcard.calibration.measurement import Measurement, write_measurement_blocks
 from hcard.calibration.splits import stroke_numbers
 from hcard.track import FingerTrack
+from hcard_device.drivers.state_log import StateLog
 from hcard_device.protocol import Capability, DeviceInfo, DeviceKind, State
+from hcard_device.protocol.constants import (
+    AMPLITUDE_UNIT_M,
+    CURRENT_UNIT_A,
+    FORCE_UNIT_N,
+    FRICTION_SCALE,
+    POSITION_UNIT_MM,
+    VOLTAGE_UNIT_V,
+    StateFlags,
+)
 
 if TYPE_CHECKING:
     from hcard_device.drivers.play import PlayResult
@@ -37,13 +48,23 @@ HOST_TIME_MODULO = 1 << 32
 """FINGER.host_time_us wraps at 2**32 us."""
 
 
-def unwrapped_times(states: list[State]) -> np.ndarray:
+def unwrap_stamps(stamps_us: np.ndarray) -> np.ndarray:
+    """Device time stamps (u32 microseconds, wrapping) unwrapped: microseconds since the
+    first, int64."""
+    stamps = np.asarray(stamps_us, dtype=np.int64)
+    if not stamps.size:
+        return np.zeros(0, dtype=np.int64)
+    steps = np.diff(stamps) % HOST_TIME_MODULO
+    return np.concatenate(([0], np.cumsum(steps)))
+
+
+def unwrapped_times(states: Sequence[State]) -> np.ndarray:
     """Device time stamps of ``states`` unwrapped (u32 microseconds), from the first, s."""
-    if not states:
-        return np.zeros(0)
-    stamps = np.array([s.timestamp_us for s in states], dtype=np.int64)
-    steps = np.diff(stamps) % (1 << 32)
-    return np.concatenate(([0], np.cumsum(steps))) * 1e-6
+    if isinstance(states, StateLog):
+        stamps = states.field("timestamp_us")
+    else:
+        stamps = np.array([s.timestamp_us for s in states], dtype=np.int64)
+    return unwrap_stamps(stamps) * 1e-6
 
 
 def track_speeds(track: FingerTrack) -> np.ndarray:
@@ -71,46 +92,58 @@ def track_strokes(track: FingerTrack) -> np.ndarray:
     return stroke_numbers(track.t, np.asarray(track.contact, dtype=bool), track_speeds(track))
 
 
+class EchoIndex:
+    """Which track sample an echoed host time names (:meth:`samples`), given the host time
+    sent with each sample of the session (``host_us``, :attr:`PlayResult.host_us`)."""
+
+    def __init__(self, host_us: np.ndarray) -> None:
+        host_us = np.asarray(host_us, dtype=np.int64) % HOST_TIME_MODULO
+        self._order = np.argsort(host_us, kind="stable")
+        self._sorted_us = host_us[self._order]
+
+    def samples(self, echoes_us: np.ndarray) -> np.ndarray:
+        """Index of the sample each echo (us, wrapping) names; -1 for an echo of no sample of
+        this session (:func:`echoed_samples`)."""
+        echoes_us = np.asarray(echoes_us, dtype=np.int64)
+        if not self._sorted_us.size:
+            return np.full(echoes_us.shape, -1, dtype=np.int64)
+        position = np.searchsorted(self._sorted_us, echoes_us, side="right") - 1
+        at = np.maximum(position, 0)
+        found = (position >= 0) & (self._sorted_us[at] == echoes_us)
+        return np.where(found, self._order[at], -1)
+
+
 def echoed_samples(host_us: np.ndarray, echoes_us: np.ndarray) -> np.ndarray:
     """Index of the sample each echoed host time (us, wrapping) names, given the host time
     sent with each sample of the session (``host_us``, :attr:`PlayResult.host_us`); -1 for an
     echo of no sample of this session. A device echoes the last FINGER report it applied,
     which at the start of a session is still one of the previous session: the host times of
     a session start at its own START on a monotonic clock, so such an echo names none."""
-    host_us = np.asarray(host_us, dtype=np.int64) % HOST_TIME_MODULO
-    echoes_us = np.asarray(echoes_us, dtype=np.int64)
-    order = np.argsort(host_us, kind="stable")
-    sorted_us = host_us[order]
-    position = np.searchsorted(sorted_us, echoes_us, side="right") - 1
-    found = (position >= 0) & (sorted_us[np.maximum(position, 0)] == echoes_us)
-    return np.where(found, order[np.maximum(position, 0)], -1)
+    return EchoIndex(host_us).samples(echoes_us)
 
 
-def state_columns(states: list[State]) -> dict[str, np.ndarray]:
-    """The STATE reports as named SI arrays (report order)."""
-    def col(getter: Any, dtype: Any = np.float64) -> np.ndarray:
-        return np.array([getter(s) for s in states], dtype=dtype)
-
-    corners = np.array([s.corner_forces_n for s in states], dtype=np.float64).reshape(-1, 4)
+def state_columns(rows: np.ndarray) -> dict[str, np.ndarray]:
+    """Packed STATE reports (:data:`~hcard_device.drivers.state_log.STATE_ROW`, report order)
+    as named SI arrays, ``t`` left out (it needs the reports before, :func:`unwrap_stamps`)."""
+    corners = rows["corner_forces_mn"].astype(np.float64) * FORCE_UNIT_N
     return {
-        "t": unwrapped_times(states),
-        "sequence": col(lambda s: s.sequence, np.int64),
-        "contact": col(lambda s: s.contact, bool),
-        "x": col(lambda s: s.x_mm) * MM,
-        "y": col(lambda s: s.y_mm) * MM,
+        "sequence": rows["sequence"].astype(np.int64),
+        "contact": (rows["flags"] & StateFlags.CONTACT) != 0,
+        "x": rows["x_10um"] * POSITION_UNIT_MM * MM,
+        "y": rows["y_10um"] * POSITION_UNIT_MM * MM,
         "f_tl": corners[:, 0], "f_tr": corners[:, 1],
         "f_bl": corners[:, 2], "f_br": corners[:, 3],
         "fn": corners.sum(axis=1),
-        "fl": col(lambda s: s.lateral_force_n),
-        "amplitude": col(lambda s: s.amplitude_m),
-        "voltage": col(lambda s: s.voltage_v),
-        "current": col(lambda s: s.current_a),
-        "target_uv": col(lambda s: s.target_uv),
-        "target_ev": col(lambda s: s.target_ev),
-        "texture": col(lambda s: s.texture, np.int64),
-        "faults": col(lambda s: s.faults, np.int64),
-        "flags": col(lambda s: s.flags, np.int64),
-        "echo_us": col(lambda s: s.host_time_echo_us, np.int64),
+        "fl": rows["lateral_force_mn"] * FORCE_UNIT_N,
+        "amplitude": rows["amplitude_nm"] * AMPLITUDE_UNIT_M,
+        "voltage": rows["voltage_dv"] * VOLTAGE_UNIT_V,
+        "current": rows["current_10na"] * CURRENT_UNIT_A,
+        "target_uv": rows["target_uv_x1e4"] / FRICTION_SCALE,
+        "target_ev": rows["target_ev_x1e4"] / FRICTION_SCALE,
+        "texture": rows["texture"].astype(np.int64),
+        "faults": rows["faults"].astype(np.int64),
+        "flags": rows["flags"].astype(np.int64),
+        "echo_us": rows["host_time_echo_us"].astype(np.int64),
     }
 
 
@@ -177,6 +210,66 @@ def sidecar(result: PlayResult, *, track_path: str | None = None,
     return conditions
 
 
+BLOCK_REPORTS = 8192
+"""Reports per block when a recording is written (:func:`write_recording`)."""
+DEVICE_COLUMNS = ("sequence", "f_tl", "f_tr", "f_bl", "f_br", "current", "target_uv",
+                  "target_ev", "texture", "faults", "flags")
+"""The device columns of rule M12 taken from the reports as they are (``echo`` is derived)."""
+
+
+def recording_blocks(result: PlayResult, *,
+                     block_reports: int = BLOCK_REPORTS) -> Iterator[Measurement]:
+    """The session's recording (:func:`recording`) as consecutive blocks of at most
+    ``block_reports`` reports, without conditions: the blocks joined are the recording.
+
+    Raises:
+        ValueError: no STATE report was received.
+    """
+    rows = result.states.rows()
+    if not rows.size:
+        raise ValueError("the device sent no STATE report: nothing to record")
+    track = result.track
+    speeds, strokes = track_speeds(track), track_strokes(track)
+    echoes = EchoIndex(result.sent_host_us())
+    has_uv = bool(result.info.capabilities & Capability.UV)
+    has_ev = bool(result.info.capabilities & Capability.EV)
+    previous_stamp = int(rows["timestamp_us"][0])
+    elapsed_us = 0
+    for first in range(0, rows.size, block_reports):
+        block = rows[first:first + block_reports]
+        stamps = np.concatenate(([previous_stamp], block["timestamp_us"].astype(np.int64)))
+        steps = np.diff(stamps) % HOST_TIME_MODULO
+        elapsed = elapsed_us + np.cumsum(steps)
+        previous_stamp, elapsed_us = int(stamps[-1]), int(elapsed[-1])
+        # a report whose time stamp does not move forward (a repeat) is left out (rule M7)
+        keep = steps > 0
+        if first == 0:
+            keep[0] = True
+        columns = {name: values[keep] for name, values in state_columns(block).items()}
+        sample = echoes.samples(columns.pop("echo_us"))
+        echoed = sample >= 0
+        at = np.maximum(sample, 0)
+        contact = columns["contact"]
+        # an echo of no sample of this session: the last host time before the track (rule
+        # M6: no NaN), one microsecond before its first sample
+        echo = np.where(echoed, track.t[at], track.t[0] - 1e-6)
+        device = {name: columns[name] for name in DEVICE_COLUMNS}
+        device["echo"] = echo
+        yield Measurement(
+            t=elapsed[keep] * 1e-6,
+            normal_force=columns["fn"],
+            lateral_force=columns["fl"],
+            amplitude=columns["amplitude"] if has_uv else None,
+            voltage=columns["voltage"] if has_ev else None,
+            x=columns["x"],
+            y=columns["y"],
+            speed=np.where(echoed & contact, speeds[at], 0.0),
+            stroke=np.where(echoed & contact, strokes[at], -1),
+            contact=contact,
+            device=device,
+        )
+
+
 def recording(result: PlayResult, *, track_path: str | None = None,
               card_path: str | None = None) -> Measurement:
     """The session as a :class:`~hcard.calibration.measurement.Measurement` (module docstring).
@@ -188,36 +281,47 @@ def recording(result: PlayResult, *, track_path: str | None = None,
     Raises:
         ValueError: no STATE report was received.
     """
-    if not result.states:
-        raise ValueError("the device sent no STATE report: nothing to record")
-    columns = state_columns(result.states)
-    keep = np.concatenate(([True], np.diff(columns["t"]) > 0))
-    columns = {name: values[keep] for name, values in columns.items()}
-    sample = echoed_samples(result.sent_host_us(), columns.pop("echo_us"))
-    speed = np.where(sample >= 0, track_speeds(result.track)[np.maximum(sample, 0)], 0.0)
-    speed = np.where(columns["contact"], speed, 0.0)
-    stroke = np.where((sample >= 0) & columns["contact"],
-                      track_strokes(result.track)[np.maximum(sample, 0)], -1)
-    echo = np.where(sample >= 0, result.track.t[np.maximum(sample, 0)], math.nan)
-    # an echo of no sample of this session: the last host time before the track (rule M6: no
-    # NaN), one microsecond before its first sample
-    echo = np.where(np.isnan(echo), result.track.t[0] - 1e-6, echo)
-    info = result.info
-    device_columns = ("sequence", "f_tl", "f_tr", "f_bl", "f_br", "current", "target_uv",
-                      "target_ev", "texture", "faults", "flags")
-    device = {name: columns[name] for name in device_columns}
-    device["echo"] = echo
+    whole = next(recording_blocks(result, block_reports=max(len(result.states), 1)))
+    whole.conditions = sidecar(result, track_path=track_path, card_path=card_path)
+    return whole
+
+
+def force_recording(result: PlayResult) -> Measurement:
+    """The columns of the session's recording that the rendered friction error reads (time,
+    normal and lateral force, speed, contact, the two targets; 7 of its 21 columns), joined
+    block by block, so a long session's summary holds 57 bytes per report besides the packed
+    reports, not the whole recording.
+
+    Raises:
+        ValueError: no STATE report was received.
+    """
+    parts: dict[str, list[np.ndarray]] = {name: [] for name in (
+        "t", "normal_force", "lateral_force", "speed", "contact", "target_uv", "target_ev")}
+    for block in recording_blocks(result):
+        for name in ("t", "normal_force", "lateral_force", "speed", "contact"):
+            parts[name].append(getattr(block, name))
+        for name in ("target_uv", "target_ev"):
+            parts[name].append(block.device[name])
+    joined = {name: np.concatenate(arrays) for name, arrays in parts.items()}
     return Measurement(
-        t=columns["t"],
-        normal_force=columns["fn"],
-        lateral_force=columns["fl"],
-        amplitude=columns["amplitude"] if info.capabilities & Capability.UV else None,
-        voltage=columns["voltage"] if info.capabilities & Capability.EV else None,
-        x=columns["x"],
-        y=columns["y"],
-        speed=speed,
-        stroke=stroke,
-        contact=columns["contact"],
-        device=device,
-        conditions=sidecar(result, track_path=track_path, card_path=card_path),
+        t=joined["t"], normal_force=joined["normal_force"],
+        lateral_force=joined["lateral_force"], speed=joined["speed"],
+        contact=joined["contact"],
+        device={"target_uv": joined["target_uv"], "target_ev": joined["target_ev"]},
     )
+
+
+def write_recording(result: PlayResult, path: str | os.PathLike[str], *,
+                    track_path: str | None = None, card_path: str | None = None) -> int:
+    """Write the session's recording (:func:`recording`) and its sidecar to ``path``, block by
+    block (:data:`BLOCK_REPORTS` reports in memory at a time besides the packed reports),
+    each file atomically; returns the rows written.
+
+    Raises:
+        ValueError: no STATE report was received (nothing is written).
+        OSError: the files cannot be written (the earlier files at ``path`` are kept).
+    """
+    conditions = sidecar(result, track_path=track_path, card_path=card_path)
+    if not len(result.states):
+        raise ValueError("the device sent no STATE report: nothing to record")
+    return write_measurement_blocks(recording_blocks(result), conditions, path)
