@@ -258,9 +258,9 @@ def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Pat
       hcard play card.hcard --device usbip://127.0.0.1:3240/1-1 --track stroke.csv -o rec.csv
     """
     from hcard.physics.profile import DeviceProfile
-    from hcard_device.drivers import open_device
+    from hcard_device.drivers import PlayTooLong, open_device
+    from hcard_device.drivers.play import check_play_length, summary
     from hcard_device.drivers.play import play as play_track
-    from hcard_device.drivers.play import summary
     from hcard_device.drivers.recording import write_recording
 
     if output.suffix.lower() != ".csv":
@@ -270,6 +270,10 @@ def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Pat
         raise HcardError(f"{output}: cannot write (no directory {folder})")
     loaded = load(card)
     track = read_track_csv(track_path)
+    try:
+        check_play_length(track)
+    except PlayTooLong as exc:
+        raise HcardError(f"{track_path}: {exc}") from None
     profile_bytes = None
     if profile_path is not None:
         profile_bytes = read_profile_bytes(profile_path)

@@ -14,7 +14,7 @@ from hcard.calibration.measurement import Measurement, read_measurement
 from hcard.card_io import save
 from hcard.cli.main import cli
 from hcard.track import straight_stroke, track_to_csv
-from hcard_device.drivers.play import TAIL_S
+from hcard_device.drivers.play import MAX_PLAY_S, TAIL_S
 from hcard_device.protocol import FaultBits
 
 
@@ -189,3 +189,29 @@ def test_play_checks_the_output_directory_before_the_device(files):
     result = play(files, "usbip://127.0.0.1:1/1-1", "-o", str(files / "no" / "rec.csv"))
     assert result.exit_code == 1
     assert "cannot write (no directory" in result.output and "cannot connect" not in result.output
+
+
+def test_play_refuses_a_track_longer_than_a_session_before_the_device(files):
+    # a 100,000 s gap between two samples: 28 hours of reports, refused before any connection
+    (files / "stroke.csv").write_text("t_s,x_mm,y_mm\n0,2,5\n0.02,3,5\n100000,4,5\n")
+    result = play(files, "usbip://127.0.0.1:1/1-1")
+    assert result.exit_code == 1
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and "stroke.csv: the track lasts 100000 s" in lines[0]
+    assert f"at most {MAX_PLAY_S:.0f} s" in lines[0] and "cannot connect" not in lines[0]
+    assert not (files / "rec.csv").exists()
+
+
+def test_the_play_function_refuses_a_long_track_before_sending_anything():
+    from hcard.track import make_track
+    from hcard_device.drivers import PlayTooLong, open_device
+    from hcard_device.drivers.play import play as play_track
+
+    track = make_track(np.array([0.0, MAX_PLAY_S + 1.0]), np.array([2.0, 3.0]),
+                       np.array([5.0, 5.0]), 0.5, True)
+    card = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[build.texture(0.5, channel="uv")],
+                      texture_index=[0, 0])
+    with open_device("sim://evita") as driver:
+        with pytest.raises(PlayTooLong, match="play it in parts"):
+            play_track(driver, card, track)
+        assert driver.upload_status().card_generation == 0  # no card was uploaded

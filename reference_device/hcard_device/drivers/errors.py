@@ -33,3 +33,8 @@ class SessionLost(DeviceError):
 
 class UriError(HcardError):
     """A device URI is malformed or names an unknown scheme."""
+
+
+class PlayTooLong(HcardError):
+    """A track would play for longer than one session may last
+    (:data:`hcard_device.drivers.play.MAX_PLAY_S`)."""

@@ -28,7 +28,7 @@ from hcard.card_io import to_bytes
 from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb
 from hcard_device.drivers.base import Driver, UploadOutcome
-from hcard_device.drivers.errors import DeviceError, SessionLost
+from hcard_device.drivers.errors import DeviceError, PlayTooLong, SessionLost
 from hcard_device.drivers.recording import HOST_TIME_MODULO, force_recording
 from hcard_device.drivers.state_log import StateLog
 from hcard_device.protocol import (
@@ -46,6 +46,10 @@ if TYPE_CHECKING:
 
 TAIL_S = 0.05
 """Reports collected after the last track sample before STOP, s."""
+MAX_PLAY_S = 4 * 3600.0
+"""Longest track one session plays, s: 14.4 million STATE reports, about 1.2 GB for the
+recording's packed reports and summary (spec/measurement-format.md, "Recording a session");
+checked before anything is sent, so a track with a 100,000 s gap is refused at once."""
 STREAM_STALL_S = 0.5
 """Longest time without any STATE report, on the driver's clock, at the end of a session
 before :func:`play` declares the input stream stopped and records nothing, s."""
@@ -151,12 +155,14 @@ def play(driver: Driver, card: pb.Card, track: FingerTrack, *, profile: bytes | 
     stops (:data:`STREAM_STALL_S`), it raises, and the caller records nothing.
 
     Raises:
+        PlayTooLong: the track lasts longer than :data:`MAX_PLAY_S` (nothing is sent).
         SessionBusy: another host's session is live; nothing was sent that changes the device.
         SessionLost: the session was lost while playing (the error says how and after how
             much of the track); nothing more was sent to the device.
         DeviceError: the device is missing, refuses the card or the profile, vanishes, or its
             input stream stopped.
     """
+    check_play_length(track)
     info = driver.info()
     driver.check_free()
     profile_record = _profile_record(driver, info, profile)
@@ -190,6 +196,14 @@ def play(driver: Driver, card: pb.Card, track: FingerTrack, *, profile: bytes | 
                       driver.reports_lost - lost_before,
                       driver.malformed_inputs, track, card_bytes, card.metadata.title, limits,
                       profile_record, str(driver.uri), started, host_us)
+
+
+def check_play_length(track: FingerTrack) -> None:
+    """Raise :class:`PlayTooLong` when ``track`` lasts longer than :data:`MAX_PLAY_S`."""
+    span_s = float(track.t[-1] - track.t[0])
+    if span_s > MAX_PLAY_S:
+        raise PlayTooLong(f"the track lasts {span_s:.0f} s; one session plays at most "
+                          f"{MAX_PLAY_S:.0f} s ({MAX_PLAY_S / 3600:g} h): play it in parts")
 
 
 @contextlib.contextmanager
