@@ -150,7 +150,7 @@ def encode(
     preview: Path | None,
     as_json: bool,
 ) -> None:
-    """Encode a grayscale IMAGE into a card: black grips, white slips.
+    """Encode a grayscale IMAGE: black is high friction, white low.
 
     The image is cut into taxtels; each taxtel's friction becomes a baseline plus up to
     --components gratings (frequency, orientation, amplitude, phase), and similar taxtels

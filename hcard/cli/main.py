@@ -28,7 +28,7 @@ COMMAND_SUMMARIES = {
     "calibrate": "Fit a model to recordings, find what it lacks, verify it.",
     "conformance": "Run the conformance suite against an implementation.",
     "device": "Serve the reference device over USB/IP, or list devices.",
-    "encode": "Encode a grayscale IMAGE into a card: black grips, white slips.",
+    "encode": "Encode a grayscale IMAGE: black is high friction, white low.",
     "info": "Describe each CARD: metadata, surface, grid and every texture.",
     "play": "Play CARD on a device along a finger track and record it.",
     "plugins": "List installed encoders, predictors, drivers, effects, checks.",
