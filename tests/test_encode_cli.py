@@ -376,4 +376,6 @@ def test_summary_lines_format_the_ratio_to_the_raw_bitmap():
     text = "\n".join(lines)
     assert "(card = 25 % of it)" in text
     assert "1 in the palette (3 distinct before merging)" in text
-    assert "rms = 0.50 x the 0.08 friction JND" in text
+    # an encoder without a 95th percentile or per-taxtel figures: rms and max only
+    assert "rms 0.0400, max 0.1000 relative friction = 0.50, 1.25 x the 0.08 friction JND" in text
+    assert not any(line.startswith("taxtels") for line in lines)

@@ -388,6 +388,28 @@ def test_reconstruction_error_matches_an_independent_render(tmp_path: Path):
         rms / limits.RELATIVE_FRICTION_JND, rel=1e-3
     )
     assert rms > 0.001  # the sharp edges cannot be represented exactly: a real error is measured
+    jnd = limits.RELATIVE_FRICTION_JND
+    p95 = float(np.percentile(np.abs(error), 95))
+    # read from a histogram of 1e-4 bins: within two bins of the exact percentile
+    assert result.stats["p95_error"] == pytest.approx(p95, abs=2e-4)
+    assert 0.1 < p95 < result.stats["max_error"]  # the percentile sits inside the distribution
+    assert result.stats["p95_error_jnd"] == pytest.approx(result.stats["p95_error"] / jnd)
+    assert result.stats["max_error_jnd"] == pytest.approx(result.stats["max_error"] / jnd)
+    # per taxtel: each 5 mm taxtel owns the pixels whose centres lie in it (50 x 50 at 0.1 mm;
+    # the overhanging last column and row own 20 and 30)
+    grid = result.card.grid
+    taxtel_rms = np.zeros((grid.rows, grid.cols))
+    taxtel_max = np.zeros((grid.rows, grid.cols))
+    for row in range(grid.rows):
+        for col in range(grid.cols):
+            block = error[row * 50:(row + 1) * 50, col * 50:(col + 1) * 50]
+            taxtel_rms[row, col] = np.sqrt(np.mean(block**2))
+            taxtel_max[row, col] = np.abs(block).max()
+    np.testing.assert_allclose(result.maps["error_rms"], taxtel_rms, rtol=1e-3, atol=1e-6)
+    np.testing.assert_allclose(result.maps["error_max"], taxtel_max, rtol=1e-3, atol=1e-6)
+    worst = np.unravel_index(np.argmax(taxtel_rms), taxtel_rms.shape)
+    assert (result.stats["worst_taxtel"]["row"], result.stats["worst_taxtel"]["col"]) == worst
+    assert result.stats["taxtels_over_jnd"] == int(np.count_nonzero(taxtel_rms > jnd))
 
 
 def test_tiles_that_do_not_fit_whole_pixels(tmp_path: Path):
@@ -614,3 +636,24 @@ def test_surface_or_grid_over_the_card_limits(tmp_path: Path):
         encode_image(path, dpi=1.0)  # 400 inches
     with pytest.raises(ImageError, match="over the card limits"):
         encode_image(path, taxtel_mm=0.1)  # 400 x 400 taxtels
+
+
+@pytest.mark.parametrize(("seed", "noise"), [(0, 0.02), (1, 0.1), (2, 0.3)])
+def test_error_percentile_and_taxtel_maps_on_noisy_images(tmp_path: Path, seed: int, noise: float):
+    """Gratings of random period and orientation under gray noise: the 95th percentile and the
+    per-taxtel RMS and maximum match an independent render of the card, whatever the noise."""
+    rng = np.random.default_rng(seed)
+    x, y = coordinates(300, 200)
+    gray = grating_gray(x, y, float(rng.uniform(0.5, 2.0)), float(rng.uniform(0, 90)), 0.3)
+    gray = np.clip(gray + noise * rng.standard_normal(gray.shape), 0.0, 1.0)
+    result = encode_image(save_gray(gray, tmp_path / "noisy.png"))
+    stored = np.round(gray * 255) / 255
+    error = render_card(result.card, 300, 200, PITCH_MM, PITCH_MM) - (
+        UV_HIGH - (UV_HIGH - UV_LOW) * stored)
+    assert result.stats["p95_error"] == pytest.approx(
+        float(np.percentile(np.abs(error), 95)), abs=2e-4)
+    blocks = error.reshape(4, 50, 6, 50).transpose(0, 2, 1, 3)
+    np.testing.assert_allclose(result.maps["error_rms"],
+                               np.sqrt(np.mean(blocks**2, axis=(2, 3))), rtol=1e-3, atol=1e-6)
+    np.testing.assert_allclose(result.maps["error_max"], np.abs(blocks).max(axis=(2, 3)),
+                               rtol=1e-3, atol=1e-6)

@@ -303,13 +303,35 @@ def summary_lines(s: dict[str, Any]) -> list[str]:
         f"locking {s['locking']}",
         f"card size   {card_bytes} bytes (binary); raw 8-bit bitmap at 0.1 mm: {raw} bytes "
         f"(card = {100.0 * card_bytes / raw:.3g} % of it)",
-        f"error       rms {s['rms_error']:.4f}, max {s['max_error']:.4f} relative friction; "
-        f"rms = {s['rms_error_jnd']:.2f} x the {limits.RELATIVE_FRICTION_JND:g} friction JND",
+        _error_line(s),
+        *_taxtel_error_lines(s),
         f"wrote       {s['output']} ({s['output_format']}, {s['output_bytes']} bytes)",
     ]
     if s.get("preview"):
         lines.append(f"preview     {s['preview']}")
     return lines
+
+
+def _error_line(s: dict[str, Any]) -> str:
+    """The summary's error line: RMS, 95th percentile (when the encoder gives it) and maximum,
+    in relative friction and in multiples of the friction JND."""
+    jnd = limits.RELATIVE_FRICTION_JND
+    names = ("rms", "p95", "max") if "p95_error" in s else ("rms", "max")
+    values = [float(s[f"{name}_error"]) for name in names]
+    return (f"error       {', '.join(f'{n} {v:.4f}' for n, v in zip(names, values, strict=True))}"
+            f" relative friction = {', '.join(f'{v / jnd:.2f}' for v in values)} x the {jnd:g} "
+            "friction JND")
+
+
+def _taxtel_error_lines(s: dict[str, Any]) -> list[str]:
+    """The summary's line on the per-taxtel error, when the encoder gives it."""
+    worst = s.get("worst_taxtel")
+    if not worst:
+        return []
+    taxtels = s["cols"] * s["rows"]
+    return [f"taxtels     {s['taxtels_over_jnd']} of {taxtels} with an rms error above 1 JND; "
+            f"worst: column {worst['col']}, row {worst['row']} (rms {worst['rms_jnd']:.2f}, max "
+            f"{worst['max_jnd']:.2f} JND)"]
 
 
 COMMANDS = [encode]

@@ -17,12 +17,14 @@ KINDS = ("encoder", "predictor", "driver", "calibration-effect", "conformance-ch
 class EncodeResult:
     """What an encoder produced: the card and figures for the summary.
 
-    ``stats`` holds named figures (for example ``rms_error``), ``log`` lines of notes.
+    ``stats`` holds named figures (for example ``rms_error``), ``log`` lines of notes, ``maps``
+    per-taxtel arrays of shape (rows, cols) (for example ``error_rms``, relative friction).
     """
 
     card: pb.Card
     stats: dict[str, Any] = field(default_factory=dict)
     log: list[str] = field(default_factory=list)
+    maps: dict[str, Any] = field(default_factory=dict)
 
 
 class Encoder(abc.ABC):

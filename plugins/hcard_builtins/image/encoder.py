@@ -246,7 +246,9 @@ def encode_image(
             f"{palette.leaders} distinct textures merged into {len(card.textures)} "
             f"(--max-textures {opts.max_textures})"
         )
-    return EncodeResult(card=card, stats=stats, log=log)
+    maps = {} if error.taxtel_rms is None else {"error_rms": error.taxtel_rms,
+                                                 "error_max": error.taxtel_max}
+    return EncodeResult(card=card, stats=stats, log=log, maps=maps)
 
 
 def analyse_image(
@@ -328,6 +330,7 @@ def _stats(
     card: pb.Card,
     opts: EncodeOptions,
 ) -> dict[str, Any]:
+    jnd = limits.RELATIVE_FRICTION_JND
     card_bytes = len(to_bytes(card))
     raw = raw_bitmap_bytes(geometry.width_mm, geometry.height_mm)
     textured = np.asarray(palette.textures.valid.any(axis=1))[palette.index]
@@ -355,7 +358,25 @@ def _stats(
         "raw_bitmap_bytes": raw,
         "rms_error": error.rms,
         "max_error": error.max,
-        "rms_error_jnd": error.rms / limits.RELATIVE_FRICTION_JND,
+        "p95_error": error.p95,
+        "rms_error_jnd": error.rms / jnd,
+        "p95_error_jnd": error.p95 / jnd,
+        "max_error_jnd": error.max / jnd,
+        **_taxtel_figures(error, jnd),
+    }
+
+
+def _taxtel_figures(error: ReconstructionError, jnd: float) -> dict[str, Any]:
+    """Per-taxtel error figures of the summary: how many taxtels have an RMS error above one
+    JND, and the worst taxtel (by RMS; column, row, RMS and maximum in JND)."""
+    if error.taxtel_rms is None or error.taxtel_max is None or not error.taxtel_rms.size:
+        return {}
+    rms, largest = error.taxtel_rms, error.taxtel_max
+    row, col = np.unravel_index(int(np.argmax(rms)), rms.shape)
+    return {
+        "taxtels_over_jnd": int(np.count_nonzero(rms > jnd)),
+        "worst_taxtel": {"col": int(col), "row": int(row), "rms_jnd": float(rms[row, col]) / jnd,
+                         "max_jnd": float(largest[row, col]) / jnd},
     }
 
 

@@ -11,6 +11,7 @@ inner size ``2K + 1``; all tiles of a chunk go through one batched ``matmul``.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,20 +19,36 @@ import numpy as np
 from .geometry import Geometry
 from .palette import Palette
 
+P95_BIN = 1e-4
+"""Width of the histogram bins of the absolute error the 95th percentile is read from,
+relative friction: the percentile is the upper edge of its bin, at most this much above the
+exact one."""
+P95_RANGE = 4.0
+"""Absolute errors from this much relative friction on share the histogram's last bin (the
+format's whole range)."""
+
 
 @dataclass(frozen=True)
 class ReconstructionError:
-    """Difference between the card and the image, relative friction units, over all pixels.
+    """Difference between the card and the image, relative friction units, over all pixels and
+    per taxtel (the pixels each taxtel owns).
 
     Attributes:
         rms: root-mean-square error.
         max: largest absolute error.
         pixels: number of pixels compared.
+        p95: 95th percentile of the absolute error over the pixels (from a histogram of
+            :data:`P95_BIN` bins: at most that much above the exact value).
+        taxtel_rms: (rows, cols) RMS error of each taxtel's pixels.
+        taxtel_max: (rows, cols) largest absolute error of each taxtel's pixels.
     """
 
     rms: float
     max: float
     pixels: int
+    p95: float = 0.0
+    taxtel_rms: np.ndarray | None = None
+    taxtel_max: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -100,7 +117,8 @@ def reconstruction_error(
     *,
     chunk_pixels: int = 1 << 22,
 ) -> ReconstructionError:
-    """RMS and maximum of (card - image) in relative friction over the image's pixels.
+    """RMS, 95th percentile and maximum of (card - image) in relative friction over the image's
+    pixels, and RMS and maximum per taxtel.
 
     Args:
         pixels: gray levels of the image (as analysed).
@@ -115,8 +133,10 @@ def reconstruction_error(
     col_mask = col_owned.astype(np.float32)
     cols_complete = bool(col_owned.all())
     step = max(1, chunk_pixels // (nh * nw * cols))
-    squares = 0.0
-    largest = 0.0
+    bins = round(P95_RANGE / P95_BIN)
+    histogram = np.zeros(bins, dtype=np.int64)
+    squares = np.zeros((geometry.rows, cols))
+    largest = np.zeros((geometry.rows, cols))
     for first in range(0, geometry.rows, step):
         stop = min(geometry.rows, first + step)
         tiles = geometry.gather(pixels, first, stop, columns).transpose(0, 2, 1, 3)
@@ -127,11 +147,26 @@ def reconstruction_error(
             error *= row_owned.astype(np.float32)[:, None, :, None]
         if not cols_complete:
             error *= col_mask[None, :, None, :]
-        per_tile = np.einsum("abij,abij->ab", error, error)
-        squares += float(np.sum(per_tile, dtype=np.float64))
-        largest = max(largest, float(error.max()), float(-error.min()))
+        squares[first:stop] = np.einsum("abij,abij->ab", error, error)
+        largest[first:stop] = np.maximum(error.max(axis=(2, 3)), -error.min(axis=(2, 3)))
+        np.abs(error, out=error)
+        np.multiply(error, np.float32(mapping.scale / P95_BIN), out=error)  # in bins
+        np.minimum(error, np.float32(bins - 1), out=error)
+        # intp: np.bincount casts any other integer type to it first (twice the time)
+        histogram += np.bincount(error.astype(np.intp).ravel(), minlength=bins)
+        # the pixels a taxtel does not own were zeroed: they are not samples of the error
+        owned = int(row_owned.sum()) * int(col_owned.sum())
+        histogram[0] -= error.size - owned
+    owned_per_tile = (geometry.row_owned[:, None] * geometry.col_owned[None, :]).astype(float)
     count = int(geometry.row_owned.sum()) * int(geometry.col_owned.sum())
     scale = mapping.scale
+    rank = math.ceil(0.95 * count)
+    p95_bin = int(np.searchsorted(np.cumsum(histogram), max(rank, 1)))
     return ReconstructionError(
-        rms=scale * float(np.sqrt(squares / max(count, 1))), max=scale * largest, pixels=count
+        rms=scale * float(np.sqrt(squares.sum() / max(count, 1))),
+        max=scale * float(largest.max(initial=0.0)),
+        pixels=count,
+        p95=(p95_bin + 1) * P95_BIN if count else 0.0,
+        taxtel_rms=scale * np.sqrt(squares / np.maximum(owned_per_tile, 1.0)),
+        taxtel_max=scale * largest,
     )
