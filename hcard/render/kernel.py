@@ -231,17 +231,12 @@ def _frame_samples(sample_t: np.ndarray, times: np.ndarray) -> np.ndarray:
 def _frame_textures(card: CompiledCard, xy: np.ndarray, contact: np.ndarray | bool) -> np.ndarray:
     """Palette index of the taxtel under each dead-reckoned position ``xy`` (N, 2) mm; -1
     without contact (per frame, or for all) or off the card."""
-    x, y = xy[:, 0], xy[:, 1]
-    width, height = card.width_mm, card.height_mm
-    inside = (x >= 0) & (x < width) & (y >= 0) & (y < height) & contact
+    inside = contact & np.logical_and.reduce((xy >= 0) & (xy < card.size_mm), axis=1)
     cell = np.divide(xy, card.taxtel_mm)
     np.floor(cell, out=cell)
     np.maximum(cell, 0.0, out=cell)  # clipped to the grid (a zero's sign goes with the cast)
     np.minimum(cell, card.last_cell, out=cell)
-    column_row = cell.astype(np.intp)
-    # row * cols + column, in two integer ufuncs (an integer np.dot has no BLAS: 3x slower)
-    flat = column_row[:, 1] * card.cell_strides[1]
-    flat += column_row[:, 0]
+    flat = np.dot(cell.astype(np.intp), card.cell_strides)  # row * cols + column
     return np.where(inside, card.grid.ravel().take(flat), -1).astype(np.int32, copy=False)
 
 
@@ -263,24 +258,11 @@ def _sample_coefficients(
     return start, rate
 
 
-def band_limit_gain(frequency_hz: np.ndarray, band_limit_hz: float, *,
-                    out: np.ndarray | None = None,
-                    scratch: np.ndarray | None = None) -> np.ndarray:
-    """Gain of a component at ``frequency_hz``: 1 below 0.8 B, 0 from B on, smoothstep between.
-
-    ``out`` (may be ``frequency_hz`` itself) and ``scratch``, arrays of its shape, take the
-    result and the intermediate: a kernel block then allocates nothing (fresh temporaries of a
-    block's size cost more in page faults than the arithmetic). The numbers are the same."""
+def band_limit_gain(frequency_hz: np.ndarray, band_limit_hz: float) -> np.ndarray:
+    """Gain of a component at ``frequency_hz``: 1 below 0.8 B, 0 from B on, smoothstep between."""
     edge = PASSBAND_FRACTION * band_limit_hz
-    x = np.subtract(frequency_hz, edge, out=out)
-    np.divide(x, band_limit_hz - edge, out=x)
-    np.maximum(x, 0.0, out=x)
-    np.minimum(x, 1.0, out=x)
-    rise = np.multiply(x, 2.0, out=scratch)  # 1 - x^2 (3 - 2x), in the same order of operations
-    np.subtract(3.0, rise, out=rise)
-    np.multiply(x, x, out=x)
-    np.multiply(x, rise, out=x)
-    return np.subtract(1.0, x, out=x)
+    x = np.clip((frequency_hz - edge) / (band_limit_hz - edge), 0.0, 1.0)
+    return 1.0 - x * x * (3.0 - 2.0 * x)
 
 
 def _texture_deviation(
@@ -317,15 +299,11 @@ def _texture_deviation(
         # Every component is in the passband: unit gain, exactly.
         np.add(wave @ selected.weighted_groups, baseline, out=out)
         return
-    frequency = np.matmul(velocity(), texture.wave_vectors, out=turns)  # turns are used up
-    np.abs(frequency, out=frequency)
-    np.add(frequency, texture.temporal_hz, out=frequency)
-    gain = band_limit_gain(frequency, options.band_limit_hz, out=frequency, scratch=within)
-    if not texture.band_limited.all():
-        gain[:, ~texture.band_limited] = 1.0
-    np.multiply(gain, texture.amplitude, out=gain)
-    np.multiply(gain, wave, out=gain)
-    np.add(gain @ selected.group_matrix, baseline, out=out)
+    frequency = np.abs(velocity() @ texture.wave_vectors) + texture.temporal_hz
+    gain = band_limit_gain(frequency, options.band_limit_hz)
+    gain[:, ~texture.band_limited] = 1.0
+    gain *= texture.amplitude
+    np.add((wave * gain) @ selected.group_matrix, baseline, out=out)
 
 
 def evaluate_frames(
