@@ -1,7 +1,10 @@
-"""The data rows of a CSV text with ``#`` comment lines and blank lines skipped.
+"""CSV rows: reading the data rows of a text with ``#`` comment lines and blank lines skipped,
+and writing columns as rows.
 
-Shared by the finger-track reader (spec/track-format.md) and the tribometer measurement reader
-(spec/measurement-format.md), which both keep line numbers for their error messages.
+The reading is shared by the finger-track reader (spec/track-format.md) and the tribometer
+measurement reader (spec/measurement-format.md), which both keep line numbers for their error
+messages; the writing (:func:`format_rows`) by the rendered-frame writers and the measurement
+writer.
 """
 
 from __future__ import annotations
@@ -11,7 +14,7 @@ import io
 import math
 import os
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -153,3 +156,13 @@ def read_csv_text(path: str | os.PathLike[str], error: type[HcardError]) -> str:
         raise error(f"{file}: cannot read (not UTF-8: {exc.reason} at byte {exc.start})") from None
     except OSError as exc:
         raise error(f"{file}: cannot read ({exc.strerror or exc})") from None
+
+
+def format_rows(columns: Sequence[tuple[str, np.ndarray]]) -> str:
+    """The CSV rows of named columns of equal length, each ending in a newline: integers (and
+    booleans) by ``str``, floats in their shortest round-trip form (``repr``), so reading them
+    back gives the same numbers exactly (spec/track-format.md rule O1, spec/measurement-format.md
+    rule M11)."""
+    cells = [map(str, values.tolist()) if values.dtype.kind in "iub"
+             else map(repr, values.tolist()) for _, values in columns]
+    return "".join(",".join(row) + "\n" for row in zip(*cells, strict=True))

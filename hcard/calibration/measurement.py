@@ -20,7 +20,7 @@ import numpy as np
 
 from hcard.atomic import atomic_output, write_atomically
 from hcard.bounded_read import MAX_JSON_FILE_BYTES, InputTooLarge, read_bounded
-from hcard.csv_rows import numeric_table, read_csv_text
+from hcard.csv_rows import format_rows, numeric_table, read_csv_text
 from hcard.errors import HcardError
 from hcard.json_text import JsonInputError, parse_json
 
@@ -354,15 +354,11 @@ def _csv_header(m: Measurement) -> str:
 
 
 def _csv_rows(m: Measurement) -> str:
-    """The data lines of ``m``'s CSV, full precision (``repr``), each ending in a newline."""
-    columns = []
-    for q, values in _present_columns(m):
-        array = np.asarray(values)
-        if UNITLESS.get(q, False):
-            columns.append([str(int(v)) for v in array.astype(np.int64)])
-        else:
-            columns.append([repr(float(v)) for v in array.astype(np.float64)])
-    return "".join(",".join(row) + "\n" for row in zip(*columns, strict=True))
+    """The data lines of ``m``'s CSV, full precision (``repr``), each ending in a newline; the
+    columns without a unit (rule M3, M12) as integers."""
+    return format_rows([
+        (q, np.asarray(values).astype(np.int64 if UNITLESS.get(q, False) else np.float64))
+        for q, values in _present_columns(m)])
 
 
 def measurement_to_csv(m: Measurement) -> str:

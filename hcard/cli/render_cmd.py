@@ -14,6 +14,7 @@ import numpy as np
 
 from hcard.card_io import load
 from hcard.cli.verbosity import quiet
+from hcard.csv_rows import format_rows
 from hcard.errors import HcardError
 from hcard.physics.actuation import (
     ChannelClipping,
@@ -27,7 +28,7 @@ from hcard.render.options import (
     DEFAULT_DEAD_RECKONING_S,
     DEFAULT_FRAME_RATE_HZ,
 )
-from hcard.render.output import csv_rows, frame_writer
+from hcard.render.output import frame_writer
 from hcard.track import FingerTrack, read_track_csv
 
 if TYPE_CHECKING:
@@ -71,7 +72,7 @@ def frames_to_csv(frames: Frames, commands: ActuatorCommands | None = None) -> b
     and with ``commands`` amplitude_m, voltage_v, rendered_uv, rendered_ev, in one piece (the
     command writes block by block, :mod:`hcard.render.output`)."""
     columns = _columns(frames, commands)
-    return (",".join(name for name, _ in columns) + "\n" + csv_rows(columns)).encode()
+    return (",".join(name for name, _ in columns) + "\n" + format_rows(columns)).encode()
 
 
 @click.command()

@@ -15,6 +15,7 @@ rendering leaves the previous file as it was.
 
 from __future__ import annotations
 
+import abc
 import contextlib
 import os
 import shutil
@@ -31,28 +32,23 @@ if TYPE_CHECKING:
 import numpy as np
 
 from hcard.atomic import atomic_output
+from hcard.csv_rows import format_rows
 
 Column = tuple[str, np.ndarray]
 """A named column of one block of frames."""
 
 
-def csv_rows(columns: Sequence[Column]) -> str:
-    """The CSV rows of a block of columns: integers as integers, floats in their shortest
-    round-trip form (rule O1)."""
-    cells = [map(str, values.tolist()) if values.dtype.kind in "iub"
-             else map(repr, values.tolist()) for _, values in columns]
-    return "".join(",".join(row) + "\n" for row in zip(*cells, strict=True))
-
-
-class _FrameWriter:
+class _FrameWriter(abc.ABC):
     """A writer used as a context manager: :meth:`close` when the block ends, :meth:`abandon`
     (the output stays as it was) when an exception escapes it."""
 
+    @abc.abstractmethod
     def close(self) -> None:
-        raise NotImplementedError
+        """Finish the output: it replaces the file at the writer's path."""
 
+    @abc.abstractmethod
     def abandon(self) -> None:
-        raise NotImplementedError
+        """Drop what was written: the file at the writer's path stays as it was."""
 
     def __enter__(self) -> Self:
         return self
@@ -81,7 +77,7 @@ class CsvFrameWriter(_FrameWriter):
             self._file.write((",".join(names) + "\n").encode())
         elif names != self._names:
             raise ValueError(f"block columns {names} differ from the header {self._names}")
-        self._file.write(csv_rows(columns).encode())
+        self._file.write(format_rows(columns).encode())
 
     def close(self) -> None:
         """Replace the output with what was written."""
