@@ -1,4 +1,4 @@
-"""Loading, saving, versioning and validation of cards (issue 3 items 1, 2 and 7)."""
+"""Loading, saving, versioning and validation of cards (spec/README.md sections 5, 7, 8)."""
 
 from __future__ import annotations
 

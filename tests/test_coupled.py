@@ -1,5 +1,5 @@
 """The coupled UV + EV model (Eq. 4.1, section 4.3) and the registration of the built-in
-predictors through the entry point (issue 4, items 1 and 5)."""
+predictors through the entry point."""
 
 from __future__ import annotations
 

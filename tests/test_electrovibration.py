@@ -1,4 +1,4 @@
-"""Electrovibration predictors (issue 4 item 3; thesis chapter 3, Eqs. 3.1-3.23)."""
+"""Electrovibration predictors (thesis chapter 3, Eqs. 3.1-3.23)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Finger friction predictor (issue 4 item 4; thesis sections 1.4.2 and 2.9.2.2)."""
+"""Finger friction predictor (thesis sections 1.4.2 and 2.9.2.2)."""
 
 from __future__ import annotations
 

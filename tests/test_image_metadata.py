@@ -58,7 +58,7 @@ def test_a_stored_resolution_out_of_range_is_reported_and_not_used(tmp_path: Pat
     assert "the image stores 150000 x 150000 dpi, outside 10-25400" in geometry.size_source
     measured, stderr = run_measured("encode", str(path), "-o", str(tmp_path / "fine.hcard"))
     assert measured["code"] == 0, stderr
-    assert measured["peak_kb"] < 1024 * 1024  # 7.8 GB before the tile bound (issue 14)
+    assert measured["peak_kb"] < 1024 * 1024  # 7.8 GB before the tile bound
 
 
 @pytest.mark.parametrize(("option", "value", "named"), [

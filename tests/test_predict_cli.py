@@ -1,4 +1,4 @@
-"""``hcard predict`` and the sweep / quantity parsing behind it (issue 4, item 7)."""
+"""``hcard predict`` and the sweep / quantity parsing behind it."""
 
 from __future__ import annotations
 
@@ -89,7 +89,8 @@ def test_single_point_with_parameters_in_units():
     assert result.exit_code == 0, result.output
     header, row = result.output.splitlines()
     assert header.split()[-2:] == ["relative_friction", "[-]"]
-    assert float(row.split()[-1]) == pytest.approx(0.247, abs=0.01)  # issue 4 test value
+    # the spring-slider's relative friction at w = 2 um (Eqs. 2.19-2.28; tests/test_ultrasonic.py)
+    assert float(row.split()[-1]) == pytest.approx(0.247, abs=0.01)
 
 
 def test_sweeping_a_parameter():

@@ -1,4 +1,4 @@
-"""Device profiles and model-based rendering (issue 4, item 6): target relative friction per
+"""Device profiles and model-based rendering: target relative friction per
 channel to plate amplitude and EV voltage envelope, clipped and reported, velocity compensated."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The hybrid renderer against analytic signals (issue 3, item 3; spec/README.md section 6)."""
+"""The hybrid renderer against analytic signals (spec/README.md section 6)."""
 
 from __future__ import annotations
 

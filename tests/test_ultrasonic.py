@@ -1,5 +1,5 @@
 """Ultrasonic friction predictors (thesis chapter 2): squeeze film, spring-slider, dimensionless
-group. Numbers are those of issue 4 and the thesis, with the tolerances stated there."""
+group. Numbers are the thesis values, with the tolerances its figures allow."""
 
 from __future__ import annotations
 
@@ -274,7 +274,7 @@ def test_dimensionless_group_inverse_is_velocity_compensation() -> None:
 
 
 def test_spring_slider_collapses_on_the_dimensionless_group() -> None:
-    """Issue 4: sweep the spring-slider, fit Psi* of Eq. 2.33: about 1.7, RMSE <= 0.05.
+    """Sweep the spring-slider, fit Psi* of Eq. 2.33: about 1.7, RMSE <= 0.05.
 
     Psi is the Eq. 2.30 group with nu = 0.33 (Table 2.3), as the predictor computes it and as
     the thesis's Psi* values (2.38, 4.69, 0.70, 1.80) were fitted, so the fitted value compares

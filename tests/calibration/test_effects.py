@@ -1,4 +1,4 @@
-"""Calibration effects (issue 7, item 4): each built-in effect, hidden in synthetic data, is
+"""Calibration effects: each built-in effect, hidden in synthetic data, is
 explained by the augmented model and flagged by the residual analysis of the base fit."""
 
 from __future__ import annotations

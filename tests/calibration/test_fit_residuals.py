@@ -1,4 +1,4 @@
-"""Fit and residual analysis of the calibration loop (issue 7, items 2 and 3), on synthetic data."""
+"""Fit and residual analysis of the calibration loop (spec/calibration.md), on synthetic data."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The calibration loop on recordings with undeclared effects (issue 7, items 5 and 7).
+"""The calibration loop on recordings with undeclared effects (spec/calibration.md).
 
 The reference device's tribometer simulation (:mod:`hcard_device.sim.tribometer`) records a
 finger with one effect switched on and nothing in the files saying which; every recording has

@@ -1,5 +1,5 @@
 """CI runs the whole suite, every level, against the reference device through the command a
-vendor runs (issue 6 item 4), and the reports it writes are complete."""
+vendor runs (spec/conformance.md), and the reports it writes are complete."""
 
 from __future__ import annotations
 

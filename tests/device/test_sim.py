@@ -1,4 +1,4 @@
-"""The simulated device (issue 5, items 2, 6 and 7): plate envelope under the PI amplitude loop,
+"""The simulated device: plate envelope under the PI amplitude loop,
 EV amplifier, sensors, finger physics, safety clamps, watchdog, streaming and clip reports.
 
 Thesis figures checked: closed-loop bandwidth 400 Hz at 2 um, amplitude held within 50 nm for

@@ -1,5 +1,5 @@
 """The simulated device: plate and PI amplitude loop, EV amplifier, sensors, a finger built from
-the physics predictors, safety clamps and watchdog (DESIGN.md section 6, thesis chapters 4-5).
+the physics predictors, safety clamps and watchdog (spec/device-protocol.md, thesis chapters 4-5).
 
 Usage (the firmware's view)::
 

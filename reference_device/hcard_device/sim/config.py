@@ -1,6 +1,6 @@
 """Physical constants and limits of the simulated devices, each with its source.
 
-Two presets (DESIGN.md section 6):
+Two presets (thesis chapters 4 and 5):
 
 - :meth:`DeviceConfig.evita` -- the E-ViTa of thesis chapter 5 (section 5.1): a glass plate
   54 x 81 x 1.6 mm resonating at 60,750 Hz (half wavelength 8 mm), a PI amplitude loop at 60 kHz

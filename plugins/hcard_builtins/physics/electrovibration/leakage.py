@@ -15,7 +15,7 @@ a first-order high pass, and the force is Kaczmarek's law with ``v_e`` (Eq. 3.23
 
 ``F_e = eps0 A v_e^2 / (2 (d_sc/eps_sc + d_i/eps_i)(d_sc + d_i))``.
 
-Consequences (the "must show" of issue 4): a DC step gives ``v_e = V exp(-t/tau_d)`` and a
+Consequences (tests/test_electrovibration.py): a DC step gives ``v_e = V exp(-t/tau_d)`` and a
 force ``~ exp(-2 t/tau_d)`` that decays to zero with time constant ``tau_d / 2``, which is why
 electrovibration needs an AC carrier; a sinusoid well above ``1/(2 pi tau_d)`` passes almost
 fully; the force response ``|H(f)|^2`` rises then saturates with frequency (Fig. 3.16).
