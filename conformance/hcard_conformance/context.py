@@ -15,7 +15,7 @@ Checks take a Context and never care which of the two they got.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -70,7 +70,7 @@ def reported_frames(states: list[State], track: FingerTrack,
                   texture=texture[keep])
 
 
-def session_times(states: list[State], track: FingerTrack, host_us: np.ndarray | None = None,
+def session_times(states: Sequence[State], track: FingerTrack, host_us: np.ndarray | None = None,
                   margin_periods: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """Which reports belong to the session (from the first that echoes one of its samples on)
     and every report's time on the track's time base, s.
@@ -85,20 +85,22 @@ def session_times(states: list[State], track: FingerTrack, host_us: np.ndarray |
     (a lag that the lag search of metric A1 absorbs; see :data:`ECHO_MARGIN_PERIODS`).
     """
     from hcard_device.drivers.recording import HOST_TIME_MODULO, echoed_samples, unwrapped_times
+    from hcard_device.drivers.state_log import state_field
+    from hcard_device.protocol.constants import ECHO_AGE_UNKNOWN, TIME_UNIT_S
 
     if host_us is None:
         host_us = np.rint(track.t * 1e6).astype(np.int64) % HOST_TIME_MODULO
     device_t = unwrapped_times(states) if states else np.zeros(0)
-    echo = np.array([s.host_time_echo_us for s in states], dtype=np.int64)
+    echo = state_field(states, "host_time_echo_us").astype(np.int64)
     sample = echoed_samples(host_us, echo)
     applied = sample >= 0
     if not np.any(applied):
         return np.zeros(len(states), dtype=bool), device_t
     keep = np.arange(len(states)) >= np.flatnonzero(applied)[0]
     echo_s = track.t[np.maximum(sample, 0)]
-    ages = [s.echo_age_s for s, ok in zip(states, applied, strict=True) if ok]
-    if all(age is not None for age in ages):
-        exact = echo_s[applied] + np.array(ages, dtype=float)
+    ages_us = state_field(states, "echo_age_us")[applied]
+    if not np.any(ages_us == ECHO_AGE_UNKNOWN):  # every applied report says its echo's age
+        exact = echo_s[applied] + ages_us * TIME_UNIT_S  # State.echo_age_s, per report
         offset = float(np.median(device_t[applied] - exact))
         t = device_t - offset  # reports that echo no sample of the session: not kept
         t[applied] = exact

@@ -244,9 +244,10 @@ def speed_known_s(result: PlayResult) -> float:
     """Track time (s) of the first report that echoes a touch sample after the stroke's first:
     from it the device has two samples, so a speed; +inf when no report does."""
     from hcard_device.drivers.recording import echoed_samples
+    from hcard_device.drivers.state_log import state_field
 
     keep, t = session_times(result.states, result.track, result.host_us)
-    echo = np.array([s.host_time_echo_us for s in result.states], dtype=np.int64)
+    echo = state_field(result.states, "host_time_echo_us").astype(np.int64)
     later = keep & (echoed_samples(result.host_us, echo) >= 1)
     return float(t[later][0]) if later.any() else math.inf
 

@@ -156,3 +156,41 @@ def test_writing_a_recording_holds_one_block_whatever_its_length(session, tmp_pa
     assert long_peak < 1.3 * short_peak, (short_peak, long_peak)
     assert long_peak < 40e6
     assert len(read_measurement(tmp_path / "long.csv")) == len(long.states)
+
+
+def test_sessions_over_usbip_are_recorded_in_blocks_twice_against_one_server(tmp_path,
+                                                                           monkeypatch):
+    """Over USB/IP from a server in another process, in real time, two sessions in a row:
+    the packed log holds the reports the driver decoded (every field), and the recording written
+    in blocks is the one built whole."""
+    from served_device import served_device
+
+    from hcard_device.drivers import recording as recording_module
+
+    monkeypatch.setattr(recording_module, "BLOCK_REPORTS", 500)  # several blocks per session
+    seen: list[list[State]] = []
+    with served_device() as served, open_device(served.uri) as driver:
+        original = driver.collect_until
+
+        def collect_until(deadline_s: float) -> list[State]:
+            got = original(deadline_s)
+            seen[-1].extend(got)
+            return got
+
+        driver.collect_until = collect_until
+        for session in range(2):
+            seen.append([])
+            result = play(driver, CARD, strokes(2))
+            # what the driver decoded while the session streamed, field by field (it also
+            # collects reports before START, which the recording leaves out)
+            first = seen[-1].index(result.states[0])
+            assert list(result.states) == seen[-1][first:first + len(result.states)]
+            assert len(result.states) == pytest.approx(1000 * result.duration_s, rel=0.05)
+            rows = write_recording(result, tmp_path / f"blocks{session}.csv")
+            write_measurement(recording(result), tmp_path / f"whole{session}.csv")
+            assert (tmp_path / f"blocks{session}.csv").read_bytes() == \
+                (tmp_path / f"whole{session}.csv").read_bytes()
+            assert rows > 2 * 500
+            back = read_measurement(tmp_path / f"blocks{session}.csv")
+            assert np.all(np.diff(back.t) > 0)
+            assert back.stroke.max() >= 3  # the two strokes there and back, from the track

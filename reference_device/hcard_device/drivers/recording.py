@@ -24,10 +24,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from hcard.calibration.measurement import Measurement, write_measurement_blocks
+from hcard.calibration.measurement import DEVICE_COLUMNS, Measurement, write_measurement_blocks
 from hcard.calibration.splits import stroke_numbers
 from hcard.track import FingerTrack
-from hcard_device.drivers.state_log import StateLog
+from hcard_device.drivers.state_log import state_field
 from hcard_device.protocol import Capability, DeviceInfo, DeviceKind, State
 from hcard_device.protocol.constants import (
     AMPLITUDE_UNIT_M,
@@ -60,11 +60,7 @@ def unwrap_stamps(stamps_us: np.ndarray) -> np.ndarray:
 
 def unwrapped_times(states: Sequence[State]) -> np.ndarray:
     """Device time stamps of ``states`` unwrapped (u32 microseconds), from the first, s."""
-    if isinstance(states, StateLog):
-        stamps = states.field("timestamp_us")
-    else:
-        stamps = np.array([s.timestamp_us for s in states], dtype=np.int64)
-    return unwrap_stamps(stamps) * 1e-6
+    return unwrap_stamps(state_field(states, "timestamp_us")) * 1e-6
 
 
 def track_speeds(track: FingerTrack) -> np.ndarray:
@@ -212,9 +208,10 @@ def sidecar(result: PlayResult, *, track_path: str | None = None,
 
 BLOCK_REPORTS = 8192
 """Reports per block when a recording is written (:func:`write_recording`)."""
-DEVICE_COLUMNS = ("sequence", "f_tl", "f_tr", "f_bl", "f_br", "current", "target_uv",
-                  "target_ev", "texture", "faults", "flags")
+REPORTED_DEVICE_COLUMNS = tuple(q for q in DEVICE_COLUMNS if q != "echo")
 """The device columns of rule M12 taken from the reports as they are (``echo`` is derived)."""
+FORCE_COLUMNS = ("t", "normal_force", "lateral_force", "speed", "contact")
+"""The recording's columns besides the targets that the rendered friction error reads."""
 
 
 def recording_blocks(result: PlayResult, *,
@@ -223,11 +220,16 @@ def recording_blocks(result: PlayResult, *,
     ``block_reports`` reports, without conditions: the blocks joined are the recording.
 
     Raises:
-        ValueError: no STATE report was received.
+        ValueError: no STATE report was received (raised here, before any block is made).
     """
     rows = result.states.rows()
     if not rows.size:
         raise ValueError("the device sent no STATE report: nothing to record")
+    return _blocks(result, rows, block_reports)
+
+
+def _blocks(result: PlayResult, rows: np.ndarray, block_reports: int) -> Iterator[Measurement]:
+    """:func:`recording_blocks` of the packed reports ``rows`` (at least one)."""
     track = result.track
     speeds, strokes = track_speeds(track), track_strokes(track)
     echoes = EchoIndex(result.sent_host_us())
@@ -253,7 +255,7 @@ def recording_blocks(result: PlayResult, *,
         # an echo of no sample of this session: the last host time before the track (rule
         # M6: no NaN), one microsecond before its first sample
         echo = np.where(echoed, track.t[at], track.t[0] - 1e-6)
-        device = {name: columns[name] for name in DEVICE_COLUMNS}
+        device = {name: columns[name] for name in REPORTED_DEVICE_COLUMNS}
         device["echo"] = echo
         yield Measurement(
             t=elapsed[keep] * 1e-6,
@@ -295,20 +297,13 @@ def force_recording(result: PlayResult) -> Measurement:
     Raises:
         ValueError: no STATE report was received.
     """
-    parts: dict[str, list[np.ndarray]] = {name: [] for name in (
-        "t", "normal_force", "lateral_force", "speed", "contact", "target_uv", "target_ev")}
+    kept: list[dict[str, np.ndarray]] = []  # the 7 columns of each block; the rest is dropped
     for block in recording_blocks(result):
-        for name in ("t", "normal_force", "lateral_force", "speed", "contact"):
-            parts[name].append(getattr(block, name))
-        for name in ("target_uv", "target_ev"):
-            parts[name].append(block.device[name])
-    joined = {name: np.concatenate(arrays) for name, arrays in parts.items()}
-    return Measurement(
-        t=joined["t"], normal_force=joined["normal_force"],
-        lateral_force=joined["lateral_force"], speed=joined["speed"],
-        contact=joined["contact"],
-        device={"target_uv": joined["target_uv"], "target_ev": joined["target_ev"]},
-    )
+        kept.append({name: getattr(block, name) for name in FORCE_COLUMNS}
+                    | {name: block.device[name] for name in ("target_uv", "target_ev")})
+    joined = {name: np.concatenate([part[name] for part in kept]) for name in kept[0]}
+    return Measurement(**{name: joined[name] for name in FORCE_COLUMNS},
+                       device={name: joined[name] for name in ("target_uv", "target_ev")})
 
 
 def write_recording(result: PlayResult, path: str | os.PathLike[str], *,
@@ -321,7 +316,6 @@ def write_recording(result: PlayResult, path: str | os.PathLike[str], *,
         ValueError: no STATE report was received (nothing is written).
         OSError: the files cannot be written (the earlier files at ``path`` are kept).
     """
+    blocks = recording_blocks(result)
     conditions = sidecar(result, track_path=track_path, card_path=card_path)
-    if not len(result.states):
-        raise ValueError("the device sent no STATE report: nothing to record")
-    return write_measurement_blocks(recording_blocks(result), conditions, path)
+    return write_measurement_blocks(blocks, conditions, path)

@@ -138,6 +138,14 @@ class StateLog(Sequence[State]):
         return f"StateLog({self._length} reports, {self.nbytes} bytes)"
 
 
+def state_field(states: Sequence[State], name: str) -> np.ndarray:
+    """One field of every report (a :class:`State` field name, wire units): read from the
+    packed rows of a :class:`StateLog`, gathered from the objects of any other sequence."""
+    if isinstance(states, StateLog):
+        return states.field(name)
+    return np.array([getattr(state, name) for state in states], dtype=STATE_ROW[name].base)
+
+
 def _state(row: np.void) -> State:
     """The report of one packed row."""
     return State.decode(bytes([State.REPORT_ID]) + row.tobytes())
