@@ -1,4 +1,5 @@
-"""The preview picture: profiles against the analytic cosine, pixels of the taxtel map, CLI."""
+"""The preview picture: profiles against the analytic cosine, the cells drawn for every texture,
+pixels of the taxtel map, CLI."""
 
 from __future__ import annotations
 
@@ -14,11 +15,22 @@ import hcard
 from hcard import build
 from hcard.preview import (
     GRID_AXES_LABEL,
+    PROFILES_AXES_LABEL,
     preview_figure,
     render_preview,
     temporal_profile,
     texture_colors,
     texture_profile,
+)
+from hcard.preview_profiles import (
+    BANDS,
+    CELL_LABELS,
+    CURVES,
+    NATURAL,
+    STRIPS,
+    SWATCHES,
+    UNREACHABLE,
+    plot_series,
 )
 
 TAXTEL_MM = 20.0
@@ -131,19 +143,121 @@ def test_preview_png_shows_the_texture_of_every_taxtel(tmp_path: Path) -> None:
     assert grid_ax.transData.transform((60.0, 0.0))[0] < 0.6 * width
 
 
-def test_preview_panels_are_labelled_and_capped_at_24() -> None:
-    titles = [ax.get_title(loc="left") for ax in preview_figure(three_texture_card()).axes]
-    assert "texture 0 (fine):\nUV, VELOCITY, 1 component" in titles
-    assert "texture 2:\nBIPOLAR, POSITION, 1 component" in titles
+def _profiles(fig) -> dict[str, object]:
+    """The profiles axes' collections by label."""
+    ax = next(ax for ax in fig.axes if ax.get_label() == PROFILES_AXES_LABEL)
+    return {c.get_label(): c for c in ax.collections}
 
+
+def test_every_texture_has_a_labelled_cell() -> None:
+    marks = _profiles(preview_figure(three_texture_card()))
+    # windows: one period of 1 cycle/mm, of an 8 mm grating, of 50 Hz
+    assert marks[CELL_LABELS].texts == [
+        "texture 0 (fine)\nUV, VELOCITY, 1 component\n1 mm ∠0°",
+        "texture 1\nEV, AUTO, 1 component\n8 mm ∠45°",
+        "texture 2\nBIPOLAR, POSITION, 1 component\n20 ms",
+    ]
+    np.testing.assert_allclose(marks[SWATCHES].get_facecolors(), texture_colors(3))
+
+    # 30 textures: no cap any more, compact labels ("BIP": bipolar)
     textures = [build.texture(1.0, [build.spatial(0.1 * (i + 1), 0.1)]) for i in range(30)]
     index = [i % 30 for i in range(36)]  # a 6 x 6 grid using all 30 textures
     card = build.card(30.0, 30.0, taxtel_mm=5.0, textures=textures, texture_index=index)
+    labels = _profiles(preview_figure(card))[CELL_LABELS].texts
+    assert len(labels) == 30
+    assert labels[0] == "0 BIP auto\n10 mm ∠0°"  # one period of 0.1 cycles/mm
+    assert labels[29] == "29 BIP auto\n0.33 mm ∠0°"  # of 3 cycles/mm
+
+
+def test_cell_draws_the_analytic_profile_on_the_shared_scale() -> None:
+    marks = _profiles(preview_figure(three_texture_card()))
+    # Extremes: 0.7 +- 0.2, 1.3 +- 0.25, 1.0 +- 0.1 and natural friction 1 -> 0.5 to 1.55,
+    # padded by a tenth of the span (0.105). The scale comes from the drawn samples (64 a
+    # period here), whose extremes miss the true ones by up to 1 - cos(pi / 63) = 0.12 %.
+    low, high = 0.5 - 0.105, 1.55 + 0.105
+    tolerance = 5e-4
+    strips = [path.vertices for path in marks[STRIPS].get_paths()]
+    curves = [np.asarray(path.vertices) for path in marks[CURVES].get_paths()]
+    assert len(strips) == len(curves) == 3
+    left, top = strips[0].min(axis=0)
+    right, bottom = strips[0].max(axis=0)
+    x_in, y_in = curves[0][:, 0], curves[0][:, 1]
+    s_mm = (x_in - left) / (right - left) * 1.0  # the window is one period, 1 mm
+    friction = high - (y_in - top) / (bottom - top) * (high - low)
+    np.testing.assert_allclose(friction, 0.7 + 0.2 * np.cos(2 * np.pi * s_mm), atol=tolerance)
+    assert s_mm[0] == pytest.approx(0.0) and s_mm[-1] == pytest.approx(1.0)
+    # the dashed natural-friction line of that cell lies at 1
+    natural = np.asarray(marks[NATURAL].get_segments()[0])
+    natural_friction = high - (natural[0, 1] - top) / (bottom - top) * (high - low)
+    assert natural_friction == pytest.approx(1.0, abs=tolerance)
+    # the temporal texture: 1.0 + 0.1 cos(2 pi 50 Hz t) over 20 ms
+    left, top = strips[2].min(axis=0)
+    right, bottom = strips[2].max(axis=0)
+    t_ms = (curves[2][:, 0] - left) / (right - left) * 20.0
+    friction = high - (curves[2][:, 1] - top) / (bottom - top) * (high - low)
+    np.testing.assert_allclose(friction, 1.0 + 0.1 * np.cos(2 * np.pi * 0.05 * t_ms),
+                               atol=tolerance)
+
+
+def test_cell_shades_what_a_one_sided_channel_cannot_render() -> None:
+    marks = _profiles(preview_figure(three_texture_card()))
+    strips = [path.vertices for path in marks[STRIPS].get_paths()]
+    spans = [path.vertices for path in marks[UNREACHABLE].get_paths()]
+    lines = [np.asarray(s)[0, 1] for s in marks[NATURAL].get_segments()]
+    assert len(spans) == 2  # the UV and the EV texture; the bipolar one renders both sides
+    # UV (texture 0) cannot raise friction: shaded from the top of its strip down to 1
+    assert spans[0][:, 1].min() == pytest.approx(strips[0][:, 1].min())
+    assert spans[0][:, 1].max() == pytest.approx(lines[0])
+    # EV (texture 1) cannot lower it: shaded from 1 down to the bottom of its strip
+    assert spans[1][:, 1].min() == pytest.approx(lines[1])
+    assert spans[1][:, 1].max() == pytest.approx(strips[1][:, 1].max())
+
+
+def test_spatial_and_temporal_parts_are_stacked_in_one_cell() -> None:
+    both = build.texture(1.0, [build.spatial(0.5, 0.2), build.temporal(100.0, 0.1)],
+                         channel="bipolar")
+    card = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[both, build.texture(0.6)],
+                      texture_index=[0, 1])
+    marks = _profiles(preview_figure(card))
+    strips = [path.vertices for path in marks[STRIPS].get_paths()]
+    assert len(strips) == 3  # two strips for texture 0, one for texture 1
+    assert strips[0][:, 1].max() < strips[1][:, 1].min()  # spatial above temporal
+    np.testing.assert_allclose(strips[0][:, 0].min(), strips[1][:, 0].min())
+    assert marks[CELL_LABELS].texts[0] == (
+        "texture 0\nBIPOLAR, AUTO, 2 components\n2 mm ∠0° | 10 ms")  # one period each
+
+
+def test_components_too_fine_to_draw_become_a_band() -> None:
+    fine, coarse = (50.0, 0.05, 0.0), (0.1, 0.2, 0.3)  # cycles per mm, amplitude, phase
+    x, friction, band = plot_series(0.8, [fine, coarse], 10.0, max_samples=1000)
+    # 500 cycles of the fine term would need 6000 samples: it is the band
+    assert band == pytest.approx(0.05)
+    assert len(x) <= 1000 and x[0] == 0.0 and x[-1] == pytest.approx(10.0)
+    np.testing.assert_allclose(friction, 0.8 + 0.2 * np.cos(2 * np.pi * 0.1 * x + 0.3))
+    x, friction, band = plot_series(0.8, [fine, coarse], 10.0, max_samples=10_000)
+    assert band == 0.0
+    assert len(x) == 6001  # 12 samples per cycle of the finer term
+
+    texture = build.texture(1.0, [build.spatial(50.0, 0.05), build.spatial(0.1, 0.2)])
+    card = build.card(10.0, 10.0, taxtel_mm=10.0, textures=[texture])
+    band_paths = _profiles(preview_figure(card))[BANDS].get_paths()
+    assert len(band_paths) == 1
+
+
+def test_a_full_palette_is_drawn_in_a_few_axes() -> None:
+    textures = [build.texture(0.4 + i / 512, [build.spatial(0.2 + i / 100, 0.05)],
+                              channel="uv", locking="position") for i in range(256)]
+    card = build.card(80.0, 80.0, taxtel_mm=5.0, textures=textures,
+                      texture_index=np.arange(256))
     fig = preview_figure(card)
-    panel_titles = [t for ax in fig.axes if (t := ax.get_title(loc="left")).startswith("texture")]
-    assert len(panel_titles) == 24
-    notes = [text.get_text() for ax in fig.axes for text in ax.texts]
-    assert "+6 more" in notes
+    assert len(fig.axes) == 2  # the taxtel map (its colour bar is an inset) and the profiles
+    marks = _profiles(fig)
+    assert len(marks[CURVES].get_paths()) == 256
+    labels = marks[CELL_LABELS].texts
+    assert labels[255] == "255 UV pos.\n0.36 mm"  # one period of 2.75 cycles/mm
+    # eight cells a row, the last texture in row 32
+    rows = {round(float(y), 6) for _, y in marks[CELL_LABELS].get_offsets()}
+    assert len(rows) == 32
 
 
 def test_invalid_card_is_refused() -> None:
