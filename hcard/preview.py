@@ -1,7 +1,8 @@
 """A picture of a card a person can read: the taxtel map and every texture's friction profile.
 
 Left: the taxtel grid over the surface (millimetres, origin top-left, y downwards, equal aspect),
-coloured by texture index. Right: one cell per texture, all of them (up to the format's
+coloured by texture index; below it, when the caller passes one, an error map of the taxtels in
+JND (:mod:`hcard.preview_error`). Right: one cell per texture, all of them (up to the format's
 256), drawn as small multiples in a single axes: the texture's relative friction ``mu/mu0`` over
 one period, spatial components along the direction of the strongest one above temporal
 components versus time, every cell on the same friction scale. The layout is fixed (computed in
@@ -30,6 +31,7 @@ from matplotlib.figure import Figure
 from hcard import __version__
 from hcard.atomic import write_atomically
 from hcard.errors import CardValidationError
+from hcard.preview_error import ErrorPanel, draw_error_map, error_panel
 from hcard.preview_profiles import (
     cells_layout,
     channel_label,
@@ -169,28 +171,40 @@ def preview_figure(
     card: pb.Card,
     *,
     dpi: int = 120,
+    error_map: np.ndarray | Sequence[Sequence[float]] | None = None,
+    error_label: str = "reconstruction error",
 ) -> Figure:
     """The preview as a matplotlib figure (Agg canvas attached, not yet drawn).
 
     Args:
         card: a valid card.
         dpi: resolution, dots per inch.
+        error_map: optional error of each taxtel in JND (multiples of
+            :data:`hcard.limits.RELATIVE_FRICTION_JND`), shape ``(grid.rows, grid.cols)``, row 0
+            at the top; NaN for a taxtel without a figure. Drawn under the taxtel map with a
+            colour bar in JND and the taxtels above 1 JND outlined.
+        error_label: what the error map shows, for its title (for example ``"RMS error"``).
 
     Raises:
         CardValidationError: the card is invalid (a preview of it would be meaningless).
-        ValueError: ``dpi`` is not positive.
+        ValueError: ``dpi`` is not positive, or ``error_map`` does not fit the grid or holds
+            negative or infinite values.
     """
     if dpi <= 0:
         raise ValueError(f"dpi must be positive, got {dpi}")
     problems = errors_of(validate(card))
     if problems:
         raise CardValidationError(problems)
+    panel: ErrorPanel | None = None
+    if error_map is not None:
+        panel = error_panel(error_map, card.grid, error_label)
     textures = list(card.textures)
     panel_w = _PANEL_RIGHT_IN - _PANEL_LEFT_IN
     layout = cells_layout(textures, panel_w)
     map_w, map_h = _map_size(card.surface)
     map_block = _MAP_ABOVE_IN + map_h + _MAP_BELOW_IN
-    height = max(MIN_HEIGHT_IN, _TOP_IN + max(map_block, layout.height) + _BOTTOM_IN)
+    left_h = map_block * (2 if panel is not None else 1)
+    height = max(MIN_HEIGHT_IN, _TOP_IN + max(left_h, layout.height) + _BOTTOM_IN)
 
     fig = Figure(figsize=(FIGURE_WIDTH_IN, height), dpi=dpi)
     FigureCanvasAgg(fig)
@@ -202,6 +216,10 @@ def preview_figure(
 
     colours = texture_colors(len(textures))
     _draw_grid(fig, rect(_MAP_LEFT_IN, _TOP_IN + _MAP_ABOVE_IN, map_w, map_h), card, colours)
+    if panel is not None:
+        ax = fig.add_axes(rect(_MAP_LEFT_IN, _TOP_IN + map_block + _MAP_ABOVE_IN, map_w, map_h))
+        draw_error_map(fig, ax, panel, card.grid)
+        _frame_surface(ax, card)
     profiles = fig.add_axes(rect(_PANEL_LEFT_IN, _TOP_IN, panel_w, layout.height),
                             label=PROFILES_AXES_LABEL)
     draw_cells(profiles, textures, colours, layout, dpi, fig.dpi_scale_trans)
@@ -240,6 +258,8 @@ def render_preview(
     path: str | os.PathLike[str],
     *,
     dpi: int = 120,
+    error_map: np.ndarray | Sequence[Sequence[float]] | None = None,
+    error_label: str = "reconstruction error",
 ) -> None:
     """Write the preview of ``card`` as a PNG image to ``path``, atomically.
 
@@ -249,26 +269,32 @@ def render_preview(
         card: a valid card.
         path: output file (PNG bytes whatever the suffix).
         dpi: resolution, dots per inch; the figure is 14 inches wide (1680 pixels at 120 dpi).
+        error_map, error_label: an error map in JND and its title (see :func:`preview_figure`).
 
     Raises:
         CardValidationError: the card is invalid.
+        ValueError: the error map does not fit the card's grid.
         OSError: the file cannot be written.
     """
-    write_atomically(path, preview_png(card, dpi=dpi))
+    write_atomically(path, preview_png(card, dpi=dpi, error_map=error_map,
+                                       error_label=error_label))
 
 
 def preview_png(
     card: pb.Card,
     *,
     dpi: int = 120,
+    error_map: np.ndarray | Sequence[Sequence[float]] | None = None,
+    error_label: str = "reconstruction error",
 ) -> bytes:
     """The preview of ``card`` as PNG bytes (:func:`render_preview` without the file), so a
     caller can render it before it replaces anything.
 
     Raises:
         CardValidationError: the card is invalid.
+        ValueError: the error map does not fit the card's grid.
     """
-    fig = preview_figure(card, dpi=dpi)
+    fig = preview_figure(card, dpi=dpi, error_map=error_map, error_label=error_label)
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=dpi, metadata={"Software": f"hcard {__version__}"})
     return buffer.getvalue()

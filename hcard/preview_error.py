@@ -1,0 +1,155 @@
+"""The error map of a preview: each taxtel's error in JND over the surface.
+
+The caller gives one figure per taxtel (for example the encoder's RMS reconstruction error, in
+relative friction, divided by :data:`hcard.limits.RELATIVE_FRICTION_JND`). The map colours
+errors up to 1 JND in blues and errors above it in yellows to reds (the colour bar gives the
+lower half of its length to 0-1 JND), and outlines the taxtels above 1 JND: a difference of
+relative friction below one JND is not felt (thesis appendix B.1, Fig. B.2; spec/README.md
+section 10), one above it is.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from matplotlib import colormaps
+from matplotlib.axes import Axes
+from matplotlib.collections import LineCollection
+from matplotlib.colors import ListedColormap, TwoSlopeNorm
+from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
+
+from hcard.limits import RELATIVE_FRICTION_JND
+from hcard.v1 import card_pb2 as pb
+
+ERROR_AXES_LABEL = "error-map"
+"""``Axes.get_label()`` of the error map (lets tests and tools find it)."""
+OUTLINE_LABEL = "over-1-jnd"
+"""``Collection.get_label()`` of the outline of the taxtels above 1 JND."""
+THRESHOLD_JND = 1.0
+"""Errors above this many JND are outlined."""
+MIN_SCALE_JND = 2.0
+"""The colour scale reaches at least this many JND, so a map without errors above 1 JND
+still shows where the threshold lies."""
+
+
+@dataclass(frozen=True)
+class ErrorPanel:
+    """A checked error map.
+
+    Attributes:
+        values: ``(rows, cols)`` errors in JND, row 0 at the top; NaN where there is no figure.
+        label: what the values are, for the title (for example ``"RMS error"``).
+    """
+
+    values: np.ndarray
+    label: str
+
+    @property
+    def above(self) -> np.ndarray:
+        """``(rows, cols)`` booleans: taxtels whose error exceeds :data:`THRESHOLD_JND`."""
+        with np.errstate(invalid="ignore"):
+            return self.values > THRESHOLD_JND
+
+
+def error_panel(
+    error_map: np.ndarray | Sequence[Sequence[float]], grid: pb.TaxtelGrid, label: str
+) -> ErrorPanel:
+    """Check ``error_map`` against the card's grid.
+
+    Raises:
+        ValueError: not a 2-D array of numbers of shape ``(grid.rows, grid.cols)``, or a value
+            is negative or infinite (NaN is allowed: a taxtel without a figure).
+    """
+    try:
+        values = np.array(error_map, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError("error_map must be a 2-D array of numbers (JND per taxtel)") from None
+    expected = (grid.rows, grid.cols)
+    if values.shape != expected:
+        raise ValueError(
+            f"error_map has shape {values.shape}, but the card's taxtel grid is {grid.rows} rows "
+            f"x {grid.cols} columns: it must be {expected} (rows, cols), row 0 at the top")
+    if np.any(np.isinf(values)) or np.any(values < 0.0):
+        raise ValueError("error_map holds negative or infinite values; errors are >= 0 JND "
+                         "(NaN marks a taxtel without a figure)")
+    return ErrorPanel(values, label)
+
+
+def _runs(boundary: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Runs of True along the last axis of a 2-D array: ``(line, start, stop)`` (stop
+    exclusive), in row-major order."""
+    padded = np.zeros((boundary.shape[0], boundary.shape[1] + 2), dtype=np.int8)
+    padded[:, 1:-1] = boundary
+    step = np.diff(padded, axis=1)
+    line, start = np.nonzero(step == 1)
+    _, stop = np.nonzero(step == -1)
+    return line, start, stop
+
+
+def outline_segments(mask: np.ndarray, taxtel_w: float, taxtel_h: float) -> np.ndarray:
+    """The boundary of the True taxtels of ``mask`` (``rows x cols``, row 0 at the top), as
+    ``(n, 2, 2)`` line segments ``((x0, y0), (x1, y1))`` in millimetres (y downwards).
+
+    A segment is an edge between a True taxtel and a False one (or the grid's border); collinear
+    edges in a row are joined, so the cost follows the outline, not the grid.
+    """
+    inside = np.pad(np.asarray(mask, dtype=bool), 1)
+    horizontal = inside[:-1, 1:-1] != inside[1:, 1:-1]  # (rows + 1, cols): edge above row r
+    vertical = inside[1:-1, :-1] != inside[1:-1, 1:]  # (rows, cols + 1): edge left of col c
+    y_line, x_start, x_stop = _runs(horizontal)
+    x_line, y_start, y_stop = _runs(vertical.T)
+    segments = np.empty((len(y_line) + len(x_line), 2, 2))
+    h = len(y_line)
+    segments[:h, 0, 0], segments[:h, 1, 0] = x_start * taxtel_w, x_stop * taxtel_w
+    segments[:h, :, 1] = (y_line * taxtel_h)[:, None]
+    segments[h:, :, 0] = (x_line * taxtel_w)[:, None]
+    segments[h:, 0, 1], segments[h:, 1, 1] = y_start * taxtel_h, y_stop * taxtel_h
+    return segments
+
+
+def error_colormap() -> ListedColormap:
+    """256 colours: light to mid blues for the lower half (0 to 1 JND with :func:`error_norm`),
+    yellow through red to dark red for the upper half (above 1 JND)."""
+    below = colormaps["Blues"](np.linspace(0.08, 0.6, 128))
+    above = colormaps["YlOrRd"](np.linspace(0.25, 1.0, 128))
+    return ListedColormap(np.vstack([below, above]), name="hcard-error")
+
+
+def error_norm(values: np.ndarray) -> TwoSlopeNorm:
+    """0 JND to the colour map's bottom, 1 JND to its middle, the largest error (at least
+    :data:`MIN_SCALE_JND`) to its top."""
+    largest = float(np.nanmax(values)) if np.any(np.isfinite(values)) else 0.0
+    return TwoSlopeNorm(vmin=0.0, vcenter=THRESHOLD_JND, vmax=max(MIN_SCALE_JND, largest))
+
+
+def draw_error_map(fig: Figure, ax: Axes, panel: ErrorPanel, grid: pb.TaxtelGrid) -> None:
+    """The error map in ``ax``: the values over the grid's extent, the outline of the taxtels
+    above 1 JND, a colour bar in JND and a title counting those taxtels."""
+    tw, th = grid.taxtel_width_mm, grid.taxtel_height_mm
+    norm = error_norm(panel.values)
+    ax.set_label(ERROR_AXES_LABEL)
+    image = ax.imshow(
+        panel.values,
+        cmap=error_colormap(),
+        norm=norm,
+        interpolation="nearest",
+        origin="upper",
+        extent=(0.0, grid.cols * tw, grid.rows * th, 0.0),
+    )
+    above = panel.above
+    ax.add_collection(LineCollection(outline_segments(above, tw, th), colors="black",
+                                     linewidths=0.9, label=OUTLINE_LABEL, zorder=3))
+    counted = int(np.count_nonzero(~np.isnan(panel.values)))
+    ax.set_title(f"{panel.label} (JND): {int(above.sum())} of {counted} taxtels above "
+                 f"{THRESHOLD_JND:g} JND, outlined", fontsize=9)
+
+    cax = ax.inset_axes((1.03, 0.0, 0.035, 1.0))
+    upper = [v for v in MaxNLocator(nbins=4).tick_values(THRESHOLD_JND, norm.vmax)
+             if THRESHOLD_JND < v <= norm.vmax]
+    bar = fig.colorbar(image, cax=cax, ticks=[0.0, 0.5, THRESHOLD_JND, *upper])
+    bar.ax.axhline(THRESHOLD_JND, color="black", linewidth=1.2)
+    bar.set_label(f"JND (1 JND = {RELATIVE_FRICTION_JND:g} μ/μ0)", fontsize=8)
+    bar.ax.tick_params(labelsize=7)
