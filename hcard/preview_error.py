@@ -26,6 +26,8 @@ from hcard.v1 import card_pb2 as pb
 
 ERROR_AXES_LABEL = "error-map"
 """``Axes.get_label()`` of the error map (lets tests and tools find it)."""
+ERROR_BAR_LABEL = "error-colour-bar"
+"""``Axes.get_label()`` of the error map's colour bar."""
 OUTLINE_LABEL = "over-1-jnd"
 """``Collection.get_label()`` of the outline of the taxtels above 1 JND."""
 THRESHOLD_JND = 1.0
@@ -125,12 +127,14 @@ def error_norm(values: np.ndarray) -> TwoSlopeNorm:
     return TwoSlopeNorm(vmin=0.0, vcenter=THRESHOLD_JND, vmax=max(MIN_SCALE_JND, largest))
 
 
-def draw_error_map(fig: Figure, ax: Axes, panel: ErrorPanel, grid: pb.TaxtelGrid) -> None:
+def draw_error_map(fig: Figure, ax: Axes, cax: Axes, panel: ErrorPanel,
+                   grid: pb.TaxtelGrid) -> None:
     """The error map in ``ax``: the values over the grid's extent, the outline of the taxtels
-    above 1 JND, a colour bar in JND and a title counting those taxtels."""
+    above 1 JND and a title counting those taxtels; its colour bar in JND in ``cax``."""
     tw, th = grid.taxtel_width_mm, grid.taxtel_height_mm
     norm = error_norm(panel.values)
     ax.set_label(ERROR_AXES_LABEL)
+    cax.set_label(ERROR_BAR_LABEL)
     image = ax.imshow(
         panel.values,
         cmap=error_colormap(),
@@ -144,9 +148,8 @@ def draw_error_map(fig: Figure, ax: Axes, panel: ErrorPanel, grid: pb.TaxtelGrid
                                      linewidths=0.9, label=OUTLINE_LABEL, zorder=3))
     counted = int(np.count_nonzero(~np.isnan(panel.values)))
     ax.set_title(f"{panel.label} (JND): {int(above.sum())} of {counted} taxtels above "
-                 f"{THRESHOLD_JND:g} JND, outlined", fontsize=9)
+                 f"{THRESHOLD_JND:g} JND, outlined", fontsize=9, loc="left")
 
-    cax = ax.inset_axes((1.03, 0.0, 0.035, 1.0))
     upper = [v for v in MaxNLocator(nbins=4).tick_values(THRESHOLD_JND, norm.vmax)
              if THRESHOLD_JND < v <= norm.vmax]
     bar = fig.colorbar(image, cax=cax, ticks=[0.0, 0.5, THRESHOLD_JND, *upper])

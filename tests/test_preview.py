@@ -250,7 +250,7 @@ def test_a_full_palette_is_drawn_in_a_few_axes() -> None:
     card = build.card(80.0, 80.0, taxtel_mm=5.0, textures=textures,
                       texture_index=np.arange(256))
     fig = preview_figure(card)
-    assert len(fig.axes) == 2  # the taxtel map (its colour bar is an inset) and the profiles
+    assert len(fig.axes) == 3  # the taxtel map, its colour bar and the profiles
     marks = _profiles(fig)
     assert len(marks[CURVES].get_paths()) == 256
     labels = marks[CELL_LABELS].texts
