@@ -55,40 +55,47 @@ def _glyph(path: str, character: str) -> tuple[np.ndarray, np.ndarray, float]:
     return np.asarray(outline.vertices, dtype=float), np.asarray(outline.codes), advance
 
 
-def _line_path(path: str, line: str) -> tuple[np.ndarray, np.ndarray, float]:
-    """One line of text from the cached glyphs: vertices (ems, baseline at 0), codes, width."""
-    vertices, codes, x = [], [], 0.0
+def _line_glyphs(path: str, line: str) -> tuple[list[tuple[np.ndarray, np.ndarray, float]],
+                                                 float]:
+    """The inked glyphs of one line with their x offsets (ems), and the line's width."""
+    glyphs, x = [], 0.0
     for character in line:
-        glyph_vertices, glyph_codes, advance = _glyph(path, character)
-        if len(glyph_vertices):
-            vertices.append(glyph_vertices + np.array([x, 0.0]))
-            codes.append(glyph_codes)
+        vertices, codes, advance = _glyph(path, character)
+        if len(codes):
+            glyphs.append((vertices, codes, x))
         x += advance
-    if not vertices:
-        return np.empty((0, 2)), np.empty(0, dtype=np.uint8), x
-    return np.concatenate(vertices), np.concatenate(codes), x
+    return glyphs, x
 
 
-def label_outline(text: str, *, ha: str = "left", va: str = "top",
-                  font: str | None = None) -> Path:
-    """The outline of ``text`` (lines split at ``"\\n"``) in ems, y up, anchored at (0, 0).
+def label_outline(text: str, *, ha: str = "left", va: str = "top", font: str | None = None,
+                  size: float = 1.0) -> Path:
+    """The outline of ``text`` (lines split at ``"\n"``), y up, anchored at (0, 0), in units of
+    ``size`` ems.
 
     ``ha``: ``"left"``, ``"center"`` or ``"right"`` (each line on its own); ``va``: ``"top"``
     (the first line's capitals touch 0), ``"center"`` (the block's capitals-to-last-baseline
-    span centred on 0) or ``"baseline"`` (the first baseline at 0).
+    span centred on 0) or ``"baseline"`` (the first baseline at 0). ``font``: a font file
+    (default: matplotlib's default font).
     """
     path = font or findfont(FontProperties())
     cap = float(_glyph(path, CAP_HEIGHT_CHAR)[0][:, 1].max())
     lines = text.split("\n")
     block = cap + LINE_STEP_EM * (len(lines) - 1)
     first_baseline = {"top": -cap, "center": block / 2.0 - cap, "baseline": 0.0}[va]
-    vertices, codes = [], []
+    pieces, codes, origins = [], [], []
     for i, line in enumerate(lines):
-        line_vertices, line_codes, width = _line_path(path, line)
+        glyphs, width = _line_glyphs(path, line)
         shift = {"left": 0.0, "center": -width / 2.0, "right": -width}[ha]
-        vertices.append(line_vertices + np.array([shift, first_baseline - i * LINE_STEP_EM]))
-        codes.append(line_codes)
-    return Path(np.concatenate(vertices), np.concatenate(codes).astype(np.uint8))
+        baseline = first_baseline - i * LINE_STEP_EM
+        for vertices, glyph_codes, x in glyphs:
+            pieces.append(vertices)
+            codes.append(glyph_codes)
+            origins.append((x + shift, baseline))
+    if not pieces:
+        return Path(np.empty((0, 2)))
+    counts = [len(piece) for piece in pieces]
+    vertices = np.concatenate(pieces) + np.repeat(np.array(origins), counts, axis=0)
+    return Path(vertices * size, np.concatenate(codes).astype(np.uint8))
 
 
 class PathLabels(PathCollection):
@@ -108,11 +115,9 @@ class PathLabels(PathCollection):
                  inches: Transform, offset_transform: Transform, ha: str = "left",
                  va: str = "top", colors: object = "black", **kwargs: object) -> None:
         self.texts = list(texts)
-        scale = size_pt / 72.0
-        paths = []
-        for text in self.texts:
-            outline = label_outline(text, ha=ha, va=va)
-            paths.append(Path(outline.vertices * scale, outline.codes))
+        font = findfont(FontProperties())
+        paths = [label_outline(text, ha=ha, va=va, font=font, size=size_pt / 72.0)
+                 for text in self.texts]
         super().__init__(paths, offsets=np.asarray(offsets, dtype=float).reshape(-1, 2),
                          offset_transform=offset_transform, facecolors=colors,
                          edgecolors="none", linewidths=0.0, **kwargs)
