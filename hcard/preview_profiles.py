@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -274,7 +274,8 @@ def unreachable_side(texture: pb.Texture) -> int | None:
     """The texture's channel when every part of it renders on UV only or EV only, else None.
 
     UV can only lower friction, so a UV-only texture cannot render the range above 1; EV can
-    only raise it, so an EV-only texture cannot render the range below 1.
+    only raise it, so an EV-only texture cannot render the range below 1 (spec/README.md
+    section 10, Channels; rule T6; thesis ch. 4).
     """
     channel = texture.channel
     if channel not in (pb.CHANNEL_UV, pb.CHANNEL_EV):
@@ -282,7 +283,6 @@ def unreachable_side(texture: pb.Texture) -> int | None:
     if any(c.channel not in (pb.CHANNEL_UNSPECIFIED, channel) for c in texture.components):
         return None
     return channel
-
 
 
 @dataclass(frozen=True)
@@ -426,6 +426,53 @@ def friction_range(all_series: Sequence[Sequence[PlotSeries]]) -> tuple[float, f
     return low - pad, high + pad
 
 
+@dataclass
+class _Marks:
+    """What the cells draw, collected texture by texture (inches, y downwards)."""
+
+    strips: list[tuple[tuple[float, float], ...]] = field(default_factory=list)
+    strip_colours: list[np.ndarray] = field(default_factory=list)
+    swatches: list[tuple[tuple[float, float], ...]] = field(default_factory=list)
+    unreachable: list[tuple[tuple[float, float], ...]] = field(default_factory=list)
+    levels: list[tuple[tuple[float, float], ...]] = field(default_factory=list)
+    natural: list[tuple[tuple[float, float], ...]] = field(default_factory=list)
+    bands: list[np.ndarray] = field(default_factory=list)
+    curves: list[np.ndarray] = field(default_factory=list)
+    labels: list[str] = field(default_factory=list)
+    label_anchors: list[tuple[float, float]] = field(default_factory=list)
+    scale_texts: list[str] = field(default_factory=list)
+    scale_anchors: list[tuple[float, float]] = field(default_factory=list)
+
+
+def _rectangle(left: float, top: float, right: float, bottom: float
+               ) -> tuple[tuple[float, float], ...]:
+    return ((left, top), (right, top), (right, bottom), (left, bottom))
+
+
+def _add_strip(marks: _Marks, s: PlotSeries, box: tuple[float, float, float, float],
+               side: int | None, friction: tuple[float, float], levels: Sequence[float]) -> None:
+    """One profile in ``box`` (left, top, right, bottom; inches) on the scale ``friction``
+    (bottom, top), with the range ``side`` (UV or EV) cannot render shaded."""
+    left, top, right, bottom = box
+    low, high = friction
+
+    def y_of(value: np.ndarray | float) -> np.ndarray | float:
+        return top + (high - value) * ((bottom - top) / (high - low))
+
+    one = float(y_of(1.0))
+    if side == pb.CHANNEL_UV:  # UV can only lower friction
+        marks.unreachable.append(_rectangle(left, top, right, one))
+    elif side == pb.CHANNEL_EV:  # EV can only raise it
+        marks.unreachable.append(_rectangle(left, one, right, bottom))
+    marks.natural.append(((left, one), (right, one)))
+    marks.levels.extend(((left, float(y_of(v))), (right, float(y_of(v)))) for v in levels)
+    xs = left + s.x * ((right - left) / s.window)
+    if s.band > 0.0:
+        marks.bands.append(np.column_stack([np.concatenate([xs, xs[::-1]]), np.concatenate(
+            [y_of(s.friction + s.band), y_of(s.friction - s.band)[::-1]])]))
+    marks.curves.append(np.column_stack([xs, y_of(s.friction)]))
+
+
 def draw_cells(ax: Axes, textures: Sequence[pb.Texture], colours: np.ndarray,
                layout: CellsLayout, dpi: float, inches: Transform) -> None:
     """Every texture's cell in ``ax``, whose data units must be inches from the panel's
@@ -434,73 +481,52 @@ def draw_cells(ax: Axes, textures: Sequence[pb.Texture], colours: np.ndarray,
                       max(MIN_PLOT_SAMPLES, round(SAMPLES_PER_PIXEL * layout.plot_w * dpi)))
     all_series = [texture_series(t, max_samples) for t in textures]
     low, high = friction_range(all_series)
-    tint = 0.82 + 0.18 * colours[:, :3]  # each texture's colour at 18 % over white
-    background_colours = []
     bins = min(6, max(2, int(layout.strip_h / LEVEL_SPACING_IN)))
     levels = [v for v in MaxNLocator(nbins=bins, steps=[1, 2, 2.5, 5, 10]).tick_values(low, high)
               if low < v < high and not math.isclose(v, 1.0)]
-
+    tint = 0.82 + 0.18 * colours[:, :3]  # each texture's colour at 18 % over white
     scale_font = min(layout.style.font_pt, 6.5)
-    backgrounds, swatches, unreachable, bands = [], [], [], []
-    curves, grid, natural, labels, anchors = [], [], [], [], []
-    scale_texts, scale_anchors = [], []
+
+    marks = _Marks()
     for i, (texture, series) in enumerate(zip(textures, all_series, strict=True)):
         left, top, right, bottom = layout.plot_box(i)
         label_top = top - layout.label_h
-        swatches.append(((left, label_top), (left + _SWATCH_IN, label_top),
-                         (left + _SWATCH_IN, label_top + _SWATCH_IN),
-                         (left, label_top + _SWATCH_IN)))
-        labels.append(cell_label(i, texture, series, layout.style))
-        anchors.append((left + _SWATCH_IN + 0.04, label_top))
+        marks.swatches.append(_rectangle(left, label_top, left + _SWATCH_IN,
+                                         label_top + _SWATCH_IN))
+        marks.labels.append(cell_label(i, texture, series, layout.style))
+        marks.label_anchors.append((left + _SWATCH_IN + 0.04, label_top))
         strip_h = (bottom - top - STRIP_GAP_IN * (len(series) - 1)) / len(series)
-        scale = strip_h / (high - low)
-        side = unreachable_side(texture)
         for k, s in enumerate(series):
             s_top = top + k * (strip_h + STRIP_GAP_IN)
-            s_bottom = s_top + strip_h
-            backgrounds.append(((left, s_top), (right, s_top), (right, s_bottom),
-                                (left, s_bottom)))
-            background_colours.append(tint[i])
-            if left == GUTTER_IN:
+            marks.strips.append(_rectangle(left, s_top, right, s_top + strip_h))
+            marks.strip_colours.append(tint[i])
+            _add_strip(marks, s, (left, s_top, right, s_top + strip_h),
+                       unreachable_side(texture), (low, high), levels)
+            if i % layout.style.columns == 0:  # the friction scale left of the first column
                 for value in _scale_labels(levels, low, high, strip_h, scale_font):
-                    scale_texts.append(f"{value:g}")
-                    scale_anchors.append((left - 0.03, s_top + (high - value) * scale))
-            one = s_top + (high - 1.0) * scale
-            if side == pb.CHANNEL_UV:
-                unreachable.append(((left, s_top), (right, s_top), (right, one), (left, one)))
-            elif side == pb.CHANNEL_EV:
-                unreachable.append(((left, one), (right, one), (right, s_bottom),
-                                    (left, s_bottom)))
-            natural.append(((left, one), (right, one)))
-            grid.extend(((left, s_top + (high - v) * scale), (right, s_top + (high - v) * scale))
-                        for v in levels)
-            xs = left + s.x * ((right - left) / s.window)
-            if s.band > 0.0:
-                upper = s_top + (high - (s.friction + s.band)) * scale
-                lower = s_top + (high - (s.friction - s.band)) * scale
-                bands.append(np.column_stack([np.concatenate([xs, xs[::-1]]),
-                                              np.concatenate([upper, lower[::-1]])]))
-            curves.append(np.column_stack([xs, s_top + (high - s.friction) * scale]))
+                    marks.scale_texts.append(f"{value:g}")
+                    marks.scale_anchors.append(
+                        (left - 0.03, s_top + (high - value) * strip_h / (high - low)))
 
     for collection in (
-        PolyCollection(backgrounds, facecolors=background_colours, edgecolors="none",
+        PolyCollection(marks.strips, facecolors=marks.strip_colours, edgecolors="none",
                        zorder=0, label=STRIPS),
-        PolyCollection(swatches, facecolors=colours, edgecolors="none", label=SWATCHES),
-        PolyCollection(unreachable, facecolors="0.8", edgecolors="none", zorder=0.5,
+        PolyCollection(marks.swatches, facecolors=colours, edgecolors="none", label=SWATCHES),
+        PolyCollection(marks.unreachable, facecolors="0.8", edgecolors="none", zorder=0.5,
                        label=UNREACHABLE),
-        LineCollection(grid, colors="0.55", linewidths=0.4, linestyles=":", zorder=1,
+        LineCollection(marks.levels, colors="0.55", linewidths=0.4, linestyles=":", zorder=1,
                        label=LEVELS),
-        LineCollection(natural, colors="0.3", linewidths=0.7, linestyles="--", zorder=1.5,
-                       label=NATURAL),
-        PolyCollection(bands, facecolors="0.1", alpha=0.3, edgecolors="none", zorder=2,
+        LineCollection(marks.natural, colors="0.3", linewidths=0.7, linestyles="--",
+                       zorder=1.5, label=NATURAL),
+        PolyCollection(marks.bands, facecolors="0.1", alpha=0.3, edgecolors="none", zorder=2,
                        label=BANDS),
-        LineCollection(curves, colors="0.05", linewidths=0.8, zorder=3, label=CURVES),
-        PathLabels(labels, np.array(anchors), size_pt=layout.style.font_pt, inches=inches,
-                   offset_transform=ax.transData, ha="left", va="top", zorder=4,
-                   label=CELL_LABELS),
-        PathLabels(scale_texts, np.array(scale_anchors), size_pt=scale_font, inches=inches,
-                   offset_transform=ax.transData, ha="right", va="center", colors="0.3",
-                   zorder=4, label=SCALE_LABELS),
+        LineCollection(marks.curves, colors="0.05", linewidths=0.8, zorder=3, label=CURVES),
+        PathLabels(marks.labels, np.array(marks.label_anchors), size_pt=layout.style.font_pt,
+                   inches=inches, offset_transform=ax.transData, ha="left", va="top",
+                   zorder=4, label=CELL_LABELS),
+        PathLabels(marks.scale_texts, np.array(marks.scale_anchors), size_pt=scale_font,
+                   inches=inches, offset_transform=ax.transData, ha="right", va="center",
+                   colors="0.3", zorder=4, label=SCALE_LABELS),
     ):
         ax.add_collection(collection, autolim=False)
     dotted = ", ".join(f"{v:g}" for v in levels)
