@@ -62,6 +62,7 @@ BANDS = "fine-component-bands"
 CURVES = "profile-curves"
 CELL_LABELS = "cell-labels"
 SCALE_LABELS = "scale-labels"
+HEADER = "profiles-header"
 _CELL_GAP_X_IN, _CELL_GAP_Y_IN = 0.12, 0.08
 _SWATCH_IN = 0.09  # side of the texture colour's square in front of a cell's label
 _LABEL_PAD_IN = 0.03  # between a label's last line and the plot
@@ -530,11 +531,12 @@ def draw_cells(ax: Axes, textures: Sequence[pb.Texture], colours: np.ndarray,
     ):
         ax.add_collection(collection, autolim=False)
     dotted = ", ".join(f"{v:g}" for v in levels)
-    ax.text(GUTTER_IN, 0.0, "relative friction μ/μ0 of each texture over one period (spatial "
-            f"profile above temporal)\none scale for all cells: {low:.2f} (bottom) to "
-            f"{high:.2f} (top); dashed: 1, natural friction"
-            f"{f'; dotted: {dotted}' if dotted else ''}", fontsize=8, va="top", ha="left",
-            linespacing=1.3)
+    header = ("relative friction μ/μ0 of each texture over one period (spatial profile above "
+              f"temporal)\none scale for all cells: {low:.2f} (bottom) to {high:.2f} (top); "
+              f"dashed: 1, natural friction{f'; dotted: {dotted}' if dotted else ''}")
+    ax.add_collection(PathLabels([header], np.array([[GUTTER_IN, 0.02]]), size_pt=8.0,
+                                 inches=inches, offset_transform=ax.transData, ha="left",
+                                 va="top", label=HEADER), autolim=False)
     ax.set_xlim(0.0, layout.width)
     ax.set_ylim(layout.height, 0.0)
     ax.set_axis_off()
