@@ -90,18 +90,22 @@ def bench_error_map(card: pb.Card) -> np.ndarray:
 
 
 def paired_medians(measured: Callable[[], object], floor: Callable[[], object],
-                   repeat: int) -> tuple[float, float]:
-    """Median wall times of ``measured`` and ``floor``, seconds: ``repeat`` runs of each,
-    alternating, after one untimed run of each."""
+                   repeat: int) -> tuple[float, float, float, float]:
+    """Median wall times of ``measured`` and ``floor`` and median CPU times of this process
+    (meaningful in process only) of each, seconds: ``repeat`` runs of each, alternating, after
+    one untimed run of each."""
     measured()
     floor()
-    times: tuple[list[float], list[float]] = ([], [])
+    wall: tuple[list[float], list[float]] = ([], [])
+    cpu: tuple[list[float], list[float]] = ([], [])
     for _ in range(repeat):
-        for fn, kept in ((measured, times[0]), (floor, times[1])):
-            start = time.perf_counter()
+        for k, fn in enumerate((measured, floor)):
+            start, start_cpu = time.perf_counter(), time.process_time()
             fn()
-            kept.append(time.perf_counter() - start)
-    return statistics.median(times[0]), statistics.median(times[1])
+            wall[k].append(time.perf_counter() - start)
+            cpu[k].append(time.process_time() - start_cpu)
+    return (statistics.median(wall[0]), statistics.median(wall[1]), statistics.median(cpu[0]),
+            statistics.median(cpu[1]))
 
 
 def empty_png(width_in: float, height_in: float, path: Path) -> None:
@@ -124,8 +128,9 @@ def main() -> None:
     parser.add_argument("--no-command", action="store_true",
                         help="skip the whole-command measurement")
     args = parser.parse_args()
-    print(f"median of {args.repeat} warm runs; {DPI} dpi; 128 x 96 taxtels")
-    print(f"{'case':>22} {'preview':>9} {'floor':>8} {'ratio':>7}   picture")
+    print(f"median of {args.repeat} warm runs; {DPI} dpi; 128 x 96 taxtels; wall time (CPU time "
+          f"of this process, less sensitive to a shared machine's load)")
+    print(f"{'case':>20} {'preview':>16} {'floor':>16} {'ratio':>14}   picture")
     verdict = ""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "out.png"
@@ -137,10 +142,11 @@ def main() -> None:
             for label, error_map in cases:
                 figure = preview_figure(card, dpi=DPI, error_map=error_map)
                 width_in, height_in = figure.get_size_inches()
-                seconds, floor = paired_medians(
+                seconds, floor, cpu, cpu_floor = paired_medians(
                     lambda card=card, e=error_map: render_preview(card, out, error_map=e),
                     lambda w=width_in, h=height_in: empty_png(w, h, out), args.repeat)
-                print(f"{label:>22} {seconds:8.3f}s {floor:7.3f}s {seconds / floor:6.2f}x   "
+                print(f"{label:>20} {seconds:6.3f}s ({cpu:.3f}s) {floor:6.3f}s ({cpu_floor:.3f}s)"
+                      f" {seconds / floor:5.2f}x ({cpu / cpu_floor:.2f}x)   "
                       f"{width_in:g} x {height_in:.2f} in")
                 if palette == max(args.palettes) and error_map is None:
                     verdict = (f"goal: preview of a {palette}-texture card under {GOAL_S:g} s "
@@ -152,7 +158,7 @@ def main() -> None:
             width_in, height_in = preview_figure(card, dpi=DPI).get_size_inches()
             path = Path(tmp) / "bench.hcard"
             save(card, path)
-            whole, floor = paired_medians(
+            whole, floor, _, _ = paired_medians(
                 run([sys.executable, "-c", ENTRY, "preview", str(path), "-o", str(out)]),
                 run([sys.executable, "-c", FLOOR_COMMAND, str(width_in), str(height_in),
                      str(out)]), args.repeat)
