@@ -32,6 +32,7 @@ from hcard.physics.profile import DeviceProfile
 from hcard.track import FingerTrack
 from hcard_builtins.physics.finger import FingerFriction
 from hcard_device.sim.hidden import HiddenPhysics
+from hcard_device.sim.sensors import NormalDraws
 
 MM = 1e-3
 """Metres per millimetre."""
@@ -67,6 +68,17 @@ class FingerTruth:
         its input checks on them (the finger models that know it set it when they build
         the state)."""
         return finite_non_negative(self.fn_n, self.speed_m_s, self.contact_time_s)
+
+    def slice(self, start: int, stop: int) -> FingerTruth:
+        """The frames ``start .. stop - 1`` (views; checked if these are)."""
+        part = FingerTruth(
+            self.x_mm[start:stop], self.y_mm[start:stop], self.fn_n[start:stop],
+            self.contact[start:stop], self.speed_m_s[start:stop],
+            self.contact_time_s[start:stop], self.held,
+        )
+        if self.__dict__.get("checked"):
+            part.__dict__["checked"] = True  # frozen: as the cached property stores it
+        return part
 
     @staticmethod
     def absent(n: int) -> FingerTruth:
@@ -129,7 +141,7 @@ class TrackFinger:
         speed of the segment the time falls in."""
         i = np.searchsorted(self.t, times, side="right") - 1
         inside = (i >= 0) & (times <= self.t[-1])
-        j = np.clip(i, 0, len(self.t) - 1)
+        j = np.minimum(np.maximum(i, 0), len(self.t) - 1)
         x = np.interp(times, self.t, self.x)
         y = np.interp(times, self.t, self.y)
         fn = np.maximum(np.interp(times, self.t, self.fn), 0.0)
@@ -212,9 +224,14 @@ class FingerPhysics:
     ) -> None:
         self.profile = profile
         self.lateral_noise_n = lateral_noise_n
-        self.rng = rng
+        self._draws = NormalDraws(rng)
         self.finger = finger if finger is not None else FingerFriction()
         self.hidden = hidden
+
+    @property
+    def rng(self) -> np.random.Generator:
+        """The random generator of the tribometer noise."""
+        return self._draws.rng
 
     def friction(
         self, amplitude_m: np.ndarray, voltage_v: np.ndarray, truth: FingerTruth
@@ -260,4 +277,4 @@ class FingerPhysics:
                 force = mu * friction * fn
             else:
                 force[pressing] = mu * friction[pressing] * fn
-        return force + self.rng.normal(0.0, 1.0, size=n) * self.lateral_noise_n
+        return force + self._draws.take(n) * self.lateral_noise_n

@@ -84,6 +84,12 @@ BRAKE_DRIVE = 1.0
 """Antiphase drive that brakes a plate above a lowered amplitude limit, fraction of full drive:
 the inverter reverses its phase at full drive (:class:`.plate.PlateLoop` ``brake_drive``)."""
 
+LOOKAHEAD_FRAMES = 1000
+"""Frames of the internal finger worked out at a time (0.1 s at 10 kHz): its true state along
+its track and the corner sensors' noiseless forces depend on nothing but the frame's time, so
+they are computed this far ahead and handed out in slices, the numbers of a computation step by
+step."""
+
 _TARGET_TOLERANCE = 1e-9
 
 
@@ -229,6 +235,8 @@ class DeviceSimulation:
         self._running = False
         self._gain = 0.0
         self._finger: TrackFinger | HostFinger | None = None
+        # the internal finger's frames ahead: (finger, first frame, truth, noiseless corners)
+        self._ahead: tuple[TrackFinger, int, FingerTruth, np.ndarray] | None = None
         self._history = TouchSamples.empty()
         self._pending = TouchSamples.empty()
         self._host_clock = HostClock()
@@ -620,7 +628,7 @@ class DeviceSimulation:
             self._events = 0
 
         # 1-2. finger, sensors.
-        truth = self._finger.state(times) if self._finger is not None else FingerTruth.absent(n)
+        truth, split = self._finger_frames(times)
         new = self._sense_touch(self._frame / rate, t_end)
         samples = self._history.concat(new)
         render_times = times + self._render_shift_s  # the samples' time line
@@ -637,7 +645,7 @@ class DeviceSimulation:
             predicted_speed(samples, render_times, self._options.dead_reckoning_s) * 1e-3
         )
         self._history = samples.tail(4)
-        corners = self.force_sensors.measure(truth.fn_n, truth.x_mm, truth.y_mm)
+        corners = self.force_sensors.add_noise(split)
         fn_est = np.maximum(corners.sum(axis=1), 0.0)
 
         # 3. targets.
@@ -716,6 +724,27 @@ class DeviceSimulation:
         old = self._history.concat(self._pending)
         if len(old):
             self._stream.push(old.t, old.x, old.y, None, old.contact)
+
+    def _finger_frames(self, times: np.ndarray) -> tuple[FingerTruth, np.ndarray]:
+        """The finger's true state at the frames of this step (at ``times``, s) and the corner
+        sensors' noiseless forces (N, 4) under it; the internal finger's from its frames ahead
+        (:data:`LOOKAHEAD_FRAMES`)."""
+        finger, n = self._finger, times.shape[0]
+        if not isinstance(finger, TrackFinger):
+            truth = finger.state(times) if finger is not None else FingerTruth.absent(n)
+            return truth, self.force_sensors.split(truth.fn_n, truth.x_mm, truth.y_mm)
+        ahead = self._ahead
+        if ahead is None or ahead[0] is not finger or not (
+            ahead[1] <= self._frame and self._frame + n <= ahead[1] + ahead[3].shape[0]
+        ):
+            count = max(n, LOOKAHEAD_FRAMES)
+            frames = (self._frame + np.arange(count, dtype=np.float64)) / self.config.frame_rate_hz
+            truth = finger.state(frames)
+            split = self.force_sensors.split(truth.fn_n, truth.x_mm, truth.y_mm)
+            split.flags.writeable = False
+            ahead = self._ahead = (finger, self._frame, truth, split)
+        start = self._frame - ahead[1]
+        return ahead[2].slice(start, start + n), ahead[3][start : start + n]
 
     def _sense_touch(self, t0: float, t1: float) -> TouchSamples:
         """Touch samples of this step: the panel's (internal finger) or the host's."""
