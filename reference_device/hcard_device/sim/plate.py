@@ -44,10 +44,11 @@ order process of gain ``K`` and time constant ``tau`` with apparent dead time ``
     Kp = 0.9 tau / (K L),  Ti = L / 0.3,  Ki = Kp / Ti.
 
 Vectorised solution. Between saturation events the loop is linear and time invariant (for a
-constant finger force), so :func:`scipy.signal.lfilter` runs the closed loop ``r -> A`` with its
-state carried in; the first sample where ``u_lin`` leaves ``[0, u_hi]`` is found with numpy, and
-from there the saturated plate (constant drive or the clamp; integrator frozen, unwinding or
-tracking) has a closed form until the controller comes back into range. The finger force is
+constant finger force), so :func:`scipy.signal.lfilter` (its C core, :func:`closed_loop`) runs
+the closed loop ``r -> A`` with its state carried in; the first sample where ``u_lin`` leaves
+``[0, u_hi]`` is found with numpy, and from there the saturated plate (constant drive or the
+clamp; integrator frozen, unwinding or tracking) has a closed form until the controller comes back
+into range. The finger force is
 quantised to :data:`FORCE_QUANTUM_N` and the coefficients cached per quantum. The result is the
 sample-by-sample recursion above (tests/device/test_sim.py compares the two).
 
@@ -65,6 +66,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.signal import lfilter
+
+try:  # the C core lfilter hands a filter with feedback to, after checking its arguments
+    from scipy.signal._sigtools import _linear_filter
+except ImportError:  # pragma: no cover - a SciPy without it: lfilter itself
+    _linear_filter = None
 
 FORCE_QUANTUM_N = 0.01
 """Resolution of the finger force seen by the plate model, N (the E-ViTa's damping changes by
@@ -89,6 +95,16 @@ AMPLITUDE_TOLERANCE_M = 1e-14
 """Guarantee of the clamp: the amplitude stays at or under ``limit (1 + LIMIT_SLACK) +
 AMPLITUDE_TOLERANCE_M`` (the drive slack lets it pass the limit by at most ``DRIVE_SLACK`` of the
 full-drive amplitude, a few femtometres)."""
+
+def closed_loop(num: np.ndarray, den: np.ndarray, reference: np.ndarray,
+                state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`scipy.signal.lfilter` ``(num, den, reference, zi=state)`` of float64 arrays
+    (``den[0] = 1``, two states): the same numbers without lfilter's argument handling, which
+    costs twice the filtering itself on the few hundred samples of a real-time step."""
+    if _linear_filter is None:  # pragma: no cover
+        return lfilter(num, den, reference, zi=state)
+    return _linear_filter(num, den, reference, -1, state)
+
 
 _LINEAR, _LOW, _HIGH, _OVER = 0, 1, 2, 3
 """Loop modes: linear, drive at 0, drive at its upper bound, plate above the limit."""
@@ -373,7 +389,7 @@ class PlateLoop:
             rest = ref[k:]
             if mode == _LINEAR:
                 zi = np.array([amp, (co.phi11 + co.den[1]) * amp + co.phi12 * integ])
-                amps, zf = lfilter(co.num, co.den, rest, zi=zi)
+                amps, zf = closed_loop(co.num, co.den, rest, zi)
                 err = rest - amps
                 integs = integ + co.c * (err.cumsum() - err)
                 u = kp * err + integs
