@@ -632,46 +632,43 @@ class DeviceSimulation:
         new = self._sense_touch(self._frame / rate, t_end)
         samples = self._history.concat(new)
         render_times = times + self._render_shift_s  # the samples' time line
-        index = hold(samples, render_times)
-        touch = np.zeros(n, dtype=TOUCH_DTYPE)
-        known = index >= 0
-        held = index[known]
-        touch["x_mm"][known] = samples.x[held]
-        touch["y_mm"][known] = samples.y[held]
-        touch["contact"][known] = samples.contact[held]
-        touch["t_s"] = np.nan
-        touch["t_s"][known] = samples.t[held] - self._render_shift_s
+        touch = self._held_touch(samples, render_times)
         speed_est = (
             predicted_speed(samples, render_times, self._options.dead_reckoning_s) * 1e-3
         )
         self._history = samples.tail(4)
         corners = self.force_sensors.add_noise(split)
-        fn_est = np.maximum(corners.sum(axis=1), 0.0)
+        fn_est = np.maximum(np.add.reduce(corners, axis=1), 0.0)
 
         # 3. targets.
         uv_t, ev_t, texture = self._targets(n)
 
         # 4. model-based rendering (neutral targets need no actuation).
-        if np.any(uv_t < 1.0) or np.any(ev_t > 1.0):
+        if np.logical_or.reduce(uv_t < 1.0) or np.logical_or.reduce(ev_t > 1.0):
             commands = actuate(self._profile, uv_t, ev_t, speed_est, fn_est)
             amplitude_raw, voltage_raw = commands.amplitude, commands.voltage
-            faults |= self._command_faults(uv_t, ev_t, commands.uv, commands.ev)
+            self._flag_commands(faults, uv_t, ev_t, commands.uv, commands.ev)
         else:
             amplitude_raw, voltage_raw = np.zeros(n), np.zeros(n)
 
         # 5. output gain (stop, watchdog).
         gain, tripped = self._output_gain(times)
-        faults[tripped] |= int(Faults.WATCHDOG)
-        amplitude_cmd = np.minimum(amplitude_raw * gain, self._limits.max_amplitude_m)
-        voltage_cmd = np.minimum(voltage_raw * gain, self._limits.max_voltage_v)
+        if tripped is not None:
+            faults[tripped] |= int(Faults.WATCHDOG)
+        if gain is not None:
+            amplitude_raw, voltage_raw = amplitude_raw * gain, voltage_raw * gain
+        amplitude_cmd = np.minimum(amplitude_raw, self._limits.max_amplitude_m)
+        voltage_cmd = np.minimum(voltage_raw, self._limits.max_voltage_v)
 
         # 6. physics.
         m = cfg.loop_samples_per_frame
         plate = self.plate.run(np.repeat(amplitude_cmd, m), np.repeat(truth.fn_n, m))
-        amplitude = plate.amplitude.reshape(n, m).mean(axis=1)
+        amplitude = np.add.reduce(plate.amplitude.reshape(n, m), axis=1) / m  # frame mean
         if self.limits_pending and not self.plate.above_limit:
             self._commit_limits()  # the braked plate landed on the lowered limit (PS5)
-        faults[plate.clamped.reshape(n, m).any(axis=1)] |= int(Faults.AMPLITUDE_LIMIT)
+        if np.logical_or.reduce(plate.clamped):
+            faults[np.logical_or.reduce(plate.clamped.reshape(n, m), axis=1)] |= int(
+                Faults.AMPLITUDE_LIMIT)
         if self.amplifier is not None:
             load = np.where(truth.contact, self.finger_capacitance_f, 0.0)
             ev_run = self.amplifier.run(voltage_cmd, load)
@@ -791,17 +788,41 @@ class DeviceSimulation:
         self._queue.clear()
         self._queued = 0
 
-    def _command_faults(
-        self, uv_t: np.ndarray, ev_t: np.ndarray, uv_r: np.ndarray, ev_r: np.ndarray
-    ) -> np.ndarray:
-        """Per-frame flags of the model-based rendering's clipping."""
-        n = uv_t.shape[0]
-        faults = np.zeros(n, dtype=np.uint16)
+    def _held_touch(self, samples: TouchSamples, render_times: np.ndarray) -> np.ndarray:
+        """The touch sample held at each frame (:data:`TOUCH_DTYPE`; ``render_times``: the
+        frames on the samples' time line, s). A step between two touch samples holds one
+        sample throughout: its fields are filled in at once."""
+        n = render_times.shape[0]
+        index = hold(samples, render_times)
+        touch = np.empty(n, dtype=TOUCH_DTYPE)
+        if n and index[0] == index[-1]:  # the index never falls: one sample throughout
+            i = int(index[0])
+            if i < 0:
+                touch.fill((0.0, 0.0, False, math.nan))
+            else:
+                touch.fill((samples.x[i], samples.y[i], samples.contact[i],
+                            samples.t[i] - self._render_shift_s))
+            return touch
+        touch.fill((0.0, 0.0, False, math.nan))
+        known = index >= 0
+        held = index[known]
+        touch["x_mm"][known] = samples.x[held]
+        touch["y_mm"][known] = samples.y[held]
+        touch["contact"][known] = samples.contact[held]
+        touch["t_s"][known] = samples.t[held] - self._render_shift_s
+        return touch
+
+    def _flag_commands(self, faults: np.ndarray, uv_t: np.ndarray, ev_t: np.ndarray,
+                       uv_r: np.ndarray, ev_r: np.ndarray) -> None:
+        """Add the flags of the model-based rendering's clipping to ``faults`` (per frame;
+        ``uv_r``, ``ev_r``: what the commands render of the targets ``uv_t``, ``ev_t``)."""
         uv_short = uv_r > uv_t + 1e-6
         ev_short = ev_r < ev_t - 1e-6
+        if not (np.logical_or.reduce(uv_short) or np.logical_or.reduce(ev_short)):
+            return  # every target rendered: nothing to flag
+        missing = None  # frames that need a channel the device lacks
         if self._profile.uv_model is not None and self._limits.max_amplitude_m > 0:
             faults[uv_short] |= int(Faults.AMPLITUDE_LIMIT)
-            missing = np.zeros(n, dtype=bool)
         else:
             missing = uv_short
         if self._profile.ev_model is not None and self._limits.max_voltage_v > 0:
@@ -809,20 +830,26 @@ class DeviceSimulation:
             flag = Faults.CURRENT_LIMIT if name == "max_current" else Faults.VOLTAGE_LIMIT
             faults[ev_short] |= int(flag)
         else:
-            missing = missing | ev_short
+            missing = ev_short if missing is None else missing | ev_short
         if not self._streaming and self._card_report.clipped:
             faults[uv_short | ev_short] |= int(Faults.CARD_CLIPPED)
-        faults[missing] |= int(Faults.CARD_CLIPPED)
-        return faults
+        if missing is not None:
+            faults[missing] |= int(Faults.CARD_CLIPPED)
 
-    def _output_gain(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Per-frame output gain and the frames where the watchdog has expired."""
+    def _output_gain(self, times: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """Per-frame output gain (None: 1 throughout) and the frames where the watchdog has
+        expired (None: none)."""
         n = times.shape[0]
-        if self.host_driven and self._running:
-            tripped = times >= self._last_feed + self.config.watchdog_s
-        else:
-            tripped = np.zeros(n, dtype=bool)
-        off = tripped | (not self._running)
+        tripped = None
+        if self.host_driven and self._running and n:
+            deadline = self._last_feed + self.config.watchdog_s
+            if times[-1] >= deadline:  # the times rise: the last frame tells if any trips
+                tripped = times >= deadline
+        if self._running and tripped is None:
+            if n:
+                self._gain = 1.0
+            return None, None
+        off = tripped if self._running else np.ones(n, dtype=bool)
         gain = np.ones(n)
         if off.any():
             first = int(np.argmax(off))
