@@ -193,6 +193,8 @@ class _Coefficients:
         c: ``Ki T``, 1/m.
         num, den: the closed loop ``r -> A`` as a filter.
         phi11, phi12: first row of the state matrix.
+        state_slope: ``phi11 + den[1]``: the filter's second state is ``state_slope A +
+            phi12 I`` for the loop state ``(A, I)``.
         full: full-drive amplitude ``G``, m.
         decay: ``a ** k`` for ``k = 0 .. MAX_SEGMENT_SAMPLES`` (the saturated plate).
     """
@@ -204,6 +206,7 @@ class _Coefficients:
     den: np.ndarray
     phi11: float
     phi12: float
+    state_slope: float
     full: float
     decay: np.ndarray
 
@@ -312,7 +315,7 @@ class PlateLoop:
         num = np.array([0.0, gamma1, phi12 * gamma2 - phi22 * gamma1])
         decay = a ** np.arange(MAX_SEGMENT_SAMPLES + 1, dtype=np.float64)
         decay.flags.writeable = False
-        co = _Coefficients(a, g, c, num, den, phi11, phi12, full, decay)
+        co = _Coefficients(a, g, c, num, den, phi11, phi12, float(phi11 + den[1]), full, decay)
         self._cache[key] = co
         return co
 
@@ -324,7 +327,8 @@ class PlateLoop:
             normal_force: (N,) finger force on the plate per loop sample, N (0 without
                 contact).
         """
-        ref = np.asarray(reference, dtype=np.float64).clip(0.0, self._limit)
+        ref = np.maximum(np.asarray(reference, dtype=np.float64), 0.0)
+        np.minimum(ref, self._limit, out=ref)  # clipped to [0, limit]
         n = ref.shape[0]
         if self.amplitude_m == 0.0 and self.integrator == 0.0 and not np.logical_or.reduce(ref):
             return PlateRun(np.zeros(n), np.zeros(n), np.zeros(n, dtype=bool))  # at rest
@@ -337,7 +341,7 @@ class PlateLoop:
             for s in range(start, end, MAX_SEGMENT_SAMPLES):
                 e = min(s + MAX_SEGMENT_SAMPLES, end)
                 self._segment(ref[s:e], co, amplitude[s : e + 1], drive[s:e], clamped[s:e])
-        return PlateRun(np.maximum(amplitude[1:], 0.0), drive, clamped)
+        return PlateRun(np.maximum(amplitude[1:], 0.0, out=amplitude[1:]), drive, clamped)
 
     # -- one constant-force run ------------------------------------------------------------
     def _brake_run(
@@ -360,16 +364,6 @@ class PlateLoop:
                 leave[m + 1] = True
         return amps, applied, leave
 
-    def _mode(self, amp: float, integ: float, ref: float, co: _Coefficients) -> int:
-        if amp > self._limit * (1.0 + LIMIT_SLACK):
-            return _OVER
-        u = self.gains.kp * (ref - amp) + integ
-        if u < -DRIVE_SLACK:
-            return _LOW
-        if u > min(1.0, max((self._limit - co.a * amp) / co.g, 0.0)) + DRIVE_SLACK:
-            return _HIGH
-        return _LINEAR
-
     def _segment(
         self,
         ref: np.ndarray,
@@ -382,28 +376,50 @@ class PlateLoop:
         ``amp_out[k + 1]`` receives the amplitude after sample ``k``."""
         n = ref.shape[0]
         kp, lim = self.gains.kp, self._limit
+        over, a, g, c = lim * (1.0 + LIMIT_SLACK), co.a, co.g, co.c
         amp, integ = self.amplitude_m, self.integrator
         k = 0
         while k < n:
-            mode = self._mode(amp, integ, float(ref[k]), co)
+            # the mode of sample k: above the limit, or where the PI's drive falls
+            if amp > over:
+                mode = _OVER
+            else:
+                u = kp * (float(ref[k]) - amp) + integ
+                if u < -DRIVE_SLACK:
+                    mode = _LOW
+                elif u > min(1.0, max((lim - a * amp) / g, 0.0)) + DRIVE_SLACK:
+                    mode = _HIGH
+                else:
+                    mode = _LINEAR
             rest = ref[k:]
             if mode == _LINEAR:
-                zi = np.array([amp, (co.phi11 + co.den[1]) * amp + co.phi12 * integ])
+                zi = np.array((amp, co.state_slope * amp + co.phi12 * integ))
                 amps, zf = closed_loop(co.num, co.den, rest, zi)
                 err = rest - amps
-                integs = integ + co.c * (err.cumsum() - err)
-                u = kp * err + integs
-                u_hi = (lim - co.a * amps) / co.g  # clipped to [0, 1] (only compared)
+                integs = err.cumsum()
+                integs -= err
+                integs *= c
+                integs += integ  # integ + c (cumsum(err) - err): the integrator before each
+                u = kp * err
+                u += integs
+                u_hi = a * amps  # (lim - a A) / g + slack, its bound clipped to [0, 1]
+                np.subtract(lim, u_hi, out=u_hi)
+                u_hi /= g
                 np.minimum(np.maximum(u_hi, 0.0, out=u_hi), 1.0, out=u_hi)
-                bad = (u < -DRIVE_SLACK) | (u > u_hi + DRIVE_SLACK)
-                j = int(bad.argmax()) if np.logical_or.reduce(bad) else rest.shape[0]
+                u_hi += DRIVE_SLACK
+                bad = u > u_hi
+                bad |= u < -DRIVE_SLACK
+                j = int(bad.argmax())  # the first sample out of range (0: none, or the first)
+                if j == 0 and not bad[0]:
+                    j = rest.shape[0]
                 if j == 0:  # rounding put the boundary sample out of range: saturate it
                     mode = _LOW if u[0] < -DRIVE_SLACK else _HIGH
                 else:
-                    drive_out[k : k + j] = u[:j].clip(0.0, 1.0)
+                    drive = drive_out[k : k + j]
+                    np.minimum(np.maximum(u[:j], 0.0, out=drive), 1.0, out=drive)
                     if j == rest.shape[0]:
                         amp_out[k + 1 : k + j] = amps[1:j]
-                        amp, integ = float(zf[0]), float(integs[-1] + co.c * err[-1])
+                        amp, integ = float(zf[0]), float(integs[-1] + c * err[-1])
                         amp_out[k + j] = amp
                     else:
                         amp_out[k + 1 : k + j + 1] = amps[1 : j + 1]
@@ -415,33 +431,45 @@ class PlateLoop:
             # and zero drive while the brake acts.
             decay = co.decay[: rest.shape[0] + 1]
             integs = np.empty(rest.shape[0] + 1)
-            integs.fill(integ)
+            integs[0] = integ
             if mode == _HIGH:
                 amps = co.full + (amp - co.full) * decay
                 np.minimum(amps, lim, out=amps)
                 amps[0] = amp
-                applied = ((lim - co.a * amps[:-1]) / co.g).clip(0.0, 1.0)
+                applied = a * amps[:-1]  # ((lim - a A) / g) clipped to [0, 1]
+                np.subtract(lim, applied, out=applied)
+                applied /= g
+                np.minimum(np.maximum(applied, 0.0, out=applied), 1.0, out=applied)
                 tracking = applied < 1.0
                 err = rest - amps[:-1]
                 integs[1:] = np.where(tracking, applied - kp * err, integ)
-                u_lin = kp * err + integs[:-1]
-                leave = u_lin <= applied + DRIVE_SLACK
-                clamp = tracking & (u_lin > applied + DRIVE_SLACK)
+                u_lin = kp * err
+                u_lin += integs[:-1]
+                ceiling = applied + DRIVE_SLACK
+                leave = u_lin <= ceiling
+                clamp = tracking & ~leave  # tracking and above the applied drive
             elif mode == _OVER:
                 amps, applied, leave = self._brake_run(amp, lim, decay, co)
                 err = rest - amps[:-1]
                 clamp = np.ones(rest.shape[0], dtype=bool)
-                integs[1:] = -kp * err
+                np.multiply(-kp, err, out=integs[1:])
             else:
                 # Zero drive. The error is negative here (u_lin < 0 and I >= 0): the
                 # integrator unwinds, down to zero drive at most.
                 amps = amp * decay
                 err = rest - amps[:-1]
                 applied = clamp = None  # zero drive, no clamp (clamp_out is zero already)
-                integs[1:] = np.maximum(integ + co.c * err.cumsum(), min(integ, 0.0))
-                leave = kp * err + integs[:-1] >= -DRIVE_SLACK
+                unwound = err.cumsum()
+                unwound *= c
+                unwound += integ
+                np.maximum(unwound, min(integ, 0.0), out=integs[1:])
+                u_lin = kp * err
+                u_lin += integs[:-1]
+                leave = u_lin >= -DRIVE_SLACK
             leave[0] = False
-            j = int(leave.argmax()) if np.logical_or.reduce(leave) else rest.shape[0]
+            j = int(leave.argmax())  # the first sample that leaves the mode (0: none)
+            if j == 0:
+                j = rest.shape[0]
             if applied is None:
                 drive_out[k : k + j] = 0.0
             else:
