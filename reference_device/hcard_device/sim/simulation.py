@@ -670,7 +670,13 @@ class DeviceSimulation:
             faults[np.logical_or.reduce(plate.clamped.reshape(n, m), axis=1)] |= int(
                 Faults.AMPLITUDE_LIMIT)
         if self.amplifier is not None:
-            load = np.where(truth.contact, self.finger_capacitance_f, 0.0)
+            contact = truth.contact
+            if np.logical_and.reduce(contact):  # one load for the whole step: a number
+                load: np.ndarray | float = self.finger_capacitance_f
+            elif not np.logical_or.reduce(contact):
+                load = 0.0
+            else:
+                load = np.where(contact, self.finger_capacitance_f, 0.0)
             ev_run = self.amplifier.run(voltage_cmd, load)
             voltage, current = ev_run.voltage, ev_run.current
             faults[ev_run.voltage_limited] |= int(Faults.VOLTAGE_LIMIT)
