@@ -71,13 +71,14 @@ class FingerTruth:
 
     def slice(self, start: int, stop: int) -> FingerTruth:
         """The frames ``start .. stop - 1`` (views; checked if these are)."""
-        part = FingerTruth(
-            self.x_mm[start:stop], self.y_mm[start:stop], self.fn_n[start:stop],
-            self.contact[start:stop], self.speed_m_s[start:stop],
-            self.contact_time_s[start:stop], self.held,
+        part = object.__new__(FingerTruth)
+        part.__dict__.update(  # frozen: set as the dataclass __init__ would, without its checks
+            x_mm=self.x_mm[start:stop], y_mm=self.y_mm[start:stop], fn_n=self.fn_n[start:stop],
+            contact=self.contact[start:stop], speed_m_s=self.speed_m_s[start:stop],
+            contact_time_s=self.contact_time_s[start:stop], held=self.held,
         )
         if self.__dict__.get("checked"):
-            part.__dict__["checked"] = True  # frozen: as the cached property stores it
+            part.__dict__["checked"] = True  # as the cached property stores it
         return part
 
     @staticmethod

@@ -165,6 +165,14 @@ class SimBlock:
         """Per-frame mask of frames with ``fault`` set."""
         return (self.faults & int(fault)) != 0
 
+    @classmethod
+    def _of(cls, **values: np.ndarray) -> SimBlock:
+        """A block of ``values`` (every field, by name), made as ``SimBlock(**values)`` is
+        without the frozen dataclass's field by field ``__setattr__`` (a step makes one)."""
+        block = object.__new__(cls)
+        block.__dict__.update(values)
+        return block
+
     @staticmethod
     def concatenate(blocks: list[SimBlock]) -> SimBlock:
         """The frames of ``blocks`` one after another."""
@@ -687,7 +695,7 @@ class DeviceSimulation:
         lateral = self.finger_physics.lateral_force(friction, truth)
 
         self._frame += n
-        return SimBlock(
+        return SimBlock._of(
             t_s=times,
             target_uv=uv_t,
             target_ev=ev_t,
