@@ -255,27 +255,39 @@ class FingerPhysics:
                 ev = np.where(truth.fn_n > 0, 1.0 + hidden / truth.fn_n, 1.0)
         return np.where(truth.contact, uv * ev, 1.0)
 
-    def lateral_force(self, friction: np.ndarray, truth: FingerTruth) -> np.ndarray:
-        """Lateral force a tribometer measures, N: ``mu_f friction Fn`` plus noise."""
-        n = friction.shape[0]
-        force = np.zeros(n)
+    def coefficient(self, truth: FingerTruth) -> np.ndarray:
+        """The bare finger's friction coefficient ``mu_f = F_l / Fn`` (Eq. 1.8,
+        :class:`FingerFriction`) at each frame where it presses (contact and ``Fn > 0``), 0
+        elsewhere. A function of the finger's state alone (the simulation works it out with
+        the internal finger's frames ahead)."""
         pressing = truth.contact & (truth.fn_n > 0)
-        if np.logical_or.reduce(pressing):
-            every = np.logical_and.reduce(pressing)  # then no frame needs picking out
-            fn = truth.fn_n if every else truth.fn_n[pressing]
-            inputs = {
-                "normal_force": fn,
-                "speed": truth.speed_m_s if every else truth.speed_m_s[pressing],
-                "contact_time": truth.contact_time_s if every else truth.contact_time_s[pressing],
-            }
-            if truth.checked:
-                if truth.held:  # one speed: its factor (Fig. 1.12) is one number
-                    inputs["speed"] = truth.speed_m_s.item(0)
-                mu = self.finger.friction_coefficient_trusted(**inputs)
-            else:
-                mu = self.finger.friction_coefficient(**inputs)
-            if every:
-                force = mu * friction * fn
-            else:
-                force[pressing] = mu * friction[pressing] * fn
-        return force + self._draws.take(n) * self.lateral_noise_n
+        if not np.logical_or.reduce(pressing):
+            return np.zeros(pressing.shape[0])
+        every = np.logical_and.reduce(pressing)  # then no frame needs picking out
+        inputs = {
+            "normal_force": truth.fn_n if every else truth.fn_n[pressing],
+            "speed": truth.speed_m_s if every else truth.speed_m_s[pressing],
+            "contact_time": truth.contact_time_s if every else truth.contact_time_s[pressing],
+        }
+        if truth.checked:
+            if truth.held:  # one speed: its factor (Fig. 1.12) is one number
+                inputs["speed"] = truth.speed_m_s.item(0)
+            mu = self.finger.friction_coefficient_trusted(**inputs)
+        else:
+            mu = self.finger.friction_coefficient(**inputs)
+        if every:
+            return mu
+        out = np.zeros(pressing.shape[0])
+        out[pressing] = mu
+        return out
+
+    def lateral_force(self, friction: np.ndarray, truth: FingerTruth,
+                      coefficient: np.ndarray | None = None) -> np.ndarray:
+        """Lateral force a tribometer measures, N: ``mu_f friction Fn`` plus noise
+        (``coefficient``: :meth:`coefficient` of ``truth``, worked out when None)."""
+        if coefficient is None:
+            coefficient = self.coefficient(truth)
+        force = coefficient * friction
+        force *= truth.fn_n  # 0 where the finger does not press
+        force += self._draws.take(friction.shape[0]) * self.lateral_noise_n
+        return force

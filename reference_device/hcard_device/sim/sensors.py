@@ -78,8 +78,8 @@ class TouchSamples:
 
     @staticmethod
     def empty() -> TouchSamples:
-        """No samples."""
-        return TouchSamples(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool))
+        """No samples (one shared instance: its arrays are never written to)."""
+        return _NO_SAMPLES
 
     def concat(self, other: TouchSamples) -> TouchSamples:
         """These samples followed by ``other`` (``self`` itself when ``other`` is empty: the
@@ -121,6 +121,9 @@ class TouchSamples:
         return TouchSamples(
             self.t[start:], self.x[start:], self.y[start:], self.contact[start:]
         )
+
+
+_NO_SAMPLES = TouchSamples(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool))
 
 
 class TouchSensor:
@@ -167,8 +170,8 @@ def hold(samples: TouchSamples, times: np.ndarray) -> np.ndarray:
 
 
 def predicted_speed(samples: TouchSamples, times: np.ndarray, horizon_s: float) -> np.ndarray:
-    """Finger speed at each time, mm/s, predicted from the touch samples for velocity
-    compensation.
+    """Finger speed at each of the rising ``times`` (s), mm/s, predicted from the touch samples
+    for velocity compensation.
 
     Each sample's speed is the renderer's two-sample estimate ``|p_i - p_(i-1)| / (t_i -
     t_(i-1))`` (both in contact, else 0), which describes the middle of the interval, half a
@@ -184,7 +187,7 @@ def predicted_speed(samples: TouchSamples, times: np.ndarray, horizon_s: float) 
         return out
     speed, slope, half = samples.kinematics
     index = hold(samples, times)
-    if index.shape[0] and np.minimum.reduce(index) == np.maximum.reduce(index):
+    if index.shape[0] and index[0] == index[-1]:  # the index never falls
         # Every time holds one sample (the common block between two touch samples).
         i = index.item(0)
         if i < 0:

@@ -86,9 +86,9 @@ the inverter reverses its phase at full drive (:class:`.plate.PlateLoop` ``brake
 
 LOOKAHEAD_FRAMES = 1000
 """Frames of the internal finger worked out at a time (0.1 s at 10 kHz): its true state along
-its track and the corner sensors' noiseless forces depend on nothing but the frame's time, so
-they are computed this far ahead and handed out in slices, the numbers of a computation step by
-step."""
+its track, the corner sensors' noiseless forces and the bare finger's friction coefficient
+depend on nothing but the frame's time, so they are computed this far ahead and handed out in
+slices, the numbers of a computation step by step."""
 
 _TARGET_TOLERANCE = 1e-9
 
@@ -243,8 +243,9 @@ class DeviceSimulation:
         self._running = False
         self._gain = 0.0
         self._finger: TrackFinger | HostFinger | None = None
-        # the internal finger's frames ahead: (finger, first frame, truth, noiseless corners)
-        self._ahead: tuple[TrackFinger, int, FingerTruth, np.ndarray] | None = None
+        # the internal finger's frames ahead: (finger, first frame, truth, noiseless corners,
+        # bare finger's friction coefficient)
+        self._ahead: tuple[TrackFinger, int, FingerTruth, np.ndarray, np.ndarray] | None = None
         self._history = TouchSamples.empty()
         self._pending = TouchSamples.empty()
         self._host_clock = HostClock()
@@ -636,7 +637,7 @@ class DeviceSimulation:
             self._events = 0
 
         # 1-2. finger, sensors.
-        truth, split = self._finger_frames(times)
+        truth, split, coefficient = self._finger_frames(times)
         new = self._sense_touch(self._frame / rate, t_end)
         samples = self._history.concat(new)
         render_times = times + self._render_shift_s  # the samples' time line
@@ -692,7 +693,7 @@ class DeviceSimulation:
         else:
             voltage, current = np.zeros(n), np.zeros(n)
         friction = self.finger_physics.friction(amplitude, voltage, truth)
-        lateral = self.finger_physics.lateral_force(friction, truth)
+        lateral = self.finger_physics.lateral_force(friction, truth, coefficient)
 
         self._frame += n
         return SimBlock._of(
@@ -736,14 +737,17 @@ class DeviceSimulation:
         if len(old):
             self._stream.push(old.t, old.x, old.y, None, old.contact)
 
-    def _finger_frames(self, times: np.ndarray) -> tuple[FingerTruth, np.ndarray]:
-        """The finger's true state at the frames of this step (at ``times``, s) and the corner
-        sensors' noiseless forces (N, 4) under it; the internal finger's from its frames ahead
-        (:data:`LOOKAHEAD_FRAMES`)."""
+    def _finger_frames(
+        self, times: np.ndarray
+    ) -> tuple[FingerTruth, np.ndarray, np.ndarray | None]:
+        """The finger's true state at the frames of this step (at ``times``, s), the corner
+        sensors' noiseless forces (N, 4) under it and the bare finger's friction coefficient
+        (:meth:`.finger.FingerPhysics.coefficient`; None: not worked out); the internal
+        finger's from its frames ahead (:data:`LOOKAHEAD_FRAMES`)."""
         finger, n = self._finger, times.shape[0]
         if not isinstance(finger, TrackFinger):
             truth = finger.state(times) if finger is not None else FingerTruth.absent(n)
-            return truth, self.force_sensors.split(truth.fn_n, truth.x_mm, truth.y_mm)
+            return truth, self.force_sensors.split(truth.fn_n, truth.x_mm, truth.y_mm), None
         ahead = self._ahead
         if ahead is None or ahead[0] is not finger or not (
             ahead[1] <= self._frame and self._frame + n <= ahead[1] + ahead[3].shape[0]
@@ -752,10 +756,11 @@ class DeviceSimulation:
             frames = (self._frame + np.arange(count, dtype=np.float64)) / self.config.frame_rate_hz
             truth = finger.state(frames)
             split = self.force_sensors.split(truth.fn_n, truth.x_mm, truth.y_mm)
-            split.flags.writeable = False
-            ahead = self._ahead = (finger, self._frame, truth, split)
-        start = self._frame - ahead[1]
-        return ahead[2].slice(start, start + n), ahead[3][start : start + n]
+            coefficient = self.finger_physics.coefficient(truth)
+            split.flags.writeable = coefficient.flags.writeable = False
+            ahead = self._ahead = (finger, self._frame, truth, split, coefficient)
+        start, stop = self._frame - ahead[1], self._frame - ahead[1] + n
+        return ahead[2].slice(start, stop), ahead[3][start:stop], ahead[4][start:stop]
 
     def _sense_touch(self, t0: float, t1: float) -> TouchSamples:
         """Touch samples of this step: the panel's (internal finger) or the host's."""
