@@ -158,8 +158,8 @@ def _state_values(block: SimBlock, ends: slice) -> np.ndarray:
     """The SI values of :data:`_STATE_FIELDS` at the frames ``ends``, (fields, reports)."""
     first = ends.start
     if first + ends.step >= len(block):  # one report (a step of one interval or less)
-        # the held touch sample as a plain tuple (np.ndarray.item: no recarray attribute lookup)
-        touch = dict(zip(_TOUCH_FIELDS, np.ndarray.item(block.touch, first), strict=True))
+        # the held touch sample as a plain tuple
+        touch = dict(zip(_TOUCH_FIELDS, block.touch.item(first), strict=True))
         return np.array([
             block.t_s.item(first), touch["contact"], touch["x_mm"], touch["y_mm"],
             *block.corner_forces_n[first].tolist(), block.lateral_force_n.item(first),
@@ -167,7 +167,7 @@ def _state_values(block: SimBlock, ends: slice) -> np.ndarray:
             block.current_a.item(first), block.target_uv.item(first),
             block.target_ev.item(first), block.texture.item(first),
         ], dtype=np.float64)[:, None]  # fmt: skip
-    touch = block.touch.view(np.ndarray)
+    touch = block.touch
     forces = block.corner_forces_n[ends]
     return np.array((
         block.t_s[ends], touch["contact"][ends], touch["x_mm"][ends], touch["y_mm"][ends],

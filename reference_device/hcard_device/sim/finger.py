@@ -70,14 +70,15 @@ class FingerTruth:
         return finite_non_negative(self.fn_n, self.speed_m_s, self.contact_time_s)
 
     def slice(self, start: int, stop: int) -> FingerTruth:
-        """The frames ``start .. stop - 1`` (views; checked if these are)."""
+        """The frames ``start .. stop - 1`` (views; checked when all frames are, which is
+        worked out once for the whole state)."""
         part = object.__new__(FingerTruth)
         part.__dict__.update(  # frozen: set as the dataclass __init__ would, without its checks
             x_mm=self.x_mm[start:stop], y_mm=self.y_mm[start:stop], fn_n=self.fn_n[start:stop],
             contact=self.contact[start:stop], speed_m_s=self.speed_m_s[start:stop],
             contact_time_s=self.contact_time_s[start:stop], held=self.held,
         )
-        if self.__dict__.get("checked"):
+        if self.checked:
             part.__dict__["checked"] = True  # as the cached property stores it
         return part
 

@@ -124,7 +124,8 @@ class SimBlock:
         lateral_force_n: lateral force a tribometer measures, N (with noise).
         normal_force_n: the finger's true normal force on the plate, N.
         corner_forces_n: (N, 4) corner force sensors, N (order ``sensors.CORNERS``).
-        touch: (N,) record array of the held touch sample (:data:`TOUCH_DTYPE`).
+        touch: (N,) structured array of the held touch sample (:data:`TOUCH_DTYPE`; fields
+            by name, ``touch["x_mm"]``).
         texture: (N,) palette index the renderer plays, -1 for a neutral frame (no card, no
             contact, off the card, or direct streaming).
         finger_x_mm, finger_y_mm: the finger's true position, mm.
@@ -145,7 +146,7 @@ class SimBlock:
     lateral_force_n: np.ndarray
     normal_force_n: np.ndarray
     corner_forces_n: np.ndarray
-    touch: np.recarray
+    touch: np.ndarray
     texture: np.ndarray
     finger_x_mm: np.ndarray
     finger_y_mm: np.ndarray
@@ -179,8 +180,7 @@ class SimBlock:
         values = {}
         for f in fields(SimBlock):
             parts = [getattr(b, f.name) for b in blocks]
-            joined = np.concatenate(parts)
-            values[f.name] = joined.view(np.recarray) if f.name == "touch" else joined
+            values[f.name] = np.concatenate(parts)
         return SimBlock(**values)
 
 
@@ -709,7 +709,7 @@ class DeviceSimulation:
             lateral_force_n=lateral,
             normal_force_n=truth.fn_n,
             corner_forces_n=corners,
-            touch=touch.view(np.recarray),
+            touch=touch,
             texture=texture,
             finger_x_mm=truth.x_mm,
             finger_y_mm=truth.y_mm,
