@@ -236,17 +236,23 @@ class FingerPhysics:
         return self._draws.rng
 
     def friction(
-        self, amplitude_m: np.ndarray, voltage_v: np.ndarray, truth: FingerTruth
+        self, amplitude_m: np.ndarray, voltage_v: np.ndarray, truth: FingerTruth, *,
+        measured: bool = False,
     ) -> np.ndarray:
-        """Relative friction felt ``F_t / (mu0 Fn)`` (Eq. 4.1) per frame; 1 without contact."""
+        """Relative friction felt ``F_t / (mu0 Fn)`` (Eq. 4.1) per frame; 1 without contact.
+
+        ``measured``: the amplitude and the voltage are the plate loop's and the amplifier's
+        outputs, one per frame, finite and >= 0 by construction (not checked again)."""
         if not np.logical_or.reduce(truth.contact):  # .any(), without its wrapper
             return np.ones(truth.contact.shape[0])
         shape = truth.fn_n.shape
         trusted = (
             amplitude_m.shape == shape and voltage_v.shape == shape and truth.checked
-            and finite_non_negative(amplitude_m)
-            # the voltage acts only through an EV channel
-            and (self.profile.ev_model is None or finite_non_negative(voltage_v))
+            and (measured or (
+                finite_non_negative(amplitude_m)
+                # the voltage acts only through an EV channel
+                and (self.profile.ev_model is None or finite_non_negative(voltage_v))
+            ))
         )
         uv, ev = self.profile.forward(amplitude_m, voltage_v, truth.speed_m_s, truth.fn_n,
                                       trusted=trusted)

@@ -692,7 +692,7 @@ class DeviceSimulation:
             faults[ev_run.current_limited] |= int(Faults.CURRENT_LIMIT)
         else:
             voltage, current = np.zeros(n), np.zeros(n)
-        friction = self.finger_physics.friction(amplitude, voltage, truth)
+        friction = self.finger_physics.friction(amplitude, voltage, truth, measured=True)
         lateral = self.finger_physics.lateral_force(friction, truth, coefficient)
 
         self._frame += n
