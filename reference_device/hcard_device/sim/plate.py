@@ -50,7 +50,11 @@ the closed loop ``r -> A`` with its state carried in; the first sample where ``u
 clamp; integrator frozen, unwinding or tracking) has a closed form until the controller comes back
 into range. The finger force is
 quantised to :data:`FORCE_QUANTUM_N` and the coefficients cached per quantum. The result is the
-sample-by-sample recursion above (tests/device/test_sim.py compares the two).
+sample-by-sample recursion above (tests/device/test_sim.py compares the two). A loop that
+chatters between modes (a one-sided drive holding a slowly falling reference switches between
+zero drive and the linear loop every few samples) would cost a vectorised solve per switch, so
+after a run of at most :data:`SHORT_RUN_SAMPLES` samples the loop runs that recursion sample by
+sample until a mode lasts longer (:meth:`PlateLoop._steps`); the two differ by rounding.
 
 With the E-ViTa constants (:meth:`hcard_device.sim.DeviceConfig.evita`) the loop has its -3 dB
 point at 403 Hz for small references around 2 um (394 Hz at 3 N), a 0 -> 2 um step rises 10-90 %
@@ -105,6 +109,11 @@ def closed_loop(num: np.ndarray, den: np.ndarray, reference: np.ndarray,
         return lfilter(num, den, reference, zi=state)
     return _linear_filter(num, den, reference, -1, state)
 
+
+SHORT_RUN_SAMPLES = 8
+"""A mode the vectorised solver finds to last this many loop samples or fewer hands the loop to
+the sample recursion, which costs about as much per sample as the vectorised solver costs per
+run of samples."""
 
 _LINEAR, _LOW, _HIGH, _OVER = 0, 1, 2, 3
 """Loop modes: linear, drive at 0, drive at its upper bound, plate above the limit."""
@@ -250,6 +259,7 @@ class PlateLoop:
         self._limit = 0.0
         self._brake = 0.0
         self._cache: dict[int, _Coefficients] = {}
+        self._chattering = False  # the last vectorised run was short: step sample by sample
         self.limit_m = limit_m
         self.brake_drive = brake_drive
 
@@ -380,6 +390,10 @@ class PlateLoop:
         amp, integ = self.amplitude_m, self.integrator
         k = 0
         while k < n:
+            if self._chattering:
+                k, amp, integ = self._steps(ref, k, amp, integ, co, amp_out, drive_out, clamp_out)
+                if k >= n:
+                    break
             # the mode of sample k: above the limit, or where the PI's drive falls
             if amp > over:
                 mode = _OVER
@@ -424,6 +438,7 @@ class PlateLoop:
                     else:
                         amp_out[k + 1 : k + j + 1] = amps[1 : j + 1]
                         amp, integ = float(amps[j]), float(integs[j])
+                        self._chattering = j <= SHORT_RUN_SAMPLES
                     k += j
                     continue
             # Saturated: constant drive, the clamp or the brake. The integrator is frozen at full
@@ -477,5 +492,63 @@ class PlateLoop:
                 clamp_out[k : k + j] = clamp[:j]
             amp_out[k + 1 : k + j + 1] = amps[1 : j + 1]
             amp, integ = float(amps[j]), float(integs[j])
+            self._chattering = mode != _OVER and j <= SHORT_RUN_SAMPLES and k + j < n
             k += j
         self.amplitude_m, self.integrator = amp, integ
+
+    def _steps(
+        self,
+        ref: np.ndarray,
+        k: int,
+        amp: float,
+        integ: float,
+        co: _Coefficients,
+        amp_out: np.ndarray,
+        drive_out: np.ndarray,
+        clamp_out: np.ndarray,
+    ) -> tuple[int, float, float]:
+        """The recursion of the module documentation sample by sample from sample ``k`` (loop
+        state ``amp``, ``integ``) until one mode has lasted :data:`SHORT_RUN_SAMPLES` samples,
+        the safety clamp or the brake would act (left to the vectorised solver), or ``ref``
+        ends; returns the next sample and the loop state there. Writes the outputs as
+        :meth:`_segment` does (the clamp never acts here)."""
+        n = ref.shape[0]
+        kp, lim = self.gains.kp, self._limit
+        over, a, g, c, full = lim * (1.0 + LIMIT_SLACK), co.a, co.g, co.c, co.full
+        start, last, lasted, handed_back = k, -1, 0, False
+        amps: list[float] = []
+        drives: list[float] = []
+        while k < n and not handed_back:
+            for r in ref[k : k + 4 * SHORT_RUN_SAMPLES].tolist():
+                if amp > over:
+                    handed_back = True  # the brake
+                    break
+                e = r - amp
+                u = kp * e + integ
+                if u < -DRIVE_SLACK:  # zero drive; the integrator unwinds, not below zero drive
+                    mode, drive = _LOW, 0.0
+                    amp, integ = amp * a, max(integ + c * e, min(integ, 0.0))
+                else:
+                    bound = min(1.0, max((lim - a * amp) / g, 0.0))
+                    if u > bound + DRIVE_SLACK:
+                        if bound < 1.0:
+                            handed_back = True  # the safety clamp
+                            break
+                        mode, drive = _HIGH, 1.0  # full drive; the integrator holds
+                        amp = min(full + (amp - full) * a, lim)
+                    else:
+                        mode, drive = _LINEAR, min(max(u, 0.0), 1.0)
+                        amp, integ = a * amp + g * u, integ + c * e
+                amps.append(amp)
+                drives.append(drive)
+                lasted = lasted + 1 if mode == last else 1
+                last = mode
+                k += 1
+                if lasted >= SHORT_RUN_SAMPLES:
+                    handed_back = True
+                    break
+        self._chattering = not handed_back  # the chatter may go on in the next run
+        if k > start:
+            amp_out[start + 1 : k + 1] = amps
+            drive_out[start:k] = drives
+        return k, amp, integ
