@@ -100,11 +100,12 @@ def test_twenty_5_ms_steps_give_the_frames_of_one_100_ms_step(config, card, seed
 
 
 def test_the_frames_ahead_and_batched_noise_are_the_direct_computation():
-    """The internal finger's state and the corner forces of a 5 ms-stepped run against the
-    track's state at the frame times worked out directly, and the lever rule plus the noise of
-    a generator seeded as the simulation's force sensors, drawn in one go."""
+    """The internal finger's state, the touch samples and the corner forces of a 5 ms-stepped
+    run against the track's state at the frame and touch times worked out directly, plus the
+    jitter and the lever rule with the noise of generators seeded as the simulation's touch
+    panel and force sensors, drawn in one go."""
     seed = 7
-    block, track = run(EVITA, cards()["uv"], seed, None, True, [50] * 70)
+    block, track = run(EVITA, cards()["uv"], seed, None, True, [50] * 100)  # past the track
     direct = TrackFinger(track, 0.0, EVITA.surface_mm).state(block.t_s)
     for name in ("x_mm", "y_mm", "fn_n", "contact", "speed_m_s"):
         field = {"x_mm": "finger_x_mm", "y_mm": "finger_y_mm", "fn_n": "normal_force_n",
@@ -116,6 +117,16 @@ def test_the_frames_ahead_and_batched_noise_are_the_direct_computation():
         direct.fn_n, direct.x_mm, direct.y_mm)
     np.testing.assert_array_equal(block.corner_forces_n, split + noise)
     assert len(block) * 4 > NOISE_BATCH  # the draws ran over a batch boundary
+    touch_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(3)[0])
+    sample_times = np.arange(0, len(block), 200) / EVITA.frame_rate_hz  # the 50 Hz panel
+    jitter = touch_rng.normal(0.0, 1.0, size=(sample_times.size, 2)) * EVITA.touch_noise_mm
+    at_samples = TrackFinger(track, 0.0, EVITA.surface_mm).state(sample_times)
+    held = block.touch[::200]  # the frames at the sample times hold those samples
+    np.testing.assert_array_equal(held["t_s"], sample_times)
+    np.testing.assert_array_equal(held["x_mm"], at_samples.x_mm + jitter[:, 0])
+    np.testing.assert_array_equal(held["y_mm"], at_samples.y_mm + jitter[:, 1])
+    np.testing.assert_array_equal(held["contact"], at_samples.contact)
+    assert not held["contact"].all() and held["contact"].any()  # lifts and touches
 
 
 def coupled_loop() -> PlateLoop:

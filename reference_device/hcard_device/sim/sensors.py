@@ -114,13 +114,21 @@ class TouchSamples:
         return speed, slope, np.concatenate(([0.0], dt / 2))
 
     def tail(self, count: int) -> TouchSamples:
-        """The last ``count`` samples (``self`` itself when it has no more)."""
+        """The last ``count`` samples (``self`` itself when it has no more); their
+        :attr:`kinematics` from these samples' when known (the same numbers, but for the first
+        sample's speed and interval and the first three slopes, which have no samples before
+        them in the tail)."""
         start = max(len(self) - count, 0)
         if start == 0:
             return self
-        return TouchSamples(
-            self.t[start:], self.x[start:], self.y[start:], self.contact[start:]
-        )
+        part = TouchSamples(self.t[start:], self.x[start:], self.y[start:], self.contact[start:])
+        known = self.__dict__.get("kinematics")
+        if known is not None:
+            speed, slope, half = (values[start:].copy() for values in known)
+            speed[0] = half[0] = 0.0
+            slope[:3] = 0.0
+            part.__dict__["kinematics"] = (speed, slope, half)  # as the cached property stores it
+        return part
 
 
 _NO_SAMPLES = TouchSamples(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool))

@@ -677,7 +677,7 @@ class DeviceSimulation:
 
         # 6. physics.
         m = cfg.loop_samples_per_frame
-        plate = self.plate.run(np.repeat(amplitude_cmd, m), np.repeat(truth.fn_n, m))
+        plate = self.plate.run(amplitude_cmd.repeat(m), truth.fn_n.repeat(m))
         amplitude = np.add.reduce(plate.amplitude.reshape(n, m), axis=1) / m  # frame mean
         if self.limits_pending and not self.plate.above_limit:
             self._commit_limits()  # the braked plate landed on the lowered limit (PS5)
@@ -774,13 +774,29 @@ class DeviceSimulation:
             times = self.touch_sensor.sample_times(t0, t1)
             if times.shape[0] == 0:
                 return TouchSamples.empty()
-            state = self._finger.state(times)
-            samples = self.touch_sensor.measure(times, state.x_mm, state.y_mm, state.contact)
+            samples = self.touch_sensor.measure(times, *self._track_at(times))
             if self._stream is not None:
                 self._stream.push(samples.t, samples.x, samples.y, None, samples.contact)
             return samples
         samples, self._pending = self._pending, TouchSamples.empty()
         return samples
+
+    def _track_at(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The internal finger's position (mm) and contact at ``times`` (s, rising): from its
+        frames ahead when every time is a frame's time among them (the touch panel's clock
+        ticks on frames: the state is the same function of the same time), else from its
+        track."""
+        ahead, rate = self._ahead, self.config.frame_rate_hz
+        if ahead is not None and ahead[0] is self._finger:
+            frames = np.rint(times * rate)
+            index = frames - ahead[1]
+            truth = ahead[2]
+            if (index[0] >= 0 and index[-1] < truth.fn_n.shape[0]
+                    and np.logical_and.reduce(frames / rate == times)):
+                i = index.astype(np.intp)
+                return truth.x_mm[i], truth.y_mm[i], truth.contact[i]
+        state = self._finger.state(times)
+        return state.x_mm, state.y_mm, state.contact
 
     def _targets(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """UV and EV targets and the palette index of the next ``n`` frames."""
