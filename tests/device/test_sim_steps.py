@@ -24,7 +24,7 @@ from hcard_device.sim.finger import TrackFinger
 from hcard_device.sim.hidden import HiddenPhysics, resolve
 from hcard_device.sim.models import device_profile
 from hcard_device.sim.plate import DRIVE_SLACK, PIGains, PlateLoop, PlateModel
-from hcard_device.sim.sensors import NOISE_BATCH, CornerForceSensors
+from hcard_device.sim.sensors import NOISE_BATCH, CornerForceSensors, TouchSamples
 
 EVITA, COUPLED = DeviceConfig.evita(), DeviceConfig.coupled()
 
@@ -207,3 +207,18 @@ def test_one_load_capacitance_gives_the_amplifier_the_numbers_of_a_per_frame_loa
             np.testing.assert_array_equal(getattr(scalar, name), getattr(array, name))
     flags = np.concatenate([p.current_limited | p.voltage_limited for p in results[0]])
     assert flags.any() or capacitance == 0.0
+
+
+@pytest.mark.parametrize("count", [1, 2, 3, 4, 6])
+def test_a_tail_of_touch_samples_has_the_kinematics_of_those_samples_alone(count):
+    """The kinematics a tail takes from the samples it is cut from are those its own samples
+    give, with lifts and a repeated time among them."""
+    rng = np.random.default_rng(count)
+    t = np.cumsum(rng.choice([0.0, 0.02], 9, p=[0.1, 0.9])) + 1.0
+    samples = TouchSamples(t, rng.normal(30, 5, 9), rng.normal(20, 5, 9), rng.uniform(size=9) > 0.2)
+    _ = samples.kinematics  # known, so the tail takes it
+    tail = samples.tail(count)
+    alone = TouchSamples(tail.t.copy(), tail.x.copy(), tail.y.copy(), tail.contact.copy())
+    assert "kinematics" in tail.__dict__
+    for derived, direct in zip(tail.kinematics, alone.kinematics, strict=True):
+        np.testing.assert_array_equal(derived, direct)
