@@ -800,12 +800,12 @@ class DeviceSimulation:
 
     def _targets(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """UV and EV targets and the palette index of the next ``n`` frames."""
+        if self._stream is not None and not self._streaming:
+            frames = self._stream.render(n, time_shift_s=self._render_shift_s)
+            return frames.uv, frames.ev, frames.texture.astype(np.int32)
         neutral = np.full(n, -1, dtype=np.int32)
         if self._streaming:
             return (*self._pop_stream(n), neutral)
-        if self._stream is not None:
-            frames = self._stream.render(n, time_shift_s=self._render_shift_s)
-            return frames.uv, frames.ev, frames.texture.astype(np.int32)
         return np.ones(n), np.ones(n), neutral
 
     def _pop_stream(self, n: int) -> tuple[np.ndarray, np.ndarray]:
