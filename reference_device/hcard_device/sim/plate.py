@@ -48,13 +48,14 @@ constant finger force), so :func:`scipy.signal.lfilter` (its C core, :func:`clos
 the closed loop ``r -> A`` with its state carried in; the first sample where ``u_lin`` leaves
 ``[0, u_hi]`` is found with numpy, and from there the saturated plate (constant drive or the
 clamp; integrator frozen, unwinding or tracking) has a closed form until the controller comes back
-into range. The finger force is
-quantised to :data:`FORCE_QUANTUM_N` and the coefficients cached per quantum. The result is the
-sample-by-sample recursion above (tests/device/test_sim.py compares the two). A loop that
-chatters between modes (a one-sided drive holding a slowly falling reference switches between
-zero drive and the linear loop every few samples) would cost a vectorised solve per switch, so
-after a run of at most :data:`SHORT_RUN_SAMPLES` samples the loop runs that recursion sample by
-sample until a mode lasts longer (:meth:`PlateLoop._steps`); the two differ by rounding.
+into range. The finger force is quantised to :data:`FORCE_QUANTUM_N` and the coefficients cached
+per quantum. The result is the sample-by-sample recursion above (tests/device/test_sim.py
+compares the two). A loop that chatters between modes (a one-sided drive following a reference
+that falls faster than the plate decays switches between zero drive and the linear loop every few
+samples) would cost a vectorised solve per switch, so after a run of at most
+:data:`SHORT_RUN_SAMPLES` samples the loop runs that recursion sample by sample until a mode
+lasts longer (:meth:`PlateLoop._steps`; the clamp and the brake are always solved vectorised);
+the two differ by rounding (tests/device/test_sim_steps.py).
 
 With the E-ViTa constants (:meth:`hcard_device.sim.DeviceConfig.evita`) the loop has its -3 dB
 point at 403 Hz for small references around 2 um (394 Hz at 3 N), a 0 -> 2 um step rises 10-90 %
@@ -99,6 +100,7 @@ AMPLITUDE_TOLERANCE_M = 1e-14
 """Guarantee of the clamp: the amplitude stays at or under ``limit (1 + LIMIT_SLACK) +
 AMPLITUDE_TOLERANCE_M`` (the drive slack lets it pass the limit by at most ``DRIVE_SLACK`` of the
 full-drive amplitude, a few femtometres)."""
+
 
 def closed_loop(num: np.ndarray, den: np.ndarray, reference: np.ndarray,
                 state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -308,6 +310,7 @@ class PlateLoop:
         """Plate at rest, integrator cleared."""
         self.amplitude_m = 0.0
         self.integrator = 0.0
+        self._chattering = False
 
     def _coefficients(self, key: int) -> _Coefficients:
         cached = self._cache.get(key)
@@ -391,7 +394,7 @@ class PlateLoop:
         k = 0
         while k < n:
             if self._chattering:
-                k, amp, integ = self._steps(ref, k, amp, integ, co, amp_out, drive_out, clamp_out)
+                k, amp, integ = self._steps(ref, k, amp, integ, co, amp_out, drive_out)
                 if k >= n:
                     break
             # the mode of sample k: above the limit, or where the PI's drive falls
@@ -505,13 +508,12 @@ class PlateLoop:
         co: _Coefficients,
         amp_out: np.ndarray,
         drive_out: np.ndarray,
-        clamp_out: np.ndarray,
     ) -> tuple[int, float, float]:
         """The recursion of the module documentation sample by sample from sample ``k`` (loop
         state ``amp``, ``integ``) until one mode has lasted :data:`SHORT_RUN_SAMPLES` samples,
         the safety clamp or the brake would act (left to the vectorised solver), or ``ref``
-        ends; returns the next sample and the loop state there. Writes the outputs as
-        :meth:`_segment` does (the clamp never acts here)."""
+        ends; returns the next sample and the loop state there. Writes the amplitudes and
+        drives as :meth:`_segment` does (the clamp never acts here)."""
         n = ref.shape[0]
         kp, lim = self.gains.kp, self._limit
         over, a, g, c, full = lim * (1.0 + LIMIT_SLACK), co.a, co.g, co.c, co.full
