@@ -78,21 +78,19 @@ def make_track(
     y_arr = column(y, "y_mm", math.nan)
     fn_arr = column(fn, "fn_n", DEFAULT_NORMAL_FORCE_N)
     contact_arr = column(contact, "contact", 1.0)
+    # each check is one pass that finds nothing in a valid track (a stream pushes one sample
+    # at a time); only a failed one looks for the sample to name
     for name, arr in (("t_s", t_arr), ("x_mm", x_arr), ("y_mm", y_arr), ("fn_n", fn_arr)):
-        bad = np.flatnonzero(~np.isfinite(arr))
-        if bad.size:
-            raise TrackError(
-                f"{source}: column {name} has a non-finite value at sample {int(bad[0])}"
-            )
-    steps = np.diff(t_arr)
-    bad = np.flatnonzero(steps <= 0)
-    if bad.size:
-        i = int(bad[0]) + 1
+        if not np.logical_and.reduce(np.isfinite(arr)):
+            bad = int(np.flatnonzero(~np.isfinite(arr))[0])
+            raise TrackError(f"{source}: column {name} has a non-finite value at sample {bad}")
+    if n > 1 and not np.logical_and.reduce(t_arr[1:] > t_arr[:-1]):
+        i = int(np.flatnonzero(t_arr[1:] <= t_arr[:-1])[0]) + 1
         raise TrackError(
             f"{source}: time must increase strictly, but t_s[{i}] = {t_arr[i]} follows "
             f"{t_arr[i - 1]}"
         )
-    if not np.all(np.isin(contact_arr, (0.0, 1.0))):
+    if not np.logical_and.reduce((contact_arr == 0.0) | (contact_arr == 1.0)):
         raise TrackError(f"{source}: column contact must hold only 0 or 1")
     return FingerTrack(t_arr, x_arr, y_arr, fn_arr, contact_arr.astype(bool))
 

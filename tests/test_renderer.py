@@ -12,6 +12,7 @@ from hcard import build
 from hcard.errors import CardValidationError, TrackError
 from hcard.render import Renderer, RenderOptions
 from hcard.render.kernel import band_limit_gain
+from hcard.render.touch import _extend_block, empty_table, extend_table
 from hcard.track import make_track, straight_stroke
 
 FS = 10_000.0
@@ -256,6 +257,39 @@ def test_batch_and_streaming_agree():
         assert np.max(np.abs(uv - batch.uv)) < 1e-9
         assert np.max(np.abs(ev - batch.ev)) < 1e-9
         assert np.array_equal(np.concatenate([p.texture for p in parts]), batch.texture)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_touch_samples_pushed_one_at_a_time_extend_the_table_as_the_vectorised_code(seed):
+    """A stream extends its touch table one pushed sample at a time; that one-sample path of
+    extend_table gives the vectorised code's numbers on the same sample, bit for bit: velocity,
+    odometer, contact start and count through touch-downs, lifts and gaps longer than the
+    dead-reckoning horizon (and the whole table agrees with one vectorised extension of all
+    the samples to rounding: the odometer sums its steps in another order)."""
+    rng = np.random.default_rng(seed)
+    m = 200
+    t = np.cumsum(rng.choice([0.004, 0.02, 0.15], m, p=[0.3, 0.6, 0.1]))
+    position = np.column_stack((rng.normal(30, 5, m), rng.normal(20, 5, m)))
+    contact = rng.uniform(size=m) > 0.2
+    horizon = 0.1
+    names = ("t", "position", "contact", "velocity", "odometer", "contact_start",
+             "samples_in_contact")
+    table = empty_table()
+    for k in range(m):
+        sample = (t[k : k + 1], position[k : k + 1], contact[k : k + 1], horizon)
+        one, vectorised = extend_table(table, *sample), _extend_block(table, *sample)
+        for name in names:
+            assert getattr(one, name).dtype == getattr(vectorised, name).dtype
+            np.testing.assert_array_equal(getattr(one, name), getattr(vectorised, name),
+                                          err_msg=f"{name} of sample {k}")
+        table = table.concat(one)
+    batch = extend_table(empty_table(), t, position, contact, horizon)
+    for name in names:
+        np.testing.assert_allclose(getattr(table, name), getattr(batch, name), rtol=1e-12,
+                                   atol=1e-12, err_msg=name)
+    assert np.count_nonzero(batch.velocity) > m // 2  # moving samples were compared
+    assert np.count_nonzero(batch.samples_in_contact == 0) > 10  # and touch-downs
+    assert np.count_nonzero(np.diff(t) > horizon) > 5  # and gaps beyond the horizon
 
 
 def test_invalid_inputs_are_refused():

@@ -75,7 +75,7 @@ from hcard_device.drivers.base import DEFAULT_TIMEOUT_S
 from hcard_device.drivers.sim import SimDriver
 from hcard_device.drivers.uri import parse_uri
 from hcard_device.firmware import Firmware
-from hcard_device.protocol import FaultBits, ReportId, State, crc32
+from hcard_device.protocol import FaultBits, ReportId, crc32
 from hcard_device.protocol.upload import UploadStore
 from hcard_device.sim import DeviceConfig, DeviceSimulation
 from hcard_device.sim.clip import ClipReport
@@ -279,13 +279,13 @@ class LossyFirmware(Firmware):
         self.dropped_fraction = float(dropped_fraction)
         self._draws = np.random.default_rng(seed)
 
-    def _emit(self, report: State) -> None:
+    def _emit(self, data: bytes, faults: int) -> None:
         if self._draws.random() >= self.dropped_fraction:
-            super()._emit(report)
+            super()._emit(data, faults)
             return
         # produced (numbered, counted) but never queued for the host; the drop is counted
         # and flagged in the next report sent, as for a full queue
-        self.latched_faults |= report.faults
+        self.latched_faults |= faults
         self._sequence = (self._sequence + 1) & 0xFFFF
         self.input_reports += 1
         self.input_dropped += 1

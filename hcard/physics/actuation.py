@@ -474,7 +474,7 @@ def actuate(
                                                                                speed_floor)
             raw = _uv_amplitude(profile, uv_t, wants_uv, state_speed, fn_a)
         uv_clipped = raw > uv_limit * (1.0 + _CLIP_SLACK)
-        amplitude = raw.clip(0.0, uv_limit)
+        amplitude = np.minimum(np.maximum(raw, 0.0), uv_limit)  # clipped to [0, limit]
     else:
         amplitude = np.zeros(uv_t.shape)
         uv_limit_name = "no UV channel"
@@ -525,9 +525,8 @@ def _uv_amplitude(
     """Raw (unclipped) plate amplitude, m: the UV model's inverse for the frames that want
     vibration (``wants_uv``, None: every frame; targets floored at :data:`UV_TARGET_FLOOR`),
     0 elsewhere. ``state_speed``: the finger speed, floored (m/s)."""
-    raw = np.zeros(uv.shape)
     if wants_uv is not None and not np.logical_or.reduce(wants_uv, axis=None):
-        return raw
+        return np.zeros(uv.shape)
     every = wants_uv is None or np.logical_and.reduce(wants_uv, axis=None)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         solved = profile.amplitude_for(
@@ -541,6 +540,9 @@ def _uv_amplitude(
         raise PredictorError(
             f"UV model {profile.uv_model.name!r} gave no amplitude for some targets"  # type: ignore[union-attr]
         )
+    if every and solved.shape == uv.shape:
+        return solved  # read only: the caller clips it into a new array
+    raw = np.zeros(uv.shape)
     if every:
         raw[...] = solved
     else:

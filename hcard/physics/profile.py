@@ -507,15 +507,18 @@ class DeviceProfile:
         shape = amplitude.shape if trusted else np.shape(amplitude)
         if self._uv_channel is not None:
             uv = self._uv_value(amplitude, speed, normal_force, trusted)
-            if np.shape(uv) != shape:
+            if (uv.shape if isinstance(uv, np.ndarray) else np.shape(uv)) != shape:
                 uv = np.broadcast_to(uv, shape)
         else:
             uv = np.ones(shape)
         if self._ev_channel is not None:
             force = self._force(voltage, normal_force, trusted)
             # 1 + F_e / F_n where F_n > 0, else 1 (no division where F_n = 0)
-            ratio = np.zeros(shape)
-            np.divide(force, normal_force, out=ratio, where=normal_force > 0)
+            if normal_force.size and np.minimum.reduce(normal_force, axis=None) > 0:
+                ratio = np.divide(force, normal_force, out=np.empty(shape))  # F_n > 0 everywhere
+            else:
+                ratio = np.zeros(shape)
+                np.divide(force, normal_force, out=ratio, where=normal_force > 0)
             ev = np.add(1.0, ratio, out=ratio)
         else:
             ev = np.ones(shape)

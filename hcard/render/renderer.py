@@ -200,7 +200,8 @@ class RenderStream:
         """Time of the next frame to be rendered, s (NaN before the first sample)."""
         if self.t0 is None:
             return math.nan
-        return float(self.renderer.frame_times(self.t0, self.next_frame, 1)[0])
+        # frame_times of one frame, in floats: t0 + next_frame / rate, the same operations
+        return self.t0 + self.next_frame / self.renderer.options.frame_rate_hz
 
     def push(
         self,
@@ -241,7 +242,9 @@ class RenderStream:
         """
         if self.t0 is None:
             raise TrackError("stream: push a touch sample before rendering")
-        times = self.renderer.frame_times(self.t0, self.next_frame, n_frames) + time_shift_s
+        times = self.renderer.frame_times(self.t0, self.next_frame, n_frames)
+        if time_shift_s:
+            times += time_shift_s
         frames = self.renderer._block(self._table, times, with_phase)
         self.next_frame += n_frames
         # Keep only the samples later frames can still use: the last one at or before the
@@ -250,7 +253,7 @@ class RenderStream:
         if len(self._table):
             horizon = self.renderer.options.dead_reckoning_s
             earliest = self.next_time + time_shift_s - horizon
-            keep = max(int(np.searchsorted(self._table.t, earliest, side="right")) - 1, 0)
+            keep = max(int(self._table.t.searchsorted(earliest, side="right")) - 1, 0)
             if keep:
                 self._table = self._table.tail(keep)
         return frames

@@ -97,6 +97,19 @@ def extend_table(
         contact: (M,) contact flags.
         horizon_s: dead-reckoning horizon H, s.
     """
+    if t.shape[0] == 1:
+        return _extend_by_one(previous, t, position, contact, horizon_s)
+    return _extend_block(previous, t, position, contact, horizon_s)
+
+
+def _extend_block(
+    previous: TouchTable,
+    t: np.ndarray,
+    position: np.ndarray,
+    contact: np.ndarray,
+    horizon_s: float,
+) -> TouchTable:
+    """:func:`extend_table`, vectorised over the samples."""
     m = t.shape[0]
     has_prev = len(previous) > 0
     prev_t = np.concatenate(([previous.t[-1] if has_prev else -np.inf], t[:-1]))
@@ -150,4 +163,55 @@ def extend_table(
         odometer,
         contact_start,
         in_contact,
+    )
+
+
+def _extend_by_one(
+    previous: TouchTable,
+    t: np.ndarray,
+    position: np.ndarray,
+    contact: np.ndarray,
+    horizon_s: float,
+) -> TouchTable:
+    """:func:`extend_table` for one sample (a stream pushes them one at a time): the same
+    operations on one element each, in floats, without the ~40 array operations of the
+    vectorised form (:func:`_extend_block`); the numbers are the same (tests/test_renderer.py
+    compares them)."""
+    time, (x, y), on = float(t[0]), position[0].tolist(), bool(contact[0])
+    if len(previous):
+        last_t, (last_x, last_y) = float(previous.t[-1]), previous.position[-1].tolist()
+        last_on = bool(previous.contact[-1])
+        carried = int(previous.samples_in_contact[-1]) + 1
+        last_start = float(previous.contact_start[-1])
+        (last_vx, last_vy), (odo_x, odo_y) = (
+            previous.velocity[-1].tolist(), previous.odometer[-1].tolist()
+        )
+    else:
+        last_t, last_x, last_y, last_on, carried, last_start = -np.inf, 0.0, 0.0, False, 0, 0.0
+        last_vx = last_vy = odo_x = odo_y = 0.0
+    touchdown = on and not last_on
+    in_contact = 0 if touchdown else carried
+    dt = time - last_t
+    vx = vy = 0.0
+    if on and not touchdown:  # moving: the finite difference of the last two samples
+        vx, vy = (x - last_x) / dt, (y - last_y) / dt
+    start = time if touchdown else last_start
+    anchor = on and in_contact <= 1
+    step_x = step_y = 0.0
+    if not anchor and on:  # dead reckoning over at most the horizon
+        held = min(dt, horizon_s)
+        step_x, step_y = last_vx * held, last_vy * held
+    if anchor:
+        base_x, base_y = x - step_x, y - step_y
+    else:
+        base_x, base_y = odo_x, odo_y
+    odometer = (base_x + step_x, base_y + step_y) if on else (x, y)
+    return TouchTable(
+        np.array([time]),
+        np.array([[x, y]]),
+        np.array([on]),
+        np.array([[vx, vy]]),
+        np.array([odometer]),
+        np.array([start]),
+        np.array([in_contact], dtype=np.int64),
     )

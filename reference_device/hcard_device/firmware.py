@@ -27,14 +27,12 @@ firmware.
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 
@@ -158,8 +156,8 @@ def _state_values(block: SimBlock, ends: slice) -> np.ndarray:
     """The SI values of :data:`_STATE_FIELDS` at the frames ``ends``, (fields, reports)."""
     first = ends.start
     if first + ends.step >= len(block):  # one report (a step of one interval or less)
-        # the held touch sample as a plain tuple (np.ndarray.item: no recarray attribute lookup)
-        touch = dict(zip(_TOUCH_FIELDS, np.ndarray.item(block.touch, first), strict=True))
+        # the held touch sample as a plain tuple
+        touch = dict(zip(_TOUCH_FIELDS, block.touch.item(first), strict=True))
         return np.array([
             block.t_s.item(first), touch["contact"], touch["x_mm"], touch["y_mm"],
             *block.corner_forces_n[first].tolist(), block.lateral_force_n.item(first),
@@ -167,7 +165,7 @@ def _state_values(block: SimBlock, ends: slice) -> np.ndarray:
             block.current_a.item(first), block.target_uv.item(first),
             block.target_ev.item(first), block.texture.item(first),
         ], dtype=np.float64)[:, None]  # fmt: skip
-    touch = block.touch.view(np.ndarray)
+    touch = block.touch
     forces = block.corner_forces_n[ends]
     return np.array((
         block.t_s[ends], touch["contact"][ends], touch["x_mm"][ends], touch["y_mm"][ends],
@@ -180,17 +178,12 @@ def _state_values(block: SimBlock, ends: slice) -> np.ndarray:
 _TOUCH_FIELDS = TOUCH_DTYPE.names
 """Fields of a held touch sample (:data:`hcard_device.sim.TOUCH_DTYPE`), in order."""
 
-_STATE_NAMES = tuple(f.name for f in dataclasses.fields(State))
-
-
-def _state(values: tuple[Any, ...]) -> State:
-    """The STATE report of ``values`` (its fields in order), each already saturated to its
-    field's range by the firmware: made as ``State(*values)`` is, without the report's own
-    range checks (``__post_init__``), which cost more than the rest of a report. A host that
-    decodes the report checks the ranges (:meth:`State.decode`)."""
-    report = object.__new__(State)
-    report.__dict__.update(zip(_STATE_NAMES, values, strict=True))  # frozen: as __init__ sets
-    return report
+_STATE_PACK = State.STRUCT.pack
+_STATE_ID = State.REPORT_ID
+"""A STATE report's bytes from its values in wire order (:meth:`State.encode`'s packing): the
+firmware packs the values it has already saturated to their ranges (rule PI2) without making a
+State, whose range checks cost more than the rest of a report. A host that decodes the report
+checks the ranges (:meth:`State.decode`)."""
 
 
 _FAULT_MAP: tuple[tuple[int, int], ...] = tuple(
@@ -795,13 +788,14 @@ class Firmware:
         for (time_us, contact, x, y, f0, f1, f2, f3, lateral, amplitude, voltage, current,
              uv, ev, texture, queued, sim_faults) in columns:  # fmt: skip
             session.expire(time_us * TIME_UNIT_S)
-            self._emit(_state((
-                time_us & _U32, self._sequence, self._flags(static, contact), x, y,
-                (f0, f1, f2, f3), lateral, amplitude, voltage, current, uv, ev, texture,
-                self._faults(sim_faults, clipped), self.input_dropped & _U16,
-                self.rejected_requests & _U16, min(max(queued, 0), _U16), echo, generation,
-                session.number, session.token or 0, self._echo_age(time_us),
-            )))  # fmt: skip
+            faults = self._faults(sim_faults, clipped)
+            self._emit(_STATE_PACK(
+                _STATE_ID, time_us & _U32, self._sequence, self._flags(static, contact), x, y,
+                f0, f1, f2, f3, lateral, amplitude, voltage, current, uv, ev, texture, faults,
+                self.input_dropped & _U16, self.rejected_requests & _U16,
+                min(max(queued, 0), _U16), echo, generation, session.number,
+                session.token or 0, self._echo_age(time_us),
+            ), faults)  # fmt: skip
 
     def _covered_faults(self, faults: np.ndarray, ends: range, any_fault: int) -> list[int]:
         """The simulation faults of each interval a block completes (``ends``: the frames that
@@ -872,12 +866,12 @@ class Firmware:
         self._pending_faults = 0
         return faults & _U16
 
-    def _emit(self, report: State) -> None:
-        """Queue a STATE report, dropping the oldest when the queue is full (rule PT5)."""
-        self.latched_faults |= report.faults
+    def _emit(self, data: bytes, faults: int) -> None:
+        """Queue a STATE report (its bytes, and its ``faults``), dropping the oldest when the
+        queue is full (rule PT5)."""
+        self.latched_faults |= faults
         self._sequence = (self._sequence + 1) & _U16
         self.input_reports += 1
-        data = report.encode()
         self._latest = data
         if len(self._queue) >= self.input_capacity:
             self._queue.popleft()

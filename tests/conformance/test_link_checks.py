@@ -193,9 +193,9 @@ def test_drops_reports_fails_the_loss_fraction_only() -> None:
 class SilentLossFirmware(LossyFirmware):
     """Loses 5 % of its STATE reports and numbers them, but counts none (test only)."""
 
-    def _emit(self, report: State) -> None:
+    def _emit(self, data: bytes, faults: int) -> None:
         if self._draws.random() >= self.dropped_fraction:
-            super(LossyFirmware, self)._emit(report)
+            super(LossyFirmware, self)._emit(data, faults)
             return
         self._sequence = (self._sequence + 1) & 0xFFFF
         self.input_reports += 1
@@ -204,9 +204,9 @@ class SilentLossFirmware(LossyFirmware):
 class UnnumberedLossFirmware(LossyFirmware):
     """Loses 5 % of its STATE reports without numbering or counting them (test only)."""
 
-    def _emit(self, report: State) -> None:
+    def _emit(self, data: bytes, faults: int) -> None:
         if self._draws.random() >= self.dropped_fraction:
-            super(LossyFirmware, self)._emit(report)
+            super(LossyFirmware, self)._emit(data, faults)
 
 
 def _firmware_context(name: str, firmware_cls: type[LossyFirmware]) -> Context:

@@ -280,18 +280,18 @@ def test_touch_sensor_samples_at_50_hz_and_holds():
     sim.use_internal_finger(diagonal_track())
     block = sim.step(4000)
     touch = block.touch
-    sample_times = np.unique(touch.t_s[np.isfinite(touch.t_s)])
+    sample_times = np.unique(touch["t_s"][np.isfinite(touch["t_s"])])
     np.testing.assert_allclose(np.diff(sample_times), 0.02, atol=1e-12)
     held = np.searchsorted(sample_times, block.t_s, side="right") - 1
-    np.testing.assert_array_equal(touch.t_s, sample_times[held])
-    for value in (touch.x_mm, touch.y_mm):  # constant between samples
+    np.testing.assert_array_equal(touch["t_s"], sample_times[held])
+    for value in (touch["x_mm"], touch["y_mm"]):  # constant between samples
         changes = np.flatnonzero(np.diff(value)) + 1
         assert np.isin(block.t_s[changes], sample_times).all()
     at_sample = np.isin(block.t_s, sample_times)
-    jitter = touch.x_mm[at_sample] - block.finger_x_mm[at_sample]
+    jitter = touch["x_mm"][at_sample] - block.finger_x_mm[at_sample]
     assert np.abs(jitter).max() < 5 * EVITA.touch_noise_mm
     assert np.std(jitter) > 0.3 * EVITA.touch_noise_mm
-    assert touch.contact[at_sample].all()
+    assert touch["contact"][at_sample].all()
 
 
 # --------------------------------------------------------------- cards felt through the device

@@ -86,9 +86,14 @@ class EVAmplifier:
         """Output at zero."""
         self.voltage_v = 0.0
 
-    def _budget(self, capacitance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Rate budget ``R`` (V/s) and whether the current (not the slew) sets it."""
+    def _budget(self, capacitance: np.ndarray | float
+                ) -> tuple[np.ndarray | float, np.ndarray | bool]:
+        """Rate budget ``R`` (V/s) and whether the current (not the slew) sets it, per frame
+        (numbers for one capacitance, F)."""
         limit = self.max_current_a * (1.0 - _SLACK)
+        if isinstance(capacitance, float):
+            current_rate = limit / capacitance if capacitance > 0 else math.inf
+            return min(self.slew_v_per_s, current_rate), current_rate < self.slew_v_per_s
         by_current = np.empty(capacitance.shape)
         by_current.fill(np.inf)
         np.divide(limit, capacitance, out=by_current, where=capacitance > 0)
@@ -99,18 +104,26 @@ class EVAmplifier:
 
         Args:
             command: (N,) commanded peak envelope, V (negative and NaN read as 0).
-            capacitance: (N,) load capacitance through the user, F (0 without contact).
+            capacitance: (N,) load capacitance through the user, F (0 without contact), or
+                one number for every frame (the same numbers, without per-frame budgets).
         """
         cmd = _command(command)
-        cap = np.maximum(np.asarray(capacitance, dtype=np.float64), 0.0)
+        if isinstance(capacitance, float | int) or getattr(capacitance, "ndim", 1) == 0:
+            cap: np.ndarray | float = max(float(capacitance), 0.0)  # NaN stays NaN
+        else:
+            cap = np.maximum(np.asarray(capacitance, dtype=np.float64), 0.0)
         n = cmd.shape[0]
         if self._idle(cmd):
             # Off and commanded off: the envelope stays at 0 V (what the recursion gives).
             zeros = np.zeros(n, dtype=bool)
-            return AmplifierRun(np.zeros(n), cap * 0.0, zeros, zeros.copy())
+            return AmplifierRun(np.zeros(n), np.multiply(cap, np.zeros(n)), zeros, zeros.copy())
         budget, by_current = self._budget(cap)
         w, dt = self.omega, self.dt
-        steady = np.minimum(self.max_voltage_v, budget / w)
+        if isinstance(budget, float):
+            steady: np.ndarray | float = min(self.max_voltage_v, budget / w)
+            budget_at: np.ndarray | float = budget  # the budget of frames k.. (one for all)
+        else:
+            steady = np.minimum(self.max_voltage_v, budget / w)
         target = np.minimum(cmd, steady)
         volts = np.empty(n)
         hard = np.zeros(n, dtype=bool)
@@ -121,8 +134,10 @@ class EVAmplifier:
             # Vectorised pass: the clipped command, checked against the rate bounds.
             v = target[k:]
             before = np.concatenate(([prev], v[:-1]))
-            hi = (budget[k:] + before / dt) / (w + 1.0 / dt)
-            lo = before - dt * (budget[k:] - w * before)
+            if not isinstance(budget, float):
+                budget_at = budget[k:]
+            hi = (budget_at + before / dt) / (w + 1.0 / dt)
+            lo = before - dt * (budget_at - w * before)
             bad = (v > hi * (1 + 1e-12)) | (v < lo * (1 - 1e-12))
             j = int(bad.argmax()) if np.logical_or.reduce(bad) else v.shape[0]
             if k == 0 and j == n:
@@ -133,11 +148,11 @@ class EVAmplifier:
             k += j
             # Sample by sample while a rate bound binds.
             while k < n:
-                b = float(budget[k])
+                b = budget if isinstance(budget, float) else float(budget[k])
                 if w * prev > b or prev > self.max_voltage_v:
                     # The load outgrew the voltage, or the limit fell under it: the limiter
                     # saturates and the envelope collapses within the frame.
-                    value = float(steady[k])
+                    value = steady if isinstance(steady, float) else float(steady[k])
                     hard[k] = True
                 else:
                     high = (b + prev / dt) / (w + 1.0 / dt)

@@ -32,6 +32,7 @@ from hcard.physics.profile import DeviceProfile
 from hcard.track import FingerTrack
 from hcard_builtins.physics.finger import FingerFriction
 from hcard_device.sim.hidden import HiddenPhysics
+from hcard_device.sim.sensors import NormalDraws
 
 MM = 1e-3
 """Metres per millimetre."""
@@ -67,6 +68,19 @@ class FingerTruth:
         its input checks on them (the finger models that know it set it when they build
         the state)."""
         return finite_non_negative(self.fn_n, self.speed_m_s, self.contact_time_s)
+
+    def slice(self, start: int, stop: int) -> FingerTruth:
+        """The frames ``start .. stop - 1`` (views; checked when all frames are, which is
+        worked out once for the whole state)."""
+        part = object.__new__(FingerTruth)
+        part.__dict__.update(  # frozen: set as the dataclass __init__ would, without its checks
+            x_mm=self.x_mm[start:stop], y_mm=self.y_mm[start:stop], fn_n=self.fn_n[start:stop],
+            contact=self.contact[start:stop], speed_m_s=self.speed_m_s[start:stop],
+            contact_time_s=self.contact_time_s[start:stop], held=self.held,
+        )
+        if self.checked:
+            part.__dict__["checked"] = True  # as the cached property stores it
+        return part
 
     @staticmethod
     def absent(n: int) -> FingerTruth:
@@ -129,7 +143,7 @@ class TrackFinger:
         speed of the segment the time falls in."""
         i = np.searchsorted(self.t, times, side="right") - 1
         inside = (i >= 0) & (times <= self.t[-1])
-        j = np.clip(i, 0, len(self.t) - 1)
+        j = np.minimum(np.maximum(i, 0), len(self.t) - 1)
         x = np.interp(times, self.t, self.x)
         y = np.interp(times, self.t, self.y)
         fn = np.maximum(np.interp(times, self.t, self.fn), 0.0)
@@ -212,22 +226,33 @@ class FingerPhysics:
     ) -> None:
         self.profile = profile
         self.lateral_noise_n = lateral_noise_n
-        self.rng = rng
+        self._draws = NormalDraws(rng)
         self.finger = finger if finger is not None else FingerFriction()
         self.hidden = hidden
 
+    @property
+    def rng(self) -> np.random.Generator:
+        """The random generator of the tribometer noise."""
+        return self._draws.rng
+
     def friction(
-        self, amplitude_m: np.ndarray, voltage_v: np.ndarray, truth: FingerTruth
+        self, amplitude_m: np.ndarray, voltage_v: np.ndarray, truth: FingerTruth, *,
+        measured: bool = False,
     ) -> np.ndarray:
-        """Relative friction felt ``F_t / (mu0 Fn)`` (Eq. 4.1) per frame; 1 without contact."""
+        """Relative friction felt ``F_t / (mu0 Fn)`` (Eq. 4.1) per frame; 1 without contact.
+
+        ``measured``: the amplitude and the voltage are the plate loop's and the amplifier's
+        outputs, one per frame, finite and >= 0 by construction (not checked again)."""
         if not np.logical_or.reduce(truth.contact):  # .any(), without its wrapper
             return np.ones(truth.contact.shape[0])
         shape = truth.fn_n.shape
         trusted = (
             amplitude_m.shape == shape and voltage_v.shape == shape and truth.checked
-            and finite_non_negative(amplitude_m)
-            # the voltage acts only through an EV channel
-            and (self.profile.ev_model is None or finite_non_negative(voltage_v))
+            and (measured or (
+                finite_non_negative(amplitude_m)
+                # the voltage acts only through an EV channel
+                and (self.profile.ev_model is None or finite_non_negative(voltage_v))
+            ))
         )
         uv, ev = self.profile.forward(amplitude_m, voltage_v, truth.speed_m_s, truth.fn_n,
                                       trusted=trusted)
@@ -237,27 +262,39 @@ class FingerPhysics:
                 ev = np.where(truth.fn_n > 0, 1.0 + hidden / truth.fn_n, 1.0)
         return np.where(truth.contact, uv * ev, 1.0)
 
-    def lateral_force(self, friction: np.ndarray, truth: FingerTruth) -> np.ndarray:
-        """Lateral force a tribometer measures, N: ``mu_f friction Fn`` plus noise."""
-        n = friction.shape[0]
-        force = np.zeros(n)
+    def coefficient(self, truth: FingerTruth) -> np.ndarray:
+        """The bare finger's friction coefficient ``mu_f = F_l / Fn`` (Eq. 1.8,
+        :class:`FingerFriction`) at each frame where it presses (contact and ``Fn > 0``), 0
+        elsewhere. A function of the finger's state alone (the simulation works it out with
+        the internal finger's frames ahead)."""
         pressing = truth.contact & (truth.fn_n > 0)
-        if np.logical_or.reduce(pressing):
-            every = np.logical_and.reduce(pressing)  # then no frame needs picking out
-            fn = truth.fn_n if every else truth.fn_n[pressing]
-            inputs = {
-                "normal_force": fn,
-                "speed": truth.speed_m_s if every else truth.speed_m_s[pressing],
-                "contact_time": truth.contact_time_s if every else truth.contact_time_s[pressing],
-            }
-            if truth.checked:
-                if truth.held:  # one speed: its factor (Fig. 1.12) is one number
-                    inputs["speed"] = truth.speed_m_s.item(0)
-                mu = self.finger.friction_coefficient_trusted(**inputs)
-            else:
-                mu = self.finger.friction_coefficient(**inputs)
-            if every:
-                force = mu * friction * fn
-            else:
-                force[pressing] = mu * friction[pressing] * fn
-        return force + self.rng.normal(0.0, 1.0, size=n) * self.lateral_noise_n
+        if not np.logical_or.reduce(pressing):
+            return np.zeros(pressing.shape[0])
+        every = np.logical_and.reduce(pressing)  # then no frame needs picking out
+        inputs = {
+            "normal_force": truth.fn_n if every else truth.fn_n[pressing],
+            "speed": truth.speed_m_s if every else truth.speed_m_s[pressing],
+            "contact_time": truth.contact_time_s if every else truth.contact_time_s[pressing],
+        }
+        if truth.checked:
+            if truth.held:  # one speed: its factor (Fig. 1.12) is one number
+                inputs["speed"] = truth.speed_m_s.item(0)
+            mu = self.finger.friction_coefficient_trusted(**inputs)
+        else:
+            mu = self.finger.friction_coefficient(**inputs)
+        if every:
+            return mu
+        out = np.zeros(pressing.shape[0])
+        out[pressing] = mu
+        return out
+
+    def lateral_force(self, friction: np.ndarray, truth: FingerTruth,
+                      coefficient: np.ndarray | None = None) -> np.ndarray:
+        """Lateral force a tribometer measures, N: ``mu_f friction Fn`` plus noise
+        (``coefficient``: :meth:`coefficient` of ``truth``, worked out when None)."""
+        if coefficient is None:
+            coefficient = self.coefficient(truth)
+        force = coefficient * friction
+        force *= truth.fn_n  # 0 where the finger does not press
+        force += self._draws.take(friction.shape[0]) * self.lateral_noise_n
+        return force

@@ -44,12 +44,18 @@ order process of gain ``K`` and time constant ``tau`` with apparent dead time ``
     Kp = 0.9 tau / (K L),  Ti = L / 0.3,  Ki = Kp / Ti.
 
 Vectorised solution. Between saturation events the loop is linear and time invariant (for a
-constant finger force), so :func:`scipy.signal.lfilter` runs the closed loop ``r -> A`` with its
-state carried in; the first sample where ``u_lin`` leaves ``[0, u_hi]`` is found with numpy, and
-from there the saturated plate (constant drive or the clamp; integrator frozen, unwinding or
-tracking) has a closed form until the controller comes back into range. The finger force is
-quantised to :data:`FORCE_QUANTUM_N` and the coefficients cached per quantum. The result is the
-sample-by-sample recursion above (tests/device/test_sim.py compares the two).
+constant finger force), so :func:`scipy.signal.lfilter` (its C core, :func:`closed_loop`) runs
+the closed loop ``r -> A`` with its state carried in; the first sample where ``u_lin`` leaves
+``[0, u_hi]`` is found with numpy, and from there the saturated plate (constant drive or the
+clamp; integrator frozen, unwinding or tracking) has a closed form until the controller comes back
+into range. The finger force is quantised to :data:`FORCE_QUANTUM_N` and the coefficients cached
+per quantum. The result is the sample-by-sample recursion above (tests/device/test_sim.py
+compares the two). A loop that chatters between modes (a one-sided drive following a reference
+that falls faster than the plate decays switches between zero drive and the linear loop every few
+samples) would cost a vectorised solve per switch, so after a run of at most
+:data:`SHORT_RUN_SAMPLES` samples the loop runs that recursion sample by sample until a mode
+lasts longer (:meth:`PlateLoop._steps`; the clamp and the brake are always solved vectorised);
+the two differ by rounding (tests/device/test_sim_steps.py).
 
 With the E-ViTa constants (:meth:`hcard_device.sim.DeviceConfig.evita`) the loop has its -3 dB
 point at 403 Hz for small references around 2 um (394 Hz at 3 N), a 0 -> 2 um step rises 10-90 %
@@ -65,6 +71,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.signal import lfilter
+
+try:  # the C core lfilter hands a filter with feedback to, after checking its arguments
+    from scipy.signal._sigtools import _linear_filter
+except ImportError:  # pragma: no cover - a SciPy without it: lfilter itself
+    _linear_filter = None
 
 FORCE_QUANTUM_N = 0.01
 """Resolution of the finger force seen by the plate model, N (the E-ViTa's damping changes by
@@ -89,6 +100,22 @@ AMPLITUDE_TOLERANCE_M = 1e-14
 """Guarantee of the clamp: the amplitude stays at or under ``limit (1 + LIMIT_SLACK) +
 AMPLITUDE_TOLERANCE_M`` (the drive slack lets it pass the limit by at most ``DRIVE_SLACK`` of the
 full-drive amplitude, a few femtometres)."""
+
+
+def closed_loop(num: np.ndarray, den: np.ndarray, reference: np.ndarray,
+                state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`scipy.signal.lfilter` ``(num, den, reference, zi=state)`` of float64 arrays
+    (``den[0] = 1``, two states): the same numbers without lfilter's argument handling, which
+    costs twice the filtering itself on the few hundred samples of a real-time step."""
+    if _linear_filter is None:  # pragma: no cover
+        return lfilter(num, den, reference, zi=state)
+    return _linear_filter(num, den, reference, -1, state)
+
+
+SHORT_RUN_SAMPLES = 8
+"""A mode the vectorised solver finds to last this many loop samples or fewer hands the loop to
+the sample recursion, which costs about as much per sample as the vectorised solver costs per
+run of samples."""
 
 _LINEAR, _LOW, _HIGH, _OVER = 0, 1, 2, 3
 """Loop modes: linear, drive at 0, drive at its upper bound, plate above the limit."""
@@ -177,6 +204,8 @@ class _Coefficients:
         c: ``Ki T``, 1/m.
         num, den: the closed loop ``r -> A`` as a filter.
         phi11, phi12: first row of the state matrix.
+        state_slope: ``phi11 + den[1]``: the filter's second state is ``state_slope A +
+            phi12 I`` for the loop state ``(A, I)``.
         full: full-drive amplitude ``G``, m.
         decay: ``a ** k`` for ``k = 0 .. MAX_SEGMENT_SAMPLES`` (the saturated plate).
     """
@@ -188,6 +217,7 @@ class _Coefficients:
     den: np.ndarray
     phi11: float
     phi12: float
+    state_slope: float
     full: float
     decay: np.ndarray
 
@@ -231,6 +261,7 @@ class PlateLoop:
         self._limit = 0.0
         self._brake = 0.0
         self._cache: dict[int, _Coefficients] = {}
+        self._chattering = False  # the last vectorised run was short: step sample by sample
         self.limit_m = limit_m
         self.brake_drive = brake_drive
 
@@ -279,6 +310,7 @@ class PlateLoop:
         """Plate at rest, integrator cleared."""
         self.amplitude_m = 0.0
         self.integrator = 0.0
+        self._chattering = False
 
     def _coefficients(self, key: int) -> _Coefficients:
         cached = self._cache.get(key)
@@ -296,7 +328,7 @@ class PlateLoop:
         num = np.array([0.0, gamma1, phi12 * gamma2 - phi22 * gamma1])
         decay = a ** np.arange(MAX_SEGMENT_SAMPLES + 1, dtype=np.float64)
         decay.flags.writeable = False
-        co = _Coefficients(a, g, c, num, den, phi11, phi12, full, decay)
+        co = _Coefficients(a, g, c, num, den, phi11, phi12, float(phi11 + den[1]), full, decay)
         self._cache[key] = co
         return co
 
@@ -308,7 +340,8 @@ class PlateLoop:
             normal_force: (N,) finger force on the plate per loop sample, N (0 without
                 contact).
         """
-        ref = np.asarray(reference, dtype=np.float64).clip(0.0, self._limit)
+        ref = np.maximum(np.asarray(reference, dtype=np.float64), 0.0)
+        np.minimum(ref, self._limit, out=ref)  # clipped to [0, limit]
         n = ref.shape[0]
         if self.amplitude_m == 0.0 and self.integrator == 0.0 and not np.logical_or.reduce(ref):
             return PlateRun(np.zeros(n), np.zeros(n), np.zeros(n, dtype=bool))  # at rest
@@ -321,7 +354,7 @@ class PlateLoop:
             for s in range(start, end, MAX_SEGMENT_SAMPLES):
                 e = min(s + MAX_SEGMENT_SAMPLES, end)
                 self._segment(ref[s:e], co, amplitude[s : e + 1], drive[s:e], clamped[s:e])
-        return PlateRun(np.maximum(amplitude[1:], 0.0), drive, clamped)
+        return PlateRun(np.maximum(amplitude[1:], 0.0, out=amplitude[1:]), drive, clamped)
 
     # -- one constant-force run ------------------------------------------------------------
     def _brake_run(
@@ -344,16 +377,6 @@ class PlateLoop:
                 leave[m + 1] = True
         return amps, applied, leave
 
-    def _mode(self, amp: float, integ: float, ref: float, co: _Coefficients) -> int:
-        if amp > self._limit * (1.0 + LIMIT_SLACK):
-            return _OVER
-        u = self.gains.kp * (ref - amp) + integ
-        if u < -DRIVE_SLACK:
-            return _LOW
-        if u > min(1.0, max((self._limit - co.a * amp) / co.g, 0.0)) + DRIVE_SLACK:
-            return _HIGH
-        return _LINEAR
-
     def _segment(
         self,
         ref: np.ndarray,
@@ -366,32 +389,59 @@ class PlateLoop:
         ``amp_out[k + 1]`` receives the amplitude after sample ``k``."""
         n = ref.shape[0]
         kp, lim = self.gains.kp, self._limit
+        over, a, g, c = lim * (1.0 + LIMIT_SLACK), co.a, co.g, co.c
         amp, integ = self.amplitude_m, self.integrator
         k = 0
         while k < n:
-            mode = self._mode(amp, integ, float(ref[k]), co)
+            if self._chattering:
+                k, amp, integ = self._steps(ref, k, amp, integ, co, amp_out, drive_out)
+                if k >= n:
+                    break
+            # the mode of sample k: above the limit, or where the PI's drive falls
+            if amp > over:
+                mode = _OVER
+            else:
+                u = kp * (float(ref[k]) - amp) + integ
+                if u < -DRIVE_SLACK:
+                    mode = _LOW
+                elif u > min(1.0, max((lim - a * amp) / g, 0.0)) + DRIVE_SLACK:
+                    mode = _HIGH
+                else:
+                    mode = _LINEAR
             rest = ref[k:]
             if mode == _LINEAR:
-                zi = np.array([amp, (co.phi11 + co.den[1]) * amp + co.phi12 * integ])
-                amps, zf = lfilter(co.num, co.den, rest, zi=zi)
+                zi = np.array((amp, co.state_slope * amp + co.phi12 * integ))
+                amps, zf = closed_loop(co.num, co.den, rest, zi)
                 err = rest - amps
-                integs = integ + co.c * (err.cumsum() - err)
-                u = kp * err + integs
-                u_hi = (lim - co.a * amps) / co.g  # clipped to [0, 1] (only compared)
+                integs = err.cumsum()
+                integs -= err
+                integs *= c
+                integs += integ  # integ + c (cumsum(err) - err): the integrator before each
+                u = kp * err
+                u += integs
+                u_hi = a * amps  # (lim - a A) / g + slack, its bound clipped to [0, 1]
+                np.subtract(lim, u_hi, out=u_hi)
+                u_hi /= g
                 np.minimum(np.maximum(u_hi, 0.0, out=u_hi), 1.0, out=u_hi)
-                bad = (u < -DRIVE_SLACK) | (u > u_hi + DRIVE_SLACK)
-                j = int(bad.argmax()) if np.logical_or.reduce(bad) else rest.shape[0]
+                u_hi += DRIVE_SLACK
+                bad = u > u_hi
+                bad |= u < -DRIVE_SLACK
+                j = int(bad.argmax())  # the first sample out of range (0: none, or the first)
+                if j == 0 and not bad[0]:
+                    j = rest.shape[0]
                 if j == 0:  # rounding put the boundary sample out of range: saturate it
                     mode = _LOW if u[0] < -DRIVE_SLACK else _HIGH
                 else:
-                    drive_out[k : k + j] = u[:j].clip(0.0, 1.0)
+                    drive = drive_out[k : k + j]
+                    np.minimum(np.maximum(u[:j], 0.0, out=drive), 1.0, out=drive)
                     if j == rest.shape[0]:
                         amp_out[k + 1 : k + j] = amps[1:j]
-                        amp, integ = float(zf[0]), float(integs[-1] + co.c * err[-1])
+                        amp, integ = float(zf[0]), float(integs[-1] + c * err[-1])
                         amp_out[k + j] = amp
                     else:
                         amp_out[k + 1 : k + j + 1] = amps[1 : j + 1]
                         amp, integ = float(amps[j]), float(integs[j])
+                        self._chattering = j <= SHORT_RUN_SAMPLES
                     k += j
                     continue
             # Saturated: constant drive, the clamp or the brake. The integrator is frozen at full
@@ -399,33 +449,45 @@ class PlateLoop:
             # and zero drive while the brake acts.
             decay = co.decay[: rest.shape[0] + 1]
             integs = np.empty(rest.shape[0] + 1)
-            integs.fill(integ)
+            integs[0] = integ
             if mode == _HIGH:
                 amps = co.full + (amp - co.full) * decay
                 np.minimum(amps, lim, out=amps)
                 amps[0] = amp
-                applied = ((lim - co.a * amps[:-1]) / co.g).clip(0.0, 1.0)
+                applied = a * amps[:-1]  # ((lim - a A) / g) clipped to [0, 1]
+                np.subtract(lim, applied, out=applied)
+                applied /= g
+                np.minimum(np.maximum(applied, 0.0, out=applied), 1.0, out=applied)
                 tracking = applied < 1.0
                 err = rest - amps[:-1]
                 integs[1:] = np.where(tracking, applied - kp * err, integ)
-                u_lin = kp * err + integs[:-1]
-                leave = u_lin <= applied + DRIVE_SLACK
-                clamp = tracking & (u_lin > applied + DRIVE_SLACK)
+                u_lin = kp * err
+                u_lin += integs[:-1]
+                ceiling = applied + DRIVE_SLACK
+                leave = u_lin <= ceiling
+                clamp = tracking & ~leave  # tracking and above the applied drive
             elif mode == _OVER:
                 amps, applied, leave = self._brake_run(amp, lim, decay, co)
                 err = rest - amps[:-1]
                 clamp = np.ones(rest.shape[0], dtype=bool)
-                integs[1:] = -kp * err
+                np.multiply(-kp, err, out=integs[1:])
             else:
                 # Zero drive. The error is negative here (u_lin < 0 and I >= 0): the
                 # integrator unwinds, down to zero drive at most.
                 amps = amp * decay
                 err = rest - amps[:-1]
                 applied = clamp = None  # zero drive, no clamp (clamp_out is zero already)
-                integs[1:] = np.maximum(integ + co.c * err.cumsum(), min(integ, 0.0))
-                leave = kp * err + integs[:-1] >= -DRIVE_SLACK
+                unwound = err.cumsum()
+                unwound *= c
+                unwound += integ
+                np.maximum(unwound, min(integ, 0.0), out=integs[1:])
+                u_lin = kp * err
+                u_lin += integs[:-1]
+                leave = u_lin >= -DRIVE_SLACK
             leave[0] = False
-            j = int(leave.argmax()) if np.logical_or.reduce(leave) else rest.shape[0]
+            j = int(leave.argmax())  # the first sample that leaves the mode (0: none)
+            if j == 0:
+                j = rest.shape[0]
             if applied is None:
                 drive_out[k : k + j] = 0.0
             else:
@@ -433,5 +495,62 @@ class PlateLoop:
                 clamp_out[k : k + j] = clamp[:j]
             amp_out[k + 1 : k + j + 1] = amps[1 : j + 1]
             amp, integ = float(amps[j]), float(integs[j])
+            self._chattering = mode != _OVER and j <= SHORT_RUN_SAMPLES and k + j < n
             k += j
         self.amplitude_m, self.integrator = amp, integ
+
+    def _steps(
+        self,
+        ref: np.ndarray,
+        k: int,
+        amp: float,
+        integ: float,
+        co: _Coefficients,
+        amp_out: np.ndarray,
+        drive_out: np.ndarray,
+    ) -> tuple[int, float, float]:
+        """The recursion of the module documentation sample by sample from sample ``k`` (loop
+        state ``amp``, ``integ``) until one mode has lasted :data:`SHORT_RUN_SAMPLES` samples,
+        the safety clamp or the brake would act (left to the vectorised solver), or ``ref``
+        ends; returns the next sample and the loop state there. Writes the amplitudes and
+        drives as :meth:`_segment` does (the clamp never acts here)."""
+        n = ref.shape[0]
+        kp, lim = self.gains.kp, self._limit
+        over, a, g, c, full = lim * (1.0 + LIMIT_SLACK), co.a, co.g, co.c, co.full
+        start, last, lasted, handed_back = k, -1, 0, False
+        amps: list[float] = []
+        drives: list[float] = []
+        while k < n and not handed_back:
+            for r in ref[k : k + 4 * SHORT_RUN_SAMPLES].tolist():
+                if amp > over:
+                    handed_back = True  # the brake
+                    break
+                e = r - amp
+                u = kp * e + integ
+                if u < -DRIVE_SLACK:  # zero drive; the integrator unwinds, not below zero drive
+                    mode, drive = _LOW, 0.0
+                    amp, integ = amp * a, max(integ + c * e, min(integ, 0.0))
+                else:
+                    bound = min(1.0, max((lim - a * amp) / g, 0.0))
+                    if u > bound + DRIVE_SLACK:
+                        if bound < 1.0:
+                            handed_back = True  # the safety clamp
+                            break
+                        mode, drive = _HIGH, 1.0  # full drive; the integrator holds
+                        amp = min(full + (amp - full) * a, lim)
+                    else:
+                        mode, drive = _LINEAR, min(max(u, 0.0), 1.0)
+                        amp, integ = a * amp + g * u, integ + c * e
+                amps.append(amp)
+                drives.append(drive)
+                lasted = lasted + 1 if mode == last else 1
+                last = mode
+                k += 1
+                if lasted >= SHORT_RUN_SAMPLES:
+                    handed_back = True
+                    break
+        self._chattering = not handed_back  # the chatter may go on in the next run
+        if k > start:
+            amp_out[start + 1 : k + 1] = amps
+            drive_out[start:k] = drives
+        return k, amp, integ

@@ -28,6 +28,41 @@ import numpy as np
 CORNERS = ("top-left", "top-right", "bottom-left", "bottom-right")
 """Order of the four corner sensors in every (N, 4) force array."""
 
+NOISE_BATCH = 8192
+"""Standard normal numbers a :class:`NormalDraws` takes from its generator at a time."""
+
+
+class NormalDraws:
+    """Standard normal numbers from one generator, handed out in order.
+
+    A :class:`numpy.random.Generator` gives the same sequence however its normal draws are
+    batched, so drawing :data:`NOISE_BATCH` numbers at a time and handing them out in order
+    gives a sensor exactly the numbers it would draw itself on every call, without the cost of
+    a small draw per simulation step.
+
+    Args:
+        rng: the generator (used by nothing else).
+    """
+
+    def __init__(self, rng: np.random.Generator) -> None:
+        self.rng = rng
+        self._buffer = np.zeros(0)
+        self._next = 0
+
+    def take(self, count: int) -> np.ndarray:
+        """The next ``count`` numbers (read-only)."""
+        start, end = self._next, self._next + count
+        if end <= self._buffer.shape[0]:
+            self._next = end
+            return self._buffer[start:end]
+        rest = self._buffer[start:]
+        self._buffer = self.rng.normal(0.0, 1.0, size=max(NOISE_BATCH, count - rest.shape[0]))
+        self._buffer.flags.writeable = False
+        self._next = count - rest.shape[0]
+        if not rest.shape[0]:
+            return self._buffer[: self._next]
+        return np.concatenate((rest, self._buffer[: self._next]))
+
 
 @dataclass(frozen=True)
 class TouchSamples:
@@ -43,8 +78,8 @@ class TouchSamples:
 
     @staticmethod
     def empty() -> TouchSamples:
-        """No samples."""
-        return TouchSamples(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool))
+        """No samples (one shared instance: its arrays are never written to)."""
+        return _NO_SAMPLES
 
     def concat(self, other: TouchSamples) -> TouchSamples:
         """These samples followed by ``other`` (``self`` itself when ``other`` is empty: the
@@ -79,13 +114,24 @@ class TouchSamples:
         return speed, slope, np.concatenate(([0.0], dt / 2))
 
     def tail(self, count: int) -> TouchSamples:
-        """The last ``count`` samples (``self`` itself when it has no more)."""
+        """The last ``count`` samples (``self`` itself when it has no more); their
+        :attr:`kinematics` from these samples' when known (the same numbers, but for the first
+        sample's speed and interval and the first three slopes, which have no samples before
+        them in the tail)."""
         start = max(len(self) - count, 0)
         if start == 0:
             return self
-        return TouchSamples(
-            self.t[start:], self.x[start:], self.y[start:], self.contact[start:]
-        )
+        part = TouchSamples(self.t[start:], self.x[start:], self.y[start:], self.contact[start:])
+        known = self.__dict__.get("kinematics")
+        if known is not None:
+            speed, slope, half = (values[start:].copy() for values in known)
+            speed[0] = half[0] = 0.0
+            slope[:3] = 0.0
+            part.__dict__["kinematics"] = (speed, slope, half)  # as the cached property stores it
+        return part
+
+
+_NO_SAMPLES = TouchSamples(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool))
 
 
 class TouchSensor:
@@ -100,7 +146,12 @@ class TouchSensor:
     def __init__(self, rate_hz: float, noise_mm: float, rng: np.random.Generator) -> None:
         self.rate_hz = rate_hz
         self.noise_mm = noise_mm
-        self.rng = rng
+        self._draws = NormalDraws(rng)
+
+    @property
+    def rng(self) -> np.random.Generator:
+        """The random generator of the jitter."""
+        return self._draws.rng
 
     def sample_times(self, t0: float, t1: float) -> np.ndarray:
         """The sensor's sample times in ``[t0, t1)``, s."""
@@ -115,7 +166,7 @@ class TouchSensor:
         gets the jitter (where there is no contact the panel still reports the last place, with
         jitter, as capacitive panels do while hovering ends)."""
         m = t.shape[0]
-        jitter = self.rng.normal(0.0, 1.0, size=(m, 2)) * self.noise_mm
+        jitter = self._draws.take(2 * m).reshape(m, 2) * self.noise_mm
         return TouchSamples(
             t.copy(), x + jitter[:, 0], y + jitter[:, 1], np.asarray(contact, dtype=bool).copy()
         )
@@ -127,8 +178,8 @@ def hold(samples: TouchSamples, times: np.ndarray) -> np.ndarray:
 
 
 def predicted_speed(samples: TouchSamples, times: np.ndarray, horizon_s: float) -> np.ndarray:
-    """Finger speed at each time, mm/s, predicted from the touch samples for velocity
-    compensation.
+    """Finger speed at each of the rising ``times`` (s), mm/s, predicted from the touch samples
+    for velocity compensation.
 
     Each sample's speed is the renderer's two-sample estimate ``|p_i - p_(i-1)| / (t_i -
     t_(i-1))`` (both in contact, else 0), which describes the middle of the interval, half a
@@ -144,7 +195,7 @@ def predicted_speed(samples: TouchSamples, times: np.ndarray, horizon_s: float) 
         return out
     speed, slope, half = samples.kinematics
     index = hold(samples, times)
-    if index.shape[0] and np.minimum.reduce(index) == np.maximum.reduce(index):
+    if index.shape[0] and index[0] == index[-1]:  # the index never falls
         # Every time holds one sample (the common block between two touch samples).
         i = index.item(0)
         if i < 0:
@@ -174,7 +225,12 @@ class CornerForceSensors:
         self.width_mm = width_mm
         self.height_mm = height_mm
         self.noise_n = noise_n
-        self.rng = rng
+        self._draws = NormalDraws(rng)
+
+    @property
+    def rng(self) -> np.random.Generator:
+        """The random generator of the noise."""
+        return self._draws.rng
 
     def split(self, force_n: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray) -> np.ndarray:
         """(N, 4) noiseless corner forces (order :data:`CORNERS`) of a force at ``(x, y)``;
@@ -207,9 +263,14 @@ class CornerForceSensors:
 
     def measure(self, force_n: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray) -> np.ndarray:
         """(N, 4) measured corner forces, N: :meth:`split` plus each sensor's noise."""
-        forces = self.split(force_n, x_mm, y_mm)
-        forces += self.rng.normal(0.0, 1.0, size=forces.shape) * self.noise_n
-        return forces
+        return self.add_noise(self.split(force_n, x_mm, y_mm))
+
+    def add_noise(self, forces_n: np.ndarray) -> np.ndarray:
+        """(N, 4) corner forces ``forces_n`` (N, noiseless; not modified) plus each sensor's
+        noise, a new array."""
+        n = forces_n.shape[0]
+        noise = np.multiply(self._draws.take(4 * n).reshape(n, 4), self.noise_n)
+        return np.add(forces_n, noise, out=noise)
 
 
 def locate(

@@ -36,8 +36,14 @@ clipped card) are set on every frame they hold; event flags (``STREAM_OVERRUN``,
 ``INVALID_REQUEST``) on the first frame of the step after the event.
 
 Determinism: every noise source has its own generator seeded from ``seed``, so a run is
-reproducible, and splitting a run into steps of other sizes gives the same numbers (to
-rounding).
+reproducible, and splitting a run into steps of other sizes gives the same numbers: every frame
+field is identical except those the plate loop's rounding reaches, which its vectorised
+solution rounds differently for other cut points (amplitude within 1e-15 m, felt friction within
+1e-9, lateral force within 1e-10 N; tests/device/test_sim_steps.py). A real-time server steps
+every 5 ms (``step(50)``), so the fixed cost of a step is kept small: the internal finger's state
+along its track, the corner sensors' noiseless forces and the bare finger's friction coefficient
+are worked out :data:`LOOKAHEAD_FRAMES` ahead, and the sensors' noise is drawn in batches, all
+giving the numbers of a computation frame by frame.
 """
 
 from __future__ import annotations
@@ -84,6 +90,12 @@ BRAKE_DRIVE = 1.0
 """Antiphase drive that brakes a plate above a lowered amplitude limit, fraction of full drive:
 the inverter reverses its phase at full drive (:class:`.plate.PlateLoop` ``brake_drive``)."""
 
+LOOKAHEAD_FRAMES = 1000
+"""Frames of the internal finger worked out at a time (0.1 s at 10 kHz): its true state along
+its track, the corner sensors' noiseless forces and the bare finger's friction coefficient
+depend on nothing but the frame's time, so they are computed this far ahead and handed out in
+slices, the numbers of a computation step by step."""
+
 _TARGET_TOLERANCE = 1e-9
 
 
@@ -118,7 +130,8 @@ class SimBlock:
         lateral_force_n: lateral force a tribometer measures, N (with noise).
         normal_force_n: the finger's true normal force on the plate, N.
         corner_forces_n: (N, 4) corner force sensors, N (order ``sensors.CORNERS``).
-        touch: (N,) record array of the held touch sample (:data:`TOUCH_DTYPE`).
+        touch: (N,) structured array of the held touch sample (:data:`TOUCH_DTYPE`; fields
+            by name, ``touch["x_mm"]``).
         texture: (N,) palette index the renderer plays, -1 for a neutral frame (no card, no
             contact, off the card, or direct streaming).
         finger_x_mm, finger_y_mm: the finger's true position, mm.
@@ -139,7 +152,7 @@ class SimBlock:
     lateral_force_n: np.ndarray
     normal_force_n: np.ndarray
     corner_forces_n: np.ndarray
-    touch: np.recarray
+    touch: np.ndarray
     texture: np.ndarray
     finger_x_mm: np.ndarray
     finger_y_mm: np.ndarray
@@ -159,14 +172,21 @@ class SimBlock:
         """Per-frame mask of frames with ``fault`` set."""
         return (self.faults & int(fault)) != 0
 
+    @classmethod
+    def _of(cls, **values: np.ndarray) -> SimBlock:
+        """A block of ``values`` (every field, by name), made as ``SimBlock(**values)`` is
+        without the frozen dataclass's field by field ``__setattr__`` (a step makes one)."""
+        block = object.__new__(cls)
+        block.__dict__.update(values)
+        return block
+
     @staticmethod
     def concatenate(blocks: list[SimBlock]) -> SimBlock:
         """The frames of ``blocks`` one after another."""
         values = {}
         for f in fields(SimBlock):
             parts = [getattr(b, f.name) for b in blocks]
-            joined = np.concatenate(parts)
-            values[f.name] = joined.view(np.recarray) if f.name == "touch" else joined
+            values[f.name] = np.concatenate(parts)
         return SimBlock(**values)
 
 
@@ -229,6 +249,9 @@ class DeviceSimulation:
         self._running = False
         self._gain = 0.0
         self._finger: TrackFinger | HostFinger | None = None
+        # the internal finger's frames ahead: (finger, first frame, truth, noiseless corners,
+        # bare finger's friction coefficient)
+        self._ahead: tuple[TrackFinger, int, FingerTruth, np.ndarray, np.ndarray] | None = None
         self._history = TouchSamples.empty()
         self._pending = TouchSamples.empty()
         self._host_clock = HostClock()
@@ -620,63 +643,66 @@ class DeviceSimulation:
             self._events = 0
 
         # 1-2. finger, sensors.
-        truth = self._finger.state(times) if self._finger is not None else FingerTruth.absent(n)
+        truth, split, coefficient = self._finger_frames(times)
         new = self._sense_touch(self._frame / rate, t_end)
         samples = self._history.concat(new)
         render_times = times + self._render_shift_s  # the samples' time line
-        index = hold(samples, render_times)
-        touch = np.zeros(n, dtype=TOUCH_DTYPE)
-        known = index >= 0
-        held = index[known]
-        touch["x_mm"][known] = samples.x[held]
-        touch["y_mm"][known] = samples.y[held]
-        touch["contact"][known] = samples.contact[held]
-        touch["t_s"] = np.nan
-        touch["t_s"][known] = samples.t[held] - self._render_shift_s
+        touch = self._held_touch(samples, render_times)
         speed_est = (
             predicted_speed(samples, render_times, self._options.dead_reckoning_s) * 1e-3
         )
         self._history = samples.tail(4)
-        corners = self.force_sensors.measure(truth.fn_n, truth.x_mm, truth.y_mm)
-        fn_est = np.maximum(corners.sum(axis=1), 0.0)
+        corners = self.force_sensors.add_noise(split)
+        fn_est = np.maximum(np.add.reduce(corners, axis=1), 0.0)
 
         # 3. targets.
         uv_t, ev_t, texture = self._targets(n)
 
         # 4. model-based rendering (neutral targets need no actuation).
-        if np.any(uv_t < 1.0) or np.any(ev_t > 1.0):
+        if np.logical_or.reduce(uv_t < 1.0) or np.logical_or.reduce(ev_t > 1.0):
             commands = actuate(self._profile, uv_t, ev_t, speed_est, fn_est)
             amplitude_raw, voltage_raw = commands.amplitude, commands.voltage
-            faults |= self._command_faults(uv_t, ev_t, commands.uv, commands.ev)
+            self._flag_commands(faults, uv_t, ev_t, commands.uv, commands.ev)
         else:
             amplitude_raw, voltage_raw = np.zeros(n), np.zeros(n)
 
         # 5. output gain (stop, watchdog).
         gain, tripped = self._output_gain(times)
-        faults[tripped] |= int(Faults.WATCHDOG)
-        amplitude_cmd = np.minimum(amplitude_raw * gain, self._limits.max_amplitude_m)
-        voltage_cmd = np.minimum(voltage_raw * gain, self._limits.max_voltage_v)
+        if tripped is not None:
+            faults[tripped] |= int(Faults.WATCHDOG)
+        if gain is not None:
+            amplitude_raw, voltage_raw = amplitude_raw * gain, voltage_raw * gain
+        amplitude_cmd = np.minimum(amplitude_raw, self._limits.max_amplitude_m)
+        voltage_cmd = np.minimum(voltage_raw, self._limits.max_voltage_v)
 
         # 6. physics.
         m = cfg.loop_samples_per_frame
-        plate = self.plate.run(np.repeat(amplitude_cmd, m), np.repeat(truth.fn_n, m))
-        amplitude = plate.amplitude.reshape(n, m).mean(axis=1)
+        plate = self.plate.run(amplitude_cmd.repeat(m), truth.fn_n.repeat(m))
+        amplitude = np.add.reduce(plate.amplitude.reshape(n, m), axis=1) / m  # frame mean
         if self.limits_pending and not self.plate.above_limit:
             self._commit_limits()  # the braked plate landed on the lowered limit (PS5)
-        faults[plate.clamped.reshape(n, m).any(axis=1)] |= int(Faults.AMPLITUDE_LIMIT)
+        if np.logical_or.reduce(plate.clamped):
+            faults[np.logical_or.reduce(plate.clamped.reshape(n, m), axis=1)] |= int(
+                Faults.AMPLITUDE_LIMIT)
         if self.amplifier is not None:
-            load = np.where(truth.contact, self.finger_capacitance_f, 0.0)
+            contact = truth.contact
+            if np.logical_and.reduce(contact):  # one load for the whole step: a number
+                load: np.ndarray | float = self.finger_capacitance_f
+            elif not np.logical_or.reduce(contact):
+                load = 0.0
+            else:
+                load = np.where(contact, self.finger_capacitance_f, 0.0)
             ev_run = self.amplifier.run(voltage_cmd, load)
             voltage, current = ev_run.voltage, ev_run.current
             faults[ev_run.voltage_limited] |= int(Faults.VOLTAGE_LIMIT)
             faults[ev_run.current_limited] |= int(Faults.CURRENT_LIMIT)
         else:
             voltage, current = np.zeros(n), np.zeros(n)
-        friction = self.finger_physics.friction(amplitude, voltage, truth)
-        lateral = self.finger_physics.lateral_force(friction, truth)
+        friction = self.finger_physics.friction(amplitude, voltage, truth, measured=True)
+        lateral = self.finger_physics.lateral_force(friction, truth, coefficient)
 
         self._frame += n
-        return SimBlock(
+        return SimBlock._of(
             t_s=times,
             target_uv=uv_t,
             target_ev=ev_t,
@@ -689,7 +715,7 @@ class DeviceSimulation:
             lateral_force_n=lateral,
             normal_force_n=truth.fn_n,
             corner_forces_n=corners,
-            touch=touch.view(np.recarray),
+            touch=touch,
             texture=texture,
             finger_x_mm=truth.x_mm,
             finger_y_mm=truth.y_mm,
@@ -717,28 +743,69 @@ class DeviceSimulation:
         if len(old):
             self._stream.push(old.t, old.x, old.y, None, old.contact)
 
+    def _finger_frames(
+        self, times: np.ndarray
+    ) -> tuple[FingerTruth, np.ndarray, np.ndarray | None]:
+        """The finger's true state at the frames of this step (at ``times``, s), the corner
+        sensors' noiseless forces (N, 4) under it and the bare finger's friction coefficient
+        (:meth:`.finger.FingerPhysics.coefficient`; None: not worked out); the internal
+        finger's from its frames ahead (:data:`LOOKAHEAD_FRAMES`)."""
+        finger, n = self._finger, times.shape[0]
+        if not isinstance(finger, TrackFinger):
+            truth = finger.state(times) if finger is not None else FingerTruth.absent(n)
+            return truth, self.force_sensors.split(truth.fn_n, truth.x_mm, truth.y_mm), None
+        ahead = self._ahead
+        if ahead is None or ahead[0] is not finger or not (
+            ahead[1] <= self._frame and self._frame + n <= ahead[1] + ahead[3].shape[0]
+        ):
+            count = max(n, LOOKAHEAD_FRAMES)
+            frames = (self._frame + np.arange(count, dtype=np.float64)) / self.config.frame_rate_hz
+            truth = finger.state(frames)
+            split = self.force_sensors.split(truth.fn_n, truth.x_mm, truth.y_mm)
+            coefficient = self.finger_physics.coefficient(truth)
+            split.flags.writeable = coefficient.flags.writeable = False
+            ahead = self._ahead = (finger, self._frame, truth, split, coefficient)
+        start, stop = self._frame - ahead[1], self._frame - ahead[1] + n
+        return ahead[2].slice(start, stop), ahead[3][start:stop], ahead[4][start:stop]
+
     def _sense_touch(self, t0: float, t1: float) -> TouchSamples:
         """Touch samples of this step: the panel's (internal finger) or the host's."""
         if isinstance(self._finger, TrackFinger):
             times = self.touch_sensor.sample_times(t0, t1)
             if times.shape[0] == 0:
                 return TouchSamples.empty()
-            state = self._finger.state(times)
-            samples = self.touch_sensor.measure(times, state.x_mm, state.y_mm, state.contact)
+            samples = self.touch_sensor.measure(times, *self._track_at(times))
             if self._stream is not None:
                 self._stream.push(samples.t, samples.x, samples.y, None, samples.contact)
             return samples
         samples, self._pending = self._pending, TouchSamples.empty()
         return samples
 
+    def _track_at(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The internal finger's position (mm) and contact at ``times`` (s, rising): from its
+        frames ahead when every time is a frame's time among them (the touch panel's clock
+        ticks on frames: the state is the same function of the same time), else from its
+        track."""
+        ahead, rate = self._ahead, self.config.frame_rate_hz
+        if ahead is not None and ahead[0] is self._finger:
+            frames = np.rint(times * rate)
+            index = frames - ahead[1]
+            truth = ahead[2]
+            if (index[0] >= 0 and index[-1] < truth.fn_n.shape[0]
+                    and np.logical_and.reduce(frames / rate == times)):
+                i = index.astype(np.intp)
+                return truth.x_mm[i], truth.y_mm[i], truth.contact[i]
+        state = self._finger.state(times)
+        return state.x_mm, state.y_mm, state.contact
+
     def _targets(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """UV and EV targets and the palette index of the next ``n`` frames."""
+        if self._stream is not None and not self._streaming:
+            frames = self._stream.render(n, time_shift_s=self._render_shift_s)
+            return frames.uv, frames.ev, frames.texture.astype(np.int32)
         neutral = np.full(n, -1, dtype=np.int32)
         if self._streaming:
             return (*self._pop_stream(n), neutral)
-        if self._stream is not None:
-            frames = self._stream.render(n, time_shift_s=self._render_shift_s)
-            return frames.uv, frames.ev, frames.texture.astype(np.int32)
         return np.ones(n), np.ones(n), neutral
 
     def _pop_stream(self, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -762,17 +829,41 @@ class DeviceSimulation:
         self._queue.clear()
         self._queued = 0
 
-    def _command_faults(
-        self, uv_t: np.ndarray, ev_t: np.ndarray, uv_r: np.ndarray, ev_r: np.ndarray
-    ) -> np.ndarray:
-        """Per-frame flags of the model-based rendering's clipping."""
-        n = uv_t.shape[0]
-        faults = np.zeros(n, dtype=np.uint16)
+    def _held_touch(self, samples: TouchSamples, render_times: np.ndarray) -> np.ndarray:
+        """The touch sample held at each frame (:data:`TOUCH_DTYPE`; ``render_times``: the
+        frames on the samples' time line, s). A step between two touch samples holds one
+        sample throughout: its fields are filled in at once."""
+        n = render_times.shape[0]
+        index = hold(samples, render_times)
+        touch = np.empty(n, dtype=TOUCH_DTYPE)
+        if n and index[0] == index[-1]:  # the index never falls: one sample throughout
+            i = int(index[0])
+            if i < 0:
+                touch.fill((0.0, 0.0, False, math.nan))
+            else:
+                touch.fill((samples.x[i], samples.y[i], samples.contact[i],
+                            samples.t[i] - self._render_shift_s))
+            return touch
+        touch.fill((0.0, 0.0, False, math.nan))
+        known = index >= 0
+        held = index[known]
+        touch["x_mm"][known] = samples.x[held]
+        touch["y_mm"][known] = samples.y[held]
+        touch["contact"][known] = samples.contact[held]
+        touch["t_s"][known] = samples.t[held] - self._render_shift_s
+        return touch
+
+    def _flag_commands(self, faults: np.ndarray, uv_t: np.ndarray, ev_t: np.ndarray,
+                       uv_r: np.ndarray, ev_r: np.ndarray) -> None:
+        """Add the flags of the model-based rendering's clipping to ``faults`` (per frame;
+        ``uv_r``, ``ev_r``: what the commands render of the targets ``uv_t``, ``ev_t``)."""
         uv_short = uv_r > uv_t + 1e-6
         ev_short = ev_r < ev_t - 1e-6
+        if not (np.logical_or.reduce(uv_short) or np.logical_or.reduce(ev_short)):
+            return  # every target rendered: nothing to flag
+        missing = None  # frames that need a channel the device lacks
         if self._profile.uv_model is not None and self._limits.max_amplitude_m > 0:
             faults[uv_short] |= int(Faults.AMPLITUDE_LIMIT)
-            missing = np.zeros(n, dtype=bool)
         else:
             missing = uv_short
         if self._profile.ev_model is not None and self._limits.max_voltage_v > 0:
@@ -780,20 +871,26 @@ class DeviceSimulation:
             flag = Faults.CURRENT_LIMIT if name == "max_current" else Faults.VOLTAGE_LIMIT
             faults[ev_short] |= int(flag)
         else:
-            missing = missing | ev_short
+            missing = ev_short if missing is None else missing | ev_short
         if not self._streaming and self._card_report.clipped:
             faults[uv_short | ev_short] |= int(Faults.CARD_CLIPPED)
-        faults[missing] |= int(Faults.CARD_CLIPPED)
-        return faults
+        if missing is not None:
+            faults[missing] |= int(Faults.CARD_CLIPPED)
 
-    def _output_gain(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Per-frame output gain and the frames where the watchdog has expired."""
+    def _output_gain(self, times: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """Per-frame output gain (None: 1 throughout) and the frames where the watchdog has
+        expired (None: none)."""
         n = times.shape[0]
-        if self.host_driven and self._running:
-            tripped = times >= self._last_feed + self.config.watchdog_s
-        else:
-            tripped = np.zeros(n, dtype=bool)
-        off = tripped | (not self._running)
+        tripped = None
+        if self.host_driven and self._running and n:
+            deadline = self._last_feed + self.config.watchdog_s
+            if times[-1] >= deadline:  # the times rise: the last frame tells if any trips
+                tripped = times >= deadline
+        if self._running and tripped is None:
+            if n:
+                self._gain = 1.0
+            return None, None
+        off = tripped if self._running else np.ones(n, dtype=bool)
         gain = np.ones(n)
         if off.any():
             first = int(np.argmax(off))
