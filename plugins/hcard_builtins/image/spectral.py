@@ -5,7 +5,7 @@ For every tile (``tile_h x tile_w`` pixels, see :mod:`.geometry`):
 1. mean and standard deviation of the gray levels; a tile whose standard deviation is below the
    smallest amplitude kept is near uniform and keeps its mean only (no spectrum is computed);
 2. a 2-D periodic Hann window and one batched real FFT of the other tiles
-   (:func:`scipy.fft.rfft2`); the windowed mean leaks into the DC bin and its neighbours only,
+   (:func:`.fft.rfft2`); the windowed mean leaks into the DC bin and its neighbours only,
    and is removed from them;
 3. peak picking in the half plane: bins above a magnitude threshold (set by the smallest
    amplitude kept), outside the DC bin and its neighbours and off the Nyquist row and column,
@@ -32,10 +32,10 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.fft
 
 from hcard import limits
 
+from .fft import rfft2
 from .geometry import Geometry
 from .textures import Textures, canonical, strongest_first
 
@@ -188,7 +188,7 @@ def analyse_tiles(tiles: np.ndarray, *, n_peaks: int, min_amplitude: float) -> T
         return result
     window = (hann_window(nh)[:, None] * hann_window(nw)[None, :]).astype(np.float32)
     block = np.multiply(tiles.transpose(0, 2, 1, 3)[active // cols, active % cols], window)
-    spectrum = scipy.fft.rfft2(block, workers=-1)  # (active, nh, nw // 2 + 1)
+    spectrum = rfft2(block)  # (active, nh, nw // 2 + 1)
     del block
     _remove_mean_leak(spectrum, nh, nw)
     local = _analyse_spectra(spectrum, nw, n_peaks, min_amplitude)
@@ -456,6 +456,7 @@ def to_surface(
     scale: float,
     min_amplitude: float,
     max_frequency: float = limits.MAX_SPATIAL_FREQUENCY,
+    first_row: int = 0,
 ) -> Textures:
     """Per-taxtel textures in surface units from the tile-local analysis.
 
@@ -467,10 +468,11 @@ def to_surface(
     (cycles/mm) are dropped, and so are all components of a taxtel whose friction standard
     deviation is below ``min_amplitude``. The baseline is the taxtel's mean friction minus the
     mean of its kept components over the tile, clipped to the friction range.
+    ``spectra`` holds whole taxtel rows, from row ``first_row`` on.
     """
     nh, nw = geometry.tile_h, geometry.tile_w
-    tile_row = np.repeat(np.arange(geometry.rows), geometry.cols)
-    tile_col = np.tile(np.arange(geometry.cols), geometry.rows)
+    tile_row, tile_col = np.divmod(np.arange(spectra.mean.size), geometry.cols)
+    tile_row += first_row
     kx = spectra.fx * (geometry.ppx / nw)
     ky = spectra.fy * (geometry.ppy / nh)
     x0 = (geometry.col_tile[tile_col] + 0.5) / geometry.ppx
