@@ -407,6 +407,11 @@ def test_reconstruction_error_matches_an_independent_render(tmp_path: Path):
             taxtel_max[row, col] = np.abs(block).max()
     np.testing.assert_allclose(result.maps["error_rms"], taxtel_rms, rtol=1e-3, atol=1e-6)
     np.testing.assert_allclose(result.maps["error_max"], taxtel_max, rtol=1e-3, atol=1e-6)
+    # 95th percentile per taxtel, nearest rank (numpy's inverted CDF), on the owned pixels only
+    taxtel_p95 = np.array([[np.percentile(np.abs(error[r * 50:(r + 1) * 50, c * 50:(c + 1) * 50]),
+                                          95, method="inverted_cdf")
+                            for c in range(grid.cols)] for r in range(grid.rows)])
+    np.testing.assert_allclose(result.maps["error_p95"], taxtel_p95, rtol=1e-3, atol=1e-6)
     worst = np.unravel_index(np.argmax(taxtel_rms), taxtel_rms.shape)
     assert (result.stats["worst_taxtel"]["row"], result.stats["worst_taxtel"]["col"]) == worst
     assert result.stats["taxtels_over_jnd"] == int(np.count_nonzero(taxtel_rms > jnd))
@@ -423,6 +428,15 @@ def test_tiles_that_do_not_fit_whole_pixels(tmp_path: Path):
     stored = np.round(np.clip(grating_gray(x, y, 0.9, 15.0, 1.0), 0, 1) * 255) / 255
     error = render_card(card, 300, 300, PITCH_MM, PITCH_MM) - (UV_HIGH - 0.7 * stored)
     assert result.stats["rms_error"] == pytest.approx(np.sqrt(np.mean(error**2)), rel=1e-3)
+    # a pixel belongs to the taxtel holding its centre: taxtels own 33 or 34 pixels a side, and
+    # the tenth column and row (29.97-30 mm) none: their figures are 0
+    owner = ((np.arange(300) + 0.5) * PITCH_MM // 3.33).astype(int)
+    p95 = np.zeros((10, 10))
+    for r in range(9):
+        for c in range(9):
+            block = np.abs(error[np.ix_(owner == r, owner == c)])
+            p95[r, c] = np.percentile(block, 95, method="inverted_cdf")
+    np.testing.assert_allclose(result.maps["error_p95"], p95, rtol=1e-3, atol=1e-6)
 
 
 @pytest.mark.parametrize("taxtel_mm", [4.5, 12.5])
@@ -657,3 +671,5 @@ def test_error_percentile_and_taxtel_maps_on_noisy_images(tmp_path: Path, seed: 
                                np.sqrt(np.mean(blocks**2, axis=(2, 3))), rtol=1e-3, atol=1e-6)
     np.testing.assert_allclose(result.maps["error_max"], np.abs(blocks).max(axis=(2, 3)),
                                rtol=1e-3, atol=1e-6)
+    p95 = np.percentile(np.abs(blocks).reshape(4, 6, -1), 95, axis=2, method="inverted_cdf")
+    np.testing.assert_allclose(result.maps["error_p95"], p95, rtol=1e-3, atol=1e-6)

@@ -246,8 +246,8 @@ def encode_image(
             f"{palette.leaders} distinct textures merged into {len(card.textures)} "
             f"(--max-textures {opts.max_textures})"
         )
-    maps = {} if error.taxtel_rms is None else {"error_rms": error.taxtel_rms,
-                                                 "error_max": error.taxtel_max}
+    maps = {"error_rms": error.taxtel_rms, "error_p95": error.taxtel_p95,
+            "error_max": error.taxtel_max}
     return EncodeResult(card=card, stats=stats, log=log, maps=maps)
 
 

@@ -18,6 +18,7 @@ import numpy as np
 
 from .geometry import Geometry
 from .palette import Palette
+from .textures import Textures
 
 P95_BIN = 1e-4
 """Width of the histogram bins of the absolute error the 95th percentile is read from,
@@ -41,6 +42,9 @@ class ReconstructionError:
             :data:`P95_BIN` bins: at most that much above the exact value).
         taxtel_rms: (rows, cols) RMS error of each taxtel's pixels.
         taxtel_max: (rows, cols) largest absolute error of each taxtel's pixels.
+        taxtel_p95: (rows, cols) 95th percentile of the absolute error of each taxtel's
+            pixels, exact (nearest rank: the smallest value that at least 95 % of the taxtel's
+            pixels do not exceed).
     """
 
     rms: float
@@ -49,6 +53,7 @@ class ReconstructionError:
     p95: float = 0.0
     taxtel_rms: np.ndarray | None = None
     taxtel_max: np.ndarray | None = None
+    taxtel_p95: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -63,16 +68,35 @@ def render_tiles(
     palette: Palette, geometry: Geometry, first: int, stop: int, mapping: FrictionMap
 ) -> np.ndarray:
     """The card's gray levels (the inverse of ``mapping``) on the tiles of taxtel rows
-    ``first:stop``: array ``((stop-first) * cols, tile_h, tile_w)``, float32.
+    ``first:stop``: array ``((stop-first) * cols, tile_h, tile_w)``, float32."""
+    cols = geometry.cols
+    return render_rows(
+        palette.textures, palette.index[first * cols : stop * cols], geometry, first, stop, mapping
+    )
 
-    Tiles are grouped by the number of components of their texture, so that each group's
-    matrix product is no wider than it needs to be; baseline-only tiles are just filled.
+
+def render_rows(
+    textures: Textures,
+    index: np.ndarray,
+    geometry: Geometry,
+    first: int,
+    stop: int,
+    mapping: FrictionMap,
+    where: np.ndarray | None = None,
+) -> np.ndarray:
+    """Gray levels (the inverse of ``mapping``) of ``textures[index]`` on tiles of taxtel rows
+    ``first:stop``: array ``(len(index), tile_h, tile_w)``, float32.
+
+    ``index`` holds one texture per tile: of every tile of those rows in row-major order, or of
+    the tiles at positions ``where`` in that order. Tiles are grouped by the number of
+    components of their texture, so that each group's matrix product is no wider than it needs
+    to be; baseline-only tiles are just filled.
     """
     cols, nh, nw = geometry.cols, geometry.tile_h, geometry.tile_w
-    textures = palette.textures
-    index = palette.index[first * cols : stop * cols]
-    tile_row = np.repeat(np.arange(first, stop), cols)
-    tile_col = np.tile(np.arange(cols), stop - first)
+    if where is None:
+        where = np.arange((stop - first) * cols)
+    tile_row, tile_col = np.divmod(where, cols)
+    tile_row = tile_row + first
     # Gray-level palette: gray = (high - friction) / scale.
     baseline = (mapping.high - textures.baseline) / mapping.scale
     coef = np.where(textures.valid, -textures.coef / mapping.scale, 0.0)
@@ -118,7 +142,7 @@ def reconstruction_error(
     chunk_pixels: int = 1 << 22,
 ) -> ReconstructionError:
     """RMS, 95th percentile and maximum of (card - image) in relative friction over the image's
-    pixels, and RMS and maximum per taxtel.
+    pixels, and RMS, 95th percentile and maximum per taxtel.
 
     Args:
         pixels: gray levels of the image (as analysed).
@@ -137,6 +161,7 @@ def reconstruction_error(
     histogram = np.zeros(bins, dtype=np.int64)
     squares = np.zeros((geometry.rows, cols))
     largest = np.zeros((geometry.rows, cols))
+    percentile = np.zeros((geometry.rows, cols))
     for first in range(0, geometry.rows, step):
         stop = min(geometry.rows, first + step)
         tiles = geometry.gather(pixels, first, stop, columns).transpose(0, 2, 1, 3)
@@ -148,8 +173,11 @@ def reconstruction_error(
         if not cols_complete:
             error *= col_mask[None, :, None, :]
         squares[first:stop] = np.einsum("abij,abij->ab", error, error)
-        largest[first:stop] = np.maximum(error.max(axis=(2, 3)), -error.min(axis=(2, 3)))
         np.abs(error, out=error)
+        largest[first:stop] = error.max(axis=(2, 3))
+        percentile[first:stop] = owned_percentile(
+            error, geometry.row_owned[first:stop], geometry.col_owned
+        )
         np.multiply(error, np.float32(mapping.scale / P95_BIN), out=error)  # in bins
         np.minimum(error, np.float32(bins - 1), out=error)
         # intp: np.bincount casts any other integer type to it first (twice the time)
@@ -169,4 +197,46 @@ def reconstruction_error(
         p95=(p95_bin + 1) * P95_BIN if count else 0.0,
         taxtel_rms=scale * np.sqrt(squares / np.maximum(owned_per_tile, 1.0)),
         taxtel_max=scale * largest,
+        taxtel_p95=scale * percentile,
     )
+
+
+def percentile_rank(owned: int, percent: int = 95) -> int:
+    """Nearest rank (1-based) of the ``percent``-th percentile of ``owned`` values:
+    ``ceil(percent * owned / 100)``, in integers (``0.95 * n`` is not exact in floating point)."""
+    return (percent * owned + 99) // 100
+
+
+def owned_percentile(
+    magnitude: np.ndarray, row_owned: np.ndarray, col_owned: np.ndarray, percent: int = 95
+) -> np.ndarray:
+    """Per tile, the ``percent``-th percentile (nearest rank) of the values of the pixels the
+    tile's taxtel owns.
+
+    Args:
+        magnitude: ``(rows, cols, tile_h, tile_w)`` values >= 0, zero on pixels a taxtel does not
+            own (so those sort first and the rank is shifted past them). The values of each
+            tile are reordered in place.
+        row_owned, col_owned: pixels owned by each tile row and column (:class:`Geometry`).
+
+    Returns:
+        ``(rows, cols)``; 0 for a taxtel that owns no pixel.
+    """
+    rows, cols, nh, nw = magnitude.shape
+    flat = magnitude.reshape(rows, cols, nh * nw)
+    out = np.zeros((rows, cols))
+    for owned_y in np.unique(row_owned):
+        r = np.nonzero(row_owned == owned_y)[0]
+        for owned_x in np.unique(col_owned):
+            owned = int(owned_y) * int(owned_x)
+            if owned == 0:
+                continue
+            c = np.nonzero(col_owned == owned_x)[0]
+            kth = nh * nw - owned + percentile_rank(owned, percent) - 1
+            if r.size == rows and c.size == cols:
+                flat.partition(kth, axis=-1)  # in place: the caller needs no pixel order
+                out[:] = flat[..., kth]
+            else:
+                block = flat[np.ix_(r, c)]
+                out[np.ix_(r, c)] = np.partition(block, kth, axis=-1)[..., kth]
+    return out
