@@ -25,7 +25,12 @@ from hcard_builtins.image import (
     encode_image,
     load_gray,
 )
-from hcard_builtins.image.palette import Textures, distances_from
+from hcard_builtins.image.palette import (
+    Textures,
+    build_palette,
+    distances_from,
+    keyed_distances_from,
+)
 
 PITCH_MM = 0.1  # 254 dpi
 UV_LOW, UV_HIGH = DEFAULT_FRICTION_RANGE["uv"]
@@ -366,6 +371,57 @@ def test_texture_distance_is_the_rms_friction_difference():
         brute = np.sqrt(np.mean((field(a) - field(b)) ** 2))
         assert distances_from(a, 0, b, bin_width=0.2)[0] == pytest.approx(brute, abs=1e-6)
     assert distances_from(a, 0, same_but_mirrored, bin_width=0.2)[0] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_keyed_distance_is_the_rms_difference_over_a_taxtel_for_harmonics_a_bin_apart():
+    """Harmonics of a 5 mm taxtel lie 0.2 cycles/mm apart and are orthogonal over it; a texture
+    may also hold a grating a fraction of a bin from one of them. The keyed distance is the RMS
+    difference over the taxtel (a whole number of periods of each harmonic), and 0 from a
+    texture to itself."""
+    rng = np.random.default_rng(3)
+
+    def texture(baseline: float, parts: list[tuple[float, float, complex]]) -> Textures:
+        k = np.array([[(kx, ky) for kx, ky, _ in parts]], dtype=float)
+        coef = np.array([[c for _, _, c in parts]], dtype=complex)
+        return Textures(np.array([baseline]), k, coef, np.ones((1, len(parts)), dtype=bool))
+
+    def amplitude() -> complex:
+        return complex(*(0.05 * rng.standard_normal(2)))
+
+    a = texture(0.6, [(0.2, 0.0, amplitude()), (0.4, 0.0, amplitude()), (0.2, 0.2, amplitude()),
+                      (0.0, 0.4, amplitude())])
+    b = texture(0.55, [(0.2, 0.0, amplitude()), (0.6, 0.0, amplitude()), (0.2, 0.2, amplitude())])
+    y, x = (np.mgrid[0:500, 0:500] + 0.5) / 100.0  # one 5 mm taxtel, 10 um pixels
+
+    def field(t: Textures) -> np.ndarray:
+        return t.baseline[0] + sum((c * np.exp(2j * np.pi * (k[0] * x + k[1] * y))).real
+                                   for k, c in zip(t.k[0], t.coef[0], strict=True))
+
+    brute = float(np.sqrt(np.mean((field(a) - field(b)) ** 2)))
+    assert keyed_distances_from(a, 0, b, bin_width=0.2)[0] == pytest.approx(brute, rel=1e-6)
+    assert keyed_distances_from(a, 0, a, bin_width=0.2)[0] == pytest.approx(0.0, abs=1e-9)
+    # two components of one texture 0.004 cycles/mm apart (aligned into one) and the mirror
+    # form of a grating are the same field: distance 0 to their sum
+    close = texture(0.6, [(0.2, 0.0, 0.03), (0.2 + 0.004, 0.0, 0.02j), (-0.4, 0.0, 0.01)])
+    merged = texture(0.6, [(0.202, 0.0, 0.03 + 0.02j), (0.4, 0.0, 0.01)])
+    assert keyed_distances_from(close, 0, merged, bin_width=0.2)[0] == pytest.approx(0.0,
+                                                                                      abs=2e-3)
+
+
+def test_per_taxtel_tolerance_keeps_a_tight_taxtel_apart():
+    """Four flat taxtels 0.03 apart: with one tolerance of 0.04 they share a texture; a taxtel
+    whose tolerance is 0.01 keeps its own."""
+    textures = Textures(np.array([0.50, 0.53, 0.50, 0.53]), np.zeros((4, 0, 2)),
+                        np.zeros((4, 0), complex), np.zeros((4, 0), bool))
+    centres = np.zeros((4, 2))
+    common = build_palette(textures, centres, bin_width=0.2, tolerance=0.04, max_textures=8,
+                           min_amplitude=0.01)
+    assert common.textures.baseline.size == 1
+    tight = build_palette(textures, centres, bin_width=0.2,
+                          tolerance=np.array([0.04, 0.01, 0.04, 0.04]), max_textures=8,
+                          min_amplitude=0.01)
+    assert tight.textures.baseline.size == 2
+    assert tight.textures.baseline[tight.index[1]] == pytest.approx(0.53)
 
 
 # ---------------------------------------------------------------------------------------------
