@@ -50,6 +50,9 @@ import numpy as np
 
 from .textures import Textures, canonical, strongest_first
 
+FINE_CELL = 0.01
+"""Alignment cell (bins) of the textures fitted as a whole to their taxtel: a shift of 1/200
+bin moves a component by 1/400 cycle at the taxtel's edge."""
 KEY_RESOLUTION = 1e-6
 """Wave vectors are compared as integers of this many cycles/mm (after alignment, equal wave
 vectors are equal floats; the rounding only makes them hashable)."""
@@ -238,6 +241,7 @@ def build_palette(
     max_textures: int,
     min_amplitude: float,
     keyed: bool = False,
+    fixed: np.ndarray | None = None,
 ) -> Palette:
     """Merge per-taxtel ``textures`` into a palette of at most ``max_textures`` entries.
 
@@ -251,10 +255,15 @@ def build_palette(
         min_amplitude: components of the merged textures weaker than this are dropped.
         keyed: *keyed* distances (see the module docstring) rather than *matched* ones; for
             textures holding harmonics of the residual pursuit.
+        fixed: ``(n,)`` taxtels whose wave vectors are not aligned (see
+            :func:`align_wave_vectors`).
     """
     if max_textures < 1:
         raise ValueError(f"max_textures must be at least 1, got {max_textures}")
-    textures = align_wave_vectors(textures.trimmed(), centres, bin_width)
+    textures = align_wave_vectors(textures.trimmed(), centres, bin_width, fixed=fixed)
+    if fixed is not None and fixed.any():
+        textures = align_wave_vectors(textures, centres, bin_width, cell=FINE_CELL,
+                                      fixed=~fixed)
     space: _Distances
     if keyed:
         textures = merge_coincident(textures)
@@ -285,7 +294,11 @@ def build_palette(
 
 
 def align_wave_vectors(
-    textures: Textures, centres: np.ndarray, bin_width: float, cell: float = 0.1
+    textures: Textures,
+    centres: np.ndarray,
+    bin_width: float,
+    cell: float = 0.1,
+    fixed: np.ndarray | None = None,
 ) -> Textures:
     """Give components of (nearly) the same wave vector in different taxtels one common value.
 
@@ -294,8 +307,11 @@ def align_wave_vectors(
     the origin would look different. Components whose wave vectors fall in the same cell of
     ``cell * bin_width`` cycles/mm get the amplitude-weighted mean wave vector of the cell, and
     their phases are re-referenced so that they do not change at their taxtel's centre.
+    Textures marked ``fixed`` (``(n,)`` booleans) keep their wave vectors and take no part: a
+    texture fitted as a whole to its taxtel (the residual pursuit's) would drift off its fit
+    (:func:`build_palette` aligns those among themselves in cells of :data:`FINE_CELL`).
     """
-    valid = textures.valid
+    valid = textures.valid if fixed is None else textures.valid & ~fixed[:, None]
     if not valid.any():
         return textures
     k = textures.k[valid]
@@ -312,7 +328,7 @@ def align_wave_vectors(
     shifted = coef * np.exp(2j * np.pi * np.einsum("nd,nd->n", k - common, position))
     new_k, new_coef = textures.k.copy(), textures.coef.copy()
     new_k[valid], new_coef[valid] = common, shifted
-    return Textures(textures.baseline, new_k, new_coef, valid)
+    return Textures(textures.baseline, new_k, new_coef, textures.valid)
 
 
 def _leaders(
