@@ -408,6 +408,21 @@ def test_keyed_distance_is_the_rms_difference_over_a_taxtel_for_harmonics_a_bin_
                                                                                       abs=2e-3)
 
 
+def test_ward_merging_spares_large_clusters():
+    """Leaders: two clusters of 10 taxtels 0.05 apart, two of 1 taxtel 0.06 apart, one far.
+    Closest-pair merging joins the two large clusters (adding 10 * 0.05^2 / 2 of squared error
+    per side); Ward's criterion joins the two small ones (1 * 0.06^2 / 2)."""
+    from hcard_builtins.image.palette import _agglomerate_ward
+
+    distance = np.full((5, 5), 1.0)
+    distance[0, 1] = distance[1, 0] = 0.05
+    distance[2, 3] = distance[3, 2] = 0.06
+    np.fill_diagonal(distance, np.inf)
+    weight = np.array([10.0, 10.0, 1.0, 1.0, 5.0])
+    kept = _agglomerate_ward(distance.copy(), weight.copy(), [0, 1, 2, 3, 4], 4)
+    assert kept == [0, 1, 2, 4]
+
+
 def test_per_taxtel_tolerance_keeps_a_tight_taxtel_apart():
     """Four flat taxtels 0.03 apart: with one tolerance of 0.04 they share a texture; a taxtel
     whose tolerance is 0.01 keeps its own."""

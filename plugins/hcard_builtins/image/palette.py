@@ -273,7 +273,7 @@ def build_palette(
     leaders, assign = _leaders(space, tolerance, leader_cap(max_textures))
     found = len(leaders)
     if found > max_textures:
-        heads = _agglomerate(space, leaders, assign, max_textures)
+        heads = _agglomerate(space, leaders, assign, max_textures, ward=keyed)
         assign = _nearest(space, heads)
     else:
         heads = leaders
@@ -353,15 +353,22 @@ def _leaders(
 
 
 def _agglomerate(
-    space: _Distances, leaders: list[int], assign: np.ndarray, max_textures: int
+    space: _Distances, leaders: list[int], assign: np.ndarray, max_textures: int,
+    ward: bool = False,
 ) -> list[int]:
     """Merge the closest pair of leader clusters until ``max_textures`` remain (the first
-    closest pair in row-major order of the distance matrix; the lighter cluster goes)."""
+    closest pair in row-major order of the distance matrix; the lighter cluster goes).
+
+    With ``ward``, "closest" is the smallest added squared error, ``w_i w_j / (w_i + w_j)
+    d_ij^2`` for clusters of ``w_i`` and ``w_j`` taxtels (Ward's criterion): two large clusters
+    are merged only when they are much closer than two small ones."""
     heads = space.take(np.asarray(leaders))
     count = len(leaders)
     distance = np.stack([heads.distances(i) for i in range(count)])
     np.fill_diagonal(distance, np.inf)
     weight = np.bincount(assign, minlength=count).astype(np.float64)
+    if ward:
+        return _agglomerate_ward(distance, weight, leaders, max_textures)
     # Row minima are kept up to date instead of searching the whole matrix at every merge.
     nearest = np.argmin(distance, axis=1)
     closest = distance[np.arange(count), nearest]
@@ -378,6 +385,28 @@ def _agglomerate(
         if stale.size:
             nearest[stale] = np.argmin(distance[stale], axis=1)
             closest[stale] = distance[stale, nearest[stale]]
+    return [leaders[i] for i in np.nonzero(weight > 0)[0]]
+
+
+def _agglomerate_ward(
+    distance: np.ndarray, weight: np.ndarray, leaders: list[int], max_textures: int
+) -> list[int]:
+    """:func:`_agglomerate` by Ward's criterion on the leaders' distance matrix (the kept
+    leader stays representative, so only the weights change and one row of costs with them)."""
+    count = len(leaders)
+    squared = distance**2
+    cost = weight[:, None] * weight[None, :] / (weight[:, None] + weight[None, :]) * squared
+    for _ in range(count - max_textures):
+        i, j = np.unravel_index(int(np.argmin(cost)), cost.shape)
+        keep, drop = (i, j) if weight[i] >= weight[j] else (j, i)
+        weight[keep] += weight[drop]
+        weight[drop] = 0.0
+        cost[drop, :] = np.inf
+        cost[:, drop] = np.inf
+        alive = np.isfinite(cost[keep])
+        row = weight[keep] * weight / (weight[keep] + weight) * squared[keep]
+        cost[keep, alive] = row[alive]
+        cost[alive, keep] = row[alive]
     return [leaders[i] for i in np.nonzero(weight > 0)[0]]
 
 
