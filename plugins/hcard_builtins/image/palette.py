@@ -394,8 +394,16 @@ def _agglomerate_ward(
     """:func:`_agglomerate` by Ward's criterion on the leaders' distance matrix (the kept
     leader stays representative, so only the weights change and one row of costs with them)."""
     count = len(leaders)
-    squared = distance**2
-    cost = weight[:, None] * weight[None, :] / (weight[:, None] + weight[None, :]) * squared
+    squared = np.where(np.isfinite(distance), distance, 0.0) ** 2
+
+    def pair_weight(a: np.ndarray | float, b: np.ndarray) -> np.ndarray:
+        """``a b / (a + b)``; 0 where both are 0 (a leader left without taxtels costs
+        nothing to merge)."""
+        total = a + b
+        return np.divide(a * b, total, out=np.zeros(np.shape(total)), where=total > 0)
+
+    cost = pair_weight(weight[:, None], weight[None, :]) * squared
+    np.fill_diagonal(cost, np.inf)
     for _ in range(count - max_textures):
         i, j = np.unravel_index(int(np.argmin(cost)), cost.shape)
         keep, drop = (i, j) if weight[i] >= weight[j] else (j, i)
@@ -404,7 +412,7 @@ def _agglomerate_ward(
         cost[drop, :] = np.inf
         cost[:, drop] = np.inf
         alive = np.isfinite(cost[keep])
-        row = weight[keep] * weight / (weight[keep] + weight) * squared[keep]
+        row = pair_weight(weight[keep], weight) * squared[keep]
         cost[keep, alive] = row[alive]
         cost[alive, keep] = row[alive]
     return [leaders[i] for i in np.nonzero(weight > 0)[0]]
