@@ -11,7 +11,6 @@ inner size ``2K + 1``; all tiles of a chunk go through one batched ``matmul``.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -19,14 +18,6 @@ import numpy as np
 from .geometry import Geometry
 from .palette import Palette
 from .textures import Textures
-
-P95_BIN = 1e-4
-"""Width of the histogram bins of the absolute error the 95th percentile is read from,
-relative friction: the percentile is the upper edge of its bin, at most this much above the
-exact one."""
-P95_RANGE = 4.0
-"""Absolute errors from this much relative friction on share the histogram's last bin (the
-format's whole range)."""
 
 
 @dataclass(frozen=True)
@@ -38,8 +29,7 @@ class ReconstructionError:
         rms: root-mean-square error.
         max: largest absolute error.
         pixels: number of pixels compared.
-        p95: 95th percentile of the absolute error over the pixels (from a histogram of
-            :data:`P95_BIN` bins: at most that much above the exact value).
+        p95: 95th percentile of the absolute error over the pixels (nearest rank, exact).
         taxtel_rms: (rows, cols) RMS error of each taxtel's pixels.
         taxtel_max: (rows, cols) largest absolute error of each taxtel's pixels.
         taxtel_p95: (rows, cols) 95th percentile of the absolute error of each taxtel's
@@ -157,8 +147,9 @@ def reconstruction_error(
     col_mask = col_owned.astype(np.float32)
     cols_complete = bool(col_owned.all())
     step = max(1, chunk_pixels // (nh * nw * cols))
-    bins = round(P95_RANGE / P95_BIN)
-    histogram = np.zeros(bins, dtype=np.int64)
+    count = int(geometry.row_owned.sum()) * int(geometry.col_owned.sum())
+    # the 95th percentile is the (count - rank + 1)-th largest absolute error
+    largest_values = Largest(count - percentile_rank(count) + 1 if count else 0)
     squares = np.zeros((geometry.rows, cols))
     largest = np.zeros((geometry.rows, cols))
     percentile = np.zeros((geometry.rows, cols))
@@ -178,27 +169,50 @@ def reconstruction_error(
         percentile[first:stop] = owned_percentile(
             error, geometry.row_owned[first:stop], geometry.col_owned
         )
-        np.multiply(error, np.float32(mapping.scale / P95_BIN), out=error)  # in bins
-        np.minimum(error, np.float32(bins - 1), out=error)
-        # intp: np.bincount casts any other integer type to it first (twice the time)
-        histogram += np.bincount(error.astype(np.intp).ravel(), minlength=bins)
-        # the pixels a taxtel does not own were zeroed: they are not samples of the error
-        owned = int(row_owned.sum()) * int(col_owned.sum())
-        histogram[0] -= error.size - owned
+        # the pixels a taxtel does not own were zeroed: below every owned value (>= 0), they
+        # never displace one from the largest
+        largest_values.add(error.reshape(-1))
     owned_per_tile = (geometry.row_owned[:, None] * geometry.col_owned[None, :]).astype(float)
-    count = int(geometry.row_owned.sum()) * int(geometry.col_owned.sum())
     scale = mapping.scale
-    rank = math.ceil(0.95 * count)
-    p95_bin = int(np.searchsorted(np.cumsum(histogram), max(rank, 1)))
     return ReconstructionError(
         rms=scale * float(np.sqrt(squares.sum() / max(count, 1))),
         max=scale * float(largest.max(initial=0.0)),
         pixels=count,
-        p95=(p95_bin + 1) * P95_BIN if count else 0.0,
+        p95=scale * largest_values.smallest,
         taxtel_rms=scale * np.sqrt(squares / np.maximum(owned_per_tile, 1.0)),
         taxtel_max=scale * largest,
         taxtel_p95=scale * percentile,
     )
+
+
+class Largest:
+    """The ``keep`` largest of values that arrive in chunks: an exact order statistic without
+    holding all the values. Each chunk adds only its values above the smallest kept."""
+
+    def __init__(self, keep: int) -> None:
+        self.keep = keep
+        self.values = np.zeros(0, dtype=np.float32)
+
+    def add(self, values: np.ndarray) -> None:
+        """Take ``values`` (1-D) into account."""
+        if self.keep <= 0:
+            return
+        if self.values.size >= self.keep:
+            values = values[values > self.values[0]]
+        merged = np.concatenate([self.values, values])
+        if merged.size > self.keep:
+            cut = merged.size - self.keep
+            merged.partition(cut)
+            merged = merged[cut:]  # its first value is its smallest
+        elif merged.size:
+            low = int(np.argmin(merged))
+            merged[[0, low]] = merged[[low, 0]]  # the smallest first
+        self.values = merged
+
+    @property
+    def smallest(self) -> float:
+        """The ``keep``-th largest value so far (0 before any)."""
+        return float(self.values[0]) if self.values.size else 0.0
 
 
 def percentile_rank(owned: int, percent: int = 95) -> int:
