@@ -115,6 +115,10 @@ class _Matched:
         self.energy = textures.energy
         self.owner, self.kx, self.ky = owner, k[:, 0], k[:, 1]
         self.re, self.im = coef.real, coef.imag
+        # components by kx: those within a bin of a wave vector or its mirror image are found
+        # by bisection (a superset: |dkx| < w), then tested exactly
+        self.by_kx = np.argsort(self.kx, kind="stable")
+        self.sorted_kx = self.kx[self.by_kx]
 
     def take(self, index: np.ndarray) -> _Matched:
         """The textures at ``index``."""
@@ -128,17 +132,34 @@ class _Matched:
         d2 = (one.baseline[i] - one.baseline) ** 2 + 0.5 * (np.sum(np.abs(c0) ** 2)
                                                             + self.energy)
         if c0.size and self.owner.size:
-            limit = self.bin_width * self.bin_width
-            kx, ky = k0[:, 0:1], k0[:, 1:2]  # (q, 1) against (m,): all pairs at once
-            direct = (self.kx - kx) ** 2 + (self.ky - ky) ** 2 < limit
-            mirror = ((self.kx + kx) ** 2 + (self.ky + ky) ** 2 < limit) & ~direct
-            # Re(c conj C) for a direct match, Re(c C) for a mirrored one.
-            same = c0.real[:, None] * self.re
-            cross = c0.imag[:, None] * self.im
-            overlap = np.where(direct, same + cross, np.where(mirror, same - cross, 0.0))
-            d2 -= np.bincount(self.owner, weights=overlap.sum(axis=0),
-                              minlength=one.baseline.size)
+            pick = self._near(k0[:, 0])
+            if pick.size:
+                limit = self.bin_width * self.bin_width
+                kx, ky = k0[:, 0:1], k0[:, 1:2]  # (q, 1) against the candidates
+                cx, cy = self.kx[pick], self.ky[pick]
+                direct = (cx - kx) ** 2 + (cy - ky) ** 2 < limit
+                mirror = ((cx + kx) ** 2 + (cy + ky) ** 2 < limit) & ~direct
+                # Re(c conj C) for a direct match, Re(c C) for a mirrored one.
+                same = c0.real[:, None] * self.re[pick]
+                cross = c0.imag[:, None] * self.im[pick]
+                overlap = np.where(direct, same + cross, np.where(mirror, same - cross, 0.0))
+                d2 -= np.bincount(self.owner[pick], weights=overlap.sum(axis=0),
+                                  minlength=one.baseline.size)
         return np.sqrt(np.maximum(d2, 0.0))
+
+    def _near(self, kx: np.ndarray) -> np.ndarray:
+        """Indices, ascending (the order of the sums above is that of all components), of the
+        components whose kx lies within a bin of one of ``kx`` or of its negative."""
+        width = self.bin_width
+        centres = np.concatenate([kx, -kx])
+        lo = np.searchsorted(self.sorted_kx, centres - width, side="left")
+        hi = np.searchsorted(self.sorted_kx, centres + width, side="right")
+        length = hi - lo
+        total = int(length.sum())
+        if total == 0:
+            return np.zeros(0, dtype=np.int64)
+        index = np.repeat(lo - np.cumsum(length) + length, length) + np.arange(total)
+        return np.unique(self.by_kx[index])
 
 
 class _Keyed:
