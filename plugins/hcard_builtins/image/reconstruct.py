@@ -144,8 +144,8 @@ def reconstruction_error(
     cols, nh, nw = geometry.cols, geometry.tile_h, geometry.tile_w
     columns = geometry.tile_columns()
     col_owned = geometry.owned_mask("x")
-    col_mask = col_owned.astype(np.float32)
-    cols_complete = bool(col_owned.all())
+    partial_cols = np.flatnonzero(~col_owned.all(axis=1))
+    col_mask = col_owned[partial_cols].astype(np.float32)
     step = max(1, chunk_pixels // (nh * nw * cols))
     count = int(geometry.row_owned.sum()) * int(geometry.col_owned.sum())
     # the 95th percentile is the (count - rank + 1)-th largest absolute error
@@ -153,16 +153,20 @@ def reconstruction_error(
     squares = np.zeros((geometry.rows, cols))
     largest = np.zeros((geometry.rows, cols))
     percentile = np.zeros((geometry.rows, cols))
+    owned_per_tile = geometry.row_owned[:, None] * geometry.col_owned[None, :]
+    # values at or above each taxtel's 95th percentile: at least this many per taxtel
+    tail = owned_per_tile - (95 * owned_per_tile + 99) // 100 + 1
     for first in range(0, geometry.rows, step):
         stop = min(geometry.rows, first + step)
         tiles = geometry.gather(pixels, first, stop, columns).transpose(0, 2, 1, 3)
         error = render_tiles(palette, geometry, first, stop, mapping).reshape(tiles.shape)
         np.subtract(tiles, error, out=error)  # (rows, cols, tile_h, tile_w), in place
+        # zero the pixels a taxtel does not own (only the tile rows and columns that have any)
         row_owned = geometry.owned_mask("y", first, stop)
-        if not row_owned.all():
-            error *= row_owned.astype(np.float32)[:, None, :, None]
-        if not cols_complete:
-            error *= col_mask[None, :, None, :]
+        for r in np.flatnonzero(~row_owned.all(axis=1)):
+            error[r] *= row_owned[r].astype(np.float32)[None, :, None]
+        if partial_cols.size:
+            error[:, partial_cols] *= col_mask[None, :, None, :]
         squares[first:stop] = np.einsum("abij,abij->ab", error, error)
         np.abs(error, out=error)
         largest[first:stop] = error.max(axis=(2, 3))
@@ -170,16 +174,18 @@ def reconstruction_error(
             error, geometry.row_owned[first:stop], geometry.col_owned
         )
         # the pixels a taxtel does not own were zeroed: below every owned value (>= 0), they
-        # never displace one from the largest
-        largest_values.add(error.reshape(-1))
-    owned_per_tile = (geometry.row_owned[:, None] * geometry.col_owned[None, :]).astype(float)
+        # never displace one from the largest. Each taxtel so far holds ``tail`` values at or
+        # above its percentile: the largest level that enough of them reach is a floor.
+        floor = certified_floor(percentile[:stop].ravel(), tail[:stop].ravel(),
+                                largest_values.keep)
+        largest_values.add(error.reshape(-1), floor=floor)
     scale = mapping.scale
     return ReconstructionError(
         rms=scale * float(np.sqrt(squares.sum() / max(count, 1))),
         max=scale * float(largest.max(initial=0.0)),
         pixels=count,
         p95=scale * largest_values.smallest,
-        taxtel_rms=scale * np.sqrt(squares / np.maximum(owned_per_tile, 1.0)),
+        taxtel_rms=scale * np.sqrt(squares / np.maximum(owned_per_tile, 1)),
         taxtel_max=scale * largest,
         taxtel_p95=scale * percentile,
     )
@@ -193,12 +199,15 @@ class Largest:
         self.keep = keep
         self.values = np.zeros(0, dtype=np.float32)
 
-    def add(self, values: np.ndarray) -> None:
-        """Take ``values`` (1-D) into account."""
+    def add(self, values: np.ndarray, floor: float = 0.0) -> None:
+        """Take ``values`` (1-D) into account; ``floor``: a level that at least ``keep`` of the
+        values seen so far (these included) reach, below which none can be kept."""
         if self.keep <= 0:
             return
         if self.values.size >= self.keep:
-            values = values[values > self.values[0]]
+            floor = max(floor, float(self.values[0]))
+        if floor > 0.0:
+            values = values[values >= floor]
         merged = np.concatenate([self.values, values])
         if merged.size > self.keep:
             cut = merged.size - self.keep
@@ -213,6 +222,17 @@ class Largest:
     def smallest(self) -> float:
         """The ``keep``-th largest value so far (0 before any)."""
         return float(self.values[0]) if self.values.size else 0.0
+
+
+def certified_floor(levels: np.ndarray, counts: np.ndarray, keep: int) -> float:
+    """The largest of ``levels`` such that the groups at or above it hold at least ``keep``
+    values in all (each group ``i`` holds ``counts[i]`` values at or above ``levels[i]``), so
+    that the ``keep``-th largest value is at least it; 0 when they hold fewer."""
+    if keep <= 0 or int(counts.sum()) < keep:
+        return 0.0
+    order = np.argsort(-levels, kind="stable")
+    reached = np.cumsum(counts[order])
+    return float(levels[order][int(np.searchsorted(reached, keep))])
 
 
 def percentile_rank(owned: int, percent: int = 95) -> int:
@@ -247,10 +267,17 @@ def owned_percentile(
                 continue
             c = np.nonzero(col_owned == owned_x)[0]
             kth = nh * nw - owned + percentile_rank(owned, percent) - 1
-            if r.size == rows and c.size == cols:
-                flat.partition(kth, axis=-1)  # in place: the caller needs no pixel order
-                out[:] = flat[..., kth]
+            if _contiguous(r) and _contiguous(c):
+                rs, cs = slice(int(r[0]), int(r[-1]) + 1), slice(int(c[0]), int(c[-1]) + 1)
+                block = flat[rs, cs]
+                block.partition(kth, axis=-1)  # in place: the caller needs no pixel order
+                out[rs, cs] = block[..., kth]
             else:
                 block = flat[np.ix_(r, c)]
                 out[np.ix_(r, c)] = np.partition(block, kth, axis=-1)[..., kth]
     return out
+
+
+def _contiguous(index: np.ndarray) -> bool:
+    """Whether ``index`` (ascending) is a run of consecutive integers."""
+    return index.size > 0 and int(index[-1]) - int(index[0]) + 1 == index.size
