@@ -101,6 +101,11 @@ def merge_coincident(textures: Textures) -> Textures:
     return strongest_first(Textures(textures.baseline, textures.k, coef, valid))
 
 
+_ALL_PAIRS = 16_384
+"""Up to this many (query component, component) pairs, all pairs are tested at once: cheaper
+than finding the few within a bin first."""
+
+
 class _Matched:
     """Textures for *matched* distances: one flat list of components (owner, wave vector,
     amplitude), so that the distance from one texture to all of them costs O(components), not
@@ -132,8 +137,9 @@ class _Matched:
         d2 = (one.baseline[i] - one.baseline) ** 2 + 0.5 * (np.sum(np.abs(c0) ** 2)
                                                             + self.energy)
         if c0.size and self.owner.size:
-            pick = self._near(k0[:, 0])
-            if pick.size:
+            everything = c0.size * self.owner.size <= _ALL_PAIRS
+            pick = slice(None) if everything else self._near(k0[:, 0])
+            if everything or pick.size:
                 limit = self.bin_width * self.bin_width
                 kx, ky = k0[:, 0:1], k0[:, 1:2]  # (q, 1) against the candidates
                 cx, cy = self.kx[pick], self.ky[pick]
@@ -159,7 +165,9 @@ class _Matched:
         if total == 0:
             return np.zeros(0, dtype=np.int64)
         index = np.repeat(lo - np.cumsum(length) + length, length) + np.arange(total)
-        return np.unique(self.by_kx[index])
+        found = np.zeros(self.kx.size, dtype=bool)
+        found[self.by_kx[index]] = True
+        return np.flatnonzero(found)
 
 
 class _Keyed:

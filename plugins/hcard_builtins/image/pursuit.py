@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .fft import irfft2, rfft2
-from .reconstruct import percentile_rank
+from .reconstruct import counts_present, percentile_rank
 from .spectral import TileSpectra
 
 _GROWTH_ROUNDS = 4
@@ -206,7 +206,7 @@ def owned_percentile(magnitude: np.ndarray, mask: np.ndarray, owned: np.ndarray)
     flat = (magnitude * mask).reshape(n, -1)  # unowned pixels sort first
     size = flat.shape[1]
     out = np.zeros(n)
-    for value in np.unique(owned):
+    for value in counts_present(owned):
         tiles = np.nonzero(owned == value)[0]
         if value == 0:
             continue

@@ -92,7 +92,7 @@ def render_rows(
     coef = np.where(textures.valid, -textures.coef / mapping.scale, 0.0)
     count = textures.valid.sum(axis=1)[index]
     out = np.empty((index.size, nh, nw), dtype=np.float32)
-    for slots in np.unique(count):
+    for slots in counts_present(count):
         tiles = np.nonzero(count == slots)[0]
         p, r, c = index[tiles], tile_row[tiles], tile_col[tiles]
         if slots == 0:
@@ -259,9 +259,9 @@ def owned_percentile(
     rows, cols, nh, nw = magnitude.shape
     flat = magnitude.reshape(rows, cols, nh * nw)
     out = np.zeros((rows, cols))
-    for owned_y in np.unique(row_owned):
+    for owned_y in counts_present(row_owned):
         r = np.nonzero(row_owned == owned_y)[0]
-        for owned_x in np.unique(col_owned):
+        for owned_x in counts_present(col_owned):
             owned = int(owned_y) * int(owned_x)
             if owned == 0:
                 continue
@@ -281,3 +281,9 @@ def owned_percentile(
 def _contiguous(index: np.ndarray) -> bool:
     """Whether ``index`` (ascending) is a run of consecutive integers."""
     return index.size > 0 and int(index[-1]) - int(index[0]) + 1 == index.size
+
+
+def counts_present(counts: np.ndarray) -> np.ndarray:
+    """The distinct values of ``counts`` (small integers >= 0), ascending. (A plain
+    ``np.unique`` imports ``numpy.ma`` on first use in numpy 2, 10 ms of a command's start.)"""
+    return np.flatnonzero(np.bincount(counts.ravel()))
