@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import json
+import os
 import re
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -180,6 +182,7 @@ def encode(
       hcard encode map.png -o map.hcard.json --taxtel-mm 2 --channel ev --preview map-p.png
       hcard encode photo.png -o - --dpi 300 | hcard info -
     """
+    _single_threaded_blas()
     from hcard_builtins.image import EncodeOptions, encode_image
 
     try:
@@ -258,6 +261,15 @@ _OPTION_FIELDS = (
     "merge_tolerance",
     "max_pixels",
 )
+
+
+def _single_threaded_blas() -> None:
+    """One BLAS thread for this process unless the environment says otherwise, set before
+    numpy loads its BLAS. The encoder's BLAS calls are small batched products and solves; a
+    pool of BLAS threads only adds its start-up (50-60 ms at numpy's import on a loaded
+    2-core machine) and threads competing with the main one (bench/bench_encoder.py)."""
+    if "numpy" not in sys.modules:
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 
 def _option_names(message: str) -> str:
