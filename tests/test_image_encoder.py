@@ -419,7 +419,7 @@ def test_ward_merging_spares_large_clusters():
     distance[2, 3] = distance[3, 2] = 0.06
     np.fill_diagonal(distance, np.inf)
     weight = np.array([10.0, 10.0, 1.0, 1.0, 5.0])
-    kept = _agglomerate_ward(distance.copy(), weight.copy(), [0, 1, 2, 3, 4], 4)
+    kept = _agglomerate_ward(distance.copy(), weight.copy(), 4)
     assert kept == [0, 1, 2, 4]
 
 

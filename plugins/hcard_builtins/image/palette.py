@@ -125,10 +125,6 @@ class _Matched:
         self.by_kx = np.argsort(self.kx, kind="stable")
         self.sorted_kx = self.kx[self.by_kx]
 
-    def take(self, index: np.ndarray) -> _Matched:
-        """The textures at ``index``."""
-        return _Matched(self.textures.take(index), self.bin_width)
-
     def distances(self, i: int) -> np.ndarray:
         """``(n,)`` distances from texture ``i`` to every texture of the set."""
         one = self.textures
@@ -188,10 +184,6 @@ class _Keyed:
         self.key, self.coef = key, coef
         self.sorted_key, self.owner = flat_key[order], owner[order]
         self.re, self.im = flat_coef.real, flat_coef.imag
-
-    def take(self, index: np.ndarray) -> _Keyed:
-        """The textures at ``index``."""
-        return _Keyed(self.textures.take(index))
 
     def distances(self, i: int) -> np.ndarray:
         """``(n,)`` distances from texture ``i`` to every texture of the set: ``(b - b_t)^2 +
@@ -299,11 +291,12 @@ def build_palette(
         space = _Keyed(textures)
     else:
         space = _Matched(textures, bin_width)
-    leaders, assign = _leaders(space, tolerance, leader_cap(max_textures))
+    leaders, assign, rows = _leaders(space, tolerance, leader_cap(max_textures))
     found = len(leaders)
     if found > max_textures:
-        heads = _agglomerate(space, leaders, assign, max_textures, ward=keyed)
-        assign = _nearest(space, heads)
+        kept = _agglomerate(rows[:, leaders], assign, max_textures, ward=keyed)
+        heads = [leaders[i] for i in kept]
+        assign = np.argmin(rows[kept], axis=0)  # the nearest representative of every taxtel
     else:
         heads = leaders
     # Keep the representatives in use (a tie may leave one without taxtels), ordered by their
@@ -362,11 +355,13 @@ def align_wave_vectors(
 
 def _leaders(
     space: _Distances, tolerance: float | np.ndarray, cap: int
-) -> tuple[list[int], np.ndarray]:
+) -> tuple[list[int], np.ndarray, np.ndarray]:
     """Farthest-first leader clustering (farthest beyond its own tolerance); returns leader
-    taxtels and each taxtel's leader slot."""
+    taxtels, each taxtel's leader slot and the distances from each leader to every taxtel
+    (``(leaders, n)``: merging and the final assignment read them instead of recomputing)."""
     leaders = [0]
-    best = space.distances(0)
+    rows = [space.distances(0)]
+    best = rows[0].copy()
     assign = np.zeros(best.size, dtype=np.int64)
     while len(leaders) < cap:
         beyond = best - tolerance
@@ -378,26 +373,26 @@ def _leaders(
         best[closer] = distance[closer]
         assign[closer] = len(leaders)
         leaders.append(j)
-    return leaders, assign
+        rows.append(distance)
+    return leaders, assign, np.stack(rows)
 
 
 def _agglomerate(
-    space: _Distances, leaders: list[int], assign: np.ndarray, max_textures: int,
-    ward: bool = False,
+    distance: np.ndarray, assign: np.ndarray, max_textures: int, ward: bool = False
 ) -> list[int]:
     """Merge the closest pair of leader clusters until ``max_textures`` remain (the first
-    closest pair in row-major order of the distance matrix; the lighter cluster goes).
+    closest pair in row-major order of the leaders' distance matrix ``distance``; the lighter
+    cluster goes). Returns the indices of the leaders kept.
 
     With ``ward``, "closest" is the smallest added squared error, ``w_i w_j / (w_i + w_j)
     d_ij^2`` for clusters of ``w_i`` and ``w_j`` taxtels (Ward's criterion): two large clusters
     are merged only when they are much closer than two small ones."""
-    heads = space.take(np.asarray(leaders))
-    count = len(leaders)
-    distance = np.stack([heads.distances(i) for i in range(count)])
+    count = distance.shape[0]
+    distance = distance.copy()
     np.fill_diagonal(distance, np.inf)
     weight = np.bincount(assign, minlength=count).astype(np.float64)
     if ward:
-        return _agglomerate_ward(distance, weight, leaders, max_textures)
+        return _agglomerate_ward(distance, weight, max_textures)
     # Row minima are kept up to date instead of searching the whole matrix at every merge.
     nearest = np.argmin(distance, axis=1)
     closest = distance[np.arange(count), nearest]
@@ -414,15 +409,15 @@ def _agglomerate(
         if stale.size:
             nearest[stale] = np.argmin(distance[stale], axis=1)
             closest[stale] = distance[stale, nearest[stale]]
-    return [leaders[i] for i in np.nonzero(weight > 0)[0]]
+    return [int(i) for i in np.nonzero(weight > 0)[0]]
 
 
 def _agglomerate_ward(
-    distance: np.ndarray, weight: np.ndarray, leaders: list[int], max_textures: int
+    distance: np.ndarray, weight: np.ndarray, max_textures: int
 ) -> list[int]:
     """:func:`_agglomerate` by Ward's criterion on the leaders' distance matrix (the kept
     leader stays representative, so only the weights change and one row of costs with them)."""
-    count = len(leaders)
+    count = distance.shape[0]
     squared = np.where(np.isfinite(distance), distance, 0.0) ** 2
 
     def pair_weight(a: np.ndarray | float, b: np.ndarray) -> np.ndarray:
@@ -444,13 +439,7 @@ def _agglomerate_ward(
         row = pair_weight(weight[keep], weight) * squared[keep]
         cost[keep, alive] = row[alive]
         cost[alive, keep] = row[alive]
-    return [leaders[i] for i in np.nonzero(weight > 0)[0]]
-
-
-def _nearest(space: _Distances, representatives: list[int]) -> np.ndarray:
-    """Index (into ``representatives``) of the nearest representative of every taxtel."""
-    distance = np.stack([space.distances(r) for r in representatives])
-    return np.argmin(distance, axis=0)
+    return [int(i) for i in np.nonzero(weight > 0)[0]]
 
 
 def _centroids(
