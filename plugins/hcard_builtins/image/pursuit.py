@@ -151,7 +151,7 @@ def _grow(
     todo = np.arange(count.size)
     for round_ in range(_GROWTH_ROUNDS + 1):
         left = _residual_after(spectrum[todo], top[todo], count[todo], mask.shape[1:])
-        p95[todo] = owned_percentile(np.abs(left), mask[todo], owned[todo])
+        p95[todo] = masked_percentile(np.abs(left), mask[todo], owned[todo])
         over = p95[todo] > target
         grow = over & (count[todo] < free[todo])
         if round_ == _GROWTH_ROUNDS or not grow.any():
@@ -186,7 +186,7 @@ def error_figures(residual: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, n
     owned = np.rint(mask.reshape(n, -1).sum(axis=1)).astype(np.int64)
     rms = np.sqrt(np.einsum("nij,nij->n", residual, residual, dtype=np.float64)
                   / np.maximum(owned, 1))
-    return rms, owned_percentile(np.abs(residual), mask, owned)
+    return rms, masked_percentile(np.abs(residual), mask, owned)
 
 
 def over_target(residual: np.ndarray, owned: np.ndarray, target: float) -> np.ndarray:
@@ -199,7 +199,7 @@ def over_target(residual: np.ndarray, owned: np.ndarray, target: float) -> np.nd
     return beyond > owned - (95 * owned + 99) // 100
 
 
-def owned_percentile(magnitude: np.ndarray, mask: np.ndarray, owned: np.ndarray) -> np.ndarray:
+def masked_percentile(magnitude: np.ndarray, mask: np.ndarray, owned: np.ndarray) -> np.ndarray:
     """95th percentile (nearest rank) of ``magnitude`` ``(n, nh, nw)`` (>= 0) over each tile's
     owned pixels (``mask`` as in :func:`pursue`, ``owned`` its sum per tile)."""
     n = magnitude.shape[0]

@@ -169,8 +169,7 @@ def reconstruction_error(
             error[:, partial_cols] *= col_mask[None, :, None, :]
         squares[first:stop] = np.einsum("abij,abij->ab", error, error)
         np.abs(error, out=error)
-        largest[first:stop] = error.max(axis=(2, 3))
-        percentile[first:stop] = owned_percentile(
+        percentile[first:stop], largest[first:stop] = owned_percentile(
             error, geometry.row_owned[first:stop], geometry.col_owned
         )
         # the pixels a taxtel does not own were zeroed: below every owned value (>= 0), they
@@ -243,9 +242,9 @@ def percentile_rank(owned: int, percent: int = 95) -> int:
 
 def owned_percentile(
     magnitude: np.ndarray, row_owned: np.ndarray, col_owned: np.ndarray, percent: int = 95
-) -> np.ndarray:
-    """Per tile, the ``percent``-th percentile (nearest rank) of the values of the pixels the
-    tile's taxtel owns.
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per tile, the ``percent``-th percentile (nearest rank) and the maximum of the values of
+    the pixels the tile's taxtel owns.
 
     Args:
         magnitude: ``(rows, cols, tile_h, tile_w)`` values >= 0, zero on pixels a taxtel does not
@@ -254,11 +253,14 @@ def owned_percentile(
         row_owned, col_owned: pixels owned by each tile row and column (:class:`Geometry`).
 
     Returns:
-        ``(rows, cols)``; 0 for a taxtel that owns no pixel.
+        ``(percentile, maximum)``, each ``(rows, cols)``; 0 for a taxtel that owns no pixel.
+        The maximum is read from the values at or above the percentile, where the partition
+        puts them.
     """
     rows, cols, nh, nw = magnitude.shape
     flat = magnitude.reshape(rows, cols, nh * nw)
     out = np.zeros((rows, cols))
+    top = np.zeros((rows, cols))
     for owned_y in counts_present(row_owned):
         r = np.nonzero(row_owned == owned_y)[0]
         for owned_x in counts_present(col_owned):
@@ -272,10 +274,12 @@ def owned_percentile(
                 block = flat[rs, cs]
                 block.partition(kth, axis=-1)  # in place: the caller needs no pixel order
                 out[rs, cs] = block[..., kth]
+                top[rs, cs] = block[..., kth:].max(axis=-1)
             else:
-                block = flat[np.ix_(r, c)]
-                out[np.ix_(r, c)] = np.partition(block, kth, axis=-1)[..., kth]
-    return out
+                block = np.partition(flat[np.ix_(r, c)], kth, axis=-1)
+                out[np.ix_(r, c)] = block[..., kth]
+                top[np.ix_(r, c)] = block[..., kth:].max(axis=-1)
+    return out, top
 
 
 def _contiguous(index: np.ndarray) -> bool:
