@@ -19,6 +19,7 @@ texture leaves (:attr:`TaxtelTextures.own_rms`) tells it how far a shared textur
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -26,10 +27,12 @@ from hcard import limits
 
 from .geometry import Geometry
 from .loading import GrayImage
-from .pursuit import Pursuit, error_figures, over_target, pursue
 from .reconstruct import FrictionMap, render_rows
 from .spectral import TileSpectra, analyse_tiles, to_surface
 from .textures import Textures
+
+if TYPE_CHECKING:
+    from .pursuit import Pursuit
 
 CHUNK_PIXELS = 1 << 24
 """Tiles are analysed in chunks of about this many pixels, which bounds the memory used."""
@@ -170,6 +173,9 @@ def _analyse_rows(
     if target is None:
         return TaxtelTextures(textures, textures, zeros, zeros, zeros, np.zeros(n, dtype=bool),
                               zeros)
+    # imported here: an encode without a target never needs it (start-up of hcard encode)
+    from .pursuit import error_figures, over_target, pursue
+
     count = textures.valid.sum(axis=1)
     check = (count > 0) | (spectra.std * scale > CHEBYSHEV_FRACTION * target.p95)
     own_rms, own_p95 = zeros.copy(), zeros.copy()

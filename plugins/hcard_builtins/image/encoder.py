@@ -41,7 +41,6 @@ from .geometry import Geometry, resolve_geometry
 from .loading import DEFAULT_MAX_PIXELS, GrayImage, load_gray
 from .palette import Palette, build_palette
 from .reconstruct import FrictionMap, ReconstructionError, reconstruction_error
-from .shortfall import shortfall
 from .spectral import tile_centres
 from .textures import orientation_and_phase
 
@@ -284,6 +283,8 @@ def encode_image(
     maps = {"error_rms": error.taxtel_rms, "error_p95": error.taxtel_p95,
             "error_max": error.taxtel_max}
     if target is not None:
+        from .shortfall import shortfall  # only with a target (start-up of hcard encode)
+
         missed = shortfall(error, taxtels, target,
                            palette_full=palette.leaders > opts.max_textures)
         stats["target"] = missed.figures()
