@@ -34,7 +34,7 @@ from .textures import Textures
 if TYPE_CHECKING:
     from .pursuit import Pursuit
 
-CHUNK_PIXELS = 1 << 24
+CHUNK_PIXELS = 1 << 22
 """Tiles are analysed in chunks of about this many pixels, which bounds the memory used."""
 GOAL_FRACTION = 0.5
 """The pursuit aims at an RMS error of this fraction of the target: the 95th percentile of

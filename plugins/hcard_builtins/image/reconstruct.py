@@ -129,7 +129,7 @@ def reconstruction_error(
     palette: Palette,
     mapping: FrictionMap,
     *,
-    chunk_pixels: int = 1 << 22,
+    chunk_pixels: int = 1 << 21,
 ) -> ReconstructionError:
     """RMS, 95th percentile and maximum of (card - image) in relative friction over the image's
     pixels, and RMS, 95th percentile and maximum per taxtel.
