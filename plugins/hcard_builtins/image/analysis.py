@@ -120,6 +120,8 @@ def analyse_image(
         tiles = geometry.gather(image.pixels, first, stop, columns)
         parts.append(_analyse_rows(tiles, geometry, mapping, first, stop, peaks, min_amplitude,
                                    low, target))
+    if len(parts) == 1:
+        return parts[0]
     return TaxtelTextures(
         textures=_stack([p.textures for p in parts]),
         spectral=_stack([p.spectral for p in parts]),

@@ -152,6 +152,22 @@ def hann_kernels(u: np.ndarray, n: int, shifts: tuple[int, ...]) -> dict[int, np
     return kernels
 
 
+def hann_kernels_of(
+    pairs: list[tuple[np.ndarray, int]], shifts: tuple[int, ...]
+) -> list[dict[int, np.ndarray]]:
+    """:func:`hann_kernels` of several ``(u, n)`` at once: the arrays of equal ``n`` and shape
+    go through one call (the kernel is elementwise: the same values, fewer numpy calls)."""
+    out: list[dict[int, np.ndarray]] = [{} for _ in pairs]
+    groups: dict[tuple[int, tuple[int, ...]], list[int]] = {}
+    for i, (u, n) in enumerate(pairs):
+        groups.setdefault((n, np.shape(u)), []).append(i)
+    for (n, _), members in groups.items():
+        stacked = hann_kernels(np.stack([pairs[i][0] for i in members]), n, shifts)
+        for slot, i in enumerate(members):
+            out[i] = {j: kernel[slot] for j, kernel in stacked.items()}
+    return out
+
+
 def hann_gain(u: np.ndarray, n: int) -> np.ndarray:
     """``|hann_kernel(u, n)|`` in real arithmetic, without the phase (of modulus 1): with
     ``S_k = sin(pi (u + k) / n)``, ``|sin(pi u)| |1/(2 S_0) - cos(pi/n) (1/S_1 + 1/S_-1) / 4
@@ -240,7 +256,8 @@ def _analyse_spectra(
     peak_x[tile, rank], peak_y[tile, rank] = kx, ky_signed
     values[tile, rank] = spectrum[tile, ky, kx]
     # Starting amplitudes: each peak bin divided by its own window gain.
-    gain = hann_kernel(local.fx - peak_x, nw) * hann_kernel(local.fy - peak_y, nh)
+    kx_gain, ky_gain = hann_kernels_of([(local.fx - peak_x, nw), (local.fy - peak_y, nh)], (0,))
+    gain = kx_gain[0] * ky_gain[0]
     local.coef = np.where(local.valid, values / np.where(local.valid, gain, 1.0), 0.0)
     for _ in range(_CLEAN_PASSES):
         _refine_frequencies(local, spectrum, peak_x, peak_y, nw)
@@ -302,10 +319,11 @@ def _refine_frequencies(
         # direct components and their mirror images; shared by the five bins looked at.
         # hann_kernels(u)[j] is H(u + j): the bin shifted by o is the kernel shifted by -o.
         shifts = (-1, 0, 1)
-        x_direct = hann_kernels(fx[:, None, :] - px[:, :, None], nw, shifts)
-        y_direct = hann_kernels(fy[:, None, :] - py[:, :, None], nh, shifts)
-        x_mirror = hann_kernels(-fx[:, None, :] - px[:, :, None], nw, shifts)
-        y_mirror = hann_kernels(-fy[:, None, :] - py[:, :, None], nh, shifts)
+        x_direct, y_direct, x_mirror, y_mirror = hann_kernels_of(
+            [(fx[:, None, :] - px[:, :, None], nw), (fy[:, None, :] - py[:, :, None], nh),
+             (-fx[:, None, :] - px[:, :, None], nw), (-fy[:, None, :] - py[:, :, None], nh)],
+            shifts,
+        )
         source, image = coef[:, None, :], np.conj(coef)[:, None, :]
         cleaned = {}
         for oy, ox in ((0, 0), (0, -1), (0, 1), (-1, 0), (1, 0)):
@@ -323,7 +341,8 @@ def _refine_frequencies(
         fy = np.where(mask, np.clip(py + dy, -nh / 2.0, nh / 2.0), 0.0)
         spectra.fx[tiles, :m], spectra.fy[tiles, :m] = fx, fy
         # Amplitudes for the next pass: own bin over own gain at the new frequency.
-        gain = hann_kernel(fx - px, nw) * hann_kernel(fy - py, nh)
+        kx_gain, ky_gain = hann_kernels_of([(fx - px, nw), (fy - py, nh)], (0,))
+        gain = kx_gain[0] * ky_gain[0]
         spectra.coef[tiles, :m] = np.where(mask, cleaned_centre / gain, 0.0)
 
 
@@ -438,12 +457,13 @@ def _solve_amplitudes(
         px, py = peak_x[tiles, :m], peak_y[tiles, :m]
         # [t, j, k]: component k seen in the peak bin of component j (zero for padding).
         pair = mask[:, :, None] & mask[:, None, :]
-        direct = hann_kernel(fx[:, None, :] - px[:, :, None], nw) * hann_kernel(
-            fy[:, None, :] - py[:, :, None], nh
+        x_direct, y_direct, x_mirror, y_mirror = hann_kernels_of(
+            [(fx[:, None, :] - px[:, :, None], nw), (fy[:, None, :] - py[:, :, None], nh),
+             (-fx[:, None, :] - px[:, :, None], nw), (-fy[:, None, :] - py[:, :, None], nh)],
+            (0,),
         )
-        mirror = hann_kernel(-fx[:, None, :] - px[:, :, None], nw) * hann_kernel(
-            -fy[:, None, :] - py[:, :, None], nh
-        )
+        direct = x_direct[0] * y_direct[0]
+        mirror = x_mirror[0] * y_mirror[0]
         direct, mirror = np.where(pair, direct, 0.0), np.where(pair, mirror, 0.0)
         plus, minus = direct + mirror, direct - mirror
         system = np.block([[plus.real, -minus.imag], [plus.imag, minus.real]])
