@@ -922,3 +922,26 @@ def test_window_kernel_and_gain_match_the_windowed_sum(n: int):
     np.testing.assert_allclose(hann_gain(u, n), np.abs(direct), atol=tolerance)
     off = np.abs(u - np.round(u)) > 1e-3
     np.testing.assert_allclose(hann_gain(u[off], n), np.abs(hann_kernel(u[off], n)), rtol=1e-12)
+
+
+def test_chunk_size_changes_no_more_than_the_last_bits(tmp_path: Path, monkeypatch):
+    """Taxtel rows are analysed and rendered in chunks (memory, cache); a tile's figures may
+    differ in the last bits with its place in a batched FFT, nothing more: the same textures,
+    indices and components, values within 1e-12, the same error figures."""
+    from hcard_builtins.image import analysis
+
+    path = save_gray(shapes_gray(7, 0.02), tmp_path / "shapes.png")
+    whole = encode_image(path)
+    monkeypatch.setattr(analysis, "CHUNK_PIXELS", 50 * 50 * 6)  # one taxtel row a chunk
+    rows = encode_image(path)
+    a, b = whole.card, rows.card
+    assert list(a.grid.texture_index) == list(b.grid.texture_index)
+    assert [len(t.components) for t in a.textures] == [len(t.components) for t in b.textures]
+    for ta, tb in zip(a.textures, b.textures, strict=True):
+        assert ta.baseline == pytest.approx(tb.baseline, abs=1e-12)
+        for ca, cb in zip(ta.components, tb.components, strict=True):
+            assert (ca.frequency, ca.amplitude, ca.orientation) == pytest.approx(
+                (cb.frequency, cb.amplitude, cb.orientation), abs=1e-12)
+            assert angle_difference(ca.phase, cb.phase) < 1e-9
+    for key in ("rms_error", "p95_error", "max_error"):
+        assert whole.stats[key] == pytest.approx(rows.stats[key], rel=1e-9)

@@ -169,20 +169,8 @@ def hann_kernels_of(
 
 
 def hann_gain(u: np.ndarray, n: int) -> np.ndarray:
-    """``|hann_kernel(u, n)|`` in real arithmetic, without the phase (of modulus 1): with
-    ``S_k = sin(pi (u + k) / n)``, ``|sin(pi u)| |1/(2 S_0) - cos(pi/n) (1/S_1 + 1/S_-1) / 4
-    + i sin(pi/n) (1/S_1 - 1/S_-1) / 4|``."""
-    u = np.asarray(u, dtype=np.float64)
-    # the same step off the removable singularities as hann_kernels
-    u = np.where(np.abs(u - np.round(u)) < 1e-7, u + 2e-7, u)
-    angle = (np.pi / n) * u
-    s, c = np.sin(angle), np.cos(angle)
-    step_c, step_s = np.cos(np.pi / n), np.sin(np.pi / n)
-    above = 1.0 / (s * step_c + c * step_s)
-    below = 1.0 / (s * step_c - c * step_s)
-    real = 0.5 / s - 0.25 * step_c * (above + below)
-    imag = 0.25 * step_s * (above - below)
-    return np.abs(np.sin(np.pi * u)) * np.hypot(real, imag)
+    """``|hann_kernel(u, n)|``."""
+    return np.abs(hann_kernel(u, n))
 
 
 def analyse_tiles(tiles: np.ndarray, *, n_peaks: int, min_amplitude: float) -> TileSpectra:
