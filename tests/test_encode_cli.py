@@ -327,6 +327,9 @@ def test_output_write_failure_leaves_no_file(tmp_path: Path, monkeypatch: pytest
         (["--taxtel-mm", "0"], "--taxtel-mm must be between"),
         (["--channel", "air"], "--channel"),
         (["--width-mm", "-3"], "--width-mm must be a positive number"),
+        (["--max-error", "0"], "--max-error"),
+        (["--max-error", "-1"], "--max-error"),
+        (["--max-error", "nan"], "--max-error"),
     ],
 )
 def test_bad_options_are_usage_errors(tmp_path: Path, args: list[str], message: str):
@@ -379,3 +382,32 @@ def test_summary_lines_format_the_ratio_to_the_raw_bitmap():
     # an encoder without a 95th percentile or per-taxtel figures: rms and max only
     assert "rms 0.0400, max 0.1000 relative friction = 0.50, 1.25 x the 0.08 friction JND" in text
     assert not any(line.startswith("taxtels") for line in lines)
+
+
+def test_max_error_prints_the_target_and_who_misses_it(tmp_path: Path):
+    """A grating patch with a sharp-edged dark square: with --max-error 1 the summary says how
+    many taxtels meet the target, the worst of the others and why; the JSON summary lists them
+    all with the same figures."""
+    x = (np.arange(300) + 0.5) * 0.1
+    xx, yy = np.meshgrid(x, x[:200])
+    gray = 0.5 - 0.3 * np.cos(2 * np.pi * xx / 1.3)
+    gray = np.where((xx > 12.3) & (xx < 18.9) & (yy > 6.2) & (yy < 13.7), 0.05, gray)
+    path = tmp_path / "patch.png"
+    Image.fromarray(np.round(gray * 255).astype(np.uint8)).save(path)
+    result = run(path, "-o", tmp_path / "p.hcard", "--max-error", "1")
+    assert result.exit_code == 0, result.output
+    lines = result.stdout.splitlines()
+    target = next(line for line in lines if line.startswith("target"))
+    assert "95th percentile <= 1 JND in each taxtel: met in" in target
+    assert "worst: column" in target
+    assert any("detail finer than 16 gratings" in line for line in lines)
+    data = json.loads(run(path, "-o", tmp_path / "p.hcard", "--max-error", "1", "--json").stdout)
+    figures = data["target"]
+    assert figures["target_jnd"] == 1.0
+    assert figures["taxtels_over"] == len(figures["over_target"]) > 0
+    assert f"met in {24 - figures['taxtels_over']} of 24" in target
+    worst = figures["worst"]
+    assert f"column {worst['col']}, row {worst['row']} ({worst['p95_jnd']:.2f} JND" in target
+    assert all(t["p95_jnd"] > 1.0 for t in figures["over_target"])
+    plain = json.loads(run(path, "-o", tmp_path / "p.hcard", "--json").stdout)
+    assert "target" not in plain and plain["components"] < data["components"]

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import json
+import os
 import re
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -58,18 +60,30 @@ DEFAULT_MAX_PIXELS = 64_000_000  # same as hcard_builtins.image.DEFAULT_MAX_PIXE
     "baseline steps between taxtels.",
 )
 @click.option(
+    "--max-error",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=None,
+    metavar="JND",
+    help="Error target in multiples of the 8% friction JND: in every taxtel, 95% of the "
+    "pixels within this of the image (the 95th percentile of the absolute error over the "
+    "taxtel's pixels, card evaluated position-locked at the pixel centres; it bounds the "
+    "image's 95th percentile too). The encoder adds gratings to the taxtels over it and gives "
+    "them textures of their own, up to --components and --max-textures, and lists the taxtels "
+    "it cannot bring under it and why. Default: no target (the spectral analysis alone).",
+)
+@click.option(
     "--components",
     type=click.IntRange(0, limits.MAX_COMPONENTS_PER_TEXTURE),
-    default=8,
-    show_default=True,
-    help="Most grating components kept per taxtel texture (strongest first).",
+    default=None,
+    help="Most grating components per taxtel texture (strongest first). Default: 8, or "
+    f"{limits.MAX_COMPONENTS_PER_TEXTURE} (the format's limit) with --max-error.",
 )
 @click.option(
     "--max-textures",
     type=click.IntRange(1, limits.MAX_TEXTURES),
-    default=64,
-    show_default=True,
-    help="Most textures in the card's palette; the closest textures are merged until it fits.",
+    default=None,
+    help="Most textures in the card's palette; the closest textures are merged until it fits. "
+    f"Default: 64, or {limits.MAX_TEXTURES} (the format's limit) with --max-error.",
 )
 @click.option(
     "--min-amplitude",
@@ -136,8 +150,9 @@ def encode(
     height_mm: float | None,
     dpi: float | None,
     taxtel_mm: float,
-    components: int,
-    max_textures: int,
+    max_error: float | None,
+    components: int | None,
+    max_textures: int | None,
     min_amplitude: float,
     merge_tolerance: float,
     channel: str,
@@ -155,14 +170,19 @@ def encode(
     The image is cut into taxtels; each taxtel's friction becomes a baseline plus up to
     --components gratings (frequency, orientation, amplitude, phase), and similar taxtels
     share a palette texture. Prints a summary: grid, textures, components, card size and the
-    reconstruction error against the image (relative friction and multiples of the 8% JND).
+    reconstruction error against the image (relative friction and multiples of the 8% JND):
+    RMS, 95th percentile and maximum over the image, and per taxtel. With --max-error, the
+    encoder spends components and textures where a taxtel is over the target and says which
+    taxtels it cannot bring under it, by how much and why.
 
     \b
     Examples:
       hcard encode photo.png -o photo.hcard --width-mm 80
+      hcard encode button.png -o button.hcard --max-error 1
       hcard encode map.png -o map.hcard.json --taxtel-mm 2 --channel ev --preview map-p.png
       hcard encode photo.png -o - --dpi 300 | hcard info -
     """
+    _single_threaded_blas()
     from hcard_builtins.image import EncodeOptions, encode_image
 
     try:
@@ -171,6 +191,7 @@ def encode(
             height_mm=height_mm,
             dpi=dpi,
             taxtel_mm=taxtel_mm,
+            max_error=max_error,
             components=components,
             max_textures=max_textures,
             min_amplitude=min_amplitude,
@@ -233,12 +254,22 @@ _OPTION_FIELDS = (
     "height_mm",
     "dpi",
     "taxtel_mm",
+    "max_error",
     "components",
     "max_textures",
     "min_amplitude",
     "merge_tolerance",
     "max_pixels",
 )
+
+
+def _single_threaded_blas() -> None:
+    """One BLAS thread for this process unless the environment says otherwise, set before
+    numpy loads its BLAS. The encoder's BLAS calls are small batched products and solves; a
+    pool of BLAS threads only adds its start-up (50-60 ms at numpy's import on a loaded
+    2-core machine) and threads competing with the main one (bench/bench_encoder.py)."""
+    if "numpy" not in sys.modules:
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 
 def _option_names(message: str) -> str:
@@ -305,6 +336,7 @@ def summary_lines(s: dict[str, Any]) -> list[str]:
         f"(card = {100.0 * card_bytes / raw:.3g} % of it)",
         _error_line(s),
         *_taxtel_error_lines(s),
+        *_target_lines(s),
         f"wrote       {s['output']} ({s['output_format']}, {s['output_bytes']} bytes)",
     ]
     if s.get("preview"):
@@ -332,6 +364,37 @@ def _taxtel_error_lines(s: dict[str, Any]) -> list[str]:
     return [f"taxtels     {s['taxtels_over_jnd']} of {taxtels} with an rms error above 1 JND; "
             f"worst: column {worst['col']}, row {worst['row']} (rms {worst['rms_jnd']:.2f}, max "
             f"{worst['max_jnd']:.2f} JND)"]
+
+
+REASON_TEXT = {
+    "detail": "detail finer than {limit} gratings a taxtel can carry (a smaller --taxtel-mm "
+    "helps)",
+    "components": "the --components cap (up to {limit} would meet it)",
+    "palette": "a shared palette texture{full}",
+}
+"""How the summary words each reason a taxtel misses the target (see
+``hcard_builtins.image.shortfall``)."""
+
+
+def _target_lines(s: dict[str, Any]) -> list[str]:
+    """The summary's lines on the error target, when one was given: how many taxtels meet
+    it, the worst of the others and how many miss it for each reason."""
+    target = s.get("target")
+    if not target:
+        return []
+    taxtels = s["cols"] * s["rows"]
+    head = (f"target      95th percentile <= {target['target_jnd']:g} JND in each taxtel: met in "
+            f"{taxtels - target['taxtels_over']} of {taxtels}")
+    worst = target["worst"]
+    if worst is None:
+        return [head]
+    head += (f"; worst: column {worst['col']}, row {worst['row']} ({worst['p95_jnd']:.2f} JND, "
+             f"{worst['p95_jnd'] - target['target_jnd']:.2f} over)")
+    full = f" (palette full: {s['textures']} textures)" if target["palette_full"] else ""
+    limit = limits.MAX_COMPONENTS_PER_TEXTURE
+    reasons = [f"{count} for {REASON_TEXT[name].format(limit=limit, full=full)}"
+               for name, count in target["reasons"].items() if count]
+    return [head, f"            over it: {'; '.join(reasons)}"]
 
 
 COMMANDS = [encode]

@@ -19,15 +19,26 @@ hooks of :mod:`hcard.plugins.hookspecs` with :data:`hookimpl`::
 
 from __future__ import annotations
 
-from hcard.plugins.hookspecs import ENTRY_POINT_GROUP, PROJECT, hookimpl, hookspec
+import importlib
+from typing import Any
+
 from hcard.plugins.kinds import KINDS, Encoder, EncodeResult
-from hcard.plugins.registry import (
-    BrokenPlugin,
-    HcardPluginWarning,
-    PluginInfo,
-    PluginRegistry,
-    get_registry,
-)
+
+_LAZY = {
+    "ENTRY_POINT_GROUP": "hookspecs", "PROJECT": "hookspecs", "hookimpl": "hookspecs",
+    "hookspec": "hookspecs", "BrokenPlugin": "registry", "HcardPluginWarning": "registry",
+    "PluginInfo": "registry", "PluginRegistry": "registry", "get_registry": "registry",
+}
+"""Names of the hook and registry modules, imported on first use: the plugin kinds alone (an
+encoder's base class) do not need pluggy or the entry-point machinery (importlib.metadata)."""
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'hcard.plugins' has no attribute {name!r}")
+    return getattr(importlib.import_module(f"hcard.plugins.{module}"), name)
+
 
 __all__ = [
     "ENTRY_POINT_GROUP",

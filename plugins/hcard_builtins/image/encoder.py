@@ -6,6 +6,12 @@ to ``components`` gratings (frequency, orientation, amplitude, phase); similar t
 palette texture. Gratings longer than a taxtel cannot be resolved inside it and show up as
 baseline steps between taxtels (the hybrid position/texture representation of chapter 5).
 
+With an error target (``max_error``, in JND) the encoder checks every taxtel against its
+pixels and, where the 95th percentile of the absolute error exceeds the target, adds the
+residual's strongest tile harmonics (:mod:`.pursuit`) and keeps the texture apart in the
+palette, within the format's limits; :mod:`.shortfall` names the taxtels it could not bring
+under the target and why.
+
 >>> from hcard_builtins.image import encode_image
 >>> result = encode_image("bumps.png", taxtel_mm=5.0, channel="uv")   # doctest: +SKIP
 >>> result.stats["rms_error_jnd"]                                     # doctest: +SKIP
@@ -30,11 +36,12 @@ from hcard.plugins.kinds import Encoder, EncodeResult
 from hcard.v1 import card_pb2 as pb
 from hcard.validate import errors_of, validate
 
+from .analysis import Target, TaxtelTextures, analyse_image
 from .geometry import Geometry, resolve_geometry
 from .loading import DEFAULT_MAX_PIXELS, GrayImage, load_gray
 from .palette import Palette, build_palette
 from .reconstruct import FrictionMap, ReconstructionError, reconstruction_error
-from .spectral import TileSpectra, analyse_tiles, tile_centres, to_surface
+from .spectral import tile_centres
 from .textures import orientation_and_phase
 
 DEFAULT_FRICTION_RANGE: dict[str, tuple[float, float]] = {
@@ -47,8 +54,13 @@ CHANNELS = tuple(DEFAULT_FRICTION_RANGE)
 LOCKINGS = ("auto", "position", "velocity")
 PROGRESS_MIN_PIXELS = 1_000_000
 """Images larger than this (pixels) report their stages through the progress callback."""
-CHUNK_PIXELS = 1 << 24
-"""Tiles are analysed in chunks of about this many pixels, which bounds the memory used."""
+DEFAULT_COMPONENTS = 8
+"""Most components per texture without an error target."""
+DEFAULT_MAX_TEXTURES = 64
+"""Most palette textures without an error target."""
+SPECTRAL_PEAKS = 8
+"""Most gratings per taxtel the spectral analysis keeps; with an error target the residual
+pursuit adds more, up to the ``components`` option."""
 GENERATOR = f"hcard {__version__} image encoder"
 
 
@@ -61,12 +73,18 @@ class EncodeOptions:
             ratio; both allow rectangular pixels).
         dpi: resolution, dots per inch (instead of a size).
         taxtel_mm: taxtel side, millimetres.
-        components: most components per texture (0 to 16).
-        max_textures: most textures in the palette (1 to 256).
+        components: most components per texture (0 to 16); ``None``: 8, or 16 with
+            ``max_error``.
+        max_textures: most textures in the palette (1 to 256); ``None``: 64, or 256 with
+            ``max_error``.
         min_amplitude: components weaker than this (relative friction) are dropped, and a
             taxtel whose friction standard deviation is below it keeps only its baseline.
         merge_tolerance: taxtels whose textures differ by less than this RMS relative friction
             share a texture (default half the 8 % friction JND).
+        max_error: error target, multiples of the 8 % friction JND: the 95th percentile of the
+            absolute error over each taxtel's pixels (the card evaluated position-locked at
+            the pixel centres); ``None`` for none. It also bounds the image's 95th
+            percentile: if 95 % of every taxtel's pixels are within it, so are 95 % of all.
         channel: ``"uv"``, ``"ev"`` or ``"bipolar"``.
         locking: ``"auto"``, ``"position"`` or ``"velocity"``.
         friction_range: relative friction of white and of black, ``(low, high)``; ``None`` for
@@ -80,10 +98,11 @@ class EncodeOptions:
     height_mm: float | None = None
     dpi: float | None = None
     taxtel_mm: float = 5.0
-    components: int = 8
-    max_textures: int = 64
+    components: int | None = None
+    max_textures: int | None = None
     min_amplitude: float = 0.01
     merge_tolerance: float = limits.RELATIVE_FRICTION_JND / 2
+    max_error: float | None = None
     channel: str = "uv"
     locking: str = "auto"
     friction_range: tuple[float, float] | None = None
@@ -114,19 +133,26 @@ class EncodeOptions:
                 f"taxtel_mm must be between {limits.MIN_TAXTEL_MM} and {limits.MAX_SURFACE_MM:g} "
                 f"mm, got {self.taxtel_mm}"
             )
-        if not 0 <= self.components <= limits.MAX_COMPONENTS_PER_TEXTURE:
+        targeted = self.max_error is not None
+        components = self.components
+        if components is None:
+            components = limits.MAX_COMPONENTS_PER_TEXTURE if targeted else DEFAULT_COMPONENTS
+        max_textures = self.max_textures
+        if max_textures is None:
+            max_textures = limits.MAX_TEXTURES if targeted else DEFAULT_MAX_TEXTURES
+        if not 0 <= components <= limits.MAX_COMPONENTS_PER_TEXTURE:
             raise ValueError(
-                f"components must be 0 to {limits.MAX_COMPONENTS_PER_TEXTURE}, got "
-                f"{self.components}"
+                f"components must be 0 to {limits.MAX_COMPONENTS_PER_TEXTURE}, got {components}"
             )
-        if not 1 <= self.max_textures <= limits.MAX_TEXTURES:
-            raise ValueError(
-                f"max_textures must be 1 to {limits.MAX_TEXTURES}, got {self.max_textures}"
-            )
+        if not 1 <= max_textures <= limits.MAX_TEXTURES:
+            raise ValueError(f"max_textures must be 1 to {limits.MAX_TEXTURES}, got {max_textures}")
         for name in ("min_amplitude", "merge_tolerance"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be a number >= 0, got {value}")
+        if self.max_error is not None and not (math.isfinite(self.max_error)
+                                               and self.max_error > 0):
+            raise ValueError(f"max_error must be a number > 0 (JND), got {self.max_error}")
         if self.channel not in CHANNELS:
             raise ValueError(f"channel must be one of {', '.join(CHANNELS)}, got {self.channel!r}")
         if self.locking not in LOCKINGS:
@@ -139,7 +165,8 @@ class EncodeOptions:
                 raise ValueError(f"{name} is longer than {limits.MAX_TEXT_LENGTH} characters")
         low, high = self.friction_limits
         _check_range(low, high, self.channel)
-        return replace(self, friction_range=(low, high))
+        return replace(self, friction_range=(low, high), components=components,
+                       max_textures=max_textures)
 
 
 def _check_range(low: float, high: float, channel: str) -> None:
@@ -183,8 +210,13 @@ def encode_image(
         ``image_height_px``), surface (``width_mm``, ``height_mm``, ``pixel_pitch_mm``,
         ``size_source``), grid (``cols``, ``rows``, ``taxtel_mm``), ``textures``,
         ``components`` (total over the palette), ``card_bytes`` (binary form),
-        ``raw_bitmap_bytes`` (8-bit bitmap at 0.1 mm), and the reconstruction error ``rms_error``,
-        ``max_error`` (relative friction) and ``rms_error_jnd`` (multiples of the 8 % JND).
+        ``raw_bitmap_bytes`` (8-bit bitmap at 0.1 mm), the reconstruction error over the image
+        ``rms_error``, ``p95_error``, ``max_error`` (relative friction) and the same in
+        multiples of the 8 % JND (``..._jnd``), the per-taxtel figures ``taxtels_over_jnd``
+        (RMS above 1 JND) and ``worst_taxtel``, and with ``max_error`` set, ``target``
+        (:meth:`.shortfall.Shortfall.figures`). ``maps`` holds per-taxtel ``error_rms``,
+        ``error_p95`` and ``error_max`` (relative friction) and, with a target, ``shortfall``
+        (reason codes of :data:`.shortfall.REASONS`, 0 where the target is met).
 
     Raises:
         ImageError: the image cannot be read or is too large (see :func:`load_gray`), or the
@@ -214,23 +246,26 @@ def encode_image(
     low, high = opts.friction_limits
     mapping = FrictionMap(high=high, scale=(high - low) / image.full_scale)
     say(f"analysing {geometry.n_taxtels} taxtels of {geometry.tile_w} x {geometry.tile_h} pixels")
-    spectra = analyse_image(image, geometry, opts.components, opts.min_amplitude / mapping.scale)
-    per_taxtel = to_surface(
-        spectra,
+    target = _target(opts)
+    taxtels = analyse_image(
+        image,
         geometry,
-        high=high,
-        low=low,
-        scale=mapping.scale,
+        mapping,
+        peaks=opts.components if target is None else min(opts.components, SPECTRAL_PEAKS),
         min_amplitude=opts.min_amplitude,
+        low=low,
+        target=target,
     )
     say(f"merging {geometry.n_taxtels} taxtel textures into at most {opts.max_textures}")
     palette = build_palette(
-        per_taxtel,
+        taxtels.textures,
         tile_centres(geometry),
         bin_width=1.0 / opts.taxtel_mm,
-        tolerance=opts.merge_tolerance,
+        tolerance=merge_tolerance(taxtels, target, opts.merge_tolerance),
         max_textures=opts.max_textures,
         min_amplitude=opts.min_amplitude,
+        keyed=target is not None,
+        fixed=taxtels.pursued,
     )
     say("rendering the card back to measure the reconstruction error")
     error = reconstruction_error(image.pixels, geometry, palette, mapping)
@@ -239,30 +274,49 @@ def encode_image(
     if problems:
         raise CardValidationError(problems, source=image.path)
     stats = _stats(image, geometry, palette, error, card, opts)
-    stats["seconds"] = time.perf_counter() - started
     log = [f"physical size {geometry.size_source}"]
     if palette.leaders > len(card.textures):
         log.append(
             f"{palette.leaders} distinct textures merged into {len(card.textures)} "
             f"(--max-textures {opts.max_textures})"
         )
-    maps = {} if error.taxtel_rms is None else {"error_rms": error.taxtel_rms,
-                                                 "error_max": error.taxtel_max}
+    maps = {"error_rms": error.taxtel_rms, "error_p95": error.taxtel_p95,
+            "error_max": error.taxtel_max}
+    if target is not None:
+        from .shortfall import shortfall  # only with a target (start-up of hcard encode)
+
+        missed = shortfall(error, taxtels, target,
+                           palette_full=palette.leaders > opts.max_textures)
+        stats["target"] = missed.figures()
+        maps["shortfall"] = missed.reason
+    stats["seconds"] = time.perf_counter() - started
     return EncodeResult(card=card, stats=stats, log=log, maps=maps)
 
 
-def analyse_image(
-    image: GrayImage, geometry: Geometry, components: int, min_amplitude_gray: float
-) -> TileSpectra:
-    """Spectral analysis of every taxtel tile, in chunks of whole taxtel rows."""
-    columns = geometry.tile_columns()
-    step = max(1, CHUNK_PIXELS // (geometry.tile_h * geometry.tile_w * geometry.cols))
-    parts = []
-    for first in range(0, geometry.rows, step):
-        stop = min(geometry.rows, first + step)
-        tiles = geometry.gather(image.pixels, first, stop, columns)
-        parts.append(analyse_tiles(tiles, n_peaks=components, min_amplitude=min_amplitude_gray))
-    return TileSpectra.concatenate(parts)
+def _target(opts: EncodeOptions) -> Target | None:
+    """The error target of ``opts`` in relative friction, or None."""
+    if opts.max_error is None:
+        return None
+    return Target(p95=opts.max_error * limits.RELATIVE_FRICTION_JND, components=opts.components)
+
+
+def merge_tolerance(
+    taxtels: TaxtelTextures, target: Target | None, tolerance: float
+) -> float | np.ndarray:
+    """How far (RMS relative friction) each taxtel's palette texture may differ from its own.
+
+    Without a target: ``tolerance`` for all. With one, errors add in quadrature (the difference
+    of two textures is nearly orthogonal to what neither reproduces), so a taxtel whose own
+    texture leaves ``own_rms`` may differ by ``sqrt(goal^2 - own_rms^2)`` and stay at the RMS
+    goal; at most ``tolerance``. A taxtel over the target on its own keeps ``tolerance``: it
+    misses the target whatever it shares, and a texture of its own would take a palette entry
+    from a taxtel that can meet it.
+    """
+    if target is None:
+        return tolerance
+    room = np.sqrt(np.maximum(target.goal_rms**2 - taxtels.own_rms**2, 0.0))
+    hopeless = taxtels.own_p95 > target.p95
+    return np.where(hopeless, tolerance, np.minimum(room, tolerance))
 
 
 def make_card(

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from PIL import Image, ImageOps, UnidentifiedImageError
+from PIL import Image, UnidentifiedImageError
 
 from hcard.errors import ImageError
 
@@ -197,6 +197,8 @@ def _upright(image: Image.Image) -> Image.Image:
     (cameras store portrait photos sideways); unchanged when there is no such tag."""
     if image.getexif().get(_EXIF_ORIENTATION, 1) in (0, 1):
         return image
+    from PIL import ImageOps  # only for rotated images (start-up of hcard encode)
+
     return ImageOps.exif_transpose(image)
 
 

@@ -5,7 +5,7 @@ For every tile (``tile_h x tile_w`` pixels, see :mod:`.geometry`):
 1. mean and standard deviation of the gray levels; a tile whose standard deviation is below the
    smallest amplitude kept is near uniform and keeps its mean only (no spectrum is computed);
 2. a 2-D periodic Hann window and one batched real FFT of the other tiles
-   (:func:`scipy.fft.rfft2`); the windowed mean leaks into the DC bin and its neighbours only,
+   (:func:`.fft.rfft2`); the windowed mean leaks into the DC bin and its neighbours only,
    and is removed from them;
 3. peak picking in the half plane: bins above a magnitude threshold (set by the smallest
    amplitude kept), outside the DC bin and its neighbours and off the Nyquist row and column,
@@ -32,10 +32,10 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.fft
 
 from hcard import limits
 
+from .fft import rfft2
 from .geometry import Geometry
 from .textures import Textures, canonical, strongest_first
 
@@ -152,6 +152,22 @@ def hann_kernels(u: np.ndarray, n: int, shifts: tuple[int, ...]) -> dict[int, np
     return kernels
 
 
+def hann_kernels_of(
+    pairs: list[tuple[np.ndarray, int]], shifts: tuple[int, ...]
+) -> list[dict[int, np.ndarray]]:
+    """:func:`hann_kernels` of several ``(u, n)`` at once: the arrays of equal ``n`` and shape
+    go through one call (the kernel is elementwise: the same values, fewer numpy calls)."""
+    out: list[dict[int, np.ndarray]] = [{} for _ in pairs]
+    groups: dict[tuple[int, tuple[int, ...]], list[int]] = {}
+    for i, (u, n) in enumerate(pairs):
+        groups.setdefault((n, np.shape(u)), []).append(i)
+    for (n, _), members in groups.items():
+        stacked = hann_kernels(np.stack([pairs[i][0] for i in members]), n, shifts)
+        for slot, i in enumerate(members):
+            out[i] = {j: kernel[slot] for j, kernel in stacked.items()}
+    return out
+
+
 def hann_gain(u: np.ndarray, n: int) -> np.ndarray:
     """``|hann_kernel(u, n)|``."""
     return np.abs(hann_kernel(u, n))
@@ -188,7 +204,7 @@ def analyse_tiles(tiles: np.ndarray, *, n_peaks: int, min_amplitude: float) -> T
         return result
     window = (hann_window(nh)[:, None] * hann_window(nw)[None, :]).astype(np.float32)
     block = np.multiply(tiles.transpose(0, 2, 1, 3)[active // cols, active % cols], window)
-    spectrum = scipy.fft.rfft2(block, workers=-1)  # (active, nh, nw // 2 + 1)
+    spectrum = rfft2(block)  # (active, nh, nw // 2 + 1)
     del block
     _remove_mean_leak(spectrum, nh, nw)
     local = _analyse_spectra(spectrum, nw, n_peaks, min_amplitude)
@@ -228,7 +244,8 @@ def _analyse_spectra(
     peak_x[tile, rank], peak_y[tile, rank] = kx, ky_signed
     values[tile, rank] = spectrum[tile, ky, kx]
     # Starting amplitudes: each peak bin divided by its own window gain.
-    gain = hann_kernel(local.fx - peak_x, nw) * hann_kernel(local.fy - peak_y, nh)
+    kx_gain, ky_gain = hann_kernels_of([(local.fx - peak_x, nw), (local.fy - peak_y, nh)], (0,))
+    gain = kx_gain[0] * ky_gain[0]
     local.coef = np.where(local.valid, values / np.where(local.valid, gain, 1.0), 0.0)
     for _ in range(_CLEAN_PASSES):
         _refine_frequencies(local, spectrum, peak_x, peak_y, nw)
@@ -290,10 +307,11 @@ def _refine_frequencies(
         # direct components and their mirror images; shared by the five bins looked at.
         # hann_kernels(u)[j] is H(u + j): the bin shifted by o is the kernel shifted by -o.
         shifts = (-1, 0, 1)
-        x_direct = hann_kernels(fx[:, None, :] - px[:, :, None], nw, shifts)
-        y_direct = hann_kernels(fy[:, None, :] - py[:, :, None], nh, shifts)
-        x_mirror = hann_kernels(-fx[:, None, :] - px[:, :, None], nw, shifts)
-        y_mirror = hann_kernels(-fy[:, None, :] - py[:, :, None], nh, shifts)
+        x_direct, y_direct, x_mirror, y_mirror = hann_kernels_of(
+            [(fx[:, None, :] - px[:, :, None], nw), (fy[:, None, :] - py[:, :, None], nh),
+             (-fx[:, None, :] - px[:, :, None], nw), (-fy[:, None, :] - py[:, :, None], nh)],
+            shifts,
+        )
         source, image = coef[:, None, :], np.conj(coef)[:, None, :]
         cleaned = {}
         for oy, ox in ((0, 0), (0, -1), (0, 1), (-1, 0), (1, 0)):
@@ -311,7 +329,8 @@ def _refine_frequencies(
         fy = np.where(mask, np.clip(py + dy, -nh / 2.0, nh / 2.0), 0.0)
         spectra.fx[tiles, :m], spectra.fy[tiles, :m] = fx, fy
         # Amplitudes for the next pass: own bin over own gain at the new frequency.
-        gain = hann_kernel(fx - px, nw) * hann_kernel(fy - py, nh)
+        kx_gain, ky_gain = hann_kernels_of([(fx - px, nw), (fy - py, nh)], (0,))
+        gain = kx_gain[0] * ky_gain[0]
         spectra.coef[tiles, :m] = np.where(mask, cleaned_centre / gain, 0.0)
 
 
@@ -426,12 +445,13 @@ def _solve_amplitudes(
         px, py = peak_x[tiles, :m], peak_y[tiles, :m]
         # [t, j, k]: component k seen in the peak bin of component j (zero for padding).
         pair = mask[:, :, None] & mask[:, None, :]
-        direct = hann_kernel(fx[:, None, :] - px[:, :, None], nw) * hann_kernel(
-            fy[:, None, :] - py[:, :, None], nh
+        x_direct, y_direct, x_mirror, y_mirror = hann_kernels_of(
+            [(fx[:, None, :] - px[:, :, None], nw), (fy[:, None, :] - py[:, :, None], nh),
+             (-fx[:, None, :] - px[:, :, None], nw), (-fy[:, None, :] - py[:, :, None], nh)],
+            (0,),
         )
-        mirror = hann_kernel(-fx[:, None, :] - px[:, :, None], nw) * hann_kernel(
-            -fy[:, None, :] - py[:, :, None], nh
-        )
+        direct = x_direct[0] * y_direct[0]
+        mirror = x_mirror[0] * y_mirror[0]
         direct, mirror = np.where(pair, direct, 0.0), np.where(pair, mirror, 0.0)
         plus, minus = direct + mirror, direct - mirror
         system = np.block([[plus.real, -minus.imag], [plus.imag, minus.real]])
@@ -456,6 +476,7 @@ def to_surface(
     scale: float,
     min_amplitude: float,
     max_frequency: float = limits.MAX_SPATIAL_FREQUENCY,
+    first_row: int = 0,
 ) -> Textures:
     """Per-taxtel textures in surface units from the tile-local analysis.
 
@@ -467,10 +488,11 @@ def to_surface(
     (cycles/mm) are dropped, and so are all components of a taxtel whose friction standard
     deviation is below ``min_amplitude``. The baseline is the taxtel's mean friction minus the
     mean of its kept components over the tile, clipped to the friction range.
+    ``spectra`` holds whole taxtel rows, from row ``first_row`` on.
     """
     nh, nw = geometry.tile_h, geometry.tile_w
-    tile_row = np.repeat(np.arange(geometry.rows), geometry.cols)
-    tile_col = np.tile(np.arange(geometry.cols), geometry.rows)
+    tile_row, tile_col = np.divmod(np.arange(spectra.mean.size), geometry.cols)
+    tile_row += first_row
     kx = spectra.fx * (geometry.ppx / nw)
     ky = spectra.fy * (geometry.ppy / nh)
     x0 = (geometry.col_tile[tile_col] + 0.5) / geometry.ppx
