@@ -205,6 +205,46 @@ def test_preview_is_written_through_hcard_preview(tmp_path: Path):
         assert picture.width > 600 and picture.height > 300
 
 
+@pytest.mark.parametrize("target", [None, "1"])
+def test_preview_draws_the_error_map_the_summary_counts(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, target: str | None
+):
+    """encode --preview hands the preview the per-taxtel error in JND: each taxtel's RMS, or
+    its 95th percentile under --max-error; the taxtels it shows above 1 JND are the ones the
+    summary counts, and the worst one is where the summary says."""
+    import hcard.preview
+
+    drawn: dict[str, object] = {}
+    real_preview_png = hcard.preview.preview_png
+
+    def recording_preview_png(card: pb.Card, **options: object) -> bytes:
+        drawn.update(options)
+        return real_preview_png(card, **options)
+
+    monkeypatch.setattr(hcard.preview, "preview_png", recording_preview_png)
+    options = [] if target is None else ["--max-error", target]
+    out, preview = tmp_path / "b.hcard", tmp_path / "b-preview.png"
+    button = Path(__file__).parents[1] / "examples" / "button.png"
+    result = run(button, "-o", out, "--preview", preview, "--json", *options)
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.stdout)
+    error_map = np.asarray(drawn["error_map"])
+    assert error_map.shape == (summary["rows"], summary["cols"])
+    if target is None:
+        assert drawn["error_label"] == "RMS error"
+        assert int((error_map > 1).sum()) == summary["taxtels_over_jnd"]
+        worst = summary["worst_taxtel"]
+        assert error_map[worst["row"], worst["col"]] == pytest.approx(worst["rms_jnd"])
+    else:
+        assert drawn["error_label"] == "95th-percentile error"
+        assert int((error_map > float(target)).sum()) == summary["target"]["taxtels_over"]
+        worst = summary["target"]["worst"]
+        assert error_map[worst["row"], worst["col"]] == pytest.approx(worst["p95_jnd"])
+    assert np.nanmax(error_map) == pytest.approx(error_map[worst["row"], worst["col"]])
+    with Image.open(preview) as picture:
+        assert picture.format == "PNG"
+
+
 def test_preview_that_cannot_be_written_is_a_one_line_error(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ):

@@ -7,7 +7,7 @@ import os
 import re
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -17,7 +17,9 @@ from hcard.bounded_read import STDIN
 from hcard.card_io import format_for_path, parse_card, save, to_bytes
 from hcard.cli.verbosity import quiet
 from hcard.errors import CardError, HcardError
-from hcard.v1 import card_pb2 as pb
+
+if TYPE_CHECKING:
+    from hcard.plugins.kinds import EncodeResult
 
 DEFAULT_MAX_PIXELS = 64_000_000  # same as hcard_builtins.image.DEFAULT_MAX_PIXELS (help text)
 
@@ -219,7 +221,7 @@ def encode(
         result = encode_image(image, options, progress=_progress)
         # The preview is rendered before the card is saved: a preview that cannot be made
         # leaves the previous card in place.
-        png = _preview_bytes(result.card) if preview is not None else None
+        png = _preview_bytes(result, max_error) if preview is not None else None
         if to_stdout:
             card_bytes = to_bytes(result.card)
             parse_card(card_bytes, source="<stdout>")  # validated, as save() does
@@ -293,11 +295,17 @@ def _check_writable(path: Path, what: str) -> None:
         raise CardError(f"cannot write the {what}: directory {parent} does not exist", source=path)
 
 
-def _preview_bytes(card: pb.Card) -> bytes:
-    """The PNG preview (hcard.preview, imported only when asked for: it loads matplotlib)."""
+def _preview_bytes(result: EncodeResult, max_error: float | None) -> bytes:
+    """The PNG preview with the encoder's error map in JND (hcard.preview, imported only when
+    asked for: it loads matplotlib). The map shows the statistic the summary counts taxtels
+    by: each taxtel's RMS error, or its 95th percentile when ``--max-error`` set that target."""
     from hcard.preview import preview_png
 
-    return preview_png(card)
+    statistic, label = ("error_p95", "95th-percentile error") if max_error is not None else (
+        "error_rms", "RMS error")
+    error = result.maps.get(statistic)
+    error_map = None if error is None else error / limits.RELATIVE_FRICTION_JND
+    return preview_png(result.card, error_map=error_map, error_label=label)
 
 
 def _write_preview(png: bytes, path: Path) -> None:
