@@ -1,8 +1,8 @@
 """Batch and streaming rendering of a card along a finger track.
 
 Both modes run the same code: touch samples go through :func:`extend_table`, frames through
-:func:`frame_state` and :func:`evaluate_frames`, so a stream fed block by block gives the
-numbers of a batch rendering of the whole track.
+:func:`render_block`, so a stream fed block by block gives the numbers of a batch rendering of
+the whole track.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import numpy as np
 
 from hcard.errors import CardValidationError, HcardError, TrackError
 from hcard.render.compiled import CompiledCard, compile_card
-from hcard.render.kernel import Workspace, evaluate_frames, frame_state
+from hcard.render.kernel import FrameClock, Workspace, render_block
 from hcard.render.options import RenderOptions
 from hcard.render.touch import TouchTable, empty_table, extend_table
 from hcard.track import FingerTrack, make_track
@@ -23,7 +23,7 @@ from hcard.v1 import card_pb2 as pb
 from hcard.validate import errors_of, validate
 
 BATCH_CHUNK_FRAMES = 1 << 15
-"""Frames evaluated per kernel call in batch mode (keeps temporaries in cache)."""
+"""Frames evaluated per kernel call in batch mode (a multiple of the kernel's anchor grid)."""
 MAX_RENDER_FRAMES = 100_000_000
 """Most frames one batch rendering may have (2.8 hours at the default 10 kHz; ~6 GB of CSV):
 checked before any work, so a track with a 100,000 s gap or ``--frame-rate 1e12`` is refused at
@@ -88,18 +88,19 @@ class Renderer:
         self.card = card
         self.options = options or RenderOptions()
         self.compiled: CompiledCard = compile_card(card, self.options)
-        self._workspace = Workspace(BATCH_CHUNK_FRAMES, self.compiled.max_components)
+        self._workspace = Workspace()
 
     def frame_times(self, t0: float, first: int, count: int) -> np.ndarray:
         """Times of frames ``first .. first+count-1`` of a rendering starting at ``t0``, s."""
-        return t0 + np.arange(first, first + count, dtype=np.float64) / self.options.frame_rate_hz
+        return FrameClock(t0, self.options.frame_rate_hz).times(first, count)
 
-    def _block(self, table: TouchTable, times: np.ndarray, with_phase: bool) -> Frames:
-        state = frame_state(self.compiled, table, times, self.options, self._workspace)
-        uv, ev, phase = evaluate_frames(
-            self.compiled, state, self.options, self._workspace, with_phase=with_phase
-        )
-        return Frames(times, uv, ev, state.texture >= 0, state.texture, phase)
+    def _block(self, table: TouchTable, clock: FrameClock, first: int, count: int,
+               with_phase: bool) -> Frames:
+        """Frames ``first .. first + count - 1`` of ``clock``."""
+        block = render_block(self.compiled, table, clock, first, count, self.options,
+                             self._workspace, with_phase=with_phase)
+        return Frames(block.times, block.uv, block.ev, block.texture >= 0, block.texture,
+                      block.phase)
 
     def frame_count(self, track: FingerTrack) -> int:
         """Frames of a batch rendering of ``track``: from its first to its last sample.
@@ -136,10 +137,10 @@ class Renderer:
             track.contact,
             self.options.dead_reckoning_s,
         )
-        t0 = float(track.t[0])
+        clock = FrameClock(float(track.t[0]), self.options.frame_rate_hz)
         for first in range(0, total, BATCH_CHUNK_FRAMES):
             count = min(BATCH_CHUNK_FRAMES, total - first)
-            yield self._block(table, self.frame_times(t0, first, count), with_phase)
+            yield self._block(table, clock, first, count, with_phase)
 
     def render(
         self,
@@ -160,7 +161,7 @@ class Renderer:
         """
         total = self.frame_count(track)
         out = Frames(
-            self.frame_times(float(track.t[0]), 0, total),
+            np.empty(total),
             np.empty(total),
             np.empty(total),
             np.empty(total, dtype=bool),
@@ -169,7 +170,7 @@ class Renderer:
         )
         first = 0
         for part in self.blocks(track, with_phase=with_phase):
-            for name in ("uv", "ev", "contact", "texture", "phase"):
+            for name in ("t", "uv", "ev", "contact", "texture", "phase"):
                 if getattr(part, name) is not None:
                     getattr(out, name)[first : first + len(part)] = getattr(part, name)
             first += len(part)
@@ -200,7 +201,7 @@ class RenderStream:
         """Time of the next frame to be rendered, s (NaN before the first sample)."""
         if self.t0 is None:
             return math.nan
-        return float(self.renderer.frame_times(self.t0, self.next_frame, 1)[0])
+        return self.t0 + self.next_frame / self.renderer.options.frame_rate_hz  # as frame_times
 
     def push(
         self,
@@ -241,8 +242,8 @@ class RenderStream:
         """
         if self.t0 is None:
             raise TrackError("stream: push a touch sample before rendering")
-        times = self.renderer.frame_times(self.t0, self.next_frame, n_frames) + time_shift_s
-        frames = self.renderer._block(self._table, times, with_phase)
+        clock = FrameClock(self.t0, self.renderer.options.frame_rate_hz, time_shift_s)
+        frames = self.renderer._block(self._table, clock, self.next_frame, n_frames, with_phase)
         self.next_frame += n_frames
         # Keep only the samples later frames can still use: the last one at or before the
         # next frame time (less one dead-reckoning horizon, for a shift that moves back) and
