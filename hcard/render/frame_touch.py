@@ -12,10 +12,6 @@ from hcard.render.compiled import PHASE_INPUTS, CompiledCard
 from hcard.render.options import RenderMode, RenderOptions
 from hcard.render.touch import TouchTable
 
-SEARCH_MAX_FRAMES = 256
-"""Blocks of at most this many frames find each frame's touch sample by binary search; longer
-ones (batch rendering) by one search per sample and a repeat."""
-
 
 @dataclass(frozen=True)
 class SampleColumns:
@@ -55,23 +51,24 @@ def sample_columns(table: TouchTable, options: RenderOptions) -> SampleColumns:
 
 @dataclass(frozen=True)
 class TouchFrames:
-    """Touch state of the N frames of a block.
+    """Touch state of the N frames of a block, in S *segments*: runs of frames with one touch
+    sample. Per segment, sequences of length S: lists for one segment (the common streaming
+    block), else NumPy arrays.
 
     Attributes:
         texture: (N,) palette index of the taxtel under the dead-reckoned finger (R7), -1 for
             a neutral frame.
-        sample: (N,) index of the frame's touch sample (R5; -1 before the first), or None when
-            every frame has the same one, ``one_sample``.
-        capped: (N,) whether dead reckoning has reached its horizon H (R6), or None with
-            ``one_sample``.
-        one_sample: the one touch sample of every frame (-1: before the first), or None.
+        starts: first frame of each segment (the first is 0).
+        sample: its touch sample (R5; -1: before the first).
+        horizon: its first frame past the dead-reckoning horizon H (R6), the frame after the
+            segment if none.
         one_texture: every frame has the same texture.
     """
 
     texture: np.ndarray
-    sample: np.ndarray | None
-    capped: np.ndarray | None
-    one_sample: int | None
+    starts: np.ndarray | list[int]
+    sample: np.ndarray | list[int]
+    horizon: np.ndarray | list[int]
     one_texture: bool
 
     @property
@@ -89,37 +86,125 @@ def touch_frames(
     times: np.ndarray,
     options: RenderOptions,
 ) -> TouchFrames:
-    """The :class:`TouchFrames` of frames at ``times`` (sorted), from the non-empty ``table``."""
+    """The :class:`TouchFrames` of frames at ``times`` (sorted), from the non-empty ``table``.
+
+    Along a segment the dead-reckoned position moves monotonically along each axis
+    (``p + v min(t - t_i, H)`` rounds monotonically), and the card and each taxtel are intervals
+    per axis: when a segment's first and last frames are on the card in one taxtel, so is every
+    frame between. Only the frames of the other segments are looked up one by one."""
     n = times.shape[0]
-    horizon = options.dead_reckoning_s
+    horizon_s = options.dead_reckoning_s
     sample_t = table.t
+    first = int(sample_t.searchsorted(times.item(0), side="right")) - 1
     last = int(sample_t.searchsorted(times.item(-1), side="right")) - 1
-    if last == int(sample_t.searchsorted(times.item(0), side="right")) - 1:
-        row = max(last, 0)  # one sample: the common streaming block
-        if last < 0 or not table.contact.item(row):
-            return TouchFrames(_filled(n, -1), None, None, last, True)
-        t_i = sample_t.item(row)
-        x0, y0 = columns.x.item(row), columns.y.item(row)
-        vx, vy = columns.vx.item(row), columns.vy.item(row)
-        start, end = min(times.item(0) - t_i, horizon), min(times.item(-1) - t_i, horizon)
-        index = one_taxtel(card, (x0 + vx * start, y0 + vy * start),
-                           (x0 + vx * end, y0 + vy * end))
-        if index is not None:
-            return TouchFrames(_filled(n, index), None, None, last, True)
-    sample = frame_samples(sample_t, times)
+    if first == last:
+        return _one_segment(card, table, columns, times, first, horizon_s)
+    starts = np.empty(last - first + 1, dtype=np.intp)
+    starts[0] = 0
+    starts[1:] = times.searchsorted(sample_t[first + 1:last + 1])  # R5: t_i <= frame time
+    sample = np.arange(first, last + 1)
+    ends = np.empty_like(starts)
+    ends[:-1] = starts[1:]
+    ends[-1] = n
+    owned = ends > starts  # a sample followed by another before the next frame owns none
+    if not owned.all():
+        starts, sample, ends = starts[owned], sample[owned], ends[owned]
     i = np.maximum(sample, 0)
-    reckon = times - sample_t.take(i)
-    np.minimum(reckon, horizon, out=reckon)
+    t_i = sample_t.take(i)
+    contact = table.contact.take(i)
+    contact &= sample >= 0
+    horizon = _first_frames_past(times, t_i, horizon_s, starts, ends)
+    horizon[sample < 0] = ends[sample < 0]
+    # the taxtels of the segments' first and last frames
+    ends -= 1
+    cells, inside = [], contact.copy()
+    for frame in (starts, ends):
+        reckon = times.take(frame) - t_i
+        np.minimum(reckon, horizon_s, out=reckon)
+        x = columns.x.take(i) + columns.vx.take(i) * reckon
+        y = columns.y.take(i) + columns.vy.take(i) * reckon
+        inside &= (x >= 0) & (x < card.width_mm) & (y >= 0) & (y < card.height_mm)
+        cells.append(_cells(card, x, y))
+    ends += 1
+    uniform = inside & (cells[0] == cells[1])
+    segment_texture = np.where(uniform, card.grid.ravel().take(cells[0]), -1)
+    counts = ends - starts
+    texture = np.repeat(segment_texture.astype(np.int32), counts)
+    uniform |= ~contact  # neutral throughout
+    if not uniform.all():
+        _look_up_frames(card, table, columns, times, horizon_s, ~uniform, i, contact, counts,
+                        texture)
+        one_texture = False
+    else:
+        one_texture = bool((segment_texture == segment_texture[0]).all())
+    return TouchFrames(texture, starts, sample, horizon, one_texture)
+
+
+def _one_segment(card: CompiledCard, table: TouchTable, columns: SampleColumns,
+                 times: np.ndarray, sample: int, horizon_s: float) -> TouchFrames:
+    """:func:`touch_frames` of frames that all hold touch sample ``sample``."""
+    n = times.shape[0]
+    row = max(sample, 0)
+    t_i = sample_t = table.t.item(row)
+    horizon = first_past_horizon(times, sample_t, horizon_s) if sample >= 0 else n
+    if sample < 0 or not table.contact.item(row):
+        return TouchFrames(_filled(n, -1), [0], [sample], [horizon], True)
+    x0, y0 = columns.x.item(row), columns.y.item(row)
+    vx, vy = columns.vx.item(row), columns.vy.item(row)
+    start, end = min(times.item(0) - t_i, horizon_s), min(times.item(-1) - t_i, horizon_s)
+    index = one_taxtel(card, (x0 + vx * start, y0 + vy * start), (x0 + vx * end, y0 + vy * end))
+    if index is not None:
+        return TouchFrames(_filled(n, index), [0], [sample], [horizon], True)
+    texture = _filled(n, -1)
+    _look_up_frames(card, table, columns, times, horizon_s, np.ones(1, dtype=bool),
+                    np.array([row]), np.ones(1, dtype=bool), np.array([n]), texture)
+    return TouchFrames(texture, [0], [sample], [horizon], False)
+
+
+def _look_up_frames(card: CompiledCard, table: TouchTable, columns: SampleColumns,
+                    times: np.ndarray, horizon_s: float, chosen: np.ndarray, sample: np.ndarray,
+                    contact: np.ndarray, counts: np.ndarray, texture: np.ndarray) -> None:
+    """Write into ``texture`` the taxtel of each frame of the ``chosen`` segments, frame by
+    frame (R6, R7); ``sample``, ``contact``, ``counts``: per segment (samples >= 0)."""
+    every = bool(chosen.all())
+    if every:
+        frame_times = times
+    else:
+        frames = np.flatnonzero(np.repeat(chosen, counts))
+        frame_times = times.take(frames)
+        sample, contact, counts = sample[chosen], contact[chosen], counts[chosen]
+    i = np.repeat(sample, counts)
+    reckon = frame_times - table.t.take(i)
+    np.minimum(reckon, horizon_s, out=reckon)
     x = columns.vx.take(i)
     x *= reckon
     x += columns.x.take(i)
     y = columns.vy.take(i)
     y *= reckon
     y += columns.y.take(i)
-    contact = table.contact.take(i)
-    contact &= sample >= 0
-    return TouchFrames(frame_textures(card, x, y, contact), sample, reckon == horizon,
-                       None, False)
+    looked_up = frame_textures(card, x, y, np.repeat(contact, counts))
+    if every:
+        texture[:] = looked_up
+    else:
+        texture[frames] = looked_up
+
+
+def _first_frames_past(times: np.ndarray, sample_t: np.ndarray, horizon_s: float,
+                       starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """:func:`first_past_horizon` of each segment, within it: ``starts``, ``ends`` (one past)."""
+    n = times.shape[0]
+    j = times.searchsorted(sample_t + horizon_s)
+    while True:  # the binary search on t_i + H may miss the per-frame comparison by a frame
+        back = (j > 0) & (times.take(np.maximum(j - 1, 0)) - sample_t >= horizon_s)
+        if not back.any():
+            break
+        j -= back
+    while True:
+        ahead = (j < n) & (times.take(np.minimum(j, n - 1)) - sample_t < horizon_s)
+        if not ahead.any():
+            break
+        j += ahead
+    return np.minimum(np.maximum(j, starts), ends)
 
 
 def first_past_horizon(times: np.ndarray, sample_t: float, horizon_s: float) -> int:
@@ -163,19 +248,6 @@ def one_taxtel(card: CompiledCard, first: tuple[float, float],
     return int(card.grid[min(max(row, 0), rows - 1), min(max(column, 0), cols - 1)])
 
 
-def frame_samples(sample_t: np.ndarray, times: np.ndarray) -> np.ndarray:
-    """Index of the latest touch sample at or before each frame time (-1 before the first);
-    both time arrays are sorted."""
-    n = times.shape[0]
-    if n <= SEARCH_MAX_FRAMES:
-        return sample_t.searchsorted(times, side="right") - 1
-    # Each sample owns the run of frames from the first one at or after it, so a repeat
-    # replaces a per-frame binary search.
-    first_frame = np.searchsorted(times, sample_t, side="left")
-    run = np.diff(np.concatenate(([0], first_frame, [n])))
-    return np.repeat(np.arange(-1, sample_t.shape[0]), run)
-
-
 def frame_textures(card: CompiledCard, x: np.ndarray, y: np.ndarray,
                    contact: np.ndarray) -> np.ndarray:
     """Palette index of the taxtel under each dead-reckoned position (x, y mm) (R7); -1
@@ -185,11 +257,17 @@ def frame_textures(card: CompiledCard, x: np.ndarray, y: np.ndarray,
     inside &= x < card.width_mm
     inside &= y >= 0
     inside &= y < card.height_mm
+    return np.where(inside, card.grid.ravel().take(_cells(card, x, y)), -1)
+
+
+def _cells(card: CompiledCard, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Flat grid index ``row * cols + col`` of each position (x, y mm), clipped to the grid
+    (R7)."""
     rows, cols = card.grid.shape
     cell = _grid_line(y, card.taxtel_height_mm, rows)
     cell *= cols
     cell += _grid_line(x, card.taxtel_width_mm, cols)
-    return np.where(inside, card.grid.ravel().take(cell), -1)
+    return cell
 
 
 def _grid_line(position: np.ndarray, pitch: float, count: int) -> np.ndarray:

@@ -79,51 +79,55 @@ def find_runs(table: TouchTable, times: np.ndarray, lead: int, frames: TouchFram
     count = times.shape[0] - lead
     grid = range((ANCHOR_FRAMES - lead) % ANCHOR_FRAMES or ANCHOR_FRAMES, count, ANCHOR_FRAMES)
     first = _first_anchor(table, times, lead, frames, horizon_s)
-    if frames.one_sample is not None:
-        row = frames.one_sample
-        horizon = first_past_horizon(times[lead:], table.t.item(row), horizon_s)
+    if len(frames.starts) == 1:
+        horizon = frames.horizon[0]
         anchors = sorted({first, *grid, *([horizon] if 0 < horizon < count else [])})
         if frames.one_texture:  # the common streaming block
             starts = [max(a, 0) for a in anchors]
             return Runs(starts, [b - a for a, b in zip(starts, [*starts[1:], count], strict=True)],
-                        anchors, [row] * len(starts), [frames.texture.item(0)] * len(starts),
-                        [s >= horizon for s in starts], [times.item(a + lead) for a in anchors])
+                        anchors, frames.sample * len(starts),
+                        [frames.texture.item(0)] * len(starts), [s >= horizon for s in starts],
+                        [times.item(a + lead) for a in anchors])
         anchor_at = np.array(anchors, dtype=np.intp)
-        capped = np.arange(count) >= horizon
-        sample = np.full(count, row)
+    else:  # the segments' starts, the horizon within each, the grid
+        segment_starts, horizon = frames.starts, frames.horizon
+        within = horizon > segment_starts
+        within[:-1] &= horizon[:-1] < segment_starts[1:]
+        within[-1] &= horizon[-1] < count
+        anchor_at = np.unique(np.concatenate(
+            ([first], segment_starts[1:], horizon[within], np.arange(grid.start, count,
+                                                                      ANCHOR_FRAMES))))
+    if frames.one_texture:
+        starts = np.maximum(anchor_at, 0)
+        anchors = anchor_at
     else:
-        capped, sample = frames.capped, frames.sample
+        texture = frames.texture
         new = np.empty(count, dtype=bool)
-        new[0] = False
-        np.not_equal(sample[1:], sample[:-1], out=new[1:])
-        new[1:] |= capped[1:] != capped[:-1]
-        new[grid.start::ANCHOR_FRAMES] = True
-        anchor_at = np.concatenate(([first], np.flatnonzero(new)))
-    texture = frames.texture
-    new = np.empty(count, dtype=bool)
-    new[0] = True
-    np.not_equal(texture[1:], texture[:-1], out=new[1:])
-    new[anchor_at[1:]] = True
-    starts = np.flatnonzero(new)
-    anchors = anchor_at[anchor_at.searchsorted(starts, side="right") - 1]
+        new[0] = True
+        np.not_equal(texture[1:], texture[:-1], out=new[1:])
+        new[anchor_at[1:]] = True
+        starts = np.flatnonzero(new)
+        anchors = anchor_at[anchor_at.searchsorted(starts, side="right") - 1]
     lengths = np.empty_like(starts)
     np.subtract(starts[1:], starts[:-1], out=lengths[:-1])
     lengths[-1] = count - starts[-1]
-    return Runs(starts, lengths, anchors, sample.take(starts), texture.take(starts),
-                capped.take(starts), times.take(anchors + lead))
+    segment = np.searchsorted(frames.starts, starts, side="right") - 1
+    return Runs(starts, lengths, anchors, np.take(frames.sample, segment),
+                frames.texture.take(starts), starts >= np.take(frames.horizon, segment),
+                times.take(anchors + lead))
 
 
 def _first_anchor(table: TouchTable, times: np.ndarray, lead: int, frames: TouchFrames,
                   horizon_s: float) -> int:
     """The anchor of the block's first frame: the latest of the grid point, the first frame of
     its touch sample and, past the horizon, the first frame past it (frame index, <= 0)."""
-    row = frames.one_sample if frames.one_sample is not None else frames.sample.item(0)
+    row = int(frames.sample[0])
     if not lead or row < 0:
         return -lead
     before = times[:lead]
     sample_t = table.t.item(row)
     anchor = int(before.searchsorted(sample_t))
-    if times.item(lead) - sample_t >= horizon_s:
+    if frames.horizon[0] == 0:  # the first frame is past the horizon
         anchor = max(anchor, first_past_horizon(before, sample_t, horizon_s))
     return anchor - lead
 
