@@ -304,3 +304,18 @@ def test_streaming_in_blocks_of_any_size_gives_the_batch_numbers():
             streamed = np.concatenate([getattr(p, name) for p in parts])
             assert np.max(np.abs(streamed - getattr(batch, name))) <= 1e-9, (block, name)
         assert np.array_equal(np.concatenate([p.texture for p in parts]), batch.texture)
+
+
+def test_a_track_whose_velocity_overflows_renders_its_frames_off_the_card_as_neutral():
+    """Finite positions 1e300 mm apart 20 ms apart: the velocity estimate overflows and the
+    dead-reckoned position is not a number there; those frames are off the card (neutral),
+    the others render (the taxtel lookup used to index the grid with the cast of a NaN)."""
+    card = grating_card(1.0, 0.2, width=100.0, height=100.0, taxtel=10.0)
+    t = np.arange(10) * 0.02
+    x = np.array([50.0, 50.0, 1e300, -1e300, 50.0, 50.0, 50.0, 1e307, 50.0, 50.0])
+    with np.errstate(over="ignore", invalid="ignore"):
+        frames = Renderer(card).render(make_track(t, x, np.full(10, 50.0)))
+    assert np.isfinite(frames.uv).all() and np.isfinite(frames.ev).all()
+    off = ((frames.t >= 0.04) & (frames.t < 0.08)) | ((frames.t >= 0.14) & (frames.t < 0.16))
+    assert np.all(frames.texture[off] == -1) and np.all(frames.uv[off] == 1.0)
+    assert np.all(frames.texture[frames.t < 0.04] == 0)

@@ -272,8 +272,9 @@ def _cells(card: CompiledCard, x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 def _grid_line(position: np.ndarray, pitch: float, count: int) -> np.ndarray:
     """``min(max(floor(position / pitch), 0), count - 1)`` as integers (R7): clipped in
-    floating point, where truncation is the floor."""
+    floating point, where truncation is the floor. A position that is not a number (a track
+    whose velocity overflows) gets cell 0; it is off the card."""
     cell = position / pitch
-    np.minimum(cell, count - 1, out=cell)
-    np.maximum(cell, 0.0, out=cell)
+    np.fmin(cell, count - 1, out=cell)
+    np.fmax(cell, 0.0, out=cell)
     return cell.astype(np.intp)

@@ -200,7 +200,9 @@ def band_limit_gain(frequency_hz: np.ndarray, band_limit_hz: float) -> np.ndarra
 
 
 def fixed_turns(turns: np.ndarray) -> np.ndarray:
-    """``turns`` modulo one turn as unsigned 32-bit fixed point (2^-32 turn, rounded)."""
+    """``turns`` modulo one turn as unsigned 32-bit fixed point (2^-32 turn, rounded); zero
+    for a phase that is not a finite number (a track whose velocity overflows)."""
+    turns = np.nan_to_num(turns, posinf=0.0, neginf=0.0)
     fraction = turns - np.floor(turns)
     fraction *= FIXED_TURN
     np.rint(fraction, out=fraction)
