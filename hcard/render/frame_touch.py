@@ -1,5 +1,5 @@
-"""Per frame of a block: its touch sample, the time since it and the taxtel under the
-dead-reckoned finger (spec/README.md rules R5-R7)."""
+"""Per frame of a block: its touch sample, whether dead reckoning has stopped and the taxtel
+under the dead-reckoned finger (spec/README.md rules R5-R7)."""
 
 from __future__ import annotations
 

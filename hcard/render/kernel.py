@@ -59,15 +59,20 @@ class Block:
 
 
 RUN_TABLE_MAX_FRAMES = ANCHOR_FRAMES
-"""Blocks of at most this many frames (streaming) take their frames from per-run tables."""
+"""Blocks of at most this many frames (streaming) and :data:`RUN_TABLE_MAX_RUNS` runs take
+their frames from the runs' tables."""
+RUN_TABLE_MAX_RUNS = 2
+"""A block's first run usually continues from the block before and its last one into the
+next; a block of more runs (texture changes every few frames) is computed directly."""
 RUN_TABLES_KEPT = 8
 """Run tables a workspace keeps."""
 
 
 @dataclass(frozen=True)
 class RunTable:
-    """Every frame a run can hold, computed at once: UV and EV targets of the frames 0 ..
-    ANCHOR_FRAMES - 1 after its anchor, and the run's :class:`RunParameters`."""
+    """Every frame a run can hold, computed at once: UV and EV targets of the frames from its
+    anchor to the end of its stretch of the anchor grid, and the run's
+    :class:`RunParameters`."""
 
     uv: np.ndarray
     ev: np.ndarray
@@ -94,18 +99,17 @@ class Workspace:
         return columns
 
     def run_table(self, card: CompiledCard, table: TouchTable, columns: SampleColumns,
-                  runs: Runs, run: int, options: RenderOptions) -> RunTable:
-        """The :class:`RunTable` of run ``run`` of ``runs``."""
+                  runs: Runs, run: int, length: int, options: RenderOptions) -> RunTable:
+        """The :class:`RunTable` of run ``run`` of ``runs``, ``length`` frames long."""
         row = max(runs.sample[run], 0)
         # everything the table depends on besides the card and the options (fixed per
         # renderer): the sample's state, the texture, the side of H, the anchor time
-        key = (runs.texture[run], runs.capped[run], runs.time[run], table.t.item(row),
+        key = (runs.texture[run], runs.capped[run], runs.time[run], length, table.t.item(row),
                columns.start[row].tobytes(), columns.rate[row].tobytes())
         found = self._tables.get(key)
         if found is None:
             parameters = run_parameters(card, table, columns, runs.single(run), options)
-            offset = np.arange(ANCHOR_FRAMES, dtype=np.uint32)
-            uv, ev = _frame_targets(card, parameters, None, offset)
+            uv, ev = _frame_targets(card, parameters, None, np.arange(length, dtype=np.uint32))
             if len(self._tables) >= RUN_TABLES_KEPT:
                 del self._tables[next(iter(self._tables))]  # the oldest
             found = self._tables[key] = RunTable(uv, ev, parameters)
@@ -136,8 +140,8 @@ def render_block(
         return _neutral_block(card, own_times, with_phase)
     runs = find_runs(table, times, lead, frames, options.dead_reckoning_s)
     parameters = None
-    if count <= RUN_TABLE_MAX_FRAMES:
-        uv, ev = _from_run_tables(card, table, columns, runs, options, workspace, count)
+    if count <= RUN_TABLE_MAX_FRAMES and len(runs) <= RUN_TABLE_MAX_RUNS:
+        uv, ev = _from_run_tables(card, table, columns, runs, first, options, workspace)
     else:
         parameters = run_parameters(card, table, columns, runs, options)
         offset = np.arange(count, dtype=np.uint32)  # frames since the anchor (wraps from < 0)
@@ -166,21 +170,20 @@ def _frame_targets(card: CompiledCard, parameters: RunParameters, lengths: np.nd
 
 
 def _from_run_tables(card: CompiledCard, table: TouchTable, columns: SampleColumns,
-                     runs: Runs, options: RenderOptions, workspace: Workspace,
-                     count: int) -> tuple[np.ndarray, np.ndarray]:
-    """UV and EV targets of a short block, copied from its runs' tables."""
-    if len(runs) == 1:
-        found = workspace.run_table(card, table, columns, runs, 0, options)
-        k = runs.starts[0] - runs.anchors[0]
-        return found.uv[k:k + count].copy(), found.ev[k:k + count].copy()
-    uv, ev = np.empty(count), np.empty(count)
+                     runs: Runs, first: int, options: RenderOptions,
+                     workspace: Workspace) -> tuple[np.ndarray, np.ndarray]:
+    """UV and EV targets of a short block whose frames ``first ..`` (in the frame grid) are
+    copied from its runs' tables."""
+    parts = []
     for run in range(len(runs)):
-        found = workspace.run_table(card, table, columns, runs, run, options)
-        start, length = runs.starts[run], runs.lengths[run]
-        k = start - runs.anchors[run]
-        uv[start:start + length] = found.uv[k:k + length]
-        ev[start:start + length] = found.ev[k:k + length]
-    return uv, ev
+        anchor = runs.anchors[run]
+        length = ANCHOR_FRAMES - (first + anchor) % ANCHOR_FRAMES  # to the next grid point
+        found = workspace.run_table(card, table, columns, runs, run, length, options)
+        k = runs.starts[run] - anchor
+        parts.append((found.uv[k:k + runs.lengths[run]], found.ev[k:k + runs.lengths[run]]))
+    if len(parts) == 1:
+        return parts[0][0].copy(), parts[0][1].copy()
+    return np.concatenate([uv for uv, _ in parts]), np.concatenate([ev for _, ev in parts])
 
 
 def _neutral_block(card: CompiledCard, times: np.ndarray, with_phase: bool) -> Block:

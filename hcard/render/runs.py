@@ -59,9 +59,10 @@ class Runs:
         return len(self.starts)
 
     def single(self, run: int) -> Runs:
-        """Run ``run`` alone, as arrays."""
-        return Runs(*(np.array([getattr(self, name)[run]]) for name in (
-            "starts", "lengths", "anchors", "sample", "texture", "capped", "time")))
+        """Run ``run`` alone."""
+        return Runs([self.starts[run]], [self.lengths[run]], [self.anchors[run]],
+                     [self.sample[run]], [self.texture[run]], [bool(self.capped[run])],
+                     [self.time[run]])
 
 
 def find_runs(table: TouchTable, times: np.ndarray, lead: int, frames: TouchFrames,
@@ -202,7 +203,9 @@ def band_limit_gain(frequency_hz: np.ndarray, band_limit_hz: float) -> np.ndarra
 def fixed_turns(turns: np.ndarray) -> np.ndarray:
     """``turns`` modulo one turn as unsigned 32-bit fixed point (2^-32 turn, rounded); zero
     for a phase that is not a finite number (a track whose velocity overflows)."""
-    turns = np.nan_to_num(turns, posinf=0.0, neginf=0.0)
+    finite = np.isfinite(turns)
+    if not finite.all():
+        turns = np.where(finite, turns, 0.0)
     fraction = turns - np.floor(turns)
     fraction *= FIXED_TURN
     np.rint(fraction, out=fraction)
