@@ -62,8 +62,6 @@ class Palette:
 
     Attributes:
         phase_weights: (T + 1, 6, C) :attr:`CompiledTexture.phase_weights`.
-        wave_vectors: (T + 1, 2, C) spatial wave vectors, cycles/mm.
-        temporal_hz: (T + 1, C) temporal frequencies, Hz.
         band_limited: (T + 1, C) whether the band-limit gain applies.
         group_amplitude: (T + 1, G, C) amplitude of each component in each of the card's G
             channel groups (:attr:`CompiledCard.channel_groups`), relative friction.
@@ -72,8 +70,6 @@ class Palette:
     """
 
     phase_weights: np.ndarray
-    wave_vectors: np.ndarray
-    temporal_hz: np.ndarray
     band_limited: np.ndarray
     group_amplitude: np.ndarray
     baseline: np.ndarray
@@ -86,8 +82,6 @@ def stack_palette(textures: tuple[CompiledTexture, ...], columns: list[int]) -> 
     width = max((t.n_components for t in textures), default=0)
     palette = Palette(
         phase_weights=np.zeros((count, 6, width)),
-        wave_vectors=np.zeros((count, 2, width)),
-        temporal_hz=np.zeros((count, width)),
         band_limited=np.zeros((count, width), dtype=bool),
         group_amplitude=np.zeros((count, len(columns), width)),
         baseline=np.zeros((count, len(columns))),
@@ -96,8 +90,6 @@ def stack_palette(textures: tuple[CompiledTexture, ...], columns: list[int]) -> 
     for index, texture in enumerate(textures):
         c = texture.n_components
         palette.phase_weights[index, :, :c] = texture.phase_weights
-        palette.wave_vectors[index, :, :c] = texture.wave_vectors
-        palette.temporal_hz[index, :c] = texture.temporal_hz
         palette.band_limited[index, :c] = texture.band_limited
         palette.group_amplitude[index, :, :c] = (
             texture.amplitude[:, None] * texture.group_matrix[:, columns]).T

@@ -13,29 +13,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hcard.render.clock import FrameClock
 from hcard.render.compiled import CompiledCard
 from hcard.render.frame_touch import SampleColumns, sample_columns, touch_frames
 from hcard.render.options import RenderOptions
 from hcard.render.runs import ANCHOR_FRAMES, RunParameters, Runs, find_runs, run_parameters
 from hcard.render.synthesis import split_channels, synthesise
 from hcard.render.touch import TouchTable
-
-
-@dataclass(frozen=True)
-class FrameClock:
-    """Frame j is at ``t0 + j / frame_rate_hz`` (spec rule R3), plus ``shift_s`` (a stream
-    rendering on another time line, :meth:`hcard.render.RenderStream.render`)."""
-
-    t0: float
-    frame_rate_hz: float
-    shift_s: float = 0.0
-
-    def times(self, first: int, count: int) -> np.ndarray:
-        """Times of frames ``first .. first + count - 1``, s."""
-        times = self.t0 + np.arange(first, first + count, dtype=np.float64) / self.frame_rate_hz
-        if self.shift_s:
-            times += self.shift_s
-        return times
 
 
 @dataclass(frozen=True)
@@ -70,9 +54,8 @@ RUN_TABLES_KEPT = 8
 
 @dataclass(frozen=True)
 class RunTable:
-    """Every frame a run can hold, computed at once: UV and EV targets of the frames from its
-    anchor to the end of its stretch of the anchor grid, and the run's
-    :class:`RunParameters`."""
+    """Every frame a run can hold, computed at once: UV and EV targets of the ANCHOR_FRAMES
+    frames from its anchor, and the run's :class:`RunParameters`."""
 
     uv: np.ndarray
     ev: np.ndarray
@@ -99,17 +82,18 @@ class Workspace:
         return columns
 
     def run_table(self, card: CompiledCard, table: TouchTable, columns: SampleColumns,
-                  runs: Runs, run: int, length: int, options: RenderOptions) -> RunTable:
-        """The :class:`RunTable` of run ``run`` of ``runs``, ``length`` frames long."""
+                  runs: Runs, run: int, options: RenderOptions) -> RunTable:
+        """The :class:`RunTable` of run ``run`` of ``runs``."""
         row = max(runs.sample[run], 0)
         # everything the table depends on besides the card and the options (fixed per
         # renderer): the sample's state, the texture, the side of H, the anchor time
-        key = (runs.texture[run], runs.capped[run], runs.time[run], length, table.t.item(row),
+        key = (runs.texture[run], runs.capped[run], runs.time[run], table.t.item(row),
                columns.start[row].tobytes(), columns.rate[row].tobytes())
         found = self._tables.get(key)
         if found is None:
             parameters = run_parameters(card, table, columns, runs.single(run), options)
-            uv, ev = _frame_targets(card, parameters, None, np.arange(length, dtype=np.uint32))
+            uv, ev = _frame_targets(card, parameters, None,
+                                    np.arange(ANCHOR_FRAMES, dtype=np.uint32))
             if len(self._tables) >= RUN_TABLES_KEPT:
                 del self._tables[next(iter(self._tables))]  # the oldest
             found = self._tables[key] = RunTable(uv, ev, parameters)
@@ -129,19 +113,17 @@ def render_block(
 ) -> Block:
     """Frames ``first .. first + count - 1`` of ``clock`` rendered from the touch samples of
     ``table`` (spec rules R5-R11)."""
-    lead = first % ANCHOR_FRAMES  # frames back to the anchor grid
-    times = clock.times(first - lead, count + lead)
-    own_times = times[lead:]
+    own_times = clock.times(first, count)
     if len(table) == 0:
         return _neutral_block(card, own_times, with_phase)
     columns = workspace.sample_columns(table, options)
     frames = touch_frames(card, table, columns, own_times, options)
     if frames.neutral:
         return _neutral_block(card, own_times, with_phase)
-    runs = find_runs(table, times, lead, frames, options.dead_reckoning_s)
+    runs = find_runs(table, clock, first, frames, options.dead_reckoning_s)
     parameters = None
     if count <= RUN_TABLE_MAX_FRAMES and len(runs) <= RUN_TABLE_MAX_RUNS:
-        uv, ev = _from_run_tables(card, table, columns, runs, first, options, workspace)
+        uv, ev = _from_run_tables(card, table, columns, runs, options, workspace)
     else:
         parameters = run_parameters(card, table, columns, runs, options)
         offset = np.arange(count, dtype=np.uint32)  # frames since the anchor (wraps from < 0)
@@ -170,16 +152,13 @@ def _frame_targets(card: CompiledCard, parameters: RunParameters, lengths: np.nd
 
 
 def _from_run_tables(card: CompiledCard, table: TouchTable, columns: SampleColumns,
-                     runs: Runs, first: int, options: RenderOptions,
+                     runs: Runs, options: RenderOptions,
                      workspace: Workspace) -> tuple[np.ndarray, np.ndarray]:
-    """UV and EV targets of a short block whose frames ``first ..`` (in the frame grid) are
-    copied from its runs' tables."""
+    """UV and EV targets of a short block, copied from its runs' tables."""
     parts = []
     for run in range(len(runs)):
-        anchor = runs.anchors[run]
-        length = ANCHOR_FRAMES - (first + anchor) % ANCHOR_FRAMES  # to the next grid point
-        found = workspace.run_table(card, table, columns, runs, run, length, options)
-        k = runs.starts[run] - anchor
+        found = workspace.run_table(card, table, columns, runs, run, options)
+        k = runs.starts[run] - runs.anchors[run]
         parts.append((found.uv[k:k + runs.lengths[run]], found.ev[k:k + runs.lengths[run]]))
     if len(parts) == 1:
         return parts[0][0].copy(), parts[0][1].copy()

@@ -14,8 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from hcard.errors import CardValidationError, HcardError, TrackError
+from hcard.render.clock import FrameClock
 from hcard.render.compiled import CompiledCard, compile_card
-from hcard.render.kernel import FrameClock, Workspace, render_block
+from hcard.render.kernel import Workspace, render_block
 from hcard.render.options import RenderOptions
 from hcard.render.touch import TouchTable, empty_table, extend_table
 from hcard.track import FingerTrack, make_track

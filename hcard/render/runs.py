@@ -18,8 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hcard.render.clock import FrameClock
 from hcard.render.compiled import CompiledCard
-from hcard.render.frame_touch import SampleColumns, TouchFrames, first_past_horizon
+from hcard.render.frame_touch import SampleColumns, TouchFrames
 from hcard.render.options import PASSBAND_FRACTION, RenderOptions
 from hcard.render.touch import TouchTable
 
@@ -34,7 +35,7 @@ FIXED_TURN = 4294967296.0
 class Runs:
     """The R runs of a block of N frames, as sequences of length R: NumPy arrays, or lists for
     a block of one touch sample and one texture (the common streaming block, where making
-    arrays would cost more than the rest of its runs' bookkeeping).
+    arrays would cost more than the rest of its runs' bookkeeping) and for a run taken alone.
 
     Attributes:
         starts: first frame of each run in the block.
@@ -65,72 +66,105 @@ class Runs:
                      [self.time[run]])
 
 
-def find_runs(table: TouchTable, times: np.ndarray, lead: int, frames: TouchFrames,
+def find_runs(table: TouchTable, clock: FrameClock, first: int, frames: TouchFrames,
               horizon_s: float) -> Runs:
-    """The :class:`Runs` of a block.
+    """The :class:`Runs` of the block of frames ``first ..`` of ``clock``.
 
-    Args:
-        table: the touch samples.
-        times: times of the ``lead`` frames before the block (back to the anchor grid) and of
-            the block's frames, s.
-        lead: frames in ``times`` before the block.
-        frames: the block's :class:`TouchFrames`.
-        horizon_s: dead-reckoning horizon H, s.
-    """
-    count = times.shape[0] - lead
-    grid = range((ANCHOR_FRAMES - lead) % ANCHOR_FRAMES or ANCHOR_FRAMES, count, ANCHOR_FRAMES)
-    first = _first_anchor(table, times, lead, frames, horizon_s)
+    A segment (one touch sample) has up to two *parts*, before and past the dead-reckoning
+    horizon; a part's anchors are its first frame in the frame grid (which may precede the
+    block) and every :data:`ANCHOR_FRAMES` frames after it; a run is the frames of one anchor
+    with one texture."""
+    count = frames.texture.shape[0]
     if len(frames.starts) == 1:
-        horizon = frames.horizon[0]
-        anchors = sorted({first, *grid, *([horizon] if 0 < horizon < count else [])})
+        row, horizon = frames.sample[0], frames.horizon[0]
+        parts = _parts_of_first_segment(table, clock, first, row, horizon, count, horizon_s)
+        anchors, capped = [], []
+        for start, end, base, past in parts:
+            anchor = base + (first + start - base) // ANCHOR_FRAMES * ANCHOR_FRAMES
+            while anchor < first + end:
+                anchors.append(anchor - first)
+                capped.append(past)
+                anchor += ANCHOR_FRAMES
         if frames.one_texture:  # the common streaming block
             starts = [max(a, 0) for a in anchors]
             return Runs(starts, [b - a for a, b in zip(starts, [*starts[1:], count], strict=True)],
-                        anchors, frames.sample * len(starts),
-                        [frames.texture.item(0)] * len(starts), [s >= horizon for s in starts],
-                        [times.item(a + lead) for a in anchors])
-        anchor_at = np.array(anchors, dtype=np.intp)
-    else:  # the segments' starts, the horizon within each, the grid
-        segment_starts, horizon = frames.starts, frames.horizon
-        within = horizon > segment_starts
-        within[:-1] &= horizon[:-1] < segment_starts[1:]
-        within[-1] &= horizon[-1] < count
-        anchor_at = np.unique(np.concatenate(
-            ([first], segment_starts[1:], horizon[within], np.arange(grid.start, count,
-                                                                      ANCHOR_FRAMES))))
+                        anchors, [row] * len(starts), [frames.texture.item(0)] * len(starts),
+                        capped, [clock.time(first + a) for a in anchors])
+        anchor_at, part_capped = np.array(anchors, dtype=np.intp), np.array(capped)
+        sample = np.full(len(anchors), row)
+    else:
+        anchor_at, part_capped, sample = _anchors_of_segments(table, clock, first, frames,
+                                                              horizon_s)
+    anchor_start = np.maximum(anchor_at, 0)
     if frames.one_texture:
-        starts = np.maximum(anchor_at, 0)
-        anchors = anchor_at
+        starts, which = anchor_start, np.arange(anchor_at.shape[0])
     else:
         texture = frames.texture
         new = np.empty(count, dtype=bool)
         new[0] = True
         np.not_equal(texture[1:], texture[:-1], out=new[1:])
-        new[anchor_at[1:]] = True
+        new[anchor_start] = True
         starts = np.flatnonzero(new)
-        anchors = anchor_at[anchor_at.searchsorted(starts, side="right") - 1]
+        which = anchor_start.searchsorted(starts, side="right") - 1  # each run's anchor
     lengths = np.empty_like(starts)
     np.subtract(starts[1:], starts[:-1], out=lengths[:-1])
     lengths[-1] = count - starts[-1]
-    segment = np.searchsorted(frames.starts, starts, side="right") - 1
-    return Runs(starts, lengths, anchors, np.take(frames.sample, segment),
-                frames.texture.take(starts), starts >= np.take(frames.horizon, segment),
-                times.take(anchors + lead))
+    anchors = anchor_at.take(which)
+    return Runs(starts, lengths, anchors, sample.take(which), frames.texture.take(starts),
+                part_capped.take(which), clock.times_of(anchors + first))
 
 
-def _first_anchor(table: TouchTable, times: np.ndarray, lead: int, frames: TouchFrames,
-                  horizon_s: float) -> int:
-    """The anchor of the block's first frame: the latest of the grid point, the first frame of
-    its touch sample and, past the horizon, the first frame past it (frame index, <= 0)."""
-    row = int(frames.sample[0])
-    if not lead or row < 0:
-        return -lead
-    before = times[:lead]
+def _parts_of_first_segment(table: TouchTable, clock: FrameClock, first: int, row: int,
+                            horizon: int, end: int, horizon_s: float
+                            ) -> list[tuple[int, int, int, bool]]:
+    """``(start, end, base, past the horizon)`` of the parts of the block's first segment:
+    block frames ``start .. end - 1`` whose anchors are ``base`` (in the frame grid) and every
+    ANCHOR_FRAMES frames after it."""
+    if row < 0:  # before the first sample: neutral frames, any anchor will do
+        return [(0, end, first, False)]
     sample_t = table.t.item(row)
-    anchor = int(before.searchsorted(sample_t))
-    if frames.horizon[0] == 0:  # the first frame is past the horizon
-        anchor = max(anchor, first_past_horizon(before, sample_t, horizon_s))
-    return anchor - lead
+    parts = []
+    if horizon > 0:
+        parts.append((0, min(horizon, end), clock.first_at_or_after(sample_t), False))
+    if horizon < end:
+        base = first + horizon if horizon > 0 else clock.first_past(sample_t, horizon_s)
+        parts.append((horizon, end, base, True))
+    return parts
+
+
+def _anchors_of_segments(table: TouchTable, clock: FrameClock, first: int,
+                         frames: TouchFrames, horizon_s: float
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every anchor of a block of several segments (block frame index, ascending), whether it
+    is past the horizon, and its touch sample."""
+    starts, horizon = frames.starts, frames.horizon
+    count = frames.texture.shape[0]
+    ends = np.empty_like(starts)
+    ends[:-1] = starts[1:]
+    ends[-1] = count
+    parts = _parts_of_first_segment(table, clock, first, frames.sample[0], horizon[0],
+                                    ends[0], horizon_s)
+    rest = slice(1, None)  # the other segments start in the block
+    before, past = horizon[rest] > starts[rest], horizon[rest] < ends[rest]
+    part_start = np.concatenate(([p[0] for p in parts], starts[rest][before],
+                                 horizon[rest][past]))
+    part_end = np.concatenate(([p[1] for p in parts], np.minimum(horizon, ends)[rest][before],
+                               ends[rest][past]))
+    part_base = np.concatenate(([p[2] - first for p in parts], starts[rest][before],
+                                horizon[rest][past]))  # block frame index
+    part_capped = np.concatenate(([p[3] for p in parts], np.zeros(before.sum(), dtype=bool),
+                                  np.ones(past.sum(), dtype=bool)))
+    segment = np.concatenate((np.zeros(len(parts), dtype=np.intp),
+                              np.flatnonzero(before) + 1, np.flatnonzero(past) + 1))
+    order = np.argsort(part_start, kind="stable")
+    part_start, part_end, part_base, part_capped, segment = (
+        a.take(order) for a in (part_start, part_end, part_base, part_capped, segment))
+    anchor = part_base + (part_start - part_base) // ANCHOR_FRAMES * ANCHOR_FRAMES
+    per_part = (part_end - anchor + ANCHOR_FRAMES - 1) // ANCHOR_FRAMES
+    part = np.repeat(np.arange(part_start.shape[0]), per_part)
+    nth = np.arange(part.shape[0]) - np.repeat(np.cumsum(per_part) - per_part, per_part)
+    return (anchor.take(part) + nth * ANCHOR_FRAMES, part_capped.take(part),
+            np.take(frames.sample, segment.take(part)))
 
 
 @dataclass(frozen=True)
@@ -156,8 +190,8 @@ class RunParameters:
 
 def run_parameters(card: CompiledCard, table: TouchTable, columns: SampleColumns, runs: Runs,
                    options: RenderOptions) -> RunParameters:
-    """The :class:`RunParameters` of ``runs``: R6 and R9 in double precision at each anchor,
-    R10 and R11's gain, amplitude and channel group per run."""
+    """The :class:`RunParameters` of ``runs`` (arrays or lists): R6 and R9 in double precision
+    at each anchor, R10 and R11's gain, amplitude and channel group per run."""
     palette = card.palette
     i = np.maximum(runs.sample, 0)
     texture = runs.texture
@@ -167,25 +201,34 @@ def run_parameters(card: CompiledCard, table: TouchTable, columns: SampleColumns
     inputs = columns.start.take(i, axis=0)
     inputs += rate * reckon[:, None]
     inputs[:, 4] += runs.time
-    # the velocity for the band limit: the sample's, also past the horizon (R10)
-    frequency = np.einsum("rk,rkc->rc", rate[:, 2:4], palette.wave_vectors.take(texture, axis=0))
-    rate[runs.capped, :4] = 0.0  # past the horizon only the time since touch-down advances
     rate[:, 4] = 1.0
-    phase = np.einsum("rk,rkc->rc", inputs, phase_weights)
-    turns_per_s = np.einsum("rk,rkc->rc", rate, phase_weights)
-    np.abs(frequency, out=frequency)
-    frequency += palette.temporal_hz.take(texture, axis=0)
-    gain = band_limit_gain(frequency, options.band_limit_hz)
-    gain[~palette.band_limited.take(texture, axis=0)] = 1.0
+    turns = np.empty((2, *phase_weights[:, 0].shape))  # at the anchor, turns; then per second
+    np.einsum("rk,rkc->rc", inputs, phase_weights, out=turns[0])
+    np.einsum("rk,rkc->rc", rate, phase_weights, out=turns[1])
+    # R10's F_c: k |n . v| of a spatial component (its phase moves with the velocity, position-
+    # and velocity-locked alike), f of a temporal one: the phase rate before the horizon, taken
+    # with the sample's velocity also past it (in position-only mode spatial components have
+    # no band limit, so their rate of zero is not used)
+    frequency = np.abs(turns[1])
+    if np.any(runs.capped):  # past the horizon only the time since touch-down advances
+        rate[runs.capped, :4] = 0.0
+        np.einsum("rk,rkc->rc", rate, phase_weights, out=turns[1])
     weights = palette.group_amplitude.take(texture, axis=0)  # (R, G, C)
-    weights *= gain[:, None, :]
+    if frequency.max(initial=0.0) > PASSBAND_FRACTION * options.band_limit_hz:
+        gain = band_limit_gain(frequency, options.band_limit_hz)
+        gain[~palette.band_limited.take(texture, axis=0)] = 1.0
+        weights *= gain[:, None, :]
+    # (below 0.8 B every gain is exactly 1: the numbers of multiplying by it)
+    per_frame = turns.copy()  # at the anchor, turns; then per frame
+    per_frame[1] /= options.frame_rate_hz
+    fixed = fixed_turns(per_frame)
     return RunParameters(
-        anchor=fixed_turns(phase).T,
-        step=fixed_turns(turns_per_s / options.frame_rate_hz).T,
+        anchor=fixed[0].T,
+        step=fixed[1].T,
         weights=weights.transpose(1, 2, 0).astype(np.float32),
         baseline=palette.baseline.take(texture, axis=0).T,
-        phase=phase,
-        rate=turns_per_s,
+        phase=turns[0],
+        rate=turns[1],
     )
 
 
@@ -201,12 +244,11 @@ def band_limit_gain(frequency_hz: np.ndarray, band_limit_hz: float) -> np.ndarra
 
 
 def fixed_turns(turns: np.ndarray) -> np.ndarray:
-    """``turns`` modulo one turn as unsigned 32-bit fixed point (2^-32 turn, rounded); zero
-    for a phase that is not a finite number (a track whose velocity overflows)."""
-    finite = np.isfinite(turns)
-    if not finite.all():
-        turns = np.where(finite, turns, 0.0)
-    fraction = turns - np.floor(turns)
+    """``turns`` modulo one turn as unsigned 32-bit fixed point (2^-32 turn, rounded): the
+    fractional part (exact in floating point) in units of 2^-32, wrapped to [0, 2^32). A phase
+    that is not a finite number (a track whose velocity overflows) gives zero."""
+    fraction = np.modf(turns)[0]  # in (-1, 1), the sign of ``turns``; 0 for an infinity
+    np.fmax(fraction, -1.0, out=fraction)  # a NaN becomes -1 turn, which wraps to 0
     fraction *= FIXED_TURN
     np.rint(fraction, out=fraction)
-    return fraction.astype(np.int64).astype(np.uint32)  # 2^32 (a fraction of 1 - ulp) wraps to 0
+    return fraction.astype(np.int64).astype(np.uint32)  # two's complement: modulo 2^32
