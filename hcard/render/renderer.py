@@ -24,7 +24,7 @@ from hcard.v1 import card_pb2 as pb
 from hcard.validate import errors_of, validate
 
 BATCH_CHUNK_FRAMES = 1 << 15
-"""Frames evaluated per kernel call in batch mode (a multiple of the kernel's anchor grid)."""
+"""Frames evaluated per kernel call in batch mode."""
 MAX_RENDER_FRAMES = 100_000_000
 """Most frames one batch rendering may have (2.8 hours at the default 10 kHz; ~6 GB of CSV):
 checked before any work, so a track with a 100,000 s gap or ``--frame-rate 1e12`` is refused at

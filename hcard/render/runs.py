@@ -1,15 +1,16 @@
 """Runs of frames and what is constant along one: anchor phase, phase step, band-limited
 amplitude (spec/README.md rules R6, R9-R11).
 
-A *run* is a stretch of consecutive frames with one touch sample, one texture, one side of the
-dead-reckoning horizon H, within one stretch of :data:`ANCHOR_FRAMES` of the frame grid. Along
-a run the dead-reckoned position, the odometer and the time since touch-down each advance by a
-fixed step per frame (or the first two stand still, past H), so every component's phase is
-affine in the frame index, and its band-limit gain, amplitude and channel group are constant.
-The phase is formed in double precision at the run's *anchor*: the first frame of the stretch
-with the same sample, side of H and grid stretch (a texture change within it keeps the anchor,
-whose phase inputs do not depend on the texture). Anchors depend on the frame grid and the touch
-samples only, not on how a stream cuts its blocks (R12).
+The frames of one touch sample fall into up to two *parts*: before and past the dead-reckoning
+horizon H. Along a part the dead-reckoned position, the odometer and the time since touch-down
+each advance by a fixed step per frame (or the first two stand still, past H), so every
+component's phase is affine in the frame index. The phase is formed in double precision at
+*anchors*: a part's first frame and every :data:`ANCHOR_FRAMES` frames after it, which bound
+the frames advanced from one anchor in fixed point (hcard/render/synthesis.py). A *run* is the
+frames of one anchor with one texture: its band-limit gain, amplitude and channel group are
+constant too. A texture change keeps the anchor (its phase inputs do not depend on the
+texture). Anchors depend on the frame times and the touch samples only, not on how a stream
+cuts its blocks (R12).
 """
 
 from __future__ import annotations
@@ -25,8 +26,7 @@ from hcard.render.options import PASSBAND_FRACTION, RenderOptions
 from hcard.render.touch import TouchTable
 
 ANCHOR_FRAMES = 256
-"""Longest run of frames advanced from one anchor; every multiple of it in the frame grid
-starts a new run."""
+"""Most frames advanced from one anchor: a part's anchors are this many frames apart."""
 FIXED_TURN = 4294967296.0
 """Units of the fixed-point phase per turn (2^32)."""
 
@@ -71,9 +71,9 @@ def find_runs(table: TouchTable, clock: FrameClock, first: int, frames: TouchFra
     """The :class:`Runs` of the block of frames ``first ..`` of ``clock``.
 
     A segment (one touch sample) has up to two *parts*, before and past the dead-reckoning
-    horizon; a part's anchors are its first frame in the frame grid (which may precede the
-    block) and every :data:`ANCHOR_FRAMES` frames after it; a run is the frames of one anchor
-    with one texture."""
+    horizon; a part's anchors are its first frame (which may precede the block) and every
+    :data:`ANCHOR_FRAMES` frames after it; a run is the frames of one anchor with one
+    texture."""
     count = frames.texture.shape[0]
     if len(frames.starts) == 1:
         row, horizon = frames.sample[0], frames.horizon[0]
@@ -118,7 +118,7 @@ def _parts_of_first_segment(table: TouchTable, clock: FrameClock, first: int, ro
                             horizon: int, end: int, horizon_s: float
                             ) -> list[tuple[int, int, int, bool]]:
     """``(start, end, base, past the horizon)`` of the parts of the block's first segment:
-    block frames ``start .. end - 1`` whose anchors are ``base`` (in the frame grid) and every
+    block frames ``start .. end - 1`` whose anchors are frame ``base`` of the clock and every
     ANCHOR_FRAMES frames after it."""
     if row < 0:  # before the first sample: neutral frames, any anchor will do
         return [(0, end, first, False)]

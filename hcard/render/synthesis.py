@@ -6,11 +6,13 @@ A component's phase along a run is advanced from its anchor in 32-bit fixed-poin
 reduction to one turn, so the per-frame work needs no floor and no double precision. The
 reduced phase is converted to single precision and its cosine evaluated there (R13).
 
-Error of one component, in turns: the anchor phase and the per-frame step are each rounded to
-2^-33 (:func:`hcard.render.runs.fixed_turns`), so a frame k < ANCHOR_FRAMES frames after its
-anchor is off by at most (k + 1) 2^-33 < 1.5e-8; the conversion to single precision adds at most
-2^-26 (1.5e-8) and the scaling to radians one rounding (< 2e-8). With the single-precision cosine
-and sum this is below 5e-7 relative friction per unit of amplitude.
+Error of one component: the anchor phase and the per-frame step are each rounded to 2^-33 turn
+(:func:`hcard.render.runs.fixed_turns`), so a frame k < ANCHOR_FRAMES frames after its anchor
+is off by at most (k + 1) 2^-33 < 3.0e-8 turn; the conversion to single precision adds at most
+2^-26 (1.5e-8) turn, the scaling to radians 3.3e-8 turn (the rounded constant and the product):
+below 4.9e-7 rad in all. With the single-precision cosine, amplitude and product (6e-8 each)
+this is below 7e-7 relative friction per unit of amplitude, plus the single-precision sum over
+the components.
 """
 
 from __future__ import annotations
