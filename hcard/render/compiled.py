@@ -112,11 +112,15 @@ class CompiledCard:
     """Channel groups (GROUP_UV, GROUP_EV, GROUP_BIPOLAR) that some texture of the card uses."""
     palette: Palette = field(init=False, repr=False, compare=False)
     """The textures stacked for the kernel (:func:`stack_palette`)."""
+    one_texture_grid: bool = field(init=False, repr=False, compare=False)
+    """Every taxtel holds the same texture."""
 
     def __post_init__(self) -> None:
         # Frozen dataclass: the derived arrays are set once, here.
         object.__setattr__(self, "palette",
                            stack_palette(self.textures, list(self.channel_groups)))
+        object.__setattr__(self, "one_texture_grid",
+                           bool((self.grid == self.grid.flat[0]).all()))
 
     @property
     def max_components(self) -> int:

@@ -90,8 +90,9 @@ def touch_frames(
 
     Along a segment the dead-reckoned position moves monotonically along each axis
     (``p + v min(t - t_i, H)`` rounds monotonically), and the card and each taxtel are intervals
-    per axis: when a segment's first and last frames are on the card in one taxtel, so is every
-    frame between. Only the frames of the other segments are looked up one by one."""
+    per axis: when a segment's first and last frames are on the card in one taxtel (or the
+    card, when every taxtel holds the same texture), so is every frame between. Only the frames
+    of the other segments are looked up one by one."""
     n = times.shape[0]
     horizon_s = options.dead_reckoning_s
     sample_t = table.t
@@ -126,7 +127,7 @@ def touch_frames(
         inside &= (x >= 0) & (x < card.width_mm) & (y >= 0) & (y < card.height_mm)
         cells.append(_cells(card, x, y))
     ends += 1
-    uniform = inside & (cells[0] == cells[1])
+    uniform = inside if card.one_texture_grid else inside & (cells[0] == cells[1])
     segment_texture = np.where(uniform, card.grid.ravel().take(cells[0]), -1)
     counts = ends - starts
     texture = np.repeat(segment_texture.astype(np.int32), counts)
@@ -231,14 +232,16 @@ def one_taxtel(card: CompiledCard, first: tuple[float, float],
                last: tuple[float, float]) -> int | None:
     """The palette index of the taxtel that holds both the first and the last dead-reckoned
     position (x, y mm) of a block with one touch sample, None when they are not both on the
-    card in one taxtel. With one sample the positions move monotonically along each axis
-    (``p + v min(t - t_i, H)`` rounds monotonically), and the card and each taxtel are
-    intervals per axis, so then every frame of the block is in that taxtel: the numbers of
-    :func:`frame_textures`, from two points."""
+    card in one taxtel (or, when every taxtel holds the same texture, on the card). With one
+    sample the positions move monotonically along each axis (``p + v min(t - t_i, H)`` rounds
+    monotonically), and the card and each taxtel are intervals per axis, so then every frame of
+    the block is in that taxtel: the numbers of :func:`frame_textures`, from two points."""
     (x0, y0), (x1, y1) = first, last
     width, height = card.width_mm, card.height_mm
     if not (0 <= x0 < width and 0 <= y0 < height and 0 <= x1 < width and 0 <= y1 < height):
         return None
+    if card.one_texture_grid:
+        return int(card.grid.flat[0])
     column = math.floor(x0 / card.taxtel_width_mm)
     row = math.floor(y0 / card.taxtel_height_mm)
     if column != math.floor(x1 / card.taxtel_width_mm) or \
