@@ -14,8 +14,9 @@ over components. The floor of a streaming 5 ms block is the same for the block's
 Rounds alternate the figures and their floors, and each keeps its best round, so both see the
 same machine load. Verdicts against the goals: batch >= 1500x real time and <= 2x its floor at
 the largest palette, a 5 ms block <= 0.1 ms at every palette, and the cost of the largest
-palette within 1.25x that of one texture. Single process, single thread
-(OMP/OPENBLAS_NUM_THREADS=1).
+palette within 1.25x that of 16 textures (the same grid of taxtels, every neighbour another
+texture: only the palette size differs; one texture on every taxtel has no texture changes and
+is printed beside). Single process, single thread (OMP/OPENBLAS_NUM_THREADS=1).
 """
 
 from __future__ import annotations
@@ -47,8 +48,10 @@ GOAL_FLOOR_RATIO = 2.0
 GOAL_BLOCK_MS = 0.1
 """Goal: streaming cost of one 5 ms block at any palette size, ms."""
 GOAL_PALETTE_RATIO = 1.25
-"""Goal: batch time at the largest palette over that of one texture (cost independent of the
-palette size, within the noise of a shared machine)."""
+"""Goal: batch time at the largest palette over that of 16 textures on the same grid (cost
+independent of the palette size, within the noise of a shared machine)."""
+PALETTE_REFERENCE = 16
+"""The palette the largest is compared with."""
 
 
 def bench_card(n_textures: int = 16, width_mm: float = 120.0, height_mm: float = 80.0):
@@ -211,11 +214,13 @@ def main() -> None:
         print(f"streaming at {p} textures: {median_ms:.3f} ms per 5 ms block (goal <= "
               f"{GOAL_BLOCK_MS} ms: {verdict(median_ms <= GOAL_BLOCK_MS)}); "
               f"{median_ms / block_floor_ms:.1f}x its floor of {block_floor_ms:.4f} ms")
-    if largest != smallest:
-        spread = batch[largest] / batch[smallest]
+    if PALETTE_REFERENCE in batch and largest != PALETTE_REFERENCE:
+        spread = batch[largest] / batch[PALETTE_REFERENCE]
         print(f"palette independence: batch at {largest} textures takes {spread:.2f}x the time "
-              f"at {smallest} (goal <= {GOAL_PALETTE_RATIO:g}x: "
-              f"{verdict(spread <= GOAL_PALETTE_RATIO)})")
+              f"at {PALETTE_REFERENCE} on the same grid (goal <= {GOAL_PALETTE_RATIO:g}x: "
+              f"{verdict(spread <= GOAL_PALETTE_RATIO)}); "
+              + (f"{batch[largest] / batch[smallest]:.2f}x the time of {smallest} texture on "
+                 "every taxtel (no texture changes)" if smallest < PALETTE_REFERENCE else ""))
 
 
 if __name__ == "__main__":
