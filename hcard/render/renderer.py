@@ -254,7 +254,7 @@ class RenderStream:
 def _frame_columns(total: int, components: int | None) -> Frames:
     """Uninitialised :class:`Frames` of ``total`` frames (with a phase of ``components``
     columns, or none), every column a view of one allocation: NumPy asks the kernel for huge
-    pages for an allocation of 4 MiB or more, where five separate columns (1.6 MB each for
+    pages for an allocation of 4 MiB or more, where five separate columns (up to 1.6 MB for
     200,000 frames) fault in every 4 KiB page on first write (2300 faults, about 3 ms of a
     20 s rendering on the machine of bench/bench_renderer.py)."""
     float_columns = 3 + (components or 0)
