@@ -55,11 +55,10 @@ RUN_TABLES_KEPT = 8
 @dataclass(frozen=True)
 class RunTable:
     """Every frame a run can hold, computed at once: UV and EV targets of the ANCHOR_FRAMES
-    frames from its anchor, and the run's :class:`RunParameters`."""
+    frames from its anchor."""
 
     uv: np.ndarray
     ev: np.ndarray
-    parameters: RunParameters
 
 
 class Workspace:
@@ -96,7 +95,7 @@ class Workspace:
                                     np.arange(ANCHOR_FRAMES, dtype=np.uint32))
             if len(self._tables) >= RUN_TABLES_KEPT:
                 del self._tables[next(iter(self._tables))]  # the oldest
-            found = self._tables[key] = RunTable(uv, ev, parameters)
+            found = self._tables[key] = RunTable(uv, ev)
         return found
 
 
