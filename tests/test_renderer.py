@@ -11,7 +11,7 @@ from signals import tone, wrap
 from hcard import build
 from hcard.errors import CardValidationError, TrackError
 from hcard.render import Renderer, RenderOptions
-from hcard.render.kernel import band_limit_gain
+from hcard.render.runs import band_limit_gain
 from hcard.render.touch import _extend_block, empty_table, extend_table
 from hcard.track import make_track, straight_stroke
 
@@ -307,31 +307,49 @@ def test_invalid_inputs_are_refused():
         stream.push(0.5, 10.0, 10.0)
 
 
-def test_run_order_and_texture_sorted_evaluation_agree(monkeypatch):
-    """The kernel evaluates frames run by run or sorted by texture, depending on how often the
-    texture changes; both strategies must give identical frames."""
-    import hcard.render.kernel as kernel
-
-    rng = np.random.default_rng(11)
-    channels = ("uv", "bipolar", "ev")
+def test_streaming_in_blocks_of_any_size_gives_the_batch_numbers():
+    """Blocks of 1 to 1000 frames, cutting runs of frames anywhere (the kernel advances each
+    run's phase from an anchor frame that a block may not hold): the batch numbers to 1e-9
+    (R12)."""
+    rng = np.random.default_rng(5)
     textures = [
-        build.texture(
-            1.2 if channels[i % 3] == "ev" else 0.5 + 0.1 * i,
-            [build.spatial(0.3 + 0.2 * i, 0.05, orientation=0.4 * i),
-             build.temporal(40.0 * (i + 1), 0.02)],
-            channel=channels[i % 3],
-            locking="auto",
-        )
-        for i in range(6)
+        build.texture(0.6 + 0.1 * i, [build.spatial(float(k), 0.05, orientation=0.5 * i + k)
+                                      for k in (0.3, 1.1, 2.9)]
+                      + [build.temporal(70.0 * (i + 1), 0.04)],
+                      channel=("uv", "bipolar", "ev")[i % 3], locking="auto")
+        for i in range(3)
     ]
-    card = build.card(30.0, 30.0, taxtel_mm=1.0, textures=textures,
-                      texture_index=rng.integers(0, 6, 900))
-    track = straight_stroke((0.5, 0.5), (180.0, 170.0), 0.15, rate_hz=120.0)
-    results = {}
-    for name, threshold in (("runs", 0), ("sorted", 10**9)):
-        monkeypatch.setattr(kernel, "RUN_MODE_MIN_FRAMES", threshold)
-        results[name] = Renderer(card).render(track)
-    runs, ordered = results["runs"], results["sorted"]
-    assert len(np.unique(runs.texture)) >= 5  # the stroke crosses many taxtels
-    assert np.array_equal(runs.uv, ordered.uv) and np.array_equal(runs.ev, ordered.ev)
-    assert np.array_equal(runs.texture, ordered.texture)
+    textures[2].baseline = 1.4
+    card = build.card(60.0, 40.0, taxtel_mm=2.0, textures=textures,
+                      texture_index=rng.integers(0, 3, 30 * 20))
+    t = np.cumsum(rng.uniform(0.015, 0.025, 30))
+    t[20:] += 0.2  # a dropout past the dead-reckoning horizon
+    track = make_track(t, 30 + 20 * np.sin(t * 5.0), 20 + 10 * np.cos(t * 4.0))
+    renderer = Renderer(card)
+    batch = renderer.render(track)
+    for block in (1, 7, 50, 255, 256, 300, 1000):
+        stream = renderer.stream()
+        stream.push(track.t, track.x, track.y)
+        parts, done = [], 0
+        while done < len(batch):
+            parts.append(stream.render(min(block, len(batch) - done)))
+            done += len(parts[-1])
+        for name in ("uv", "ev"):
+            streamed = np.concatenate([getattr(p, name) for p in parts])
+            assert np.max(np.abs(streamed - getattr(batch, name))) <= 1e-9, (block, name)
+        assert np.array_equal(np.concatenate([p.texture for p in parts]), batch.texture)
+
+
+def test_a_track_whose_velocity_overflows_renders_its_frames_off_the_card_as_neutral():
+    """Finite positions 1e300 mm apart 20 ms apart: the velocity estimate overflows and the
+    dead-reckoned position is not a number there; those frames are off the card (neutral),
+    the others render (the taxtel lookup used to index the grid with the cast of a NaN)."""
+    card = grating_card(1.0, 0.2, width=100.0, height=100.0, taxtel=10.0)
+    t = np.arange(10) * 0.02
+    x = np.array([50.0, 50.0, 1e300, -1e300, 50.0, 50.0, 50.0, 1e307, 50.0, 50.0])
+    with np.errstate(over="ignore", invalid="ignore"):
+        frames = Renderer(card).render(make_track(t, x, np.full(10, 50.0)))
+    assert np.isfinite(frames.uv).all() and np.isfinite(frames.ev).all()
+    off = ((frames.t >= 0.04) & (frames.t < 0.08)) | ((frames.t >= 0.14) & (frames.t < 0.16))
+    assert np.all(frames.texture[off] == -1) and np.all(frames.uv[off] == 1.0)
+    assert np.all(frames.texture[frames.t < 0.04] == 0)

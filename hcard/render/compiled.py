@@ -35,9 +35,6 @@ class CompiledTexture:
         band_limited: (C,) whether the band-limit gain applies to the component.
         amplitude: (C,) peak amplitude, relative friction.
         group_matrix: (C, 3) one-hot channel group of each component.
-        weighted_groups: (C, 3) float32 ``amplitude * group_matrix``.
-        max_wave_number: largest |k| of band-limited spatial components, cycles/mm.
-        max_temporal_hz: largest band-limited temporal frequency, Hz.
         baseline_deviation: (3,) baseline - 1 in the texture's channel group.
     """
 
@@ -48,13 +45,57 @@ class CompiledTexture:
     amplitude: np.ndarray
     group_matrix: np.ndarray
     baseline_deviation: np.ndarray
-    weighted_groups: np.ndarray
-    max_wave_number: float
-    max_temporal_hz: float
 
     @property
     def n_components(self) -> int:
         return int(self.amplitude.shape[0])
+
+
+@dataclass(frozen=True)
+class Palette:
+    """Every texture of a card stacked into arrays indexed by palette index, each texture
+    padded with silent components (zero amplitude and weights) to the card's largest component
+    count C, plus one silent texture at the end that index -1 (a neutral frame) picks.
+
+    The kernel gathers from these per run of frames, so its work does not grow with the
+    palette.
+
+    Attributes:
+        phase_weights: (T + 1, 6, C) :attr:`CompiledTexture.phase_weights`.
+        band_limited: (T + 1, C) whether the band-limit gain applies.
+        group_amplitude: (T + 1, G, C) amplitude of each component in each of the card's G
+            channel groups (:attr:`CompiledCard.channel_groups`), relative friction.
+        baseline: (T + 1, G) baseline - 1 in each channel group.
+        n_components: (T + 1,) components of each texture (0 for the silent one).
+    """
+
+    phase_weights: np.ndarray
+    band_limited: np.ndarray
+    group_amplitude: np.ndarray
+    baseline: np.ndarray
+    n_components: np.ndarray
+
+
+def stack_palette(textures: tuple[CompiledTexture, ...], columns: list[int]) -> Palette:
+    """The :class:`Palette` of ``textures``, restricted to the channel groups ``columns``."""
+    count = len(textures) + 1
+    width = max((t.n_components for t in textures), default=0)
+    palette = Palette(
+        phase_weights=np.zeros((count, 6, width)),
+        band_limited=np.zeros((count, width), dtype=bool),
+        group_amplitude=np.zeros((count, len(columns), width)),
+        baseline=np.zeros((count, len(columns))),
+        n_components=np.zeros(count, dtype=np.intp),
+    )
+    for index, texture in enumerate(textures):
+        c = texture.n_components
+        palette.phase_weights[index, :, :c] = texture.phase_weights
+        palette.band_limited[index, :c] = texture.band_limited
+        palette.group_amplitude[index, :, :c] = (
+            texture.amplitude[:, None] * texture.group_matrix[:, columns]).T
+        palette.baseline[index] = texture.baseline_deviation[columns]
+        palette.n_components[index] = c
+    return palette
 
 
 @dataclass(frozen=True)
@@ -69,60 +110,22 @@ class CompiledCard:
     textures: tuple[CompiledTexture, ...]
     channel_groups: tuple[int, ...]
     """Channel groups (GROUP_UV, GROUP_EV, GROUP_BIPOLAR) that some texture of the card uses."""
-    size_mm: np.ndarray = field(init=False, repr=False, compare=False)
-    """(2,) surface width and height, mm."""
-    taxtel_mm: np.ndarray = field(init=False, repr=False, compare=False)
-    """(2,) taxtel width and height, mm."""
-    last_cell: np.ndarray = field(init=False, repr=False, compare=False)
-    """(2,) last grid column and row, as floats."""
-    cell_strides: np.ndarray = field(init=False, repr=False, compare=False)
-    """(2,) flat-index step of a column and of a row of the grid: ``(1, cols)``."""
-    texture_columns: tuple[TextureColumns, ...] = field(init=False, repr=False, compare=False)
-    """Per texture, its arrays restricted to :attr:`channel_groups` (the kernel's columns)."""
-    _max_components: int = field(init=False, repr=False, compare=False)
+    palette: Palette = field(init=False, repr=False, compare=False)
+    """The textures stacked for the kernel (:func:`stack_palette`)."""
+    one_texture_grid: bool = field(init=False, repr=False, compare=False)
+    """Every taxtel holds the same texture."""
 
     def __post_init__(self) -> None:
         # Frozen dataclass: the derived arrays are set once, here.
-        rows, cols = self.grid.shape
-        columns = list(self.channel_groups)
-        derived = {
-            "size_mm": np.array([self.width_mm, self.height_mm], dtype=np.float64),
-            "taxtel_mm": np.array([self.taxtel_width_mm, self.taxtel_height_mm],
-                                  dtype=np.float64),
-            "last_cell": np.array([cols - 1, rows - 1], dtype=np.float64),
-            "cell_strides": np.array([1, cols], dtype=np.intp),
-            "_max_components": max((t.n_components for t in self.textures), default=0),
-            "texture_columns": tuple(
-                TextureColumns(
-                    baseline=t.baseline_deviation[columns],
-                    weighted_groups=t.weighted_groups[:, columns],
-                    group_matrix=t.group_matrix[:, columns],
-                )
-                for t in self.textures
-            ),
-        }
-        for name, value in derived.items():
-            object.__setattr__(self, name, value)
+        object.__setattr__(self, "palette",
+                           stack_palette(self.textures, list(self.channel_groups)))
+        object.__setattr__(self, "one_texture_grid",
+                           bool((self.grid == self.grid.flat[0]).all()))
 
     @property
     def max_components(self) -> int:
-        return self._max_components
-
-
-@dataclass(frozen=True)
-class TextureColumns:
-    """A texture's arrays restricted to the channel groups its card uses (the columns of the
-    kernel's per-frame deviation), made once per card instead of once per block.
-
-    Attributes:
-        baseline: (G,) baseline - 1 per used group.
-        weighted_groups: (C, G) float32 ``amplitude * group_matrix`` of the used groups.
-        group_matrix: (C, G) one-hot group of each component among the used groups.
-    """
-
-    baseline: np.ndarray
-    weighted_groups: np.ndarray
-    group_matrix: np.ndarray
+        """Components of the card's largest texture."""
+        return int(self.palette.phase_weights.shape[2])
 
 
 def velocity_locked(component: pb.Component, locking: int, options: RenderOptions) -> bool:
@@ -162,8 +165,6 @@ def compile_texture(texture: pb.Texture, options: RenderOptions) -> CompiledText
         limited[c] = options.mode is RenderMode.HYBRID
     baseline = np.zeros(3)
     baseline[_GROUP_OF_CHANNEL[texture.channel]] = texture.baseline - 1.0
-    spatial_limited = limited & (temporal == 0)
-    temporal_limited = limited & (temporal > 0)
     return CompiledTexture(
         phase_weights=weights,
         wave_vectors=wave,
@@ -172,9 +173,6 @@ def compile_texture(texture: pb.Texture, options: RenderOptions) -> CompiledText
         amplitude=amplitude,
         group_matrix=groups,
         baseline_deviation=baseline,
-        weighted_groups=(amplitude[:, None] * groups).astype(np.float32),
-        max_wave_number=float(np.hypot(*wave)[spatial_limited].max(initial=0.0)),
-        max_temporal_hz=float(temporal[temporal_limited].max(initial=0.0)),
     )
 
 

@@ -1,405 +1,182 @@
-"""The frame kernel: phase, band-limit gain and channel split for a block of frames.
+"""The frame kernel: a block of frames from the touch samples (spec/README.md section 6).
 
-Frames are grouped by active texture so each texture's components are evaluated as dense
-(frames x components) arrays. The phase is formed in float64 turns and reduced to one turn
-before the cosine, which is evaluated in float32 (error < 1e-6 relative friction, spec 6).
+Per frame, the touch sample, dead reckoning and taxtel (:mod:`hcard.render.frame_touch`);
+per run of frames, the phase at the run's anchor, its step, the band-limit gain and amplitude
+(:mod:`hcard.render.runs`); per frame again, the components' cosines summed per channel group
+and split into UV and EV (:mod:`hcard.render.synthesis`). Nothing per frame depends on the
+palette size or the stroke speed.
 """
 
 from __future__ import annotations
 
-import itertools
-import math
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from hcard.render.compiled import (
-    GROUP_BIPOLAR,
-    GROUP_EV,
-    GROUP_UV,
-    PHASE_INPUTS,
-    CompiledCard,
-    CompiledTexture,
-    TextureColumns,
-)
-from hcard.render.options import PASSBAND_FRACTION, RenderMode, RenderOptions
+from hcard.render.clock import FrameClock
+from hcard.render.compiled import CompiledCard
+from hcard.render.frame_touch import SampleColumns, sample_columns, touch_frames
+from hcard.render.options import RenderOptions
+from hcard.render.runs import ANCHOR_FRAMES, RunParameters, Runs, find_runs, run_parameters
+from hcard.render.synthesis import split_channels, synthesise
 from hcard.render.touch import TouchTable
-
-MAX_RELATIVE_FRICTION = 4.0
-RUN_MODE_MIN_FRAMES = 256
-"""Evaluate runs of frames in time order when texture runs average at least this many frames;
-below, sort the frames by texture first (fewer, larger kernel calls)."""
-TWO_PI_F32 = np.float32(2.0 * np.pi)
 
 
 @dataclass(frozen=True)
-class FrameState:
-    """Per-frame inputs of the kernel for a block of N frames.
+class Block:
+    """A block of rendered frames.
 
     Attributes:
-        texture: (N,) active palette index, -1 where the frame is neutral.
-        phase_inputs: (N, 5) dead-reckoned x, y (mm), odometer x, y (mm), time since
-            touch-down (s).
-        sample: (N,) index of each frame's touch sample in ``sample_velocity``.
-        sample_velocity: (M, 2) velocity estimate of each touch sample, mm/s.
-        speed: (N,) magnitude of the frame's velocity, mm/s.
-        uniform: every frame has the same texture (known without comparing them).
+        times: (N,) frame times, s.
+        texture: (N,) active palette index, -1 for a neutral frame.
+        uv: (N,) UV target, relative friction in [0, 1].
+        ev: (N,) EV target, relative friction in [1, 4].
+        phase: (N, max components) unwrapped phase of each component, turns (NaN where the
+            frame has no such component), or None.
     """
 
+    times: np.ndarray
     texture: np.ndarray
-    phase_inputs: np.ndarray
-    sample: np.ndarray
-    sample_velocity: np.ndarray
-    speed: np.ndarray
-    uniform: bool = False
+    uv: np.ndarray
+    ev: np.ndarray
+    phase: np.ndarray | None
+
+
+RUN_TABLE_MAX_FRAMES = ANCHOR_FRAMES
+"""Blocks of at most this many frames (streaming) and :data:`RUN_TABLE_MAX_RUNS` runs take
+their frames from the runs' tables."""
+RUN_TABLE_MAX_RUNS = 2
+"""A block's first run usually continues from the block before and its last one into the
+next; a block of more runs (texture changes every few frames) is computed directly."""
+RUN_TABLES_KEPT = 8
+"""Run tables a workspace keeps."""
+
+
+@dataclass(frozen=True)
+class RunTable:
+    """Every frame a run can hold, computed at once: UV and EV targets of the ANCHOR_FRAMES
+    frames from its anchor."""
+
+    uv: np.ndarray
+    ev: np.ndarray
 
 
 class Workspace:
-    """Scratch arrays reused from block to block.
+    """What a renderer keeps from block to block: the sample columns of the latest touch table
+    and the tables of the latest runs. A stream renders several blocks on one table between two
+    touch samples, and several blocks along one run: a run's frames are computed once, and each
+    block copies its part (the numbers of a batch rendering: the same operations per frame)."""
 
-    Fresh multi-megabyte temporaries cost more in page faults than the arithmetic done in
-    them; reusing these buffers makes the kernel several times faster.
-    """
+    def __init__(self) -> None:
+        self._columns: tuple[TouchTable, RenderOptions, SampleColumns] | None = None
+        self._tables: dict[tuple, RunTable] = {}
 
-    def __init__(self, frames: int = 0, components: int = 0) -> None:
-        self.frames = -1
-        self.components = -1
-        self.reserve(frames, components)
-
-    def reserve(self, frames: int, components: int) -> None:
-        """Make room for ``frames`` frames of up to ``components`` components."""
-        if frames <= self.frames and components <= self.components:
-            return
-        self.frames = max(frames, self.frames)
-        self.components = max(components, self.components, 1)
-        size = self.frames * self.components
-        self.inputs = np.empty((self.frames, PHASE_INPUTS))
-        self.rate = np.empty((self.frames, PHASE_INPUTS))
-        self.sorted_inputs = np.empty((self.frames, PHASE_INPUTS))
-        self.turns = np.empty(size)
-        self.rounded = np.empty(size)
-        self.wave = np.empty(size, dtype=np.float32)
-        self.deviation = np.empty(self.frames * 3)
-        self._views: dict[tuple[str, int, int], np.ndarray] = {}
-
-    def matrix(self, name: str, rows: int, cols: int) -> np.ndarray:
-        """A (rows, cols) C-contiguous view of the flat buffer ``name`` (the same view object
-        for the same request, until :meth:`reserve` makes new buffers)."""
-        key = (name, rows, cols)
-        view = self._views.get(key)
-        if view is None:
-            if len(self._views) > 64:  # blocks of many sizes (batch tails): start afresh
-                self._views.clear()
-            view = self._views[key] = getattr(self, name)[: rows * cols].reshape(rows, cols)
-        return view
-
-    def sample_state(
-        self, table: TouchTable, options: RenderOptions
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``start``, ``rate`` (:func:`_sample_coefficients`) and speed (mm/s) of the samples
-        of ``table``, kept until another table comes: a stream renders many blocks on one
-        table between two touch samples."""
-        cached = getattr(self, "_sample_state", None)
-        if cached is not None and cached[0] is table and cached[1] is options.mode:
+    def sample_columns(self, table: TouchTable, options: RenderOptions) -> SampleColumns:
+        """The :class:`SampleColumns` of ``table``, computed once per table."""
+        cached = self._columns
+        if cached is not None and cached[0] is table and cached[1] is options:
             return cached[2]
-        start, rate = _sample_coefficients(table, options)
-        speed = np.hypot(table.velocity[:, 0], table.velocity[:, 1])
-        self._sample_state = (table, options.mode, (start, rate, speed))
-        return start, rate, speed
+        columns = sample_columns(table, options)
+        self._columns = (table, options, columns)
+        return columns
+
+    def run_table(self, card: CompiledCard, table: TouchTable, columns: SampleColumns,
+                  runs: Runs, run: int, options: RenderOptions) -> RunTable:
+        """The :class:`RunTable` of run ``run`` of ``runs``."""
+        row = max(runs.sample[run], 0)
+        # everything the table depends on besides the card and the options (fixed per
+        # renderer): the sample's state, the texture, the side of H, the anchor time
+        key = (runs.texture[run], runs.capped[run], runs.time[run], table.t.item(row),
+               columns.start[row].tobytes(), columns.rate[row].tobytes())
+        found = self._tables.get(key)
+        if found is None:
+            parameters = run_parameters(card, table, columns, runs.single(run), options)
+            uv, ev = _frame_targets(card, parameters, None,
+                                    np.arange(ANCHOR_FRAMES, dtype=np.uint32))
+            if len(self._tables) >= RUN_TABLES_KEPT:
+                del self._tables[next(iter(self._tables))]  # the oldest
+            found = self._tables[key] = RunTable(uv, ev)
+        return found
 
 
-def frame_state(
+def render_block(
     card: CompiledCard,
     table: TouchTable,
-    times: np.ndarray,
-    options: RenderOptions,
-    workspace: Workspace,
-) -> FrameState:
-    """Look up the touch sample, dead-reckon and find the taxtel of each frame time.
-
-    The returned ``phase_inputs`` live in ``workspace`` until its next use.
-    """
-    n = times.shape[0]
-    workspace.reserve(n, card.max_components)
-    if len(table) == 0:
-        return FrameState(
-            np.full(n, -1, np.int32),
-            np.zeros((n, PHASE_INPUTS)),
-            np.zeros(n, dtype=np.intp),
-            np.zeros((1, 2)),
-            np.zeros(n),
-        )
-    sample = _frame_samples(table.t, times)
-    i = np.maximum(sample, 0)
-    # Every phase input is affine in the time since the sample: gather both coefficients once.
-    start, rate, sample_speed = workspace.sample_state(table, options)
-    if n and sample.item(0) == sample.item(-1):
-        return _one_sample_state(card, table, times, options, workspace, sample.item(0), i,
-                                 (start, rate, sample_speed))
-    contact = (sample >= 0) & table.contact.take(i)
-    reckon = np.minimum(times - table.t.take(i), options.dead_reckoning_s)
-    # take is several times faster than fancy indexing for row gathers; with ``out`` it
-    # needs mode="clip" (the indices are in range) to avoid a buffered slow path.
-    inputs = start.take(i, axis=0, out=workspace.inputs[:n], mode="clip")
-    travel = rate.take(i, axis=0, out=workspace.rate[:n], mode="clip")
-    np.multiply(travel, reckon[:, None], out=travel)
-    np.add(inputs, travel, out=inputs)
-    inputs[:, 4] += times
-    texture = _frame_textures(card, inputs[:, 0:2], contact)
-    return FrameState(texture, inputs, i, table.velocity, sample_speed.take(i))
-
-
-def _one_sample_state(
-    card: CompiledCard,
-    table: TouchTable,
-    times: np.ndarray,
-    options: RenderOptions,
-    workspace: Workspace,
-    sample: int,
-    i: np.ndarray,
-    coefficients: tuple[np.ndarray, np.ndarray, np.ndarray],
-) -> FrameState:
-    """:func:`frame_state` of a block whose frames all hold touch sample ``sample`` (-1: all
-    before the first one), with ``i`` its index per frame: the most common block in streaming,
-    whose per-frame gathers are one row (``coefficients``: :meth:`Workspace.sample_state`). The
-    numbers are those of the gathers (``a + b`` is ``b + a``)."""
-    n = times.shape[0]
-    row = max(sample, 0)
-    start, rate, sample_speed = coefficients
-    reckon = np.minimum(times - table.t.item(row), options.dead_reckoning_s)
-    inputs = workspace.inputs[:n]
-    np.multiply(rate[row], reckon[:, None], out=inputs)
-    np.add(inputs, start[row], out=inputs)
-    inputs[:, 4] += times
-    index = -1  # no contact: every frame is neutral
-    if sample >= 0 and table.contact.item(row):
-        index = _one_taxtel(card, inputs[0, 0:2].tolist(), inputs[-1, 0:2].tolist())
-        if index is None:
-            texture = _frame_textures(card, inputs[:, 0:2], True)
-            return FrameState(texture, inputs, i, table.velocity,
-                              _filled(n, sample_speed.item(row)))
-    return FrameState(_filled(n, index, np.int32), inputs, i, table.velocity,
-                      _filled(n, sample_speed.item(row)), uniform=True)
-
-
-def _filled(n: int, value: float, dtype: type = np.float64) -> np.ndarray:
-    """``np.full(n, value, dtype)`` without its Python-level wrapper."""
-    out = np.empty(n, dtype=dtype)
-    out.fill(value)
-    return out
-
-
-def _one_taxtel(card: CompiledCard, first: list[float], last: list[float]) -> int | None:
-    """The palette index of the taxtel that holds both the first and the last dead-reckoned
-    position (x, y mm) of a block with one touch sample, None when they are not both on the
-    card in one taxtel. With one sample the positions move monotonically along each axis
-    (``start + rate min(t - t_i, H)`` rounds monotonically), and the card and each taxtel are
-    intervals per axis, so then every frame of the block is in that taxtel: the numbers of
-    :func:`_frame_textures`, from two points."""
-    (x0, y0), (x1, y1) = first, last
-    width, height = card.width_mm, card.height_mm
-    if not (0 <= x0 < width and 0 <= y0 < height and 0 <= x1 < width and 0 <= y1 < height):
-        return None
-    column = math.floor(x0 / card.taxtel_width_mm)
-    row = math.floor(y0 / card.taxtel_height_mm)
-    if column != math.floor(x1 / card.taxtel_width_mm) or \
-            row != math.floor(y1 / card.taxtel_height_mm):
-        return None
-    rows, cols = card.grid.shape
-    return int(card.grid[min(max(row, 0), rows - 1), min(max(column, 0), cols - 1)])
-
-
-SEARCH_MAX_FRAMES = 256
-"""Blocks of at most this many frames find each frame's touch sample by binary search; longer
-ones (batch rendering) by one search per sample and a repeat."""
-
-
-def _frame_samples(sample_t: np.ndarray, times: np.ndarray) -> np.ndarray:
-    """Index of the latest touch sample at or before each frame time (-1 before the first);
-    both time arrays are sorted."""
-    n = times.shape[0]
-    if n <= SEARCH_MAX_FRAMES:
-        return sample_t.searchsorted(times, side="right") - 1
-    # Each sample owns the run of frames from the first one at or after it, so a repeat
-    # replaces a per-frame binary search.
-    first_frame = np.searchsorted(times, sample_t, side="left")
-    run = np.diff(np.concatenate(([0], first_frame, [n])))
-    return np.repeat(np.arange(-1, sample_t.shape[0]), run)
-
-
-def _frame_textures(card: CompiledCard, xy: np.ndarray, contact: np.ndarray | bool) -> np.ndarray:
-    """Palette index of the taxtel under each dead-reckoned position ``xy`` (N, 2) mm; -1
-    without contact (per frame, or for all) or off the card."""
-    inside = contact & np.logical_and.reduce((xy >= 0) & (xy < card.size_mm), axis=1)
-    cell = np.divide(xy, card.taxtel_mm)
-    np.floor(cell, out=cell)
-    np.maximum(cell, 0.0, out=cell)  # clipped to the grid (a zero's sign goes with the cast)
-    np.minimum(cell, card.last_cell, out=cell)
-    flat = np.dot(cell.astype(np.intp), card.cell_strides)  # row * cols + column
-    return np.where(inside, card.grid.ravel().take(flat), -1).astype(np.int32, copy=False)
-
-
-def _sample_coefficients(
-    table: TouchTable, options: RenderOptions
-) -> tuple[np.ndarray, np.ndarray]:
-    """Per-sample ``start`` and ``rate`` (M, 6) so that a frame's phase inputs are
-    ``start[i] + rate[i] * min(tau - t_i, H)`` (plus ``tau`` in column 4)."""
-    m = len(table)
-    start = np.empty((m, PHASE_INPUTS))
-    start[:, 0:2] = table.position
-    start[:, 2:4] = table.odometer
-    start[:, 4] = -table.contact_start
-    start[:, 5] = 1.0
-    rate = np.zeros((m, PHASE_INPUTS))
-    if options.mode is not RenderMode.POSITION_ONLY:
-        rate[:, 0:2] = table.velocity
-    rate[:, 2:4] = table.velocity
-    return start, rate
-
-
-def band_limit_gain(frequency_hz: np.ndarray, band_limit_hz: float) -> np.ndarray:
-    """Gain of a component at ``frequency_hz``: 1 below 0.8 B, 0 from B on, smoothstep between."""
-    edge = PASSBAND_FRACTION * band_limit_hz
-    x = np.clip((frequency_hz - edge) / (band_limit_hz - edge), 0.0, 1.0)
-    return 1.0 - x * x * (3.0 - 2.0 * x)
-
-
-def _texture_deviation(
-    texture: CompiledTexture,
-    selected: TextureColumns,
-    inputs: np.ndarray,
-    velocity: Callable[[], np.ndarray],
-    speed: np.ndarray,
-    options: RenderOptions,
-    workspace: Workspace,
-    out: np.ndarray,
-    phase_out: np.ndarray | None,
-) -> None:
-    """Write into ``out`` (n, len(columns)) the deviation from 1 in the card's channel groups
-    (``selected``: the texture's arrays restricted to them) for n frames of one texture;
-    ``velocity()`` gathers the frames' velocities when the band limit needs them."""
-    n, c = inputs.shape[0], texture.n_components
-    baseline = selected.baseline
-    if c == 0:
-        out[:] = baseline
-        return
-    turns = np.matmul(inputs, texture.phase_weights, out=workspace.matrix("turns", n, c))
-    if phase_out is not None:
-        phase_out[:, :c] = turns
-    within = workspace.matrix("rounded", n, c)
-    np.rint(turns, out=within)
-    np.subtract(turns, within, out=within)  # one turn, in [-1/2, 1/2]
-    wave = workspace.matrix("wave", n, c)
-    np.multiply(within, 2.0 * np.pi, out=wave, casting="same_kind")
-    np.cos(wave, out=wave)
-    edge = PASSBAND_FRACTION * options.band_limit_hz
-    fastest = float(np.maximum.reduce(speed, initial=0.0))
-    if fastest * texture.max_wave_number <= edge and texture.max_temporal_hz <= edge:
-        # Every component is in the passband: unit gain, exactly.
-        np.add(wave @ selected.weighted_groups, baseline, out=out)
-        return
-    frequency = np.abs(velocity() @ texture.wave_vectors) + texture.temporal_hz
-    gain = band_limit_gain(frequency, options.band_limit_hz)
-    gain[:, ~texture.band_limited] = 1.0
-    gain *= texture.amplitude
-    np.add((wave * gain) @ selected.group_matrix, baseline, out=out)
-
-
-def evaluate_frames(
-    card: CompiledCard,
-    state: FrameState,
+    clock: FrameClock,
+    first: int,
+    count: int,
     options: RenderOptions,
     workspace: Workspace,
     *,
     with_phase: bool = False,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """UV and EV targets of each frame (and, on request, each component's phase in turns).
-
-    Returns:
-        ``(uv, ev, phase)``: uv in [0, 1], ev in [1, 4]; ``phase`` is (N, max components)
-        unwrapped turns (NaN where a frame has no such component) or None.
-    """
-    n = state.texture.shape[0]
-    columns = list(card.channel_groups)
-    textures = state.texture
-    change = None if state.uniform else (textures[1:] != textures[:-1]).nonzero()[0] + 1
-    if change is None or change.size * RUN_MODE_MIN_FRAMES <= n:
-        # Few texture changes: evaluate each run of frames in place, in time order.
-        order = None
-        inputs, speed = state.phase_inputs, state.speed
-        starts = np.concatenate(([0], change)) if change is not None and change.size else (0,)
+) -> Block:
+    """Frames ``first .. first + count - 1`` of ``clock`` rendered from the touch samples of
+    ``table`` (spec rules R5-R11)."""
+    own_times = clock.times(first, count)
+    if len(table) == 0:
+        return _neutral_block(card, own_times, with_phase)
+    columns = workspace.sample_columns(table, options)
+    frames = touch_frames(card, table, columns, own_times, options)
+    if frames.neutral:
+        return _neutral_block(card, own_times, with_phase)
+    runs = find_runs(table, clock, first, frames, options.dead_reckoning_s)
+    parameters = None
+    if count <= RUN_TABLE_MAX_FRAMES and len(runs) <= RUN_TABLE_MAX_RUNS:
+        uv, ev = _from_run_tables(card, table, columns, runs, options, workspace)
     else:
-        # Many changes: sort the frames by texture so each texture is one contiguous slice.
-        order = np.argsort(textures, kind="stable")
-        textures = np.take(textures, order)
-        starts = np.flatnonzero(np.concatenate(([True], textures[1:] != textures[:-1])))
-        inputs = np.take(
-            state.phase_inputs, order, axis=0, out=workspace.sorted_inputs[:n], mode="clip"
-        )
-        speed = np.take(state.speed, order)
-    deviation = workspace.matrix("deviation", n, len(columns))
-    bounds = (*(int(k) for k in starts), n)
-    if len(bounds) != 2 or textures[0] < 0:  # else one texture writes every frame
-        deviation.fill(0.0)
+        parameters = run_parameters(card, table, columns, runs, options)
+        offset = np.arange(count, dtype=np.uint32)  # frames since the anchor (wraps from < 0)
+        offset -= np.repeat(np.asarray(runs.anchors).astype(np.uint32), runs.lengths)
+        uv, ev = _frame_targets(card, parameters, runs.lengths, offset)
+    phase = None
+    if with_phase:
+        if parameters is None:
+            runs = Runs(*(np.asarray(getattr(runs, name)) for name in (
+                "starts", "lengths", "anchors", "sample", "texture", "capped", "time")))
+            parameters = run_parameters(card, table, columns, runs, options)
+        phase = _unwrapped_phase(card, parameters, runs, own_times, frames.texture)
+    return Block(own_times, frames.texture, uv, ev, phase)
+
+
+def _frame_targets(card: CompiledCard, parameters: RunParameters, lengths: np.ndarray | None,
+                   offset: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """UV and EV targets of frames ``offset`` frames after their runs' anchors (R9-R11)."""
+    baseline = parameters.baseline
+    if lengths is not None:
+        baseline = np.repeat(baseline, lengths, axis=1)
+    deviation = synthesise(parameters.anchor, parameters.step, parameters.weights, lengths,
+                           offset)
+    return split_channels(np.add(deviation, baseline, dtype=np.float64),
+                          list(card.channel_groups))
+
+
+def _from_run_tables(card: CompiledCard, table: TouchTable, columns: SampleColumns,
+                     runs: Runs, options: RenderOptions,
+                     workspace: Workspace) -> tuple[np.ndarray, np.ndarray]:
+    """UV and EV targets of a short block, copied from its runs' tables."""
+    parts = []
+    for run in range(len(runs)):
+        found = workspace.run_table(card, table, columns, runs, run, options)
+        k = runs.starts[run] - runs.anchors[run]
+        parts.append((found.uv[k:k + runs.lengths[run]], found.ev[k:k + runs.lengths[run]]))
+    if len(parts) == 1:
+        return parts[0][0].copy(), parts[0][1].copy()
+    return np.concatenate([uv for uv, _ in parts]), np.concatenate([ev for _, ev in parts])
+
+
+def _neutral_block(card: CompiledCard, times: np.ndarray, with_phase: bool) -> Block:
+    n = times.shape[0]
     phase = np.full((n, card.max_components), np.nan) if with_phase else None
-    for start, end in itertools.pairwise(bounds):
-        index = int(textures[start])
-        if index < 0:
-            continue
-        rows = slice(start, end) if order is None else order[start:end]
-        samples = state.sample[rows]
-        _texture_deviation(
-            card.textures[index],
-            card.texture_columns[index],
-            inputs[start:end],
-            lambda samples=samples: np.take(state.sample_velocity, samples, axis=0),
-            speed[start:end],
-            options,
-            workspace,
-            deviation[start:end],
-            None if phase is None else phase[start:end],
-        )
-    if order is not None:
-        inverse = np.empty_like(order)
-        inverse[order] = np.arange(n)
-        deviation = np.take(deviation, inverse, axis=0)
-        phase = None if phase is None else np.take(phase, inverse, axis=0)
-    return (*split_channels(deviation, columns), phase)
+    return Block(times, np.full(n, -1, np.int32), np.ones(n), np.ones(n), phase)
 
 
-def split_channels(deviation: np.ndarray, columns: list[int]) -> tuple[np.ndarray, np.ndarray]:
-    """UV and EV targets from the group deviations (spec rule R-split; thesis Eq. 4.1).
-
-    ``1 + deviation`` is never -0.0, so clipping with ``maximum`` then ``minimum`` gives
-    ``np.clip``'s numbers; a channel without its own group starts from exactly 1, and
-    ``1 * x = x``, so the bipolar group alone sets it."""
-
-    def group(g: int) -> np.ndarray | None:
-        return 1.0 + deviation[:, columns.index(g)] if g in columns else None
-
-    uv_group, ev_group, bipolar = group(GROUP_UV), group(GROUP_EV), group(GROUP_BIPOLAR)
-    if uv_group is not None:
-        uv_group = np.minimum(np.maximum(uv_group, 0.0, out=uv_group), 1.0, out=uv_group)
-    if ev_group is not None:
-        ev_group = np.minimum(np.maximum(ev_group, 1.0, out=ev_group), MAX_RELATIVE_FRICTION,
-                              out=ev_group)
-    if bipolar is None:
-        ones = np.ones(deviation.shape[0])
-        return (ones.copy() if uv_group is None else uv_group,
-                ones if ev_group is None else ev_group)
-    np.maximum(bipolar, 0.0, out=bipolar)
-    np.minimum(bipolar, MAX_RELATIVE_FRICTION, out=bipolar)
-    lowering, raising = np.minimum(bipolar, 1.0), np.maximum(bipolar, 1.0)
-    if uv_group is None:
-        uv = lowering
-    else:
-        uv = uv_group
-        uv *= lowering
-    if ev_group is None:
-        ev = raising  # at most MAX_RELATIVE_FRICTION already
-    else:
-        ev = ev_group
-        ev *= raising
-        np.minimum(ev, MAX_RELATIVE_FRICTION, out=ev)
-    return uv, ev
+def _unwrapped_phase(card: CompiledCard, parameters: RunParameters, runs: Runs,
+                     times: np.ndarray, texture: np.ndarray) -> np.ndarray:
+    """(N, C) unwrapped phase of each frame's components, turns (R9, in double precision);
+    NaN where the frame's texture has no such component or the frame is neutral."""
+    unwrapped = np.repeat(parameters.rate, runs.lengths, axis=0)
+    unwrapped *= (times - np.repeat(runs.time, runs.lengths))[:, None]
+    unwrapped += np.repeat(parameters.phase, runs.lengths, axis=0)
+    components = card.palette.n_components.take(texture)
+    unwrapped[np.arange(card.max_components)[None, :] >= components[:, None]] = np.nan
+    return unwrapped

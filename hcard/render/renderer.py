@@ -1,8 +1,8 @@
 """Batch and streaming rendering of a card along a finger track.
 
 Both modes run the same code: touch samples go through :func:`extend_table`, frames through
-:func:`frame_state` and :func:`evaluate_frames`, so a stream fed block by block gives the
-numbers of a batch rendering of the whole track.
+:func:`render_block`, so a stream fed block by block gives the numbers of a batch rendering of
+the whole track.
 """
 
 from __future__ import annotations
@@ -14,8 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from hcard.errors import CardValidationError, HcardError, TrackError
+from hcard.render.clock import FrameClock
 from hcard.render.compiled import CompiledCard, compile_card
-from hcard.render.kernel import Workspace, evaluate_frames, frame_state
+from hcard.render.kernel import Workspace, render_block
 from hcard.render.options import RenderOptions
 from hcard.render.touch import TouchTable, empty_table, extend_table
 from hcard.track import FingerTrack, make_track
@@ -23,7 +24,11 @@ from hcard.v1 import card_pb2 as pb
 from hcard.validate import errors_of, validate
 
 BATCH_CHUNK_FRAMES = 1 << 15
-"""Frames evaluated per kernel call in batch mode (keeps temporaries in cache)."""
+"""Frames per block of :meth:`Renderer.blocks` (output of any length in bounded memory)."""
+RENDER_CHUNK_FRAMES = 1 << 17
+"""Frames per kernel call of :meth:`Renderer.render`, which holds the whole output anyway:
+fewer calls, each with the same per-call bookkeeping (20 s at 10 kHz: 12.7 -> 10.7 ms CPU
+against 32768-frame calls). The frames do not depend on the cut."""
 MAX_RENDER_FRAMES = 100_000_000
 """Most frames one batch rendering may have (2.8 hours at the default 10 kHz; ~6 GB of CSV):
 checked before any work, so a track with a 100,000 s gap or ``--frame-rate 1e12`` is refused at
@@ -88,18 +93,19 @@ class Renderer:
         self.card = card
         self.options = options or RenderOptions()
         self.compiled: CompiledCard = compile_card(card, self.options)
-        self._workspace = Workspace(BATCH_CHUNK_FRAMES, self.compiled.max_components)
+        self._workspace = Workspace()
 
     def frame_times(self, t0: float, first: int, count: int) -> np.ndarray:
         """Times of frames ``first .. first+count-1`` of a rendering starting at ``t0``, s."""
-        return t0 + np.arange(first, first + count, dtype=np.float64) / self.options.frame_rate_hz
+        return FrameClock(t0, self.options.frame_rate_hz).times(first, count)
 
-    def _block(self, table: TouchTable, times: np.ndarray, with_phase: bool) -> Frames:
-        state = frame_state(self.compiled, table, times, self.options, self._workspace)
-        uv, ev, phase = evaluate_frames(
-            self.compiled, state, self.options, self._workspace, with_phase=with_phase
-        )
-        return Frames(times, uv, ev, state.texture >= 0, state.texture, phase)
+    def _block(self, table: TouchTable, clock: FrameClock, first: int, count: int,
+               with_phase: bool) -> Frames:
+        """Frames ``first .. first + count - 1`` of ``clock``."""
+        block = render_block(self.compiled, table, clock, first, count, self.options,
+                             self._workspace, with_phase=with_phase)
+        return Frames(block.times, block.uv, block.ev, block.texture >= 0, block.texture,
+                      block.phase)
 
     def frame_count(self, track: FingerTrack) -> int:
         """Frames of a batch rendering of ``track``: from its first to its last sample.
@@ -128,6 +134,10 @@ class Renderer:
         Raises:
             RenderTooLong: the track needs more than :data:`MAX_RENDER_FRAMES` frames.
         """
+        yield from self._chunks(track, BATCH_CHUNK_FRAMES, with_phase)
+
+    def _chunks(self, track: FingerTrack, chunk: int, with_phase: bool) -> Iterator[Frames]:
+        """:meth:`blocks` of at most ``chunk`` frames."""
         total = self.frame_count(track)
         table = extend_table(
             empty_table(),
@@ -136,10 +146,9 @@ class Renderer:
             track.contact,
             self.options.dead_reckoning_s,
         )
-        t0 = float(track.t[0])
-        for first in range(0, total, BATCH_CHUNK_FRAMES):
-            count = min(BATCH_CHUNK_FRAMES, total - first)
-            yield self._block(table, self.frame_times(t0, first, count), with_phase)
+        clock = FrameClock(float(track.t[0]), self.options.frame_rate_hz)
+        for first in range(0, total, chunk):
+            yield self._block(table, clock, first, min(chunk, total - first), with_phase)
 
     def render(
         self,
@@ -159,17 +168,10 @@ class Renderer:
             RenderTooLong: the track needs more than :data:`MAX_RENDER_FRAMES` frames.
         """
         total = self.frame_count(track)
-        out = Frames(
-            self.frame_times(float(track.t[0]), 0, total),
-            np.empty(total),
-            np.empty(total),
-            np.empty(total, dtype=bool),
-            np.empty(total, dtype=np.int32),
-            np.empty((total, self.compiled.max_components)) if with_phase else None,
-        )
+        out = _frame_columns(total, self.compiled.max_components if with_phase else None)
         first = 0
-        for part in self.blocks(track, with_phase=with_phase):
-            for name in ("uv", "ev", "contact", "texture", "phase"):
+        for part in self._chunks(track, RENDER_CHUNK_FRAMES, with_phase):
+            for name in ("t", "uv", "ev", "contact", "texture", "phase"):
                 if getattr(part, name) is not None:
                     getattr(out, name)[first : first + len(part)] = getattr(part, name)
             first += len(part)
@@ -200,8 +202,7 @@ class RenderStream:
         """Time of the next frame to be rendered, s (NaN before the first sample)."""
         if self.t0 is None:
             return math.nan
-        # frame_times of one frame, in floats: t0 + next_frame / rate, the same operations
-        return self.t0 + self.next_frame / self.renderer.options.frame_rate_hz
+        return self.t0 + self.next_frame / self.renderer.options.frame_rate_hz  # as frame_times
 
     def push(
         self,
@@ -242,10 +243,8 @@ class RenderStream:
         """
         if self.t0 is None:
             raise TrackError("stream: push a touch sample before rendering")
-        times = self.renderer.frame_times(self.t0, self.next_frame, n_frames)
-        if time_shift_s:
-            times += time_shift_s
-        frames = self.renderer._block(self._table, times, with_phase)
+        clock = FrameClock(self.t0, self.renderer.options.frame_rate_hz, time_shift_s)
+        frames = self.renderer._block(self._table, clock, self.next_frame, n_frames, with_phase)
         self.next_frame += n_frames
         # Keep only the samples later frames can still use: the last one at or before the
         # next frame time (less one dead-reckoning horizon, for a shift that moves back) and
@@ -257,6 +256,21 @@ class RenderStream:
             if keep:
                 self._table = self._table.tail(keep)
         return frames
+
+
+def _frame_columns(total: int, components: int | None) -> Frames:
+    """Uninitialised :class:`Frames` of ``total`` frames (with a phase of ``components``
+    columns, or none), every column a view of one allocation: NumPy asks the kernel for huge
+    pages for an allocation of 4 MiB or more, where five separate columns (up to 1.6 MB for
+    200,000 frames) fault in every 4 KiB page on first write (2300 faults, about 3 ms of a
+    20 s rendering on the machine of bench/bench_renderer.py)."""
+    float_columns = 3 + (components or 0)
+    memory = np.empty(total * (8 * float_columns + 4 + 1), dtype=np.uint8)
+    floats = memory[:8 * float_columns * total].view(np.float64)
+    rest = memory[8 * float_columns * total:]
+    phase = floats[3 * total:].reshape(total, components) if components is not None else None
+    return Frames(floats[:total], floats[total:2 * total], floats[2 * total:3 * total],
+                  rest[4 * total:].view(bool), rest[:4 * total].view(np.int32), phase)
 
 
 def render(
