@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from hcard import build
+from hcard.track import straight_stroke
 from hcard_device.sim import DeviceConfig, DeviceSimulation, SimBlock
 from hcard_device.sim.finger import HOST_TIME_WRAP_S
 from hcard_device.sim.host_clock import REANCHOR_GAP_S, HostClock
@@ -193,3 +194,40 @@ def test_a_clock_offset_learnt_mid_stroke_leaves_no_lead_on_the_host_time_line()
     assert error_at(0.0) < 0.01
     # the comparison can fail: half a millisecond off the time line is far outside it
     assert error_at(0.0005) > 10 * error_at(0.0)
+
+
+def test_the_internal_finger_takes_over_from_a_host_time_line_ahead_of_the_device():
+    """The first host sample arrives late (its offset fixes the render time line), later ones
+    travel faster, so the host's samples are rendered ahead of the device clock; then the
+    touch source switches to the internal panel (CONTROL SET_TOUCH_SOURCE internal). The
+    panel's samples are timed by the device clock, behind the host's last one: the switch
+    starts a new render time line (a new finger), instead of the stream refusing the panel's
+    samples as out of order and stopping a served device. The internal stroke then renders
+    as it does on a device that never had a host finger."""
+    late_s = 0.030
+    switched = DeviceSimulation(DeviceConfig.evita(), seed=3)
+    switched.load_card(grating_card())
+    switched.start()
+    for k in range(20):
+        switched.step(round(SAMPLE_S * switched.config.frame_rate_hz))
+        delay = late_s if k == 0 else TRANSPORT_S
+        switched.host_finger(switched.time_s, 10.0 + SPEED_MM_S * k * SAMPLE_S, 20.0, 0.5, True,
+                             host_time_s=7.0 + k * SAMPLE_S - delay)
+        switched.feed_watchdog()
+    assert switched._render_shift_s > 0.02  # the host's time line runs ahead of the device
+    track = straight_stroke((20.0, 20.0), (SPEED_MM_S, 0.0), 1.0, rate_hz=200.0, fn=0.5,
+                            t0=0.0)
+    switched.use_internal_finger(track)
+    fresh = DeviceSimulation(DeviceConfig.evita(), seed=3)
+    fresh.load_card(grating_card())
+    fresh.start()
+    fresh.step(switched._frame)  # the same device time and frame count
+    fresh.use_internal_finger(track)
+    after_switch = switched.step(3000)
+    reference = fresh.step(3000)
+    touching = reference.touch["contact"] if reference.touch.shape[0] else None
+    assert touching is None or touching.any()
+    in_contact = reference.t_s >= reference.t_s[0] + 0.05  # once the panel has two samples
+    assert np.ptp(reference.target_uv[in_contact]) > 0.3  # the grating is rendered
+    np.testing.assert_allclose(after_switch.target_uv[in_contact],
+                               reference.target_uv[in_contact], atol=1e-9)

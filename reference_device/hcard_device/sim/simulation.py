@@ -582,10 +582,17 @@ class DeviceSimulation:
     def use_internal_finger(self, track: FingerTrack) -> None:
         """Let the simulated finger follow ``track`` from now on (its first sample now), sensed
         by the 50 Hz touch panel and the corner force sensors. Host finger reports stop
-        counting."""
+        counting.
+
+        The panel's samples are a new finger on a new render time line: the host's samples
+        may have been rendered ahead of the device clock (:meth:`_render_time`), and the
+        panel's, timed by the device clock, would not follow them."""
         self._finger = TrackFinger(track, self.time_s, self.config.surface_mm)
+        self._history = TouchSamples.empty()
         self._pending = TouchSamples.empty()
         self._forget_render_time_line()
+        if self._renderer is not None:
+            self._new_stream()
 
     def stream_frames(self, uv: np.ndarray | float, ev: np.ndarray | float) -> int:
         """Queue target relative friction frames (UV in [0, 1], EV in [1, 4]; broadcast
