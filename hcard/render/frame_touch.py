@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hcard.render.compiled import PHASE_INPUTS, CompiledCard
+from hcard.render.crossings import axis_keys, grid_line, segment_crossings
 from hcard.render.options import RenderMode, RenderOptions
 from hcard.render.touch import TouchTable
 
@@ -116,29 +117,72 @@ def touch_frames(
     contact &= sample >= 0
     horizon = _first_frames_past(times, t_i, horizon_s, starts, ends)
     horizon[sample < 0] = ends[sample < 0]
-    # the taxtels of the segments' first and last frames
+    # the axis keys (hcard/render/crossings.py) of the segments' first and last frames
+    x0, y0, vx, vy = (a.take(i) for a in (columns.x, columns.y, columns.vx, columns.vy))
     ends -= 1
-    cells, inside = [], contact.copy()
+    keys, inside = [], contact.copy()
     for frame in (starts, ends):
         reckon = times.take(frame) - t_i
         np.minimum(reckon, horizon_s, out=reckon)
-        x = columns.x.take(i) + columns.vx.take(i) * reckon
-        y = columns.y.take(i) + columns.vy.take(i) * reckon
-        inside &= (x >= 0) & (x < card.width_mm) & (y >= 0) & (y < card.height_mm)
-        cells.append(_cells(card, x, y))
+        keys.append(axis_keys(card, x0 + vx * reckon, y0 + vy * reckon, inside))
     ends += 1
-    uniform = inside if card.one_texture_grid else inside & (cells[0] == cells[1])
-    segment_texture = np.where(uniform, card.grid.ravel().take(cells[0]), -1)
+    (key_x, key_y, cell), (last_x, last_y, _) = keys
+    uniform = inside if card.one_texture_grid else inside & (key_x == last_x) & (key_y == last_y)
+    segment_texture = np.where(uniform, card.grid.ravel().take(cell), -1)
     counts = ends - starts
-    texture = np.repeat(segment_texture.astype(np.int32), counts)
     uniform |= ~contact  # neutral throughout
-    if not uniform.all():
-        _look_up_frames(card, table, columns, times, horizon_s, ~uniform, i, contact, counts,
-                        texture)
-        one_texture = False
-    else:
+    if uniform.all():
+        texture = np.repeat(segment_texture.astype(np.int32), counts)
         one_texture = bool((segment_texture == segment_texture[0]).all())
-    return TouchFrames(texture, starts, sample, horizon, one_texture)
+        return TouchFrames(texture, starts, sample, horizon, one_texture)
+    # pieces: every segment from its first frame, the crossing ones (in contact, not in one
+    # taxtel throughout) also from each crossing; segments of a position that is not finite,
+    # or that skip taxtels between frames, are looked up frame by frame
+    crossing = np.flatnonzero(~uniform)
+    position, velocity = np.stack((x0, y0)), np.stack((vx, vy))
+    finite = np.isfinite(position).all(axis=0) & np.isfinite(velocity).all(axis=0)
+    searched = crossing[finite.take(crossing)]
+    frames, of_segment, by_frame = segment_crossings(
+        card, times, horizon_s, starts.take(searched), ends.take(searched) - 1,
+        t_i.take(searched), position.take(searched, axis=1), velocity.take(searched, axis=1),
+        np.stack((key_x.take(searched), key_y.take(searched))),
+        np.stack((last_x.take(searched), last_y.take(searched))))
+    of_segment = searched.take(of_segment)
+    piece_start = np.concatenate((starts, frames))
+    piece_texture = np.concatenate((segment_texture, np.empty(frames.shape[0], np.intp)))
+    looked_up = np.concatenate((searched, starts.shape[0] + np.arange(frames.shape[0])))
+    piece_texture[looked_up] = _textures_at(
+        card, table, columns, times, horizon_s, piece_start.take(looked_up),
+        i.take(np.concatenate((searched, of_segment))))
+    order = np.argsort(piece_start, kind="stable")
+    piece_start = piece_start.take(order)
+    lengths = np.empty_like(piece_start)
+    np.subtract(piece_start[1:], piece_start[:-1], out=lengths[:-1])
+    lengths[-1] = n - piece_start[-1]
+    texture = np.repeat(piece_texture.take(order).astype(np.int32), lengths)
+    frame_by_frame = np.zeros(starts.shape[0], dtype=bool)
+    frame_by_frame[crossing] = True
+    frame_by_frame[searched[~by_frame]] = False
+    if frame_by_frame.any():
+        _look_up_frames(card, table, columns, times, horizon_s, frame_by_frame, i, contact,
+                        counts, texture)
+    return TouchFrames(texture, starts, sample, horizon, False)
+
+
+def _textures_at(card: CompiledCard, table: TouchTable, columns: SampleColumns,
+                 times: np.ndarray, horizon_s: float, frames: np.ndarray,
+                 sample: np.ndarray) -> np.ndarray:
+    """Texture of block frames ``frames`` whose touch samples ``sample`` are in contact (R6,
+    R7): the numbers of :func:`_look_up_frames`."""
+    reckon = times.take(frames) - table.t.take(sample)
+    np.minimum(reckon, horizon_s, out=reckon)
+    x = columns.vx.take(sample)
+    x *= reckon
+    x += columns.x.take(sample)
+    y = columns.vy.take(sample)
+    y *= reckon
+    y += columns.y.take(sample)
+    return frame_textures(card, x, y, np.ones(frames.shape[0], dtype=bool))
 
 
 def _one_segment(card: CompiledCard, table: TouchTable, columns: SampleColumns,
@@ -267,17 +311,7 @@ def _cells(card: CompiledCard, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Flat grid index ``row * cols + col`` of each position (x, y mm), clipped to the grid
     (R7)."""
     rows, cols = card.grid.shape
-    cell = _grid_line(y, card.taxtel_height_mm, rows)
+    cell = grid_line(y, card.taxtel_height_mm, rows)
     cell *= cols
-    cell += _grid_line(x, card.taxtel_width_mm, cols)
+    cell += grid_line(x, card.taxtel_width_mm, cols)
     return cell
-
-
-def _grid_line(position: np.ndarray, pitch: float, count: int) -> np.ndarray:
-    """``min(max(floor(position / pitch), 0), count - 1)`` as integers (R7): clipped in
-    floating point, where truncation is the floor. A position that is not a number (a track
-    whose velocity overflows) gets cell 0; it is off the card."""
-    cell = position / pitch
-    np.fmin(cell, count - 1, out=cell)
-    np.fmax(cell, 0.0, out=cell)
-    return cell.astype(np.intp)
