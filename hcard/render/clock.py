@@ -24,9 +24,16 @@ class FrameClock:
     frame_rate_hz: float
     shift_s: float = 0.0
 
-    def times(self, first: int, count: int) -> np.ndarray:
-        """Times of frames ``first .. first + count - 1``, s."""
-        return self.times_of(np.arange(first, first + count, dtype=np.float64))
+    def times(self, first: int, count: int, out: np.ndarray | None = None) -> np.ndarray:
+        """Times of frames ``first .. first + count - 1``, s (into ``out`` when given)."""
+        if out is None:
+            return self.times_of(np.arange(first, first + count, dtype=np.float64))
+        np.divide(np.arange(first, first + count, dtype=np.float64), self.frame_rate_hz,
+                  out=out)
+        np.add(self.t0, out, out=out)  # the operations of times_of
+        if self.shift_s:
+            out += self.shift_s
+        return out
 
     def times_of(self, frames: np.ndarray | list[int]) -> np.ndarray:
         """Times of the frames ``frames``, s."""

@@ -18,7 +18,7 @@ from hcard.render.compiled import CompiledCard
 from hcard.render.frame_touch import SampleColumns, sample_columns, touch_frames
 from hcard.render.options import RenderOptions
 from hcard.render.runs import ANCHOR_FRAMES, RunParameters, Runs, find_runs, run_parameters
-from hcard.render.synthesis import split_channels, synthesise
+from hcard.render.synthesis import frame_targets
 from hcard.render.touch import TouchTable
 
 
@@ -91,8 +91,9 @@ class Workspace:
         found = self._tables.get(key)
         if found is None:
             parameters = run_parameters(card, table, columns, runs.single(run), options)
-            uv, ev = _frame_targets(card, parameters, None,
-                                    np.arange(ANCHOR_FRAMES, dtype=np.uint32))
+            uv, ev = np.empty(ANCHOR_FRAMES), np.empty(ANCHOR_FRAMES)
+            _frame_targets(card, parameters, None, np.arange(ANCHOR_FRAMES, dtype=np.uint32),
+                           uv, ev)
             if len(self._tables) >= RUN_TABLES_KEPT:
                 del self._tables[next(iter(self._tables))]  # the oldest
             found = self._tables[key] = RunTable(uv, ev)
@@ -109,65 +110,69 @@ def render_block(
     workspace: Workspace,
     *,
     with_phase: bool = False,
+    out: Block | None = None,
 ) -> Block:
     """Frames ``first .. first + count - 1`` of ``clock`` rendered from the touch samples of
-    ``table`` (spec rules R5-R11)."""
-    own_times = clock.times(first, count)
+    ``table`` (spec rules R5-R11), written into the arrays of ``out`` when given (which has a
+    phase array if and only if ``with_phase``), else into new ones."""
+    if out is None:
+        out = Block(np.empty(count), np.empty(count, np.int32), np.empty(count),
+                    np.empty(count), np.empty((count, card.max_components)) if with_phase
+                    else None)
+    clock.times(first, count, out=out.times)
     if len(table) == 0:
-        return _neutral_block(card, own_times, with_phase)
+        return _neutral_block(out)
     columns = workspace.sample_columns(table, options)
-    frames = touch_frames(card, table, columns, own_times, options)
+    frames = touch_frames(card, table, columns, out.times, options)
     if frames.neutral:
-        return _neutral_block(card, own_times, with_phase)
+        return _neutral_block(out)
+    out.texture[:] = frames.texture
     runs = find_runs(table, clock, first, frames, options.dead_reckoning_s)
     parameters = None
     if count <= RUN_TABLE_MAX_FRAMES and len(runs) <= RUN_TABLE_MAX_RUNS:
-        uv, ev = _from_run_tables(card, table, columns, runs, options, workspace)
+        _from_run_tables(card, table, columns, runs, options, workspace, out)
     else:
         parameters = run_parameters(card, table, columns, runs, options)
         offset = np.arange(count, dtype=np.uint32)  # frames since the anchor (wraps from < 0)
         offset -= np.repeat(np.asarray(runs.anchors).astype(np.uint32), runs.lengths)
-        uv, ev = _frame_targets(card, parameters, runs.lengths, offset)
-    phase = None
-    if with_phase:
-        if parameters is None:
-            runs = Runs(*(np.asarray(getattr(runs, name)) for name in (
-                "starts", "lengths", "anchors", "sample", "texture", "capped", "time")))
-            parameters = run_parameters(card, table, columns, runs, options)
-        phase = _unwrapped_phase(card, parameters, runs, own_times, frames.texture)
-    return Block(own_times, frames.texture, uv, ev, phase)
+        _frame_targets(card, parameters, runs.lengths, offset, out.uv, out.ev)
+    if out.phase is None:
+        return out
+    if parameters is None:
+        runs = Runs(*(np.asarray(getattr(runs, name)) for name in (
+            "starts", "lengths", "anchors", "sample", "texture", "capped", "time")))
+        parameters = run_parameters(card, table, columns, runs, options)
+    out.phase[:] = _unwrapped_phase(card, parameters, runs, out.times, out.texture)
+    return out
 
 
 def _frame_targets(card: CompiledCard, parameters: RunParameters, lengths: np.ndarray | None,
-                   offset: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """UV and EV targets of frames ``offset`` frames after their runs' anchors (R9-R11)."""
-    baseline = parameters.baseline
-    if lengths is not None:
-        baseline = np.repeat(baseline, lengths, axis=1)
-    deviation = synthesise(parameters.anchor, parameters.step, parameters.weights, lengths,
-                           offset)
-    return split_channels(np.add(deviation, baseline, dtype=np.float64),
-                          list(card.channel_groups))
+                   offset: np.ndarray, uv: np.ndarray, ev: np.ndarray) -> None:
+    """UV and EV targets of frames ``offset`` frames after their runs' anchors (R9-R11),
+    written into ``uv`` and ``ev``."""
+    frame_targets(parameters.anchor, parameters.step, parameters.weights, parameters.baseline,
+                  lengths, offset, list(card.channel_groups), uv, ev)
 
 
 def _from_run_tables(card: CompiledCard, table: TouchTable, columns: SampleColumns,
-                     runs: Runs, options: RenderOptions,
-                     workspace: Workspace) -> tuple[np.ndarray, np.ndarray]:
-    """UV and EV targets of a short block, copied from its runs' tables."""
-    parts = []
+                     runs: Runs, options: RenderOptions, workspace: Workspace,
+                     out: Block) -> None:
+    """UV and EV targets of a short block, copied from its runs' tables into ``out``."""
     for run in range(len(runs)):
         found = workspace.run_table(card, table, columns, runs, run, options)
         k = runs.starts[run] - runs.anchors[run]
-        parts.append((found.uv[k:k + runs.lengths[run]], found.ev[k:k + runs.lengths[run]]))
-    if len(parts) == 1:
-        return parts[0][0].copy(), parts[0][1].copy()
-    return np.concatenate([uv for uv, _ in parts]), np.concatenate([ev for _, ev in parts])
+        start, length = runs.starts[run], runs.lengths[run]
+        out.uv[start:start + length] = found.uv[k:k + length]
+        out.ev[start:start + length] = found.ev[k:k + length]
 
 
-def _neutral_block(card: CompiledCard, times: np.ndarray, with_phase: bool) -> Block:
-    n = times.shape[0]
-    phase = np.full((n, card.max_components), np.nan) if with_phase else None
-    return Block(times, np.full(n, -1, np.int32), np.ones(n), np.ones(n), phase)
+def _neutral_block(out: Block) -> Block:
+    out.texture.fill(-1)
+    out.uv.fill(1.0)
+    out.ev.fill(1.0)
+    if out.phase is not None:
+        out.phase.fill(np.nan)
+    return out
 
 
 def _unwrapped_phase(card: CompiledCard, parameters: RunParameters, runs: Runs,

@@ -16,7 +16,7 @@ import numpy as np
 from hcard.errors import CardValidationError, HcardError, TrackError
 from hcard.render.clock import FrameClock
 from hcard.render.compiled import CompiledCard, compile_card
-from hcard.render.kernel import Workspace, render_block
+from hcard.render.kernel import Block, Workspace, render_block
 from hcard.render.options import RenderOptions
 from hcard.render.touch import TouchTable, empty_table, extend_table
 from hcard.track import FingerTrack, make_track
@@ -67,6 +67,12 @@ class Frames:
     def __len__(self) -> int:
         return int(self.t.shape[0])
 
+    def rows(self, start: int, end: int) -> Frames:
+        """Frames ``start .. end - 1``, as views of these arrays."""
+        return Frames(self.t[start:end], self.uv[start:end], self.ev[start:end],
+                      self.contact[start:end], self.texture[start:end],
+                      None if self.phase is None else self.phase[start:end])
+
     @staticmethod
     def concatenate(parts: list[Frames]) -> Frames:
         """Frames of ``parts`` one after another."""
@@ -100,12 +106,19 @@ class Renderer:
         return FrameClock(t0, self.options.frame_rate_hz).times(first, count)
 
     def _block(self, table: TouchTable, clock: FrameClock, first: int, count: int,
-               with_phase: bool) -> Frames:
-        """Frames ``first .. first + count - 1`` of ``clock``."""
-        block = render_block(self.compiled, table, clock, first, count, self.options,
-                             self._workspace, with_phase=with_phase)
-        return Frames(block.times, block.uv, block.ev, block.texture >= 0, block.texture,
-                      block.phase)
+               with_phase: bool, out: Frames | None = None) -> Frames:
+        """Frames ``first .. first + count - 1`` of ``clock``, written into ``out`` when given
+        (which has a phase if and only if ``with_phase``)."""
+        if out is None:
+            block = render_block(self.compiled, table, clock, first, count, self.options,
+                                 self._workspace, with_phase=with_phase)
+            return Frames(block.times, block.uv, block.ev, block.texture >= 0, block.texture,
+                          block.phase)
+        render_block(self.compiled, table, clock, first, count, self.options, self._workspace,
+                     with_phase=with_phase,
+                     out=Block(out.t, out.texture, out.uv, out.ev, out.phase))
+        np.greater_equal(out.texture, 0, out=out.contact)
+        return out
 
     def frame_count(self, track: FingerTrack) -> int:
         """Frames of a batch rendering of ``track``: from its first to its last sample.
@@ -139,6 +152,12 @@ class Renderer:
     def _chunks(self, track: FingerTrack, chunk: int, with_phase: bool) -> Iterator[Frames]:
         """:meth:`blocks` of at most ``chunk`` frames."""
         total = self.frame_count(track)
+        table, clock = self._table_and_clock(track)
+        for first in range(0, total, chunk):
+            yield self._block(table, clock, first, min(chunk, total - first), with_phase)
+
+    def _table_and_clock(self, track: FingerTrack) -> tuple[TouchTable, FrameClock]:
+        """The touch table of ``track`` and the frame clock of its batch rendering."""
         table = extend_table(
             empty_table(),
             track.t,
@@ -146,9 +165,7 @@ class Renderer:
             track.contact,
             self.options.dead_reckoning_s,
         )
-        clock = FrameClock(float(track.t[0]), self.options.frame_rate_hz)
-        for first in range(0, total, chunk):
-            yield self._block(table, clock, first, min(chunk, total - first), with_phase)
+        return table, FrameClock(float(track.t[0]), self.options.frame_rate_hz)
 
     def render(
         self,
@@ -169,14 +186,12 @@ class Renderer:
         """
         total = self.frame_count(track)
         out = _frame_columns(total, self.compiled.max_components if with_phase else None)
-        first = 0
-        for part in self._chunks(track, RENDER_CHUNK_FRAMES, with_phase):
-            for name in ("t", "uv", "ev", "contact", "texture", "phase"):
-                if getattr(part, name) is not None:
-                    getattr(out, name)[first : first + len(part)] = getattr(part, name)
-            first += len(part)
+        table, clock = self._table_and_clock(track)
+        for first in range(0, total, RENDER_CHUNK_FRAMES):
+            end = min(first + RENDER_CHUNK_FRAMES, total)
+            self._block(table, clock, first, end - first, with_phase, out=out.rows(first, end))
             if progress is not None:
-                progress(first, total)
+                progress(end, total)
         return out
 
     def stream(self, t0: float | None = None) -> RenderStream:

@@ -30,42 +30,59 @@ SYNTHESIS_FRAMES = 32 * ANCHOR_FRAMES
 FIXED_TO_RADIANS = np.float32(2.0 * math.pi / FIXED_TURN)
 
 
-def synthesise(
+def frame_targets(
     anchor: np.ndarray,
     step: np.ndarray,
     weights: np.ndarray,
+    baseline: np.ndarray,
     lengths: np.ndarray | None,
     offset: np.ndarray,
-) -> np.ndarray:
-    """Sum over components of ``weight * cos(phase)`` per channel group and frame.
+    columns: list[int],
+    uv: np.ndarray,
+    ev: np.ndarray,
+) -> None:
+    """UV and EV targets of frames along runs (R9-R11), written into ``uv`` and ``ev``.
 
     Args:
         anchor: (C, R) phase of each component at each run's anchor, fixed-point turns.
         step: (C, R) its change per frame, fixed-point turns.
         weights: (G, C, R) amplitude of each component per channel group and run.
+        baseline: (G, R) baseline - 1 per channel group and run.
         lengths: (R,) frames of each run; None for one run (R = 1).
         offset: (N,) uint32 frames from each frame's anchor (< ANCHOR_FRAMES).
+        columns: the channel group of each of the G rows (:func:`split_channels`).
+        uv, ev: (N,) float64 outputs.
 
-    Returns:
-        (G, N) float32 sums.
+    Frames go in passes of at most SYNTHESIS_FRAMES, cut between runs: every array of a pass
+    stays in the core's cache, and the memory a pass takes is reused by the next.
     """
-    groups, components, _ = weights.shape
     n = offset.shape[0]
-    deviation = np.zeros((groups, n), dtype=np.float32)
-    if components == 0:
-        return deviation
     if lengths is None or n <= SYNTHESIS_FRAMES:
-        _pass(anchor, step, weights, lengths, offset, deviation)
-        return deviation
+        _targets_of_pass(anchor, step, weights, baseline, lengths, offset, columns, uv, ev)
+        return
     ends = np.cumsum(lengths)
     done, run = 0, 0
-    while done < n:  # passes of at most SYNTHESIS_FRAMES frames, cut between runs
+    while done < n:
         last = max(int(ends.searchsorted(done + SYNTHESIS_FRAMES, side="right")), run + 1)
         end = int(ends[last - 1])
-        _pass(anchor[:, run:last], step[:, run:last], weights[:, :, run:last],
-              lengths[run:last], offset[done:end], deviation[:, done:end])
+        _targets_of_pass(anchor[:, run:last], step[:, run:last], weights[:, :, run:last],
+                         baseline[:, run:last], lengths[run:last], offset[done:end], columns,
+                         uv[done:end], ev[done:end])
         done, run = end, last
-    return deviation
+
+
+def _targets_of_pass(anchor: np.ndarray, step: np.ndarray, weights: np.ndarray,
+                     baseline: np.ndarray, lengths: np.ndarray | None, offset: np.ndarray,
+                     columns: list[int], uv: np.ndarray, ev: np.ndarray) -> None:
+    """:func:`frame_targets` of one pass: the components' sum per group in single precision,
+    plus the baseline in double precision, split into the channels."""
+    groups, components, _ = weights.shape
+    deviation = np.zeros((groups, offset.shape[0]), dtype=np.float32)
+    if components:
+        _pass(anchor, step, weights, lengths, offset, deviation)
+    total = deviation.astype(np.float64)
+    total += baseline if lengths is None else np.repeat(baseline, lengths, axis=1)
+    split_channels(total, columns, uv, ev)
 
 
 def _pass(anchor: np.ndarray, step: np.ndarray, weights: np.ndarray,
@@ -104,38 +121,36 @@ def _sum_rows(terms: np.ndarray) -> np.ndarray:
     return terms[0]
 
 
-def split_channels(deviation: np.ndarray, columns: list[int]) -> tuple[np.ndarray, np.ndarray]:
-    """UV and EV targets from the (G, N) group deviations (spec rule R11; thesis Eq. 4.1).
+def split_channels(deviation: np.ndarray, columns: list[int], uv: np.ndarray,
+                   ev: np.ndarray) -> None:
+    """UV and EV targets from the (G, N) group deviations (which this overwrites), written
+    into ``uv`` and ``ev`` (spec rule R11; thesis Eq. 4.1).
 
-    ``1 + deviation`` is never -0.0, so clipping with ``maximum`` then ``minimum`` gives
-    ``np.clip``'s numbers; a channel without its own group starts from exactly 1, and
-    ``1 * x = x``, so the bipolar group alone sets it."""
+    ``1 + deviation`` is never -0.0 or a NaN, so ``np.clip`` gives the numbers of ``maximum``
+    then ``minimum``; a channel without its own group starts from exactly 1, and ``1 * x =
+    x``, so the bipolar group alone sets it."""
+    np.add(deviation, 1.0, out=deviation)
 
-    def group(g: int) -> np.ndarray | None:
-        return 1.0 + deviation[columns.index(g)] if g in columns else None
+    def group(g: int, low: float, high: float, out: np.ndarray | None = None
+              ) -> np.ndarray | None:
+        if g not in columns:
+            return None
+        row = deviation[columns.index(g)]
+        return np.clip(row, low, high, out=row if out is None else out)
 
-    uv_group, ev_group, bipolar = group(GROUP_UV), group(GROUP_EV), group(GROUP_BIPOLAR)
+    if GROUP_BIPOLAR not in columns:
+        if group(GROUP_UV, 0.0, 1.0, uv) is None:
+            uv.fill(1.0)
+        if group(GROUP_EV, 1.0, MAX_RELATIVE_FRICTION, ev) is None:
+            ev.fill(1.0)
+        return
+    uv_group = group(GROUP_UV, 0.0, 1.0)
+    ev_group = group(GROUP_EV, 1.0, MAX_RELATIVE_FRICTION)
+    bipolar = group(GROUP_BIPOLAR, 0.0, MAX_RELATIVE_FRICTION)
+    np.minimum(bipolar, 1.0, out=uv)  # the bipolar group's lowering
     if uv_group is not None:
-        uv_group = np.minimum(np.maximum(uv_group, 0.0, out=uv_group), 1.0, out=uv_group)
+        uv *= uv_group
+    np.maximum(bipolar, 1.0, out=ev)  # and raising, at most MAX_RELATIVE_FRICTION already
     if ev_group is not None:
-        ev_group = np.minimum(np.maximum(ev_group, 1.0, out=ev_group), MAX_RELATIVE_FRICTION,
-                              out=ev_group)
-    if bipolar is None:
-        ones = np.ones(deviation.shape[1])
-        return (ones.copy() if uv_group is None else uv_group,
-                ones if ev_group is None else ev_group)
-    np.maximum(bipolar, 0.0, out=bipolar)
-    np.minimum(bipolar, MAX_RELATIVE_FRICTION, out=bipolar)
-    lowering, raising = np.minimum(bipolar, 1.0), np.maximum(bipolar, 1.0)
-    if uv_group is None:
-        uv = lowering
-    else:
-        uv = uv_group
-        uv *= lowering
-    if ev_group is None:
-        ev = raising  # at most MAX_RELATIVE_FRICTION already
-    else:
-        ev = ev_group
-        ev *= raising
+        ev *= ev_group
         np.minimum(ev, MAX_RELATIVE_FRICTION, out=ev)
-    return uv, ev
