@@ -114,36 +114,34 @@ def render_block(
 ) -> Block:
     """Frames ``first .. first + count - 1`` of ``clock`` rendered from the touch samples of
     ``table`` (spec rules R5-R11), written into the arrays of ``out`` when given (which has a
-    phase array if and only if ``with_phase``), else into new ones."""
-    if out is None:
-        out = Block(np.empty(count), np.empty(count, np.int32), np.empty(count),
-                    np.empty(count), np.empty((count, card.max_components)) if with_phase
-                    else None)
-    clock.times(first, count, out=out.times)
+    phase array if and only if ``with_phase``; a batch rendering's output columns), else
+    returned in new ones."""
+    times = clock.times(first, count, out=None if out is None else out.times)
     if len(table) == 0:
-        return _neutral_block(out)
+        return _neutral_block(card, times, with_phase, out)
     columns = workspace.sample_columns(table, options)
-    frames = touch_frames(card, table, columns, out.times, options)
+    frames = touch_frames(card, table, columns, times, options)
     if frames.neutral:
-        return _neutral_block(out)
-    out.texture[:] = frames.texture
+        return _neutral_block(card, times, with_phase, out)
     runs = find_runs(table, clock, first, frames, options.dead_reckoning_s)
     parameters = None
     if count <= RUN_TABLE_MAX_FRAMES and len(runs) <= RUN_TABLE_MAX_RUNS:
-        _from_run_tables(card, table, columns, runs, options, workspace, out)
+        uv, ev = _from_run_tables(card, table, columns, runs, options, workspace)
     else:
         parameters = run_parameters(card, table, columns, runs, options)
         offset = np.arange(count, dtype=np.uint32)  # frames since the anchor (wraps from < 0)
         offset -= np.repeat(np.asarray(runs.anchors).astype(np.uint32), runs.lengths)
-        _frame_targets(card, parameters, runs.lengths, offset, out.uv, out.ev)
-    if out.phase is None:
-        return out
-    if parameters is None:
-        runs = Runs(*(np.asarray(getattr(runs, name)) for name in (
-            "starts", "lengths", "anchors", "sample", "texture", "capped", "time")))
-        parameters = run_parameters(card, table, columns, runs, options)
-    out.phase[:] = _unwrapped_phase(card, parameters, runs, out.times, out.texture)
-    return out
+        uv, ev = (np.empty(count), np.empty(count)) if out is None else (out.uv, out.ev)
+        _frame_targets(card, parameters, runs.lengths, offset, uv, ev)
+    phase = None
+    if with_phase:
+        if parameters is None:
+            runs = Runs(*(np.asarray(getattr(runs, name)) for name in (
+                "starts", "lengths", "anchors", "sample", "texture", "capped", "time")))
+            parameters = run_parameters(card, table, columns, runs, options)
+        phase = _unwrapped_phase(card, parameters, runs, times, frames.texture)
+    block = Block(times, frames.texture, uv, ev, phase)
+    return block if out is None else _copy_into(block, out)
 
 
 def _frame_targets(card: CompiledCard, parameters: RunParameters, lengths: np.ndarray | None,
@@ -155,23 +153,39 @@ def _frame_targets(card: CompiledCard, parameters: RunParameters, lengths: np.nd
 
 
 def _from_run_tables(card: CompiledCard, table: TouchTable, columns: SampleColumns,
-                     runs: Runs, options: RenderOptions, workspace: Workspace,
-                     out: Block) -> None:
-    """UV and EV targets of a short block, copied from its runs' tables into ``out``."""
+                     runs: Runs, options: RenderOptions,
+                     workspace: Workspace) -> tuple[np.ndarray, np.ndarray]:
+    """UV and EV targets of a short block, copied from its runs' tables."""
+    parts = []
     for run in range(len(runs)):
         found = workspace.run_table(card, table, columns, runs, run, options)
         k = runs.starts[run] - runs.anchors[run]
-        start, length = runs.starts[run], runs.lengths[run]
-        out.uv[start:start + length] = found.uv[k:k + length]
-        out.ev[start:start + length] = found.ev[k:k + length]
+        parts.append((found.uv[k:k + runs.lengths[run]], found.ev[k:k + runs.lengths[run]]))
+    if len(parts) == 1:
+        return parts[0][0].copy(), parts[0][1].copy()
+    return np.concatenate([uv for uv, _ in parts]), np.concatenate([ev for _, ev in parts])
 
 
-def _neutral_block(out: Block) -> Block:
+def _neutral_block(card: CompiledCard, times: np.ndarray, with_phase: bool,
+                   out: Block | None) -> Block:
+    n = times.shape[0]
+    if out is None:
+        phase = np.full((n, card.max_components), np.nan) if with_phase else None
+        return Block(times, np.full(n, -1, np.int32), np.ones(n), np.ones(n), phase)
     out.texture.fill(-1)
     out.uv.fill(1.0)
     out.ev.fill(1.0)
     if out.phase is not None:
         out.phase.fill(np.nan)
+    return out
+
+
+def _copy_into(block: Block, out: Block) -> Block:
+    """``out`` holding the arrays of ``block`` (the ones not written there already)."""
+    for name in ("times", "texture", "uv", "ev", "phase"):
+        source, target = getattr(block, name), getattr(out, name)
+        if target is not None and source is not target:
+            target[:] = source
     return out
 
 
