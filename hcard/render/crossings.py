@@ -5,12 +5,12 @@ R7), found by a search over a few frames instead of a lookup of every frame.
 Along a segment the dead-reckoned position ``p + v min(t - t_i, H)`` moves monotonically along
 each axis (every floating-point operation in it rounds monotonically), so along each axis the
 *key* ``cell + [p >= 0] + [p >= extent]`` (R7's clipped cell plus the card edges passed) is
-monotonic too: a sum of two monotonic terms, constant only where both are. A frame's taxtel and
-whether it lies on the card are functions of the two axes' keys, so the frames between two
-changes of either key share their texture. Each change is the first frame whose key reaches
-the next value, found by a binary search on the per-frame key (the numbers of a lookup of
-that frame), started at the frame where the straight line meets the cell's edge: the answer,
-bar rounding.
+monotonic too: a sum of monotonic terms, constant only where each term is. Between two changes
+of either key the cells and the sides of the card's edges stay, and with them the frame's
+taxtel and whether it lies on the card: such frames share their texture. Each change is the
+first frame whose key reaches the next value, found by a binary search on the per-frame key
+(the numbers of a lookup of that frame), started at the frame where the straight line meets
+the cell's edge: the answer, bar rounding.
 """
 
 from __future__ import annotations
@@ -116,7 +116,9 @@ def first_reached(line: Line, direction: np.ndarray, target: np.ndarray, low: np
 
 
 class Line:
-    """The dead-reckoned position along one axis of the segment of each search."""
+    """The dead-reckoned position along one axis of the segment of each search (R6), from
+    per-search arrays: ``on_y`` (the y axis, else x), ``sample_t`` (time of the segment's touch
+    sample, s), ``start`` (its position on the axis, mm) and ``velocity`` (mm/s)."""
 
     def __init__(self, card: CompiledCard, times: np.ndarray, horizon_s: float,
                  on_y: np.ndarray, sample_t: np.ndarray, start: np.ndarray,

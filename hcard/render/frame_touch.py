@@ -92,8 +92,9 @@ def touch_frames(
     Along a segment the dead-reckoned position moves monotonically along each axis
     (``p + v min(t - t_i, H)`` rounds monotonically), and the card and each taxtel are intervals
     per axis: when a segment's first and last frames are on the card in one taxtel (or the
-    card, when every taxtel holds the same texture), so is every frame between. Only the frames
-    of the other segments are looked up one by one."""
+    card, when every taxtel holds the same texture), so is every frame between. The other
+    segments are cut where the finger crosses into another taxtel (hcard/render/crossings.py),
+    and each piece is looked up at its first frame."""
     n = times.shape[0]
     horizon_s = options.dead_reckoning_s
     sample_t = table.t
@@ -135,38 +136,54 @@ def touch_frames(
         texture = np.repeat(segment_texture.astype(np.int32), counts)
         one_texture = bool((segment_texture == segment_texture[0]).all())
         return TouchFrames(texture, starts, sample, horizon, one_texture)
-    # pieces: every segment from its first frame, the crossing ones (in contact, not in one
-    # taxtel throughout) also from each crossing; segments of a position that is not finite,
-    # or that skip taxtels between frames, are looked up frame by frame
-    crossing = np.flatnonzero(~uniform)
-    position, velocity = np.stack((x0, y0)), np.stack((vx, vy))
+    texture = _piecewise_textures(card, table, columns, times, horizon_s, starts, counts, i,
+                                  segment_texture, np.flatnonzero(~uniform),
+                                  np.stack((key_x, key_y)), np.stack((last_x, last_y)))
+    return TouchFrames(texture, starts, sample, horizon, False)
+
+
+def _piecewise_textures(card: CompiledCard, table: TouchTable, columns: SampleColumns,
+                        times: np.ndarray, horizon_s: float, starts: np.ndarray,
+                        counts: np.ndarray, sample: np.ndarray, segment_texture: np.ndarray,
+                        crossing: np.ndarray, key_first: np.ndarray,
+                        key_last: np.ndarray) -> np.ndarray:
+    """(N,) texture of every frame: ``segment_texture`` on the segments that hold one, and on
+    the ``crossing`` ones (in contact, not in one taxtel throughout) the texture of each piece
+    between two taxtel crossings (:func:`hcard.render.crossings.segment_crossings`), looked up
+    at its first frame; segments of a position that is not finite, or that skip taxtels
+    between frames, are looked up frame by frame. Per segment: ``starts``, ``counts``,
+    ``sample`` (its touch sample, in contact), (2, S) x and y keys of its first and last
+    frames."""
+    rows = sample.take(crossing)
+    position = np.stack((columns.x.take(rows), columns.y.take(rows)))
+    velocity = np.stack((columns.vx.take(rows), columns.vy.take(rows)))
     finite = np.isfinite(position).all(axis=0) & np.isfinite(velocity).all(axis=0)
-    searched = crossing[finite.take(crossing)]
+    searched = crossing[finite]
     frames, of_segment, by_frame = segment_crossings(
-        card, times, horizon_s, starts.take(searched), ends.take(searched) - 1,
-        t_i.take(searched), position.take(searched, axis=1), velocity.take(searched, axis=1),
-        np.stack((key_x.take(searched), key_y.take(searched))),
-        np.stack((last_x.take(searched), last_y.take(searched))))
-    of_segment = searched.take(of_segment)
+        card, times, horizon_s, starts.take(searched),
+        starts.take(searched) + counts.take(searched) - 1, table.t.take(rows[finite]),
+        position[:, finite], velocity[:, finite], key_first.take(searched, axis=1),
+        key_last.take(searched, axis=1))
+    # pieces: every segment from its first frame, the searched ones also from each crossing
     piece_start = np.concatenate((starts, frames))
     piece_texture = np.concatenate((segment_texture, np.empty(frames.shape[0], np.intp)))
     looked_up = np.concatenate((searched, starts.shape[0] + np.arange(frames.shape[0])))
     piece_texture[looked_up] = _textures_at(
         card, table, columns, times, horizon_s, piece_start.take(looked_up),
-        i.take(np.concatenate((searched, of_segment))))
+        sample.take(np.concatenate((searched, searched.take(of_segment)))))
     order = np.argsort(piece_start, kind="stable")
     piece_start = piece_start.take(order)
     lengths = np.empty_like(piece_start)
     np.subtract(piece_start[1:], piece_start[:-1], out=lengths[:-1])
-    lengths[-1] = n - piece_start[-1]
+    lengths[-1] = times.shape[0] - piece_start[-1]
     texture = np.repeat(piece_texture.take(order).astype(np.int32), lengths)
     frame_by_frame = np.zeros(starts.shape[0], dtype=bool)
     frame_by_frame[crossing] = True
     frame_by_frame[searched[~by_frame]] = False
     if frame_by_frame.any():
-        _look_up_frames(card, table, columns, times, horizon_s, frame_by_frame, i, contact,
-                        counts, texture)
-    return TouchFrames(texture, starts, sample, horizon, False)
+        _look_up_frames(card, table, columns, times, horizon_s, frame_by_frame, sample,
+                        np.ones(starts.shape[0], dtype=bool), counts, texture)
+    return texture
 
 
 def _textures_at(card: CompiledCard, table: TouchTable, columns: SampleColumns,

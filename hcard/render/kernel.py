@@ -1,10 +1,12 @@
 """The frame kernel: a block of frames from the touch samples (spec/README.md section 6).
 
-Per frame, the touch sample, dead reckoning and taxtel (:mod:`hcard.render.frame_touch`);
-per run of frames, the phase at the run's anchor, its step, the band-limit gain and amplitude
-(:mod:`hcard.render.runs`); per frame again, the components' cosines summed per channel group
-and split into UV and EV (:mod:`hcard.render.synthesis`). Nothing per frame depends on the
-palette size or the stroke speed.
+Per segment of frames (one touch sample), dead reckoning and the taxtel under the finger, a
+segment that crosses taxtels cut at its crossings (:mod:`hcard.render.frame_touch`,
+:mod:`hcard.render.crossings`); per run of frames, the phase at the run's anchor, its step,
+the band-limit gain and amplitude (:mod:`hcard.render.runs`); per frame, the components'
+cosines summed per channel group and split into UV and EV, in passes that stay in the core's
+cache (:mod:`hcard.render.synthesis`). Nothing per frame depends on the palette size or the
+stroke speed. A batch rendering's blocks write into its output columns.
 """
 
 from __future__ import annotations
