@@ -191,7 +191,15 @@ def _textures_at(card: CompiledCard, table: TouchTable, columns: SampleColumns,
                  sample: np.ndarray) -> np.ndarray:
     """Texture of block frames ``frames`` whose touch samples ``sample`` are in contact (R6,
     R7): the numbers of :func:`_look_up_frames`."""
-    reckon = times.take(frames) - table.t.take(sample)
+    x, y = _reckoned_positions(table, columns, times.take(frames), sample, horizon_s)
+    return frame_textures(card, x, y, np.ones(frames.shape[0], dtype=bool))
+
+
+def _reckoned_positions(table: TouchTable, columns: SampleColumns, frame_times: np.ndarray,
+                        sample: np.ndarray, horizon_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Dead-reckoned finger position (R6), mm, at each of ``frame_times`` (s) from its touch
+    sample (row ``sample`` of ``table``), moving for at most ``horizon_s``."""
+    reckon = frame_times - table.t.take(sample)
     np.minimum(reckon, horizon_s, out=reckon)
     x = columns.vx.take(sample)
     x *= reckon
@@ -199,7 +207,7 @@ def _textures_at(card: CompiledCard, table: TouchTable, columns: SampleColumns,
     y = columns.vy.take(sample)
     y *= reckon
     y += columns.y.take(sample)
-    return frame_textures(card, x, y, np.ones(frames.shape[0], dtype=bool))
+    return x, y
 
 
 def _one_segment(card: CompiledCard, table: TouchTable, columns: SampleColumns,
@@ -235,15 +243,8 @@ def _look_up_frames(card: CompiledCard, table: TouchTable, columns: SampleColumn
         frames = np.flatnonzero(np.repeat(chosen, counts))
         frame_times = times.take(frames)
         sample, contact, counts = sample[chosen], contact[chosen], counts[chosen]
-    i = np.repeat(sample, counts)
-    reckon = frame_times - table.t.take(i)
-    np.minimum(reckon, horizon_s, out=reckon)
-    x = columns.vx.take(i)
-    x *= reckon
-    x += columns.x.take(i)
-    y = columns.vy.take(i)
-    y *= reckon
-    y += columns.y.take(i)
+    x, y = _reckoned_positions(table, columns, frame_times, np.repeat(sample, counts),
+                               horizon_s)
     looked_up = frame_textures(card, x, y, np.repeat(contact, counts))
     if every:
         texture[:] = looked_up
