@@ -38,6 +38,7 @@ from hcard.atomic import write_atomically
 from hcard.calibration.loop import CalibrationResult, ModelFit
 from hcard.calibration.profile import parameter_table, profile_of
 from hcard.calibration.residuals import ResidualReport
+from hcard.calibration.screening import SCREEN_TOLERANCE, describe_screening, screening_stride
 from hcard.physics import PredictorError
 from hcard.physics.profile import DeviceProfile
 from hcard.physics.units import display_unit
@@ -249,6 +250,13 @@ def report_dict(
         },
         "criterion": result.settings.criterion(),
         "settings": asdict(result.settings),
+        "screening": {
+            "stride": screening_stride(int(np.count_nonzero(data.train)),
+                                       result.settings.screen_samples),
+            "tolerance": SCREEN_TOLERANCE,
+            "description": describe_screening(int(np.count_nonzero(data.train)),
+                                              result.settings.screen_samples),
+        },
         "data": {
             "sources": list(data.sources),
             "samples": len(data),
@@ -383,6 +391,9 @@ def report_markdown(
         f"{s.max_effects} effects, {s.bins} bins.",
         "",
     ]
+    screening = describe_screening(int(np.count_nonzero(data.train)), s.screen_samples)
+    if screening:
+        lines += [screening, ""]
 
     lines += ["## Data", ""]
     lines += [f"- Source: {source}" for source in data.sources]
@@ -432,7 +443,7 @@ def report_markdown(
                     _g(c.score_change, ".1f"),
                     f"{c.signature_eta2:.3f}",
                     "yes" if c.accepted else "no",
-                    c.note,
+                    f"{c.note} (screened)" if c.screened else c.note,
                 ]
                 for c in result.candidates
             ],
