@@ -53,10 +53,11 @@ fitted on one training sample in ``k`` (about ``screen_samples`` of them); one w
 figures come within :data:`~hcard.calibration.screening.SCREEN_TOLERANCE` of a threshold of the
 criterion, or of a rival it must be ranked against, is fitted again on every training sample,
 from the same start, before the loop decides on it. The effects chosen, the verdict and every
-accepted model's fit are those the loop reaches without screening (``screen_samples = 0``);
-only the figures of candidates far from every decision are the screened fits' (marked in the
-candidate table), and so may be the runner-up among rivals none of which comes within the
-separation thresholds of the final model (:func:`_runner_up`).
+accepted model's fit are those the loop reaches without screening (``screen_samples = 0``), and
+so is the runner-up whenever it may come within the separation thresholds of the final model;
+the figures of candidates far from every decision are the screened fits' (marked in the
+candidate table), and among rivals far from the final model the one named runner-up may be
+another within the tolerance of the best (:func:`_runner_up`).
 
 **Verdicts.** When no candidate passes, the residual of the final model is analysed once more.
 Structure left against a regressor (p < ``alpha`` and ``eta^2 >= min_eta2``) or in time
@@ -1158,8 +1159,11 @@ def _runner_up(
     fits: whether a rival earns its place, and, when some rival may come within the
     separation thresholds of the final model, which rival is best. When none can (or the
     final model is the base model, whose comparison decides nothing), the comparison is not
-    ambiguous whichever it is, and the rival with the best screened ``H`` is the runner-up
-    (fitted on every training sample for the comparison)."""
+    ambiguous whichever rival it is: the runner-up is the rival of lowest ``H`` taking
+    screened figures as they are, fitted in full, and fitted again while another screened
+    rival looks better than its full fit. It is the runner-up without screening, or a rival
+    whose ``H`` lies within the tolerance band (:func:`~hcard.calibration.screening.
+    criterion_band`) of it."""
     size = max(len(final.effects), 1)
     own = frozenset(final.effects)
     n_eff = effective_samples(final.fit.residuals[final.fit.test])
@@ -1220,25 +1224,21 @@ def _runner_up(
         return (score(key)[1] - final_score < settings.separation_criterion
                 or rmse(key)[0] / final.test_rmse - 1.0 < settings.separation_rmse)
 
-    if final.effects and any(may_be_close(key) for key in candidates):
-        # the best rival by full fits: every screened one that may beat the best is fitted
-        while True:
-            candidates = [key for key in candidates if key in pool]
-            best = min(candidates, key=lambda k: score(k)[0])
-            doubtful = [key for key in candidates
-                        if key in screened and score(key)[1] < score(best)[2]]
-            if not doubtful or confirmed is None:
-                break
-            settle(doubtful)
-    else:
-        while True:
-            candidates = [key for key in candidates if key in pool]
-            if not candidates:
-                return None
-            best = min(candidates, key=lambda k: score(k)[0])
-            settle([best])
-            if best in pool:
-                break
+    # When a rival may make the comparison ambiguous, the best rival by full fits: every
+    # screened one whose full fit may beat the best is fitted on every training sample. Else
+    # the comparison is not ambiguous whichever rival it is: the best taking screened figures
+    # as they are, fitted in full, again while another screened one looks better.
+    exact = bool(final.effects) and any(may_be_close(key) for key in candidates)
+    while True:
+        candidates = [key for key in candidates if key in pool]
+        if not candidates:
+            return None
+        best = min(candidates, key=lambda k: score(k)[0])
+        doubtful = [key for key in candidates if key in screened and (
+            score(key)[1] < score(best)[2] if exact else key == best)]
+        if not doubtful or confirmed is None:
+            break
+        settle(doubtful)
     effects, rival = pool[best]
     observed = data.observed[used]
     return compare(

@@ -14,8 +14,8 @@ parameters of every accepted model are those of full fits.
 The tolerance is the largest relative difference of held-out RMSE between a candidate's
 screened and full fit that the loop allows for, with a margin: over the candidates of the
 independent recordings of tests/calibration/independent_recordings.py (every scenario, white
-and AR(1) noise), screening on 4000 of 12000 training samples moved a candidate's held-out
-RMSE by at most 0.84 % (bench/bench_calibration_screening.py measures it again).
+and AR(1) noise, 60 s long), screening on one training sample in 8 moved a candidate's held-out
+RMSE by at most 1.5 % (bench/bench_calibration_screening.py measures it again).
 """
 
 from __future__ import annotations
@@ -26,25 +26,35 @@ import numpy as np
 
 SCREEN_SAMPLES = 4000
 """Training samples a candidate is screened on, about (the stride is the smallest that keeps
-at most this many); a training split of at most this many is not screened."""
+at most this many)."""
 
-SCREEN_TOLERANCE = 0.02
+MIN_STRIDE = 4
+"""Smallest stride worth screening with; a training split that a smaller one would thin to
+:data:`SCREEN_SAMPLES` (fewer than 16000 samples) is not screened. A model evaluation costs
+about 0.2 ms whatever the sample count (0.3 ms at 4000 samples, 0.5 ms at 12000), so a fit
+screened at stride 3 costs over half a full one, and the full fits of the candidates near a
+decision took the rest: over the independent recordings (12000 training samples), loops
+screened at stride 3 ran 0.8-1.4 times as fast as without screening."""
+
+SCREEN_TOLERANCE = 0.03
 """Relative held-out RMSE by which a screened fit may differ from the full fit of the same
-model; a screened figure decides nothing that a difference of this size could change."""
+model (twice the largest difference measured); a screened figure decides nothing that a
+difference of this size could change."""
 
 
 def screening_stride(n_train: int, samples: int) -> int:
-    """The stride ``k`` (>= 1) that keeps at most ``samples`` of ``n_train`` training samples;
-    1 (no screening) for ``samples <= 0`` or ``n_train <= samples``."""
-    if samples <= 0 or n_train <= samples:
+    """The stride ``k`` that keeps at most ``samples`` of ``n_train`` training samples; 1 (no
+    screening) for ``samples <= 0`` or when ``k`` would be below :data:`MIN_STRIDE`."""
+    if samples <= 0:
         return 1
-    return math.ceil(n_train / samples)
+    stride = math.ceil(n_train / samples)
+    return stride if stride >= MIN_STRIDE else 1
 
 
 def screening_mask(train: np.ndarray, samples: int) -> np.ndarray | None:
     """Every ``k``-th training sample of the boolean mask ``train`` (in sample order, so every
     stroke keeps samples along its length), ``k`` from :func:`screening_stride`; None when
-    ``k`` is 1 (nothing to screen: fit on the whole training split)."""
+    ``k`` is 1 (not screened: fit on the whole training split)."""
     index = np.flatnonzero(train)
     stride = screening_stride(index.size, samples)
     if stride == 1:

@@ -20,6 +20,7 @@ import independent_recordings as ir
 
 from hcard.calibration.loop import LoopSettings, calibrate
 from hcard.calibration.report import report_dict, report_markdown
+from hcard.calibration.residuals import effective_samples
 from hcard.calibration.screening import (
     SCREEN_TOLERANCE,
     criterion_band,
@@ -30,19 +31,22 @@ from hcard.calibration.screening import (
 from hcard.plugins.registry import get_registry
 
 SMALL = ir.Protocol(sessions=2, strokes_per_session=4, stroke_s=0.6)
-"""9 s at 1 kHz: about 3600 training samples, screened here on 1200 of them."""
+"""9 s at 1 kHz: about 3600 training samples, screened here on a quarter of them."""
 
 
 def test_the_screening_split_is_every_kth_training_sample_in_order() -> None:
     train = np.zeros(40, dtype=bool)
-    train[[1, 2, 3, 7, 8, 9, 10, 20, 21, 22, 30, 31, 39]] = True  # 13 training samples
-    mask = screening_mask(train, 5)  # at most 5 kept: one in ceil(13 / 5) = 3
+    train[[1, 2, 3, 7, 8, 9, 10, 20, 21, 22, 30, 31, 33, 39]] = True  # 14 training samples
+    mask = screening_mask(train, 3)  # at most 3 kept: one in ceil(14 / 3) = 5
     assert mask is not None
-    assert np.flatnonzero(mask).tolist() == [1, 7, 10, 22, 39]
-    assert screening_stride(13, 5) == 3
-    assert screening_mask(train, 13) is None  # no more than asked for: nothing to screen
+    assert np.flatnonzero(mask).tolist() == [1, 9, 30]
+    assert screening_stride(14, 3) == 5
+    assert screening_mask(train, 4) is not None  # one in 4: the smallest stride screened
+    assert screening_mask(train, 5) is None  # one in 3 would save too little: not screened
+    assert screening_mask(train, 14) is None
     assert screening_mask(train, 0) is None  # screening off
     assert screening_stride(30472, 4000) == 8
+    assert screening_stride(12000, 4000) == 1
 
 
 def test_the_tolerance_bands() -> None:
@@ -72,15 +76,21 @@ def test_the_loop_gives_the_same_answers_with_and_without_screening(
     n_train = int(np.count_nonzero(data.train))
     full = calibrate(data, base, library, settings=LoopSettings(screen_samples=0))
     screened = calibrate(data, base, library,
-                         settings=LoopSettings(screen_samples=n_train // 3))
+                         settings=LoopSettings(screen_samples=n_train // 4))
     assert screened.effects_added == full.effects_added == tuple(scenario.expected)
     assert screened.verdict == full.verdict
     # the accepted model is fitted on every training sample from the same start: the same fit
     assert screened.after.fit.params == full.after.fit.params
     assert screened.after.test_rmse == full.after.test_rmse
-    assert screened.comparison is not None and full.comparison is not None
-    assert screened.comparison.runner_up == full.comparison.runner_up
-    assert screened.comparison.criterion_margin == full.comparison.criterion_margin
+    # the runner-up: the same one where it could make the verdict ambiguous; among rivals far
+    # from the final model, one whose criterion lies within the tolerance band of the best
+    chosen, best = screened.comparison, full.comparison
+    assert chosen is not None and best is not None
+    if best.criterion_margin < 2 * LoopSettings().separation_criterion:
+        assert chosen.runner_up == best.runner_up
+    fit = full.after.fit
+    band = criterion_band(effective_samples(fit.residuals[fit.test]))
+    assert 0.0 <= chosen.criterion_margin - best.criterion_margin <= band
     # the screening did happen: candidates far from every threshold kept their screened
     # figures, within the tolerance of their full fits; the accepted one was fitted in full
     marked = [c for c in screened.candidates if c.screened]
@@ -91,6 +101,6 @@ def test_the_loop_gives_the_same_answers_with_and_without_screening(
     assert not any(c.screened for c in full.candidates)
     # and the report says so
     markdown = report_markdown(screened)
-    assert "Screening: each candidate was first fitted on one training sample in 3 " in markdown
+    assert "Screening: each candidate was first fitted on one training sample in 4 " in markdown
     assert "(screened)" in markdown
-    assert report_dict(screened)["screening"]["stride"] == 3
+    assert report_dict(screened)["screening"]["stride"] == 4
