@@ -63,7 +63,11 @@ PANEL_COLUMNS = 3
 FIT_INCHES = (12.0, 4.0)
 """Size of ``fit.png``, inches."""
 TICKS = MaxNLocator(nbins=5, steps=[1, 2, 2.5, 5, 10])
-"""Where the figures' ticks go (:func:`_fixed_ticks`)."""
+"""Where the figures' ticks go (:func:`_fixed_ticks`): at most 5 intervals (matplotlib's own
+choice for the panels' axes is 5-8); each tick is a handful of artists to make and draw."""
+PNG_COMPRESSION = 1
+"""zlib level of the PNG figures: 1 encodes residuals.png in 23 ms instead of 39 ms (level 6,
+PIL's default), for a file 15 % larger."""
 MARGINS_INCHES = (0.62, 0.12, 0.5, 0.3)
 """Space around each panel's axes (left, right, bottom, top), inches: tick labels and the axis
 label at left and below, the title above. The figures place their axes at these fixed margins
@@ -582,7 +586,8 @@ def report_markdown(
 # -- figures ------------------------------------------------------------------------------------
 def _png(fig: Figure) -> bytes:
     buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=DPI, metadata={"Software": f"hcard {__version__}"})
+    fig.savefig(buffer, format="png", dpi=DPI, metadata={"Software": f"hcard {__version__}"},
+                pil_kwargs={"compress_level": PNG_COMPRESSION})
     return buffer.getvalue()
 
 
@@ -613,10 +618,9 @@ def _panel(fig: Figure, row: int, column: int, rows: int, cell_inches: tuple[flo
 
 
 def _fixed_ticks(ax: Axes) -> None:
-    """Fix ``ax``'s ticks where matplotlib's automatic locator would put them for its current
-    limits (at most :data:`TICKS` intervals of 1, 2, 2.5 or 5 times a power of ten): the
-    automatic locator runs again at every stage of a draw, and took about half of the
-    drawing of a panel."""
+    """Fix ``ax``'s ticks for its current limits at :data:`TICKS` (steps of 1, 2, 2.5 or 5
+    times a power of ten, as matplotlib's automatic locator): the automatic locator runs
+    again at every stage of a draw, and took about half of the drawing of a panel."""
     for axis, limits in ((ax.xaxis, ax.get_xlim()), (ax.yaxis, ax.get_ylim())):
         low, high = sorted(limits)
         ticks = TICKS.tick_values(low, high)
