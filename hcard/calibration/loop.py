@@ -887,6 +887,34 @@ def calibrate(
             say(f"round {round_number}: removed {weakest}: {reasons[weakest][0]}")
         return chosen
 
+    def is_screened(item: tuple[Candidate, FitResult | None]) -> bool:
+        """Whether a candidate of the current round holds a screened fit."""
+        cand, result = item
+        return result is not None and frozenset(
+            [*(e.name for e in added), cand.effect]) in screened
+
+    def settle(tried: list[tuple[Candidate, FitResult | None]], index: int,
+               round_number: int, n_eff: float, current_score: float) -> None:
+        """Fit the screened candidate ``tried[index]`` of the current round on every training
+        sample; its row takes the full fit's figures (or says the fit failed)."""
+        cand = tried[index][0]
+        key = frozenset([*(e.name for e in added), cand.effect])
+        tic = time.perf_counter()
+        exact = confirmed(key)
+        seconds = cand.seconds + time.perf_counter() - tic
+        if exact is None:
+            tried[index] = (replace(cand, test_rmse=None, improvement=None, score_change=None,
+                                    seconds=seconds,
+                                    note=f"fit failed: {failures.get(key, '')}"), None)
+            return
+        rmse = float(exact.test_rmse or math.nan)
+        gain = 1.0 - rmse / current.test_rmse
+        tried[index] = (replace(cand, test_rmse=rmse, improvement=gain,
+                                score_change=_score(exact, n_eff) - current_score,
+                                seconds=seconds), exact)
+        say(f"round {round_number}: {cand.effect}: held-out RMSE {format_error(rmse, unit)} "
+            f"({-100 * gain:+.1f} %) on every training sample")
+
     for round_number in range(1, settings.max_effects + 1):
         remaining = [e for e in usable if e not in added]
         if not remaining:
@@ -946,33 +974,15 @@ def calibrate(
                 f"round {round_number}: {effect.name}: held-out RMSE {format_error(rmse, unit)} "
                 f"({-100 * gain:+.1f} %){', screened' if key in screened else ''}"
             )
-        # A screened candidate that may pass the criterion is fitted on every training
-        # sample before the round decides: one whose held-out RMSE may fall by
-        # min_improvement once fitted so (the other checks are on the current residual).
+        # A screened candidate whose held-out RMSE may fall by min_improvement once fitted on
+        # every training sample is fitted so before the round decides. The round's n_eff
+        # (below) comes from the best-fitting candidate's residual: when some candidate may
+        # pass, that one is then a full fit too, for every candidate left screened lies above
+        # `target` by more than the tolerance.
         target = (1.0 - settings.min_improvement) * current.test_rmse
-        for index, (cand, result) in enumerate(tried):
-            key = frozenset([*(e.name for e in added), cand.effect])
-            if (result is None or key not in screened
-                    or cand.signature_eta2 < settings.signature_eta2
-                    or not may_fall_to(float(cand.test_rmse), target)):
-                continue
-            tic = time.perf_counter()
-            exact = confirmed(key)
-            seconds = cand.seconds + time.perf_counter() - tic
-            if exact is None:
-                tried[index] = (replace(cand, test_rmse=None, improvement=None,
-                                        score_change=None, seconds=seconds,
-                                        note=f"fit failed: {failures.get(key, '')}"), None)
-                continue
-            rmse = float(exact.test_rmse or math.nan)
-            gain = 1.0 - rmse / current.test_rmse
-            tried[index] = (replace(cand, test_rmse=rmse, improvement=gain,
-                                    score_change=_score(exact, n_eff) - current_score,
-                                    seconds=seconds), exact)
-            say(
-                f"round {round_number}: {cand.effect}: held-out RMSE {format_error(rmse, unit)} "
-                f"({-100 * gain:+.1f} %) on every training sample"
-            )
+        for index, (cand, _) in enumerate(tried):
+            if is_screened(tried[index]) and may_fall_to(float(cand.test_rmse), target):
+                settle(tried, index, round_number, n_eff, current_score)
         fitted = [item for item in tried if item[1] is not None]
         # The round's effective sample count: from the best-fitting of the current model and
         # the candidates. The current residual of a model that lacks a strong effect is
