@@ -783,11 +783,11 @@ def calibrate(
         new, start = best
         rest = [e for e in effects if e is not new]
         start_key = frozenset(e.name for e in rest)
-        ratio = None
         if not exact and screen is not None:
             ratio = (scale.get(start_key) if start_key in screened
                      else reference_scale(pool[start_key][0], start))
-        if ratio is not None:
+            if ratio is None:  # fitted in full from full subsets, as without screening
+                return from_subsets(effects, exact=True)
             try:
                 result = fit_with(rest, new, start, screen)
             except PredictorError:
