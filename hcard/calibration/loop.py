@@ -217,8 +217,9 @@ class Candidate:
         note: why it was (not) added, or why it was not fitted.
         seconds: wall time of its fit, s.
         screened: whether its figures are those of a fit on the screening samples only
-            (:mod:`hcard.calibration.screening`): far enough from every threshold that a
-            full fit could not change the decision.
+            (:mod:`hcard.calibration.screening`; the held-out RMSE scaled by its start
+            model's full over screened one): far enough from every threshold that a full fit
+            could not change the decision.
     """
 
     round: int
