@@ -896,7 +896,10 @@ def calibrate(
         band = criterion_band(n_eff)
         doubtful = [key for key, (_, _, score) in scores.items()
                     if key in screened and score - band < own_score]
-        stay = bool(doubtful) and all(returns_to_own(key, own, n_eff) for key in doubtful)
+        better = [key for key, (_, _, score) in scores.items()
+                  if key not in screened and key != own and score < own_score]
+        stay = (bool(doubtful) and not better
+                and all(returns_to_own(key, own, n_eff) for key in doubtful))
         for key, (effects, _result, score) in list(scores.items()):
             if key in screened and score - band < own_score and not stay:
                 tic = time.perf_counter()
