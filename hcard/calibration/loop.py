@@ -664,22 +664,27 @@ def calibrate(
     screen = screening_mask(data.train, settings.screen_samples)
     screened: dict[frozenset[str], tuple[tuple[Effect, ...], Effect, FitResult] | None] = {}
     scale: dict[frozenset[str], float] = {}
-    references: dict[frozenset[str], float | None] = {}
+    references: dict[int, tuple[FitResult, float]] = {}  # by id of the start fit (kept)
 
-    def reference_scale(effects: Sequence[Effect], start: FitResult) -> float | None:
-        """Full over screened held-out RMSE of the model with ``effects`` fitted in full as
-        ``start``: ``start``'s RMSE over that of the same model refitted on the screening
-        samples from ``start``'s parameters (once per model; None when that refit fails)."""
-        key = frozenset(e.name for e in effects)
-        if key not in references:
+    def reference_scale(start: FitResult) -> float | None:
+        """Full over screened held-out RMSE of the model fitted in full as ``start``:
+        ``start``'s RMSE over that of the same model (``start.predictor``: its effects in the
+        order it was fitted with) refitted on the screening samples from ``start``'s
+        parameters, once per fit; None when that refit fails."""
+        if id(start) not in references:
+            model = start.predictor
             try:
-                again = fit(effects, start.params, CANDIDATE_EVALUATIONS, screen)
-                references[key] = float(start.test_rmse or math.nan) / float(
-                    again.test_rmse or math.nan)
+                again = fit_predictor(
+                    model, data.inputs_for(model), data.observed, free=start.free,
+                    train=screen, test=data.test,
+                    dynamic="time" in {v.name for v in model.inputs},
+                    max_evaluations=CANDIDATE_EVALUATIONS)
+                ratio = float(start.test_rmse or math.nan) / float(again.test_rmse or math.nan)
             except PredictorError:
-                references[key] = None
-        ratio = references[key]
-        return ratio if ratio is not None and math.isfinite(ratio) and ratio > 0 else None
+                ratio = math.nan
+            references[id(start)] = (start, ratio)
+        ratio = references[id(start)][1]
+        return ratio if math.isfinite(ratio) and ratio > 0 else None
 
     def held_out(key: frozenset[str]) -> float:
         """The pool's held-out RMSE of ``key``: a screened one scaled (``scale``)."""
@@ -710,7 +715,7 @@ def calibrate(
         screening samples and pooled as screened (on every training sample, and pooled as
         such, without screening or when the screened fit fails)."""
         key = frozenset([*(e.name for e in effects), new.name])
-        ratio = reference_scale(effects, start) if screen is not None else None
+        ratio = reference_scale(start) if screen is not None else None
         if ratio is not None:
             try:
                 result = fit_with(effects, new, start, screen)
@@ -786,7 +791,7 @@ def calibrate(
         start_key = frozenset(e.name for e in rest)
         if not exact and screen is not None:
             ratio = (scale.get(start_key) if start_key in screened
-                     else reference_scale(pool[start_key][0], start))
+                     else reference_scale(start))
             if ratio is None:  # fitted in full from full subsets, as without screening
                 return from_subsets(effects, exact=True)
             try:
