@@ -666,6 +666,19 @@ def calibrate(
     scale: dict[frozenset[str], float] = {}
     references: dict[int, tuple[FitResult, float]] = {}  # by id of the start fit (kept)
 
+    dynamic_sets: dict[frozenset[str], bool] = {}
+
+    def evaluates_every_sample(effects: Sequence[Effect]) -> bool:
+        """Whether the model with ``effects`` has memory (a ``time`` input): its fit evaluates
+        it on every sample whatever the training split (``fit_predictor``'s ``dynamic``), so a
+        screened fit saves only the optimiser's algebra, not worth its full refits near
+        decisions; such candidates are fitted on every training sample at once."""
+        key = frozenset(e.name for e in effects)
+        if key not in dynamic_sets:
+            model = _model(base, effects, {}, observation)
+            dynamic_sets[key] = "time" in {v.name for v in model.inputs}
+        return dynamic_sets[key]
+
     def reference_scale(start: FitResult) -> float | None:
         """Full over screened held-out RMSE of the model fitted in full as ``start``:
         ``start``'s RMSE over that of the same model (``start.predictor``: its effects in the
@@ -715,7 +728,8 @@ def calibrate(
         screening samples and pooled as screened (on every training sample, and pooled as
         such, without screening or when the screened fit fails)."""
         key = frozenset([*(e.name for e in effects), new.name])
-        ratio = reference_scale(start) if screen is not None else None
+        worth = screen is not None and not evaluates_every_sample([*effects, new])
+        ratio = reference_scale(start) if worth else None
         if ratio is not None:
             try:
                 result = fit_with(effects, new, start, screen)
@@ -789,7 +803,7 @@ def calibrate(
         new, start = best
         rest = [e for e in effects if e is not new]
         start_key = frozenset(e.name for e in rest)
-        if not exact and screen is not None:
+        if not exact and screen is not None and not evaluates_every_sample(effects):
             ratio = (scale.get(start_key) if start_key in screened
                      else reference_scale(start))
             if ratio is None:  # fitted in full from full subsets, as without screening

@@ -9,7 +9,9 @@ hold, and their screened figures lie far from every threshold of the criterion. 
 whose screened figures come within :data:`SCREEN_TOLERANCE` of a threshold, or of a rival it
 must be ranked against, is fitted again on every training sample, from the same start as
 without screening, before the loop decides anything on it: the effects chosen, the verdict and
-the fitted parameters of every accepted model are those of full fits.
+the fitted parameters of every accepted model are those of full fits. A model with memory (a
+filter over time) is evaluated on every sample whatever its training split, so screening it
+would save little; such candidates are fitted on every training sample at once.
 
 A screened fit generalises a little worse than a full one, and so does its start model's:
 the loop reads a screened candidate's held-out RMSE multiplied by its start model's full over
