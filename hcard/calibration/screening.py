@@ -15,9 +15,9 @@ would save little; such candidates are fitted on every training sample at once.
 
 A screened fit generalises a little worse than a full one, and so does its start model's:
 the loop reads a screened candidate's held-out RMSE multiplied by its start model's full over
-screened RMSE (the start refitted on the same samples), which takes that common part out (on a
-charge-leakage recording, a high-pass of 7.7 ms seen every 8 ms, every screened candidate read
-4 % high without it). The tolerance is the largest relative difference between that estimate
+screened RMSE (the start refitted on the same samples), which takes that common part out (a
+model with a 7.7 ms high-pass fitted on one sample in 8 read 4 % high without it). The
+tolerance is the largest relative difference between that estimate
 and the full fit's held-out RMSE that the loop allows for, with a margin; it is measured over
 the independent recordings of tests/calibration/independent_recordings.py by
 bench/bench_calibration_screening.py.
