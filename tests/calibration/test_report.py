@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -18,6 +19,8 @@ from hcard.calibration.report import (
     FIT_INCHES,
     FORMAT,
     PANEL_INCHES,
+    fit_figure,
+    residuals_figure,
     residuals_grid,
     write_report,
 )
@@ -134,6 +137,37 @@ def test_figures_are_pngs_of_the_expected_size(result, report):
     for path in report.figures:
         assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
         assert imread(path).shape[:2] == expected[path.name]
+
+
+def _cells_hold_their_panels(fig, cells):
+    """Every panel's drawn extent (axes, tick labels, axis labels, title, offset text) lies
+    inside its own cell, given in pixels as (x0, y0, x1, y1) from the lower left."""
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    assert len(fig.axes) == len(cells)
+    for ax, (x0, y0, x1, y1) in zip(fig.axes, cells, strict=True):
+        box = ax.get_tightbbox(renderer)
+        assert box.x0 >= x0 - 0.5 and box.x1 <= x1 + 0.5, (ax.get_title(), box, (x0, x1))
+        assert box.y0 >= y0 - 0.5 and box.y1 <= y1 + 0.5, (ax.get_title(), box, (y0, y1))
+
+
+def test_figure_panels_keep_their_labels_inside_their_cells(result):
+    # the figures place their axes at fixed margins (no layout engine): wide tick labels, a
+    # long regressor name or an offset must still not spill into the next panel; here the
+    # residual is scaled up to four-digit millinewton tick labels as well
+    wide = replace(result, before=replace(result.before, fit=replace(
+        result.before.fit, residuals=result.before.fit.residuals * 3e4)))
+    for case in (result, wide):
+        names = list(case.data.regressors)
+        rows, columns = residuals_grid(len(names))
+        width, height = PANEL_INCHES[0] * DPI, PANEL_INCHES[1] * DPI
+        cells = [((k % columns) * width, (rows - 1 - k // columns) * height,
+                  (k % columns + 1) * width, (rows - k // columns) * height)
+                 for k in range(len(names))]
+        _cells_hold_their_panels(residuals_figure(case), cells)
+    third = FIT_INCHES[0] * DPI / 3
+    _cells_hold_their_panels(fit_figure(result), [(0, 0, 2 * third, FIT_INCHES[1] * DPI),
+                                                  (2 * third, 0, 3 * third, FIT_INCHES[1] * DPI)])
 
 
 def test_no_figures(result, tmp_path):
