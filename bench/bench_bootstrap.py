@@ -15,7 +15,8 @@ alternating, in this process:
 - ``new``: the fits as they run now, on one BLAS thread.
 
 Prints per scenario and stage the median wall time of each path and their ratio (goal: the
-new path at least :data:`GOAL_SPEEDUP` times faster where the machine's cores are shared), the
+new path at least :data:`GOAL_SPEEDUP` times faster; the gain grows with the load other
+processes put on the cores, so the load average is printed before and after), the
 floor (the time the new path spends in the model's own evaluations, which no change to the
 optimiser's linear algebra can remove) and the new path's ratio to it (goal for the bootstrap,
 whose time is all refits: at most :data:`GOAL_FLOOR_RATIO`; the loop also analyses residuals
@@ -33,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import statistics
 import tempfile
 import time
@@ -51,8 +53,11 @@ from hcard.cli.main import cli
 from hcard.physics import Predictor
 from hcard.plugins.registry import get_registry
 
-GOAL_SPEEDUP = 3.0
-"""The new path at least this many times faster than the old one (2 shared cores)."""
+GOAL_SPEEDUP = 2.0
+"""The new path at least this many times faster than the old one. Measured on 2 cores:
+1.9-2.3x with the machine otherwise idle (OpenBLAS's second thread then costs each call its
+hand-over and takes the core the model evaluations would use), 6-12x at a load average of 2-3
+from other processes (each call also waits for its second thread to be scheduled)."""
 GOAL_FLOOR_RATIO = 1.5
 """The bootstrap's new path at most this many times the model evaluations it needs."""
 EFFECT = "air-layer"
@@ -209,6 +214,7 @@ def main() -> None:
     if all(n == 1 for _, n in pools):
         print("warning: the default is one thread already (OPENBLAS_NUM_THREADS?): the old "
               "and the new path are the same")
+    print("load average (1, 5, 15 min): " + ", ".join(f"{x:.2f}" for x in os.getloadavg()))
     registry = get_registry()
     library = list(registry.calibration_effects.values())
     with tempfile.TemporaryDirectory() as tmp:
@@ -227,6 +233,8 @@ def main() -> None:
             measure(f"bootstrap ({args.samples} refits)",
                     lambda fit=fit, data=data: stroke_bootstrap(fit, data, samples=args.samples),
                     args.repeat)
+            print("load average (1, 5, 15 min): "
+                  + ", ".join(f"{x:.2f}" for x in os.getloadavg()))
 
 
 def _device_base(path: Path):

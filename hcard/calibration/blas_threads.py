@@ -5,9 +5,10 @@ A fit's linear algebra is on tall, narrow matrices: the trust-region step of
 training samples by at most a dozen parameters) and forms ``J^T f`` every iteration, between
 model evaluations that are NumPy element-wise code on one core. OpenBLAS's thread pool gains
 nothing on a matrix a dozen columns wide, and its threads, spinning for work after each call,
-take the cores the model evaluations need; on a busy 2-core machine every call also waits for
-its second thread to be scheduled. There, one thread made the 50 refits of a stroke bootstrap
-of a 30 s recording 12x faster and the whole calibration 4-8x (bench/bench_bootstrap.py).
+take the cores the model evaluations need; on a busy machine every call also waits for its
+second thread to be scheduled. On 2 cores one thread made the calibration loop and the 50
+refits of a stroke bootstrap of a 30 s recording 1.9-2.3x faster with the machine otherwise
+idle, and 6-12x at a load average of 2-3 from other processes (bench/bench_bootstrap.py).
 
 The number of threads changes the last bits of long sums only: OpenBLAS splits a dot product
 over more than about 10,000 samples (the cost ``f^T f``), and a product of a long matrix with a
