@@ -6,6 +6,10 @@ split, and reports the error on a held-out split. Inputs are plain arrays in SI 
 the predictor's input variables); the observed output is in the unit of the predictor's output.
 Split by stroke or by time block, never by random sample, so that correlated samples do not leak
 from the training split into the held-out one: the split masks are the caller's choice.
+
+A fit runs on one BLAS thread (:mod:`hcard.calibration.blas_threads`): its linear algebra is on
+a Jacobian a dozen columns wide, where OpenBLAS's threads only compete with the model
+evaluations for the cores.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
+from hcard.calibration.blas_threads import one_blas_thread
 from hcard.physics import Predictor, PredictorError
 
 UNIDENTIFIABLE = 1e-8
@@ -180,6 +185,7 @@ def _covariance(jac_scaled: np.ndarray, scales: np.ndarray) -> tuple[np.ndarray,
     return covariance, condition
 
 
+@one_blas_thread()  # its linear algebra is on narrow matrices, and threads only compete
 def fit_predictor(
     predictor: Predictor,
     inputs: Mapping[str, np.ndarray],
