@@ -10,8 +10,8 @@ its final model (``--samples`` refits, the command's default). Both run twice pe
 alternating, in this process:
 
 - ``old``: the code path before the fits ran on one BLAS thread: OpenBLAS's default pool, one
-  thread per CPU (:func:`~hcard.calibration.blas_threads.one_blas_thread` made to find no
-  library, so it changes nothing);
+  thread per CPU (:func:`~hcard.calibration.blas_threads.one_blas_thread` made to set no
+  limit, so it changes nothing);
 - ``new``: the fits as they run now, on one BLAS thread.
 
 Prints per scenario and stage the median wall time of each path and their ratio (goal: the
@@ -43,6 +43,7 @@ from pathlib import Path
 
 import numpy as np
 from click.testing import CliRunner
+from threadpoolctl import threadpool_info
 
 import hcard.calibration.blas_threads as blas_threads
 from hcard.calibration.bootstrap import DEFAULT_SAMPLES, BootstrapResult, stroke_bootstrap
@@ -123,13 +124,13 @@ class ModelClock:
 
 
 def old_path(run: Callable[[], object]) -> object:
-    """``run`` with :func:`one_blas_thread` finding no library: OpenBLAS's default pool."""
-    found = blas_threads.loaded_openblas
-    blas_threads.loaded_openblas = lambda: []
+    """``run`` with :func:`one_blas_thread` setting no limit: OpenBLAS's default pool."""
+    limits = blas_threads.threadpool_limits
+    blas_threads.threadpool_limits = lambda **_: limits(limits=None)
     try:
         return run()
     finally:
-        blas_threads.loaded_openblas = found
+        blas_threads.threadpool_limits = limits
 
 
 def deviations(new: CalibrationResult | BootstrapResult,
@@ -207,8 +208,8 @@ def main() -> None:
     parser.add_argument("--samples", type=int, default=DEFAULT_SAMPLES)
     parser.add_argument("--seed", type=int, nargs="+", default=[5, 3])
     args = parser.parse_args()
-    pools = [(Path(lib.path).name, int(lib.get_threads()))
-             for lib in blas_threads.loaded_openblas()]
+    pools = [(Path(info["filepath"]).name, int(info["num_threads"]))
+             for info in threadpool_info() if info["user_api"] == "blas"]
     print("OpenBLAS default threads (the old path): "
           + (", ".join(f"{name} {n}" for name, n in pools) or "no OpenBLAS found"))
     if all(n == 1 for _, n in pools):

@@ -23,107 +23,37 @@ candidate fits moved their held-out RMSE by up to 4.7e-7 of itself and a weakly 
 its values by up to 9.3e-7 of their uncertainty (tests/calibration/test_blas_threads.py bounds
 that at 1e-3).
 
-:func:`one_blas_thread` sets every OpenBLAS library loaded in the process (NumPy's and SciPy's
-wheels each bring their own) to one thread and restores the counts when the outermost use
-ends. The libraries are found in the process's memory map (Linux); where there is none, or
-the BLAS is not OpenBLAS, it changes nothing.
+The BLAS libraries are found and set by :mod:`threadpoolctl` (every BLAS the process has
+loaded: NumPy's and SciPy's wheels each bring their own OpenBLAS). Blocks nest; with several
+Python threads, threadpoolctl lets one thread at a time set OpenBLAS's process-wide pool (the
+others' blocks change nothing) and restores the counts it found when that thread's outermost
+block ends.
 """
 
 from __future__ import annotations
 
-import ctypes
-import threading
-from collections.abc import Iterator
-from contextlib import contextmanager
-from dataclasses import dataclass
-from pathlib import Path
+import functools
+from collections.abc import Callable
+from typing import ParamSpec, TypeVar
 
-MEMORY_MAP = Path("/proc/self/maps")
-"""The libraries this process has loaded, one mapping a line (Linux)."""
+from threadpoolctl import threadpool_limits
 
-SYMBOLS = (
-    # (getter, setter): SciPy's and NumPy's wheels since 2024 (64-bit and 32-bit integers),
-    # then older wheels and system builds
-    ("scipy_openblas_get_num_threads64_", "scipy_openblas_set_num_threads64_"),
-    ("scipy_openblas_get_num_threads", "scipy_openblas_set_num_threads"),
-    ("openblas_get_num_threads64_", "openblas_set_num_threads64_"),
-    ("openblas_get_num_threads", "openblas_set_num_threads"),
-)
-"""Names of OpenBLAS's thread-count functions, in the order they are looked for."""
+P = ParamSpec("P")
+R = TypeVar("R")
 
 
-@dataclass(frozen=True)
-class BlasLibrary:
-    """A loaded OpenBLAS library and its thread-count functions.
-
-    Attributes:
-        path: the shared library's file.
-        get_threads: returns the number of threads its calls use.
-        set_threads: sets that number (from the next call on).
-    """
-
-    path: str
-    get_threads: ctypes._CFuncPtr  # type: ignore[name-defined]
-    set_threads: ctypes._CFuncPtr  # type: ignore[name-defined]
+def one_blas_thread() -> threadpool_limits:
+    """A context manager that runs its block with every loaded BLAS on one thread and restores
+    the thread counts after (module docstring)."""
+    return threadpool_limits(limits=1, user_api="blas")
 
 
-def loaded_openblas() -> list[BlasLibrary]:
-    """The OpenBLAS libraries this process has loaded (none where there is no memory map)."""
-    try:
-        text = MEMORY_MAP.read_text()
-    except OSError:
-        return []
-    paths = sorted({
-        fields[5]
-        for fields in (line.split(maxsplit=5) for line in text.splitlines()
-                       if "openblas" in line.lower())
-        if len(fields) == 6
-    })
-    found = []
-    for path in paths:
-        try:
-            library = ctypes.CDLL(path)  # already loaded: the same handle, nothing runs
-        except OSError:
-            continue
-        for getter, setter in SYMBOLS:
-            get = getattr(library, getter, None)
-            put = getattr(library, setter, None)
-            if get is not None and put is not None:
-                get.restype, get.argtypes = ctypes.c_int, []
-                put.restype, put.argtypes = None, [ctypes.c_int]
-                found.append(BlasLibrary(path, get, put))
-                break
-    return found
+def on_one_blas_thread(function: Callable[P, R]) -> Callable[P, R]:
+    """Decorator: every call of ``function`` runs in :func:`one_blas_thread`."""
 
+    @functools.wraps(function)
+    def on_one_thread(*args: P.args, **kwargs: P.kwargs) -> R:
+        with one_blas_thread():
+            return function(*args, **kwargs)
 
-_lock = threading.Lock()
-_depth = 0
-_saved: list[tuple[BlasLibrary, int]] = []
-
-
-@contextmanager
-def one_blas_thread() -> Iterator[None]:
-    """Run the block with every loaded OpenBLAS on one thread (module docstring).
-
-    Nests (only the outermost use sets and restores) and is safe to enter from several
-    threads at once; the thread count is the process's, so other threads' BLAS calls run on
-    one thread too while any block runs.
-    """
-    global _depth
-    with _lock:
-        if _depth == 0:
-            _saved[:] = [(lib, int(lib.get_threads())) for lib in loaded_openblas()]
-            for lib, threads in _saved:
-                if threads != 1:
-                    lib.set_threads(1)
-        _depth += 1
-    try:
-        yield
-    finally:
-        with _lock:
-            _depth -= 1
-            if _depth == 0:
-                for lib, threads in _saved:
-                    if threads != 1:
-                        lib.set_threads(threads)
-                _saved.clear()
+    return on_one_thread

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hcard.calibration.blas_threads import one_blas_thread
+from hcard.calibration.blas_threads import on_one_blas_thread
 from hcard.calibration.dataset import CalibrationData
 from hcard.calibration.fit import FitResult, fit_predictor
 from hcard.physics import PredictorError
@@ -91,7 +91,7 @@ class BootstrapResult:
         return text
 
 
-@one_blas_thread()  # the refits' linear algebra is on narrow matrices (fit_predictor)
+@on_one_blas_thread  # the refits' linear algebra is on narrow matrices (fit_predictor)
 def stroke_bootstrap(
     fit: FitResult,
     data: CalibrationData,

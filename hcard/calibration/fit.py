@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from hcard.calibration.blas_threads import one_blas_thread
+from hcard.calibration.blas_threads import on_one_blas_thread
 from hcard.physics import Predictor, PredictorError
 
 UNIDENTIFIABLE = 1e-8
@@ -185,7 +185,7 @@ def _covariance(jac_scaled: np.ndarray, scales: np.ndarray) -> tuple[np.ndarray,
     return covariance, condition
 
 
-@one_blas_thread()  # its linear algebra is on narrow matrices, and threads only compete
+@on_one_blas_thread  # its linear algebra is on narrow matrices, and threads only compete
 def fit_predictor(
     predictor: Predictor,
     inputs: Mapping[str, np.ndarray],

@@ -1,8 +1,9 @@
-"""The fits' one-BLAS-thread block: it finds the OpenBLAS libraries NumPy and SciPy loaded, sets
-them to one thread and restores them. The SVDs of a fit's Jacobian are the same bits on one
-thread and on two; long sums (the cost) may differ in their last bit, and a fit on OpenBLAS's
-pool then ends within its convergence tolerance of the fit on one thread, on a recording
-generated independently of the library (independent_recordings.py)."""
+"""The fits' one-BLAS-thread block: it sets the BLAS libraries NumPy and SciPy loaded to one
+thread and restores them (through threadpoolctl), once for nested blocks and blocks of several
+threads. The SVDs of a fit's Jacobian are the same bits on one thread and on two; long sums (the
+cost) may differ in their last bit, and a fit on OpenBLAS's pool then ends within its
+convergence tolerance of the fit on one thread, on a recording generated independently of the
+library (independent_recordings.py)."""
 
 from __future__ import annotations
 
@@ -14,9 +15,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.linalg
+from threadpoolctl import threadpool_info, threadpool_limits
 
 from hcard.calibration import blas_threads
-from hcard.calibration.blas_threads import loaded_openblas, one_blas_thread
+from hcard.calibration.blas_threads import one_blas_thread
 from hcard.calibration.effects import augment
 from hcard.calibration.fit import fit_predictor
 from hcard.calibration.observation import lateral_force_model
@@ -30,36 +32,26 @@ POOL_DEVIATION = 1e-3
 pool and on one thread that these tests allow (measured: 9.3e-7; a fit's convergence tolerance,
 a cost that falls by less than 1e-8 of itself per iteration, leaves ~1e-2 on 12,000 samples)."""
 
-linux_wheels = pytest.mark.skipif(
-    not sys.platform.startswith("linux"), reason="the libraries are found in /proc/self/maps"
-)
-
 
 def counts() -> list[int]:
-    return [int(lib.get_threads()) for lib in loaded_openblas()]
+    """Threads of each loaded BLAS, NumPy's and SciPy's (in threadpoolctl's order)."""
+    return [int(info["num_threads"]) for info in threadpool_info()
+            if info["user_api"] == "blas"]
 
 
 @pytest.fixture
 def two_threads():
-    """Every loaded OpenBLAS on two threads during the test, its own count restored after."""
-    libraries = loaded_openblas()
-    before = counts()
-    for lib in libraries:
-        lib.set_threads(2)
-    yield libraries
-    for lib, threads in zip(libraries, before, strict=True):
-        lib.set_threads(threads)
+    """Every loaded BLAS on two threads during the test, its own count restored after."""
+    with threadpool_limits(limits=2, user_api="blas"):
+        yield
 
 
-@linux_wheels
-def test_numpy_and_scipy_openblas_are_found() -> None:
-    paths = [lib.path for lib in loaded_openblas()]
-    numpy_dir = np.__file__.rsplit("/", 2)[0]  # site-packages: numpy.libs/ beside numpy/
-    assert any(path.startswith(numpy_dir) and "numpy" in path for path in paths), paths
+def test_numpy_and_scipy_blas_are_both_set() -> None:
+    paths = [info["filepath"] for info in threadpool_info() if info["user_api"] == "blas"]
+    assert any("numpy" in path for path in paths), paths
     assert any("scipy" in path for path in paths), paths
 
 
-@linux_wheels
 def test_one_thread_inside_and_the_counts_restored_after(two_threads) -> None:
     assert counts() == [2, 2]  # NumPy's and SciPy's
     with one_blas_thread():
@@ -73,12 +65,14 @@ def test_one_thread_inside_and_the_counts_restored_after(two_threads) -> None:
     assert counts() == [2, 2]
 
 
-@linux_wheels
-def test_threads_overlapping_blocks_restore_once_the_last_leaves(two_threads) -> None:
+def test_a_block_in_another_thread_sets_one_thread_and_restores_the_counts() -> None:
+    before = counts()
     inside, leave = threading.Event(), threading.Event()
+    seen: list[list[int]] = []
 
     def other() -> None:
         with one_blas_thread():
+            seen.append(counts())
             inside.set()
             leave.wait(5.0)
 
@@ -86,23 +80,23 @@ def test_threads_overlapping_blocks_restore_once_the_last_leaves(two_threads) ->
     worker.start()
     try:
         assert inside.wait(5.0)
-        with one_blas_thread():
-            pass
-        assert counts() == [1, 1]  # the other thread's block still runs
+        assert counts() == [1, 1]  # process-wide while the other thread's block runs
     finally:
         leave.set()
         worker.join()
+    assert seen == [[1, 1]]
+    assert counts() == before
+
+
+def test_the_decorator_runs_each_call_on_one_thread(two_threads) -> None:
+    @blas_threads.on_one_blas_thread
+    def threads_inside(offset: int) -> list[int]:
+        return [n + offset for n in counts()]
+
+    assert threads_inside(10) == [11, 11]
     assert counts() == [2, 2]
 
 
-def test_without_a_memory_map_nothing_is_changed(monkeypatch, tmp_path) -> None:
-    monkeypatch.setattr(blas_threads, "MEMORY_MAP", tmp_path / "missing")
-    assert loaded_openblas() == []
-    with one_blas_thread():
-        pass
-
-
-@linux_wheels
 def test_the_thread_count_changes_no_svd_of_a_jacobian(two_threads) -> None:
     """The SVDs of a fit's Jacobian, 20,000 samples x 9 parameters: SciPy's of the augmented
     Jacobian (C order, as least_squares builds it) in its trust-region step and NumPy's in the
@@ -121,7 +115,6 @@ def test_the_thread_count_changes_no_svd_of_a_jacobian(two_threads) -> None:
         np.testing.assert_array_equal(a, b)
 
 
-@linux_wheels
 def test_a_fit_on_the_pool_ends_within_its_tolerance_of_the_fit_on_one_thread(
     two_threads, monkeypatch
 ) -> None:
@@ -144,7 +137,8 @@ def test_a_fit_on_the_pool_ends_within_its_tolerance_of_the_fit_on_one_thread(
 
     single = fit()
     assert counts() == [2, 2]
-    monkeypatch.setattr(blas_threads, "loaded_openblas", lambda: [])  # the pool stays on
+    monkeypatch.setattr(blas_threads, "threadpool_limits",  # the pool stays on
+                        lambda **_: threadpool_limits(limits=None))
     pooled = fit()
     assert single.n_train > 10_000  # long enough for OpenBLAS to split its sums
     for name in free:
