@@ -7,6 +7,9 @@ includes this file, so SciPy 1.10 is covered)."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from scipy.signal import lfilter
@@ -75,3 +78,32 @@ def test_closed_loop_matches_a_direct_recursion_and_lfilter(loop_filter, seed) -
     public, public_final = lfilter(num, den, x, zi=state)
     np.testing.assert_array_equal(y, public)
     np.testing.assert_array_equal(final, public_final)
+
+
+@pytest.mark.parametrize("scipy_first", [False, True], ids=["hcard first", "scipy first"])
+def test_one_copy_of_pocketfft_per_process(scipy_first: bool) -> None:
+    """SciPy 1.10's pybind11 aborts the interpreter at exit ("free(): invalid pointer") once a
+    second copy of pocketfft has been initialised: whichever of the encoder and scipy.fft loads
+    it first, the other must reuse that copy, and the process must exit cleanly."""
+    first, second = "import scipy.fft", "from hcard_builtins.image import fft"
+    if not scipy_first:
+        first, second = second, first
+    script = "\n".join(
+        [
+            "import sys",
+            "import numpy as np",
+            first,
+            second,
+            "from hcard_builtins.image import fft",
+            "import scipy.fft",
+            "tiles = np.arange(2 * 6 * 8, dtype=np.float64).reshape(2, 6, 8)",
+            "ours, theirs = fft.rfft2(tiles), scipy.fft.rfft2(tiles)",
+            "assert np.allclose(ours, theirs), 'transforms differ'",
+            "print(fft._pocketfft() is sys.modules['scipy.fft._pocketfft.pypocketfft'])",
+        ]
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=60, check=False
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "True"

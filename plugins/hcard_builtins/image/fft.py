@@ -13,12 +13,18 @@ a whole encode of a 1024 x 1024 image. The compiled module (``pypocketfft``, the
 scipy's installation on its own. Should that ever fail (a scipy that moved or renamed it), the
 public :func:`scipy.fft.rfft2` and :func:`scipy.fft.irfft2` are used instead: the same numbers,
 only a slower start.
+
+The extension must be initialised once per process: older pybind11 builds (SciPy 1.10) abort at
+interpreter exit ("free(): invalid pointer") when a second copy of the module is created. So
+the module scipy already imported is reused, and the one loaded here is registered under
+scipy's own name, where a later ``import scipy.fft`` finds it instead of loading another.
 """
 
 from __future__ import annotations
 
 import importlib.machinery
 import importlib.util
+import sys
 from collections.abc import Callable
 from functools import cache
 from pathlib import Path
@@ -27,10 +33,15 @@ from typing import Any
 
 import numpy as np
 
+_SCIPY_NAME = "scipy.fft._pocketfft.pypocketfft"
+
 
 @cache
 def _pocketfft() -> ModuleType | None:
     """scipy's compiled pocketfft module, loaded without importing :mod:`scipy.fft`, or None."""
+    loaded = sys.modules.get(_SCIPY_NAME)
+    if loaded is not None:
+        return loaded if _has_transforms(loaded) else None
     try:
         spec = importlib.util.find_spec("scipy")
         if spec is None or spec.origin is None:
@@ -40,18 +51,21 @@ def _pocketfft() -> ModuleType | None:
         files = sorted(p for p in folder.glob("pypocketfft*") if p.name.endswith(suffixes))
         if not files:
             return None
-        name = "pypocketfft"  # must match the module's init function; not put in sys.modules
+        name = "pypocketfft"  # must match the module's init function
         loader = importlib.machinery.ExtensionFileLoader(name, str(files[0]))
         module_spec = importlib.util.spec_from_file_location(name, files[0], loader=loader)
         if module_spec is None:
             return None
         module = importlib.util.module_from_spec(module_spec)
         loader.exec_module(module)
-        if not (callable(getattr(module, "r2c", None)) and callable(getattr(module, "c2r", None))):
-            return None
-        return module
     except (ImportError, OSError):
         return None
+    sys.modules[_SCIPY_NAME] = module  # scipy.fft's own import then reuses this one copy
+    return module if _has_transforms(module) else None
+
+
+def _has_transforms(module: ModuleType) -> bool:
+    return callable(getattr(module, "r2c", None)) and callable(getattr(module, "c2r", None))
 
 
 def _scipy(name: str) -> Callable[..., Any]:
