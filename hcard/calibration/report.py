@@ -30,10 +30,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from matplotlib import rc_context
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-from matplotlib.ticker import MaxNLocator
+from matplotlib.ticker import MaxNLocator, ScalarFormatter
+from matplotlib.transforms import ScaledTranslation
 
 from hcard import __version__
 from hcard.atomic import write_atomically
@@ -44,6 +46,7 @@ from hcard.calibration.screening import SCREEN_TOLERANCE, describe_screening, sc
 from hcard.physics import PredictorError
 from hcard.physics.profile import DeviceProfile
 from hcard.physics.units import display_unit
+from hcard.preview_text import PathLabels
 
 FORMAT = "hcard-calibration-report/1"
 """Value of the ``format`` key of ``report.json``."""
@@ -58,6 +61,8 @@ DPI = 100
 """Resolution of the figures, dots per inch."""
 PANEL_INCHES = (3.2, 2.5)
 """Size of one regressor panel of ``residuals.png`` (width, height), inches."""
+PANEL_STYLE = {"xtick.labelsize": 7, "ytick.labelsize": 7}
+"""Matplotlib settings of the residual panels (set while they are made)."""
 PANEL_COLUMNS = 3
 """Regressor panels per row."""
 FIT_INCHES = (12.0, 4.0)
@@ -629,13 +634,78 @@ def _fixed_ticks(ax: Axes) -> None:
         axis.set_ticks(ticks[(ticks >= low - slack) & (ticks <= high + slack)])
 
 
+TICK_LABEL_PT = 7.0
+"""Font size of the residual panels' tick labels, points."""
+TICK_GAP_PT = 7.0
+"""From the axes' edge to its tick labels, points (matplotlib's tick length plus its pad)."""
+LABEL_GAP_PT = 4.0
+"""From the tick labels to the axis label, points (matplotlib's label pad)."""
+
+
+def _tick_texts(ticks: np.ndarray) -> list[str]:
+    """The tick labels matplotlib would write for ``ticks``, without an offset or a power of
+    ten taken out (the panels have no room for the offset text)."""
+    formatter = ScalarFormatter(useOffset=False)
+    formatter.set_scientific(False)
+    formatter.set_locs(ticks)
+    return [formatter(value) for value in ticks]
+
+
+def _outlined_tick_labels(ax: Axes, *, left: bool) -> None:
+    """Label ``ax``'s fixed ticks with glyph outlines, one collection per axis
+    (:class:`hcard.preview_text.PathLabels`), below the x axis and, if ``left``, left of the y
+    axis, and place its axis labels beyond them. matplotlib's ``Text`` costs about 1 ms per
+    label to lay out and draw: the ~100 tick labels of a figure of 11 panels took a third of
+    it."""
+    fig = ax.get_figure()
+    assert fig is not None
+    inches = fig.dpi_scale_trans
+    gap = TICK_GAP_PT / 72.0
+    ax.tick_params(labelbottom=False, labelleft=False)
+    box = ax.get_position()
+    width_in, height_in = fig.get_size_inches()
+    axes_width_in, axes_height_in = box.width * width_in, box.height * height_in
+    x_ticks = ax.get_xticks()
+    below = ax.get_xaxis_transform() + ScaledTranslation(0.0, -gap, inches)
+    x_labels = PathLabels(_tick_texts(x_ticks), np.column_stack(
+        [x_ticks, np.zeros_like(x_ticks)]), size_pt=TICK_LABEL_PT, inches=inches,
+        offset_transform=below, ha="center", va="top", clip_on=False)
+    ax.add_collection(x_labels, autolim=False)
+    # from the top of the capitals down to the lowest control point (the outlines' control
+    # points bound their curves; Path.get_extents solves for the curves' extrema and took a
+    # third of the figure's time)
+    label_height_in = max((-float(path.vertices[:, 1].min()) for path in x_labels.get_paths()
+                           if len(path.vertices)), default=0.0)
+    ax.xaxis.set_label_coords(
+        0.5, -(gap + label_height_in + LABEL_GAP_PT / 72.0) / axes_height_in)
+    if not left:
+        return
+    y_ticks = ax.get_yticks()
+    texts = _tick_texts(y_ticks)
+    beside = ax.get_yaxis_transform() + ScaledTranslation(-gap, 0.0, inches)
+    labels = PathLabels(texts, np.column_stack([np.zeros_like(y_ticks), y_ticks]),
+                        size_pt=TICK_LABEL_PT, inches=inches, offset_transform=beside,
+                        ha="right", va="center", clip_on=False)
+    ax.add_collection(labels, autolim=False)
+    widest_in = max((float(np.ptp(path.vertices[:, 0])) for path in labels.get_paths()
+                     if len(path.vertices)), default=0.0)
+    ax.yaxis.set_label_coords(
+        -(gap + widest_in + LABEL_GAP_PT / 72.0) / axes_width_in, 0.5)
+
+
 def residuals_figure(result: CalibrationResult) -> Figure:
     """``residuals.png`` as a figure (Agg canvas attached)."""
     names = list(result.data.regressors)
     rows, columns = residuals_grid(len(names))
+    with rc_context(PANEL_STYLE):  # ticks are made with these sizes, not restyled after
+        return _residuals_figure(result, names, rows, columns)
+
+
+def _residuals_figure(result: CalibrationResult, names: list[str], rows: int,
+                      columns: int) -> Figure:
     fig = Figure(figsize=(PANEL_INCHES[0] * columns, PANEL_INCHES[1] * rows), dpi=DPI)
     FigureCanvasAgg(fig)
-    before = result.before.fit.residuals * 1e3
+    before = result.before.fit.residuals
     pick = _subsample(np.flatnonzero(result.data.used), MAX_SCATTER)
     low, high = np.percentile(before[pick], [1.0, 99.0]) if pick.size else (0.0, 0.0)
     if not names:
@@ -643,18 +713,33 @@ def residuals_figure(result: CalibrationResult) -> Figure:
         ax.text(0.5, 0.5, "no regressor varies in these data", ha="center", va="center")
         ax.set_axis_off()
         return fig
+    # one residual scale for every panel: the binned means of all regressors compare at a
+    # glance, and only the first column needs its tick labels
+    means = np.concatenate([
+        np.concatenate([result.before.analysis.regressors[name].bin_means,
+                        result.after.analysis.regressors[name].bin_means])
+        for name in names])
+    span_low = min(float(low), float(np.nanmin(means, initial=low)))
+    span_high = max(float(high), float(np.nanmax(means, initial=high)))
+    # in mN for the usual residuals, N or kN should a fit be far off: tick labels of at most
+    # four digits, which the panel's margin holds
+    force_scale, force_unit = (1e-3, "mN") if max(-span_low, span_high) < 1.0 else display_unit(
+        "N", [span_low, span_high])
+    before = before / force_scale
+    span_low, span_high = span_low / force_scale, span_high / force_scale
+    pad = 0.05 * (span_high - span_low) or 1.0
     for k, name in enumerate(names):
         ax = _panel(fig, k // columns, k % columns, rows, PANEL_INCHES)
         x = result.data.regressors[name]
         scale, unit = display_unit(REGRESSOR_UNITS.get(name, ""), x)
         ax.scatter(
-            x[pick] / scale, before[pick], s=2, c="0.75", alpha=0.5, linewidths=0, rasterized=True
+            x[pick] / scale, before[pick], s=2, c="0.75", alpha=0.5, linewidths=0
         )
         stats_b = result.before.analysis.regressors[name]
         stats_a = result.after.analysis.regressors[name]
         ax.plot(
             stats_b.bin_centres / scale,
-            stats_b.bin_means * 1e3,
+            stats_b.bin_means / force_scale,
             "o-",
             color=BEFORE_COLOUR,
             ms=3,
@@ -663,7 +748,7 @@ def residuals_figure(result: CalibrationResult) -> Figure:
         )
         ax.plot(
             stats_a.bin_centres / scale,
-            stats_a.bin_means * 1e3,
+            stats_a.bin_means / force_scale,
             "s-",
             color=AFTER_COLOUR,
             ms=3,
@@ -671,18 +756,16 @@ def residuals_figure(result: CalibrationResult) -> Figure:
             label="after",
         )
         ax.axhline(0.0, color="0.4", lw=0.6)
-        means = np.concatenate([stats_b.bin_means, stats_a.bin_means]) * 1e3
-        span_low = min(float(low), float(means.min()))
-        span_high = max(float(high), float(means.max()))
-        pad = 0.05 * (span_high - span_low) or 1.0
         ax.set_ylim(span_low - pad, span_high + pad)
         ax.set_title(f"{name}: eta² {stats_b.eta2:.2f} → {stats_a.eta2:.2f}", fontsize=9, y=1.0)
         ax.set_xlabel(f"{name} [{unit or '-'}]", fontsize=8)
-        ax.set_ylabel("residual [mN]", fontsize=8)
-        ax.tick_params(labelsize=7)
         _fixed_ticks(ax)
+        first_column = k % columns == 0
+        if first_column:
+            ax.set_ylabel(f"residual [{force_unit}]", fontsize=8)
+        _outlined_tick_labels(ax, left=first_column)
         if k == 0:
-            ax.legend(fontsize=7, loc="best")
+            ax.legend(fontsize=7, loc="upper right")
     return fig
 
 

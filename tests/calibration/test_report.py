@@ -170,6 +170,42 @@ def test_figure_panels_keep_their_labels_inside_their_cells(result):
                                                   (2 * third, 0, 3 * third, FIT_INCHES[1] * DPI)])
 
 
+def _ink_columns(image: np.ndarray, row: int, left: int, right: int, half: int = 2) -> int:
+    """How many pixel columns of ``image`` (RGBA, top row first) between ``left`` and ``right``
+    hold dark ink within ``half`` pixels of ``row``."""
+    band = image[max(row - half, 0) : row + half + 1, left:right, :3].mean(axis=2)
+    return int(np.count_nonzero((band < 0.5).any(axis=0)))
+
+
+def test_residual_panels_draw_their_tick_labels(result):
+    # the tick labels are glyph outlines drawn outside the axes: they must not be clipped
+    # away, and the residual axis is labelled in the first column only (all panels share it)
+    fig = residuals_figure(result)
+    fig.canvas.draw()
+    image = np.asarray(fig.canvas.buffer_rgba(), dtype=float) / 255.0
+    height = image.shape[0]
+    columns = residuals_grid(len(result.data.regressors))[1]
+    limits = {ax.get_ylim() for ax in fig.axes}
+    assert len(limits) == 1
+    for k, ax in enumerate(fig.axes):
+        box = ax.get_window_extent()
+        ticks = [t for t in ax.get_yticks() if ax.get_ylim()[0] < t < ax.get_ylim()[1]]
+        assert len(ticks) >= 3
+        for tick in ticks:
+            row = height - round(float(ax.transData.transform((0.0, tick))[1]))
+            inked = _ink_columns(image, row, int(box.x0) - 30, int(box.x0) - 8)
+            if k % columns == 0:
+                assert inked >= 4, (ax.get_title(), tick)
+            else:
+                assert inked == 0, (ax.get_title(), tick)
+        x_row = height - int(box.y0) + 12
+        for tick in ax.get_xticks():
+            column = round(float(ax.transData.transform((tick, 0.0))[0]))
+            if box.x0 < column < box.x1:
+                inked = _ink_columns(image.transpose(1, 0, 2), column, x_row - 6, x_row + 6, half=6)
+                assert inked >= 4, (ax.get_title(), tick)
+
+
 def test_no_figures(result, tmp_path):
     files = write_report(result, tmp_path, figures=False)
     assert files.figures == []
