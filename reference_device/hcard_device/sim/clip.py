@@ -1,7 +1,7 @@
 """What a card asks that a device cannot render: the clip report of ``load_card``.
 
 For each texture the grid uses, the extreme targets follow from its baseline and component
-amplitudes per channel group (the renderer's split, spec rule R-split, Eq. 4.1)::
+amplitudes per channel group (the renderer's split, spec rule R11, Eq. 4.1)::
 
     uv_min = clip(1 + b_uv - A_uv, 0, 1) * min(clip(1 + b_bip - A_bip, 0, 4), 1)
     ev_max = min(clip(1 + b_ev + A_ev, 1, 4) * max(clip(1 + b_bip + A_bip, 0, 4), 1), 4)
