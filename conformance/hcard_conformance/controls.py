@@ -285,10 +285,10 @@ class LossyFirmware(Firmware):
             return
         # produced (numbered, counted) but never queued for the host; the drop is counted
         # and flagged in the next report sent, as for a full queue
-        self.latched_faults |= faults
+        self.counts.latched_faults |= faults
         self._sequence = (self._sequence + 1) & 0xFFFF
-        self.input_reports += 1
-        self.input_dropped += 1
+        self.counts.input_reports += 1
+        self.counts.input_dropped += 1
         self._pending_faults |= FaultBits.INPUT_DROPPED
 
 
