@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from hcard.cli.render_cmd import finger_state
 from hcard.render.synthesis import channel_targets
 from hcard.render.touch import (
     empty_table,
@@ -20,6 +21,8 @@ from hcard.render.touch import (
 from hcard.track import make_track
 from hcard.v1 import card_pb2 as pb
 from hcard_conformance.device_level import track_speed
+from hcard_conformance.metrics import sample_speeds
+from hcard_conformance.vectors.tracks import contact_speeds
 from hcard_device.sim.clip import texture_extremes
 from hcard_device.sim.finger import HostFinger, TrackFinger
 from hcard_device.sim.sensors import TouchSamples
@@ -126,3 +129,18 @@ def test_the_renderer_table_and_the_simulated_fingers_use_rule_r4():
     ends = math.hypot(x[5] - x[4], y[5] - y[4]) / (t[5] - t[4]) * 1e-3
     assert truth.speed_m_s[0] == pytest.approx(ends, rel=1e-14)
     assert track_speed(track, np.array([middle + t[0]]))[0] == pytest.approx(ends, rel=1e-14)
+
+
+def test_the_command_line_and_conformance_speeds_are_rule_r4():
+    t, x, y, contact = _track_samples()
+    track = make_track(t, x, y, 0.5, contact)
+    middles = (t[:-1] + t[1:]) / 2
+    speed_m_s, _ = finger_state(track, middles)
+    for i, got in enumerate(speed_m_s):  # segment i runs from sample i to i + 1
+        both = contact[i] and contact[i + 1]
+        segment = math.hypot(x[i + 1] - x[i], y[i + 1] - y[i]) / (t[i + 1] - t[i])
+        assert got == pytest.approx(segment * 1e-3 if both else 0.0, rel=1e-14, abs=0)
+    backward = np.hypot(np.diff(x), np.diff(y)) / np.diff(t)  # in contact or not
+    np.testing.assert_allclose(sample_speeds(track), np.r_[backward[0], backward], rtol=1e-14)
+    in_contact = contact[1:] & contact[:-1]
+    np.testing.assert_allclose(contact_speeds(track), backward[in_contact], rtol=1e-14)
