@@ -17,7 +17,8 @@ two sides of each comparison):
   drawn by the report module of commit :data:`BEFORE` (matplotlib's constrained layout and
   automatic ticks), read from the repository's history when there is one.
 - **CSV read**: ``read_measurement`` of the recording written by ``write_measurement``, against
-  its floor: ``numpy.loadtxt`` of the same rows. The issue measured 0.61 s for 60k rows.
+  its floor: ``numpy.loadtxt`` of the same rows. The reader once took 0.61 s for 60k
+  rows.
 
 ``--quick``: the first scenario only. The process is pinned to one CPU and BLAS to one thread.
 """
@@ -73,7 +74,7 @@ SCENARIOS = (
 )
 
 FIGURE_GOAL_S = 0.3
-"""The issue's goal for each report figure, s."""
+"""The goal for each report figure, s."""
 BEFORE = "16b8560"
 """The commit whose report module drew the figures with constrained layout (the baseline)."""
 

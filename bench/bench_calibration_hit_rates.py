@@ -27,7 +27,7 @@ Each run is scored against what was hidden:
   above).
 
 Prints one line per run, then per scenario class and overall: the rates, the mean run time of
-``prepare`` + ``calibrate``, and the issue's targets (no wrong effect; "none" on clean data,
+``prepare`` + ``calibrate``, and the targets (no wrong effect; "none" on clean data,
 white and coloured; the right effect in >= 90 % of in-library cases) with whether they are met.
 """
 

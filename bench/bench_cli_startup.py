@@ -6,7 +6,7 @@ Times (median wall time of ``--repeat`` runs, each a fresh process) ``python -c 
 ``python -c "import numpy"``, and ``hcard --help`` / ``info`` / ``validate`` on a small card,
 and prints each with its excess over ``python -c pass`` and over ``import numpy``. The hcard
 commands run the console script's own code (:data:`ENTRY`), not a shell shim, so a pyenv or
-conda wrapper does not count. Target (issue: card commands under
+conda wrapper does not count. Target (card commands under
 0.3 s): printed with whether it is met.
 """
 

@@ -10,7 +10,7 @@ at 0.1 mm, generated with each seed) it encodes with the default options, with `
 and shapes: smaller taxtels), and prints side by side: the card size against the raw 8-bit
 bitmap of the surface at 0.1 mm, the image's RMS, 95th percentile and maximum of the absolute
 error in JND (the card evaluated position-locked at the pixel centres), the taxtels over 1 JND
-(by reason, with a target), and the encode time. The goal (issue): the image's 95th percentile
+(by reason, with a target), and the encode time. The goal: the image's 95th percentile
 below 1 JND with a card at most 1/100 of the bitmap; the verdict is printed per row.
 """
 

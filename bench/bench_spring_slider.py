@@ -11,8 +11,8 @@ lateral recovery), and evaluates the relative
 friction of all of them in one call of
 :func:`hcard_builtins.physics.ultrasonic.relative_friction` (the vectorised core of
 ``SpringSlider.forward``; it takes mu0 per point, which the predictor holds as a parameter). It
-prints the best and median wall time of ``--repeats`` runs and points per second. The aim (issue
-4) is under 10 s for 100,000 points on one core.
+prints the best and median wall time of ``--repeats`` runs and points per second. The aim is
+under 10 s for 100,000 points on one core.
 
 ``--inverse N`` also times the amplitude inverse (velocity compensation through the
 spring-slider, used by device profiles whose UV model is it) for N frames: targets 0.2-0.8 at
@@ -37,7 +37,8 @@ AIM_SECONDS = 10.0
 
 
 def random_points(count: int, seed: int = 0) -> dict[str, np.ndarray]:
-    """Uniform random inputs in the issue's ranges (SI units), deterministic for ``seed``."""
+    """Uniform random inputs in the model's parameter ranges (SI units), deterministic for
+    ``seed``."""
     rng = np.random.default_rng(seed)
     return {
         "amplitude": rng.uniform(1e-6, 5e-6, count),

@@ -161,8 +161,8 @@ def read_csv_text(path: str | os.PathLike[str], error: type[HcardError]) -> str:
 def format_rows(columns: Sequence[tuple[str, np.ndarray]]) -> str:
     """The CSV rows of named columns of equal length, each ending in a newline: integers (and
     booleans) by ``str``, floats in their shortest round-trip form (``repr``), so reading them
-    back gives the same numbers exactly (spec/track-format.md rule O1, spec/measurement-format.md
-    rule M11)."""
+    back gives the same numbers exactly (spec/track-format.md rule TO1, spec/measurement-format.md
+    rule MF11)."""
     cells = [map(str, values.tolist()) if values.dtype.kind in "iub"
              else map(repr, values.tolist()) for _, values in columns]
     return "".join(",".join(row) + "\n" for row in zip(*cells, strict=True))

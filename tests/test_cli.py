@@ -120,7 +120,7 @@ def test_render_csv_matches_the_renderer(card_file, track_file, tmp_path):
     table = np.genfromtxt(out, delimiter=",", names=True)
     frames = render(two_texture_card(), read_track_csv(track_file))
     assert table.dtype.names == ("t_s", "uv", "ev", "friction", "contact", "texture")
-    assert np.array_equal(table["uv"], frames.uv)  # round-trip exact (spec rule O1)
+    assert np.array_equal(table["uv"], frames.uv)  # round-trip exact (spec rule TO1)
     assert np.array_equal(table["friction"], frames.friction)
     assert np.array_equal(table["texture"].astype(int), frames.texture)
 

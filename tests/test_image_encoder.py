@@ -35,7 +35,7 @@ from hcard_builtins.image.palette import (
 PITCH_MM = 0.1  # 254 dpi
 UV_LOW, UV_HIGH = DEFAULT_FRICTION_RANGE["uv"]
 
-# Issue tolerances.
+# Tolerances of the encoder's grating recovery.
 PERIOD_TOL = 0.02
 ORIENTATION_TOL_DEG = 2.0
 AMPLITUDE_TOL = 0.05
@@ -99,8 +99,8 @@ def assert_component(
     amplitude: float,
     phase: float | None = None,
 ) -> None:
-    """``component`` is the grating (period, orientation, amplitude, phase) within the issue's
-    tolerances. Orientations are compared as gratings: (th, phase) and (th + 180 deg, -phase)
+    """``component`` is the grating (period, orientation, amplitude, phase) within the
+    tolerances above. Orientations are compared as gratings: (th, phase) and (th + 180 deg, -phase)
     are the same one, which matters next to the canonical range's edge at +-90 deg."""
     assert component.domain == pb.DOMAIN_SPATIAL
     assert -math.pi / 2 < component.orientation <= math.pi / 2

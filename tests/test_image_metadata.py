@@ -1,5 +1,5 @@
 """The surface an image encodes to does not hang on metadata Pillow makes up, and no stored
-or given resolution makes the encoder's work unbounded (issue: a 271-byte PNG storing 150,000
+or given resolution makes the encoder's work unbounded (a 271-byte PNG storing 150,000
 dpi took 7.8 GB)."""
 
 from __future__ import annotations

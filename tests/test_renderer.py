@@ -141,7 +141,7 @@ def test_sweep_along_the_ridges_is_constant(locking):
 
 
 def test_band_limit_gain_curve():
-    """Unit gain below 0.8 B, zero from B, smoothstep between (spec rule R-band)."""
+    """Unit gain below 0.8 B, zero from B, smoothstep between (spec rule R10)."""
     f = np.array([0.0, 799.0, 800.0, 900.0, 1000.0, 1500.0])
     np.testing.assert_allclose(band_limit_gain(f, 1000.0), [1, 1, 1, 0.5, 0, 0], atol=1e-12)
 

@@ -90,7 +90,7 @@ def test_spring_slider_preload_balances_the_normal_force(slider: SpringSlider) -
 
 def _brute_force(amplitude: float, frequency: float, speed: float, normal_force: float,
                  mu0: float, steps: int = 400_000) -> tuple[float, float]:
-    """(rate form, issue's min form) by plain time stepping over one period from the onset."""
+    """(rate form, min form) by plain time stepping over one period from the onset."""
     half = amplitude / 2
     h = float(SpringSlider(mu0=mu0).preload(amplitude=amplitude, normal_force=normal_force))
     onset = -math.asin(h / half)
@@ -124,9 +124,9 @@ def test_spring_slider_matches_time_stepping(
                               normal_force=normal_force))
     rate, minimum = _brute_force(amplitude, frequency, speed, normal_force, mu0)
     assert got == pytest.approx(rate, abs=1e-4)
-    assert got <= minimum + 2e-5  # never above the issue's min reading (grid error 1.1e-5)
+    assert got <= minimum + 2e-5  # never above the min reading (grid error 1.1e-5)
     if amplitude / 2 >= math.pi * normal_force / KN:
-        # contact starts on the concave part: the issue's min(kl U t, mu0 F_reac) is the same
+        # contact starts on the concave part: the min form min(kl U t, mu0 F_reac) is the same
         assert got == pytest.approx(minimum, abs=1e-4)
     if amplitude / 2 < 1.1 * normal_force / KN:
         # slipped from the onset, the spring reloads from the slip value: below the min reading

@@ -1,5 +1,5 @@
 """The conditions a run was judged under: device class and timing class, with why (spec
-conformance.md section 6, P5). They are stated in every report so that a reader knows which
+conformance.md section 6, QP5). They are stated in every report so that a reader knows which
 thresholds applied without reading the code."""
 
 from __future__ import annotations

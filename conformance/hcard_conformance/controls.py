@@ -1,6 +1,6 @@
 """Negative-control drivers: deliberately faulty implementations the suite must fail.
 
-They exist to prove that the conformance checks can fail (spec/conformance.md section 6, rule N1).
+They exist to prove that the conformance checks can fail (spec/conformance.md section 6, rule QN1).
 Each is the in-process ``sim://`` device with one documented defect; none is a conforming device.
 Open them with :func:`open_control` (``hcard conformance --driver control:NAME``):
 
@@ -285,10 +285,10 @@ class LossyFirmware(Firmware):
             return
         # produced (numbered, counted) but never queued for the host; the drop is counted
         # and flagged in the next report sent, as for a full queue
-        self.latched_faults |= faults
+        self.counts.latched_faults |= faults
         self._sequence = (self._sequence + 1) & 0xFFFF
-        self.input_reports += 1
-        self.input_dropped += 1
+        self.counts.input_reports += 1
+        self.counts.input_dropped += 1
         self._pending_faults |= FaultBits.INPUT_DROPPED
 
 
@@ -341,7 +341,7 @@ CATCHES: dict[str, tuple[str, str]] = {
     "accepts-bad-crc": ("device.upload-integrity", "bad-crc"),
     "drops-reports": ("device.report-loss", "loss-fraction"),
 }
-"""The (check, case) each negative control exists to fail (spec/conformance.md section 6, N1):
+"""The (check, case) each negative control exists to fail (spec/conformance.md section 6, QN1):
 the proof that the threshold of that check bites.
 ``tests/conformance/test_negative_controls.py`` runs every control against its case and requires
 FAIL."""

@@ -51,6 +51,7 @@ import numpy as np
 from hcard import build
 from hcard.physics.profile import DeviceProfile
 from hcard.render import render
+from hcard.render.touch import speed_estimate
 from hcard.track import FingerTrack, straight_stroke
 from hcard.v1 import card_pb2 as pb
 from hcard_conformance.context import Context, session_times
@@ -224,20 +225,31 @@ class FrictionMeasurement:
 def rendered_friction(result: PlayResult,
                       profile: DeviceProfile) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Track time (s), rendered relative friction and contact of each report of the session:
-    the measured amplitude and voltage through ``profile.forward`` at the track's speed and
-    the measured normal force."""
+    the measured amplitude and voltage through ``profile.forward`` at the track's speed
+    (:func:`track_speed`) and the measured normal force."""
     track = result.track
     keep, t = session_times(result.states, track, result.host_us)
     applied = [s for s, ok in zip(result.states, keep, strict=True) if ok]
     t = t[keep]
-    speed = np.hypot(np.gradient(track.x, track.t), np.gradient(track.y, track.t)) * 1e-3
-    v = np.interp(t, track.t, speed)
+    v = track_speed(track, t)
     amplitude = np.array([s.amplitude_m for s in applied])
     voltage = np.array([s.voltage_v for s in applied])
     fn = np.array([s.normal_force_n for s in applied])
     uv, ev = profile.forward(amplitude, voltage, v, np.maximum(fn, 1e-3))
     contact = np.array([bool(s.contact) for s in applied], dtype=bool) & (fn > 0.05)
     return t, uv * ev, contact
+
+
+def track_speed(track: FingerTrack, t: np.ndarray) -> np.ndarray:
+    """The finger's speed along ``track`` at track times ``t`` (s), m/s. The finger moves
+    straight between samples (as the simulated finger does), so it is the speed of the segment
+    a time falls in: rule R4's estimate at the segment's end sample (the first or last segment
+    outside the track)."""
+    every = np.ones(len(track), dtype=bool)
+    segment = speed_estimate(track.t, track.x, track.y, every) * 1e-3
+    if len(track) < 2:
+        return np.zeros(t.shape[0])
+    return segment[np.clip(track.t.searchsorted(t, side="right"), 1, len(track) - 1)]
 
 
 def speed_known_s(result: PlayResult) -> float:

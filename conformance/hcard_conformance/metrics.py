@@ -18,6 +18,7 @@ import numpy as np
 
 from hcard.render import RenderOptions
 from hcard.render.compiled import velocity_locked
+from hcard.render.touch import speed_estimate
 from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb
 
@@ -305,11 +306,13 @@ def component_errors(impl: Signal, golden: Signal, tol: Tolerances,
 
 
 def sample_speeds(track: FingerTrack) -> np.ndarray:
-    """|v_i| of each touch sample, mm/s (backward difference; the first takes the second's)."""
+    """|v_i| of each touch sample, mm/s: rule R4's estimate from the previous sample, in
+    contact or not (the first takes the second's)."""
     if len(track) < 2:
         return np.zeros(len(track))
-    v = np.hypot(np.diff(track.x), np.diff(track.y)) / np.diff(track.t)
-    return np.concatenate(([v[0]], v))
+    v = speed_estimate(track.t, track.x, track.y, np.ones(len(track), dtype=bool))
+    v[0] = v[1]
+    return v
 
 
 def speed_at(track: FingerTrack, t: float) -> float:

@@ -3,7 +3,7 @@
 JUnit XML has one ``<testsuite>`` per level (``name`` = the level) and one
 ``<testcase>`` per (check, case): ``classname`` is the check, ``name`` the case. A failed case
 has a ``<failure>`` whose ``message`` gives metric, value and threshold; every case carries
-them as ``<properties>`` too. JSON (:data:`JSON_FORMAT`, spec P4) holds the run, the
+them as ``<properties>`` too. JSON (:data:`JSON_FORMAT`, spec QP4) holds the run, the
 thresholds and every result (:meth:`CheckResult.to_dict`); non-finite numbers are written as
 the strings ``"inf"``, ``"-inf"``, ``"nan"``.
 """
@@ -31,7 +31,7 @@ def _number(value: float) -> str:
 
 
 def failure_message(result: CheckResult) -> str:
-    """``VALUE UNIT > THRESHOLD UNIT (METRIC)`` (spec P3), or the detail when there is no
+    """``VALUE UNIT > THRESHOLD UNIT (METRIC)`` (spec QP3), or the detail when there is no
     measured value (a check that raised)."""
     if result.metric and not math.isnan(result.value):
         unit = f" {result.unit}" if result.unit else ""
@@ -181,7 +181,7 @@ def to_json(report: SuiteReport) -> dict[str, Any]:
 
 def _finite(value: Any) -> Any:
     """``value``, with non-finite floats (and None from :meth:`CheckResult.to_dict`) as the
-    strings of spec P4."""
+    strings of spec QP4."""
     if value is None:
         return "nan"
     if isinstance(value, float) and not math.isfinite(value):

@@ -95,7 +95,7 @@ def stream_fed(driver: Driver, uv: np.ndarray, ev: np.ndarray | None = None, *,
 def require_fed(empty: int, reports: int, what: str) -> None:
     """Raise :class:`CannotAssess` when the host left the stream queue empty in ``empty`` of
     ``reports`` reports, more than :data:`STARVED_FRACTION`: the stream then measured the host
-    (a software-emulated or overloaded one), not the device (spec/conformance.md 5.2, T2)."""
+    (a software-emulated or overloaded one), not the device (spec/conformance.md 5.2, QT2)."""
     if empty > STARVED_FRACTION * max(reports, 1):
         raise CannotAssess(
             f"{what}: the host left the stream queue empty in {empty} of {reports} reports; "

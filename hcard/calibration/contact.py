@@ -1,6 +1,6 @@
 """Contact decided by the normal force, and a check of a recording's own stroke column.
 
-A finger touches when the recorded normal force is at least a threshold (rule S2). The
+A finger touches when the recorded normal force is at least a threshold (rule MS2). The
 threshold defaults to the larger of :data:`~hcard.calibration.measurement.CONTACT_THRESHOLD_N`
 (10 mN) and :data:`NOISE_MULTIPLE` standard deviations of the normal-force sensor's noise,
 measured on the lifted samples (those below the 10 mN floor): a noisier sensor needs a higher

@@ -252,7 +252,7 @@ def friction_force(
     """The friction force opposing the motion, N, from the recorded lateral force.
 
     Tribometers record the lateral force either signed by the direction of motion (with either
-    sign convention) or as a magnitude (rule M3). When the sign of the force follows the sign
+    sign convention) or as a magnitude (rule MF3). When the sign of the force follows the sign
     of the speed on at least 3/4 of the contact samples (or its opposite), the force is signed
     and is multiplied by the direction (so that a sensor offset stays an offset per direction);
     otherwise it is a magnitude, taken with the sign of most contact samples.
@@ -270,7 +270,7 @@ def friction_force(
 
 def split_by_time_fraction(m: Measurement, test_fraction: float) -> tuple[np.ndarray, np.ndarray]:
     """Sample indices ``(train_idx, test_idx)``: the last ``test_fraction`` of the recording's
-    duration is held out (one time block, rule S4), the rest trains."""
+    duration is held out (one time block, rule MS4), the rest trains."""
     span = float(m.t[-1] - m.t[0])
     test = m.t >= m.t[0] + (1.0 - test_fraction) * span
     if span <= 0 or test.all() or not test.any():
@@ -299,9 +299,9 @@ def prepare(
     Args:
         measurements: one or more recordings (every one needs ``amplitude`` or ``voltage``;
             all must record the same actuation columns).
-        split: ``"stroke"``: hold out ``test_fraction`` of each recording's strokes (rule S3,
+        split: ``"stroke"``: hold out ``test_fraction`` of each recording's strokes (rule MS3,
             drawn with ``seed``); ``"time"``: hold out the last ``test_fraction`` of each
-            recording's duration (a time block, rule S4).
+            recording's duration (a time block, rule MS4).
         test_fraction: share of strokes (or of time) held out, in (0, 1).
         seed: random seed of the stroke draw.
         rest_s: pause that rests the finger, s (see :func:`strokes_since_rest`).

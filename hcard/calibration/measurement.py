@@ -24,7 +24,7 @@ from hcard.csv_rows import format_rows, numeric_table, read_csv_text
 from hcard.errors import HcardError
 from hcard.json_text import JsonInputError, parse_json
 
-#: Accepted unit suffixes per quantity: suffix -> scale to the SI unit (rule M4).
+#: Accepted unit suffixes per quantity: suffix -> scale to the SI unit (rule MF4).
 UNITS: dict[str, dict[str, float]] = {
     "t": {"s": 1.0, "ms": 1e-3, "us": 1e-6},
     "amplitude": {"m": 1.0, "mm": 1e-3, "um": 1e-6, "nm": 1e-9},
@@ -35,7 +35,7 @@ UNITS: dict[str, dict[str, float]] = {
     "fn": {"n": 1.0, "mn": 1e-3},
     "fl": {"n": 1.0, "mn": 1e-3},
     "frequency": {"hz": 1.0, "khz": 1e3},
-    # device columns (rule M12)
+    # device columns (rule MF12)
     "current": {"a": 1.0, "ma": 1e-3, "ua": 1e-6},
     "f_tl": {"n": 1.0, "mn": 1e-3},
     "f_tr": {"n": 1.0, "mn": 1e-3},
@@ -46,7 +46,7 @@ UNITS: dict[str, dict[str, float]] = {
 #: The SI unit suffix each quantity is written in by :func:`write_measurement`.
 SI_SUFFIX = {quantity: next(s for s, scale in units.items() if scale == 1.0)
              for quantity, units in UNITS.items()}
-#: Columns without a unit, named exactly (rules M3, M12): name -> integer values only.
+#: Columns without a unit, named exactly (rules MF3, MF12): name -> integer values only.
 UNITLESS: dict[str, bool] = {
     "stroke": True,
     "contact": True,
@@ -63,16 +63,16 @@ ATTRIBUTE = {
     "speed": "speed", "fn": "normal_force", "fl": "lateral_force", "stroke": "stroke",
     "frequency": "plate_frequency", "contact": "contact",
 }
-#: Device columns (rule M12), kept by quantity name in ``Measurement.device``, in writing order.
+#: Device columns (rule MF12), kept by quantity name in ``Measurement.device``, in writing order.
 DEVICE_COLUMNS = (
     "sequence", "f_tl", "f_tr", "f_bl", "f_br", "current", "target_uv", "target_ev", "texture",
     "faults", "flags", "echo",
 )
 REQUIRED = ("t", "fn", "fl")
 CONTACT_THRESHOLD_N = 0.01
-"""Samples whose normal force is below this are out of contact, N (rule S2)."""
+"""Samples whose normal force is below this are out of contact, N (rule MS2)."""
 ACTUATION = ("amplitude", "voltage")
-#: Sidecar keys with a checked type; other keys are kept as they are (rule M9).
+#: Sidecar keys with a checked type; other keys are kept as they are (rule MF9).
 SIDECAR_STRINGS = ("device", "surface", "participant", "probe", "notes", "voltage_form")
 SIDECAR_NUMBERS = ("plate_frequency_hz", "ambient_pressure_pa", "temperature_c",
                    "relative_humidity", "carrier_frequency_hz")
@@ -101,8 +101,8 @@ class Measurement:
         stroke: integer stroke number per sample, or None.
         plate_frequency: plate vibration frequency, Hz, or None.
         contact: True where a finger touches the surface (the device's own contact sensing,
-            column ``contact``), or None (contact is then read from the normal force, S2).
-        device: the device columns of rule M12 by quantity name (``sequence``, ``faults``,
+            column ``contact``), or None (contact is then read from the normal force, MS2).
+        device: the device columns of rule MF12 by quantity name (``sequence``, ``faults``,
             ``target_uv``, ``current``, ``f_tl``, ``echo``, ...), SI units, each shape (M,).
         conditions: the JSON sidecar (device, plate frequency, surface, ...).
     """
@@ -139,7 +139,7 @@ class Measurement:
         return out
 
     def column(self, quantity: str) -> np.ndarray | None:
-        """A column by its quantity name (rules M3, M12: ``fn``, ``fl``, ``amplitude``,
+        """A column by its quantity name (rules MF3, MF12: ``fn``, ``fl``, ``amplitude``,
         ``faults``, ``target_uv``, ...), SI units; None when the recording has none."""
         if quantity in ATTRIBUTE:
             return getattr(self, ATTRIBUTE[quantity])
@@ -149,7 +149,7 @@ class Measurement:
 
     @property
     def in_contact(self) -> np.ndarray:
-        """Per sample, a finger touches (rule S2): the ``contact`` column where there is one,
+        """Per sample, a finger touches (rule MS2): the ``contact`` column where there is one,
         and a normal force of at least :data:`CONTACT_THRESHOLD_N`."""
         pressing = self.normal_force >= CONTACT_THRESHOLD_N
         return pressing if self.contact is None else pressing & self.contact
@@ -162,7 +162,7 @@ class Measurement:
 
 
 def sidecar_path(path: str | os.PathLike[str]) -> Path:
-    """The sidecar of ``path``: the CSV's file name with ``.json`` appended (rule M8)."""
+    """The sidecar of ``path``: the CSV's file name with ``.json`` appended (rule MF8)."""
     file = Path(path)
     return file.with_name(file.name + ".json")
 
@@ -188,7 +188,7 @@ def _split_header(name: str, source: str, line: int) -> tuple[str, float]:
 
 
 def _known_names() -> list[str]:
-    """The quantities of rules M3 and M12, for error messages."""
+    """The quantities of rules MF3 and MF12, for error messages."""
     return [*ATTRIBUTE, *DEVICE_COLUMNS]
 
 
@@ -318,7 +318,7 @@ def _parse(text: str, source: str, conditions: dict[str, Any]) -> Measurement:
 
 
 def _check_finite(raw: np.ndarray, lines: np.ndarray, name: str, source: str) -> None:
-    """Reject NaN (or empty) cells and infinities: a lone NaN and a NaN run both (rule M6)."""
+    """Reject NaN (or empty) cells and infinities: a lone NaN and a NaN run both (rule MF6)."""
     nan = np.isnan(raw)
     if nan.any():
         start = int(np.flatnonzero(nan)[0])
@@ -339,8 +339,8 @@ def _check_finite(raw: np.ndarray, lines: np.ndarray, name: str, source: str) ->
 
 
 def _present_columns(m: Measurement) -> list[tuple[str, np.ndarray]]:
-    """The columns ``m`` holds, by quantity name, in writing order: the columns of rule M3
-    first, then the device columns of rule M12."""
+    """The columns ``m`` holds, by quantity name, in writing order: the columns of rule MF3
+    first, then the device columns of rule MF12."""
     present: list[tuple[str, np.ndarray]] = [
         (q, getattr(m, ATTRIBUTE[q])) for q in ATTRIBUTE if getattr(m, ATTRIBUTE[q]) is not None
     ]
@@ -355,7 +355,7 @@ def _csv_header(m: Measurement) -> str:
 
 def _csv_rows(m: Measurement) -> str:
     """The data lines of ``m``'s CSV, full precision (``repr``), each ending in a newline; the
-    columns without a unit (rule M3, M12) as integers."""
+    columns without a unit (rule MF3, MF12) as integers."""
     return format_rows([
         (q, np.asarray(values).astype(np.int64 if UNITLESS.get(q, False) else np.float64))
         for q, values in _present_columns(m)])
@@ -363,7 +363,7 @@ def _csv_rows(m: Measurement) -> str:
 
 def measurement_to_csv(m: Measurement) -> str:
     """The CSV text of ``m`` in SI column units (``t_s``, ``amplitude_m``, ...), full precision;
-    the columns of rule M3 first, then the device columns of rule M12."""
+    the columns of rule MF3 first, then the device columns of rule MF12."""
     return _csv_header(m) + _csv_rows(m)
 
 

@@ -1,6 +1,6 @@
 """The friction a device rendered, measured against the card's target (spec/calibration.md K17).
 
-A device recording (spec/measurement-format.md, device columns of rule M12) carries, per STATE
+A device recording (spec/measurement-format.md, device columns of rule MF12) carries, per STATE
 report, the lateral force ``F_l`` and the normal force ``F_n`` the device measured and the target
 relative friction it was rendering (``target_uv * target_ev``, Eq. 4.1). The card's unit is the
 finger's natural friction (spec/README.md section 1.5: relative friction 1 is the surface as it
@@ -158,7 +158,7 @@ def rendering_error(m: Measurement) -> RenderingError:
     uv, ev = m.column("target_uv"), m.column("target_ev")
     if uv is None or ev is None:
         raise MeasurementError(
-            "the recording has no target_uv and target_ev columns (rule M12): it was not made "
+            "the recording has no target_uv and target_ev columns (rule MF12): it was not made "
             "through a device, so there is no target to compare with"
         )
     target = uv * ev

@@ -33,7 +33,7 @@ def stroke_ids(
     (``normal_force >= contact_threshold_n`` and the ``contact`` column) and are -1 elsewhere:
     a column that carries the stroke number through the lifts does not put samples with
     ``fn ~ 0`` in contact (:mod:`hcard.calibration.contact` reports the disagreement). Without
-    one, strokes are derived (rule S2): a sample is out of contact when
+    one, strokes are derived (rule MS2): a sample is out of contact when
     ``normal_force < contact_threshold_n`` (N) or, with a ``contact`` column, where that column
     is 0, and gets -1; a new stroke starts at the first
     contact sample after a lift, after a time gap longer than ``gap_factor`` times the median
@@ -56,7 +56,7 @@ def stroke_numbers(
     *,
     gap_factor: float = GAP_FACTOR,
 ) -> np.ndarray:
-    """Rule S2 on arrays: the stroke number of every sample, -1 where ``contact`` is False.
+    """Rule MS2 on arrays: the stroke number of every sample, -1 where ``contact`` is False.
 
     A new stroke starts at the first sample, at the first contact sample after a lift, after a
     time gap (``t``, s) longer than ``gap_factor`` times the median interval, and where the sign

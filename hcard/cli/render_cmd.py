@@ -29,6 +29,7 @@ from hcard.render.options import (
     DEFAULT_FRAME_RATE_HZ,
 )
 from hcard.render.output import frame_writer
+from hcard.render.touch import speed_estimate
 from hcard.track import FingerTrack, read_track_csv
 
 if TYPE_CHECKING:
@@ -41,13 +42,8 @@ PROGRESS_FRAMES = 2_000_000
 def finger_state(track: FingerTrack, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The finger's speed (m/s, of the track segment each frame falls in; 0 out of contact)
     and normal force (N, interpolated) at the frame times ``t`` (s)."""
-    speed_mm_s = np.zeros(len(track))
-    if len(track) > 1:
-        dt = np.diff(track.t)
-        moving = track.contact[1:] & track.contact[:-1] & (dt > 0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            speed_mm_s[:-1] = np.where(moving, np.hypot(np.diff(track.x), np.diff(track.y)) / dt,
-                                       0.0)
+    speed_mm_s = np.zeros(len(track))  # each segment's: rule R4's estimate at its end sample
+    speed_mm_s[:-1] = speed_estimate(track.t, track.x, track.y, track.contact)[1:]
     segment = np.clip(np.searchsorted(track.t, t, side="right") - 1, 0, len(track) - 1)
     touching = track.contact[segment]
     speed = np.where(touching, speed_mm_s[segment] * 1e-3, 0.0)

@@ -129,7 +129,7 @@ class CompiledCard:
 
 
 def velocity_locked(component: pb.Component, locking: int, options: RenderOptions) -> bool:
-    """Whether a spatial component's phase follows the odometer (spec rule R-lock)."""
+    """Whether a spatial component's phase follows the odometer (spec rule R8)."""
     if options.mode is RenderMode.POSITION_ONLY:
         return False
     if locking == pb.LOCKING_VELOCITY:

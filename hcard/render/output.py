@@ -7,7 +7,7 @@ output only when the last block is in (:func:`hcard.atomic.atomic_output`): an i
 rendering leaves the previous file as it was.
 
 - :class:`CsvFrameWriter`: the CSV of spec/track-format.md, floats in their shortest round-trip
-  form (rule O1), so reading it back gives the rendered numbers exactly.
+  form (rule TO1), so reading it back gives the rendered numbers exactly.
 - :class:`NpzFrameWriter`: a NumPy ``.npz`` archive (deflated). Each column is spilled to its own
   temporary file while the blocks come, and the archive is assembled from those files at the
   end, member by member, through a fixed-size buffer.

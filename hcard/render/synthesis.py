@@ -121,6 +121,20 @@ def _sum_rows(terms: np.ndarray) -> np.ndarray:
     return terms[0]
 
 
+def channel_targets(deviation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """UV and EV targets ``(u, e)`` of group deviations, spec rule R11: ``deviation`` holds
+    ``D_UV, D_EV, D_BI`` (the sums of the group's components plus ``baseline - 1`` of the
+    texture's group), shape (3,) or (3, N); ``u`` and ``e`` have shape (N,) (1 for (3,)).
+
+    The renderer's own split (:func:`split_channels`), for callers outside the kernel (the
+    device's clip report evaluates a texture's extremes with it)."""
+    rows = np.array(deviation, dtype=np.float64).reshape(3, -1)  # a copy: the split overwrites
+    uv = np.empty(rows.shape[1])
+    ev = np.empty(rows.shape[1])
+    split_channels(rows, [GROUP_UV, GROUP_EV, GROUP_BIPOLAR], uv, ev)
+    return uv, ev
+
+
 def split_channels(deviation: np.ndarray, columns: list[int], uv: np.ndarray,
                    ev: np.ndarray) -> None:
     """UV and EV targets from the (G, N) group deviations (which this overwrites), written

@@ -1,8 +1,13 @@
-"""Per-touch-sample state of the rendering equation (spec/README.md section 6).
+"""Per-touch-sample state of the rendering equation (spec/README.md section 6, rule R4).
 
 For each sample: the velocity estimate, the contact time origin and the odometer (the
 velocity-locked position). Computed vectorised over a block of samples, with the state of the
 previous sample carried in, so batch and streaming rendering share this code.
+
+R4's velocity estimate is defined here once for every user: :func:`has_velocity` (which samples
+have one), :func:`velocity_estimate` (the renderer's vector), :func:`speed_estimate` and
+:func:`step_speed` (its magnitude, for the device's velocity compensation, the simulated finger
+and the conformance suite).
 """
 
 from __future__ import annotations
@@ -68,6 +73,44 @@ class TouchTable:
         )
 
 
+def has_velocity(contact: np.ndarray, previous_contact: np.ndarray) -> np.ndarray:
+    """Rule R4: the samples with a velocity estimate, those in contact that are not a
+    touch-down (the previous sample was in contact too)."""
+    return contact & previous_contact
+
+
+def velocity_estimate(displacement: np.ndarray, dt: np.ndarray, moving: np.ndarray) -> np.ndarray:
+    """Rule R4's ``v_i = (p_i - p_(i-1)) / (t_i - t_(i-1))``, mm/s, (M, 2): ``displacement``
+    (M, 2) mm and ``dt`` (M,) s from the previous sample; (0, 0) where ``moving`` (M,) is
+    False."""
+    velocity = np.zeros(displacement.shape)
+    velocity[moving] = displacement[moving] / dt[moving, None]
+    return velocity
+
+
+def speed_estimate(t: np.ndarray, x: np.ndarray, y: np.ndarray, contact: np.ndarray) -> np.ndarray:
+    """``|v_i|`` of rule R4 for each of M samples (times ``t`` s, position ``x, y`` mm),
+    mm/s: ``|p_i - p_(i-1)| / (t_i - t_(i-1))`` where the sample has a velocity estimate
+    (:func:`has_velocity`) and the interval is positive, else 0 (always for the first)."""
+    speed = np.zeros(t.shape[0])
+    if t.shape[0] < 2:
+        return speed
+    dt = t[1:] - t[:-1]
+    moving = has_velocity(contact[1:], contact[:-1]) & (dt > 0)
+    distance = np.hypot(x[1:] - x[:-1], y[1:] - y[:-1])
+    np.divide(distance, dt, out=speed[1:], where=moving)
+    return speed
+
+
+def step_speed(dx_mm: float, dy_mm: float, dt_s: float, moving: bool) -> float:
+    """:func:`speed_estimate` of one sample, mm/s: its displacement ``(dx_mm, dy_mm)`` from
+    the previous sample over ``dt_s``; 0 unless ``moving`` (:func:`has_velocity`) and
+    ``dt_s > 0``."""
+    if not (moving and dt_s > 0):
+        return 0.0
+    return float(np.hypot(dx_mm, dy_mm)) / dt_s
+
+
 def empty_table() -> TouchTable:
     """A table with no samples."""
     return TouchTable(
@@ -124,10 +167,9 @@ def _extend_block(
     carried = int(previous.samples_in_contact[-1]) + 1 if has_prev else 0
     in_contact = np.where(last_touchdown >= 0, idx - last_touchdown, carried + idx)
 
-    moving = contact & ~touchdown
+    moving = has_velocity(contact, prev_c)
     dt = t - prev_t
-    velocity = np.zeros((m, 2))
-    velocity[moving] = (position[moving] - prev_p[moving]) / dt[moving, None]
+    velocity = velocity_estimate(position - prev_p, dt, moving)
 
     prev_start = previous.contact_start[-1] if has_prev else 0.0
     contact_start = np.where(
@@ -193,7 +235,7 @@ def _extend_by_one(
     in_contact = 0 if touchdown else carried
     dt = time - last_t
     vx = vy = 0.0
-    if on and not touchdown:  # moving: the finite difference of the last two samples
+    if on and not touchdown:  # has_velocity: velocity_estimate of this one sample (R4)
         vx, vy = (x - last_x) / dt, (y - last_y) / dt
     start = time if touchdown else last_start
     anchor = on and in_contact <= 1

@@ -317,15 +317,8 @@ class Firmware:
         self._clip_index = 0
         self._sequence = 0
         self.session = Session(self.config.watchdog_s)
-        # counters (spec 8.4), zeroed by CLEAR_COUNTERS
-        self.input_reports = 0
-        self.input_dropped = 0
-        self.output_reports = 0
-        self.rejected_requests = 0
-        self.stream_gaps = 0
-        self.watchdog_trips = 0
-        self.latched_faults = 0
-        self._stream_dropped_base = 0
+        # counters (spec 8.4), zeroed by CLEAR_COUNTERS: the simulation's, one set
+        self.counts = sim.counts
 
     # ---- host requests ----------------------------------------------------------------------
 
@@ -339,7 +332,7 @@ class Firmware:
             try:
                 cls = report_class(ReportKind.FEATURE, report_id)
             except ProtocolError:
-                self.rejected_requests += 1
+                self.counts.rejected_requests += 1
                 raise
             self._host_report()
             return self._feature_report(cls).encode()
@@ -357,10 +350,10 @@ class Firmware:
                 report = self._decode_feature_set(data)
                 accepted = self._apply_feature(report)
             except ProtocolError:
-                self.rejected_requests += 1
+                self.counts.rejected_requests += 1
                 raise
             if not accepted:
-                self.rejected_requests += 1
+                self.counts.rejected_requests += 1
             self._host_report()
 
     def handle_output(self, data: bytes) -> None:
@@ -379,7 +372,7 @@ class Firmware:
                 self._refuse()
                 return
             if not (isinstance(report, Control) and report.command == Command.CLEAR_COUNTERS):
-                self.output_reports += 1  # CLEAR_COUNTERS leaves every counter at 0
+                self.counts.output_reports += 1  # CLEAR_COUNTERS leaves every counter at 0
             self._host_report()
 
     def _host_report(self) -> None:
@@ -622,16 +615,7 @@ class Firmware:
 
     def counters(self) -> Counters:
         """The COUNTERS report."""
-        return Counters(
-            input_reports=self.input_reports & _U32,
-            input_dropped=self.input_dropped & _U32,
-            output_reports=self.output_reports & _U32,
-            rejected_requests=self.rejected_requests & _U32,
-            stream_frames_dropped=(self.sim.stream_overruns - self._stream_dropped_base) & _U32,
-            stream_gaps=self.stream_gaps & _U32,
-            watchdog_trips=self.watchdog_trips & _U32,
-            latched_faults=self.latched_faults & _U16,
-        )
+        return self.counts.report()
 
     def _clip_item_count(self) -> int:
         return len(self.sim.clip_report.items) if self.upload.active else 0
@@ -670,7 +654,7 @@ class Firmware:
     # ---- outputs ----------------------------------------------------------------------------
 
     def _refuse(self) -> None:
-        self.rejected_requests += 1
+        self.counts.rejected_requests += 1
         self._pending_faults |= FaultBits.INVALID_REQUEST
 
     def _apply_output(self, report: Report) -> bool:
@@ -688,7 +672,7 @@ class Firmware:
             return True
         if isinstance(report, Stream):
             if self._expected_seq is not None and report.stream_seq != self._expected_seq:
-                self.stream_gaps += 1
+                self.counts.stream_gaps += 1
             self._expected_seq = (report.stream_seq + 1) & _U16
             self.sim.stream_frames(np.asarray(report.uv), np.asarray(report.ev))
             self._streaming = True
@@ -703,10 +687,7 @@ class Firmware:
         if command in (Command.START, Command.STOP, Command.TAKE_OVER):
             return self._session_command(command, report.argument)
         if command == Command.CLEAR_COUNTERS:
-            self.input_reports = self.input_dropped = self.output_reports = 0
-            self.rejected_requests = self.stream_gaps = self.watchdog_trips = 0
-            self.latched_faults = 0
-            self._stream_dropped_base = self.sim.stream_overruns
+            self.counts.clear()
             return True
         if command == Command.DEVICE_PROFILE:
             self.session.expire(self.sim.time_s)
@@ -792,7 +773,7 @@ class Firmware:
             self._emit(_STATE_PACK(
                 _STATE_ID, time_us & _U32, self._sequence, self._flags(static, contact), x, y,
                 f0, f1, f2, f3, lateral, amplitude, voltage, current, uv, ev, texture, faults,
-                self.input_dropped & _U16, self.rejected_requests & _U16,
+                self.counts.input_dropped & _U16, self.counts.rejected_requests & _U16,
                 min(max(queued, 0), _U16), echo, generation, session.number,
                 session.token or 0, self._echo_age(time_us),
             ), faults)  # fmt: skip
@@ -824,7 +805,7 @@ class Firmware:
             return  # not tripped before nor during the block
         watchdog = (faults & watchdog_bit) != 0
         previous = np.concatenate(([self._watchdog_was_tripped], watchdog[:-1]))
-        self.watchdog_trips += int(np.count_nonzero(watchdog & ~previous))
+        self.counts.watchdog_trips += int(np.count_nonzero(watchdog & ~previous))
         self._watchdog_was_tripped = bool(watchdog[-1])
 
     def _static_flags(self) -> int:
@@ -869,13 +850,13 @@ class Firmware:
     def _emit(self, data: bytes, faults: int) -> None:
         """Queue a STATE report (its bytes, and its ``faults``), dropping the oldest when the
         queue is full (rule PT5)."""
-        self.latched_faults |= faults
+        self.counts.latched_faults |= faults
         self._sequence = (self._sequence + 1) & _U16
-        self.input_reports += 1
+        self.counts.input_reports += 1
         self._latest = data
         if len(self._queue) >= self.input_capacity:
             self._queue.popleft()
-            self.input_dropped += 1
+            self.counts.input_dropped += 1
             self._pending_faults |= FaultBits.INPUT_DROPPED
         self._queue.append(data)
 
@@ -886,7 +867,7 @@ class Firmware:
             flags=0, x_10um=0, y_10um=0, corner_forces_mn=(0, 0, 0, 0), lateral_force_mn=0,
             amplitude_nm=0, voltage_dv=0, current_10na=0, target_uv_x1e4=FRICTION_SCALE,
             target_ev_x1e4=FRICTION_SCALE, texture=-1, faults=0, dropped_reports=0,
-            rejected_requests=self.rejected_requests & _U16, stream_queued=0,
+            rejected_requests=self.counts.rejected_requests & _U16, stream_queued=0,
             host_time_echo_us=self._host_time_echo, card_generation=self.upload.generation,
             echo_age_us=self._echo_age(round(self.sim.time_s / TIME_UNIT_S)),
             **self._session_fields(),

@@ -4,7 +4,7 @@ A device renders with its own profile until a host uploads another (protocol 1.1
 reference devices publish theirs: it is the firmware's model (:func:`hcard_device.sim.models.
 device_profile`) at the hardware limits, and a host that recognises the device (its
 ``device_kind`` and plate frequency in DEVICE_INFO) can write it into a recording's sidecar
-(spec/measurement-format.md rule M9, key ``profile``), where ``hcard calibrate`` finds the base
+(spec/measurement-format.md rule MF9, key ``profile``), where ``hcard calibrate`` finds the base
 model to calibrate.
 """
 

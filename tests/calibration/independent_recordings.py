@@ -43,7 +43,7 @@ library has no such effect):
   (no library effect).
 
 Nuisances (:class:`Nuisances`): a lateral-force sensor offset that drifts, a ``stroke`` column
-that carries the stroke number through the lifts, and dropped samples (rows missing, rule M6).
+that carries the stroke number through the lifts, and dropped samples (rows missing, rule MF6).
 Sensor noise (:class:`Noise`): white or AR(1) coloured, on both force channels.
 
 :func:`generate` returns a :class:`~hcard.calibration.measurement.Measurement` (what
@@ -219,7 +219,7 @@ class Nuisances:
             recording, N (plus a constant offset of the same size).
         stroke_column: write a ``stroke`` column that carries the stroke number through the
             lifts and rests (every sample then claims a stroke).
-        dropped_fraction: share of rows dropped at random (lost samples, rule M6).
+        dropped_fraction: share of rows dropped at random (lost samples, rule MF6).
     """
 
     offset_drift_n: float = 0.0

@@ -281,7 +281,7 @@ def test_spec_example_reads(tmp_path: Path) -> None:
     np.testing.assert_array_equal(stroke_ids(m), [0, 0, 0, 1, 1])
 
 
-# -- device columns (rule M12) -------------------------------------------------------------
+# -- device columns (rule MF12) -------------------------------------------------------------
 DEVICE_TEXT = """t_s,x_m,y_m,speed_m_s,fn_n,fl_n,amplitude_m,voltage_v,contact,sequence,f_tl_mn,\
 f_tr_n,f_bl_n,f_br_n,current_ua,target_uv,target_ev,texture,faults,flags,echo_ms
 0.000,0.01,0.02,0.05,0.50,0.24,1e-6,0,1,65534,125,0.125,0.125,0.125,0,0.8,1.0,2,0,15,10
@@ -302,7 +302,7 @@ def test_device_columns_are_read_by_name_in_si_units(tmp_path: Path) -> None:
     assert m.column("fl") is m.lateral_force
     with pytest.raises(KeyError, match="lateral_n"):
         m.column("lateral_n")
-    # contact: the device's own sensing, and at least 10 mN (rule S2)
+    # contact: the device's own sensing, and at least 10 mN (rule MS2)
     np.testing.assert_array_equal(m.in_contact, [True, True, False])
     np.testing.assert_array_equal(stroke_ids(m), [0, 0, -1])
 

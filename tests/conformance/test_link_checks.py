@@ -198,7 +198,7 @@ class SilentLossFirmware(LossyFirmware):
             super(LossyFirmware, self)._emit(data, faults)
             return
         self._sequence = (self._sequence + 1) & 0xFFFF
-        self.input_reports += 1
+        self.counts.input_reports += 1
 
 
 class UnnumberedLossFirmware(LossyFirmware):

@@ -551,7 +551,7 @@ def test_stream_frames_are_rendered_and_gaps_counted() -> None:
     for report in stream_reports(frames, [1.0] * 30, first_seq=7):
         fw.handle_output(report)
     fw.handle_output(Stream(20, (2500,), (10_000,)).encode())  # 9 expected: a gap
-    assert fw.stream_gaps == 1
+    assert fw.counts.stream_gaps == 1
     fw.advance(0.002)
     first, second = states(fw)
     assert first.target_uv_x1e4 == 2500 and first.flags & StateFlags.STREAMING

@@ -177,7 +177,7 @@ def test_guest_device_level_conforms_over_hid_under_software_emulation(tmp_path:
     payload = summary["payload"]
     results = payload["results"]
     # Under software emulation a case that needs the host to keep real time may be
-    # UNASSESSED, saying so (spec 5.2 T2): the stream behind limits-while-driven, the first
+    # UNASSESSED, saying so (spec 5.2 QT2): the stream behind limits-while-driven, the first
     # host's session kept alive while a second host uploads. Nothing may FAIL or raise.
     host_timed = {("device.safety", "limits-while-driven"),
                   ("device.session-ownership", "second-host-refused")}

@@ -106,7 +106,7 @@ def test_a_recording_written_in_blocks_is_the_recording_built_whole(session, tmp
     rows = write_recording(result, tmp_path / "blocks.csv")
     write_measurement(whole, tmp_path / "whole.csv")
     assert (tmp_path / "blocks.csv").read_bytes() == (tmp_path / "whole.csv").read_bytes()
-    assert rows == len(states) - 1  # the repeated report is left out once (rule M7)
+    assert rows == len(states) - 1  # the repeated report is left out once (rule MF7)
     stamps = [s.timestamp_us for s in states]
     expected = unwrapped_by_hand(stamps)
     expected = [t for k, t in enumerate(expected) if k == 0 or t > expected[k - 1]]

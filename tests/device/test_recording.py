@@ -1,4 +1,4 @@
-"""A play session is a measurement recording (spec/measurement-format.md M3, M9, M12): columns
+"""A play session is a measurement recording (spec/measurement-format.md MF3, MF9, MF12): columns
 by name in SI units, the finger's speed from the echoed track samples, and the sidecar of what
 the device and the host know."""
 
@@ -46,7 +46,7 @@ def test_the_recording_is_the_measurement_format_and_reads_back(tmp_path):
     assert header[:9] == ["t_s", "amplitude_m", "x_m", "y_m", "speed_m_s", "fn_n", "fl_n",
                           "stroke", "contact"]
     np.testing.assert_array_equal(back.stroke, m.stroke)
-    assert "voltage_v" not in header  # the E-ViTa has no EV channel (rule M5)
+    assert "voltage_v" not in header  # the E-ViTa has no EV channel (rule MF5)
     for name in ("sequence", "faults", "target_uv", "texture", "echo", "f_tl", "current"):
         np.testing.assert_array_equal(back.column(name), m.column(name), err_msg=name)
     np.testing.assert_array_equal(back.contact, m.contact)
@@ -101,7 +101,7 @@ def test_two_sessions_on_one_device_each_echo_their_own_samples():
 
 
 def test_strokes_follow_the_track_whatever_reports_are_lost():
-    """Reports lost in transit leave gaps in the device's time stamps, which rule S2 reads as
+    """Reports lost in transit leave gaps in the device's time stamps, which rule MS2 reads as
     new strokes; the recording takes each report's stroke from the track sample it echoes, so
     the strokes, and the split that holds whole strokes out, are those of the finger."""
     track = back_and_forth()
@@ -118,7 +118,7 @@ def test_strokes_follow_the_track_whatever_reports_are_lost():
     assert np.all(whole.speed[whole.stroke == 0] >= 0)
     assert np.all(whole.speed[whole.stroke == 1] <= 0)
     np.testing.assert_array_equal(lossy.stroke, whole.stroke[~lost])
-    assert stroke_ids(dataclasses.replace(lossy, stroke=None)).max() + 1 >= 4  # S2 on the gaps
+    assert stroke_ids(dataclasses.replace(lossy, stroke=None)).max() + 1 >= 4  # MS2 on the gaps
     # the split holds out the same stroke, whatever was lost
     _, test_whole = split_by_stroke(whole, seed=3)
     _, test_lossy = split_by_stroke(lossy, seed=3)

@@ -538,14 +538,14 @@ def test_malicious_stream_is_clipped_flagged_and_overruns_are_counted():
     queued = sim.stream_frames(np.array([np.nan, -5.0, 9.0] * 100), np.array([np.inf] * 300))
     assert queued == 300
     assert sim.stream_frames(np.full(50, 0.5), 1.0) == 0
-    assert sim.stream_overruns == 50
+    assert sim.counts.stream_frames_dropped == 50
     sim.feed_watchdog()
     block = sim.step(400)
     assert block.has(Faults.STREAM_OVERRUN)[0] and block.has(Faults.INVALID_REQUEST)[0]
     assert not block.has(Faults.STREAM_OVERRUN)[1:].any()
     np.testing.assert_array_equal(block.target_uv[:3], [1.0, 0.0, 1.0])
     assert np.all(block.target_ev[:300] == 4.0) and np.all(block.target_ev[300:] == 1.0)
-    assert sim.stream_underruns == 100
+    assert sim.counts.stream_underruns == 100
     assert (block.texture == -1).all()  # streamed frames play no palette texture
     assert block.has(Faults.AMPLITUDE_LIMIT).any()  # uv = 0 needs more than 2.5 um
     assert block.voltage_v.max() <= 2000.0 and block.amplitude_m.max() <= 2.5e-6 * (1 + 1e-9)
@@ -560,7 +560,7 @@ def test_set_limits_only_lowers_and_never_raises():
         1e-6, 500.0, 100e-6)
     assert sim.set_limits(max_voltage_v=math.nan).max_voltage_v == 500.0
     assert sim.set_limits(max_amplitude_m=-1.0).max_amplitude_m == 0.0
-    assert sim.invalid_requests == 2
+    assert sim.counts.invalid_requests == 2
     assert sim.profile.limits.max_amplitude == 0.0 and sim.profile.limits.max_voltage == 500.0
 
 

@@ -21,7 +21,7 @@ SHORT = Protocol(duration_s=10.0)
 
 
 def friction(m):
-    """The recorded lateral force with the direction of motion taken out (rule M3: signed)."""
+    """The recorded lateral force with the direction of motion taken out (rule MF3: signed)."""
     return m.lateral_force * np.where(m.speed < 0, -1.0, 1.0)
 
 

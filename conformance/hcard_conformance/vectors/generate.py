@@ -100,7 +100,7 @@ def npz_bytes(arrays: dict[str, np.ndarray]) -> bytes:
 
 
 def frames_arrays(frames: Frames) -> dict[str, np.ndarray]:
-    """The six arrays of a render file (spec/track-format.md O2), as ``hcard render`` writes."""
+    """The six arrays of a render file (spec/track-format.md TO2), as ``hcard render`` writes."""
     return {
         "t_s": frames.t.astype(np.float64),
         "uv": frames.uv.astype(np.float64),

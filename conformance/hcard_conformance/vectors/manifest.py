@@ -20,7 +20,7 @@ from hcard.v1 import card_pb2 as pb
 MANIFEST_FORMAT = "hcard-vectors/1"
 MANIFEST_NAME = "manifest.json"
 RENDER_ARRAYS = ("t_s", "uv", "ev", "friction", "contact", "texture")
-"""Arrays of a golden render NPZ (spec/track-format.md O2)."""
+"""Arrays of a golden render NPZ (spec/track-format.md TO2)."""
 
 
 def default_root() -> Path:

@@ -23,7 +23,7 @@ drift from the generator. How the vectors are used, every metric and every thres
 - `tracks/NAME.csv`: finger tracks, 50 Hz touch samples (track CSV, `../track-format.md`
   section 1).
 - `renders/CARD__TRACK.npz`: golden renders by the reference renderer (NPZ with `t_s, uv, ev,
-  friction` float64, `contact` bool, `texture` int32; `../track-format.md` O2).
+  friction` float64, `contact` bool, `texture` int32; `../track-format.md` TO2).
 - `invalid/NAME.hcard`, `invalid/NAME.json`: invalid cards, one broken rule each.
 
 ## Manifest

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hcard.render.touch import has_velocity, speed_estimate
 from hcard.track import FingerTrack, make_track
 
 TOUCH_RATE_HZ = 50.0
@@ -128,10 +129,8 @@ def vector_tracks() -> list[VectorTrack]:
 
 def contact_speeds(track: FingerTrack) -> np.ndarray:
     """Speeds between consecutive samples that are both in contact, mm/s."""
-    both = track.contact[1:] & track.contact[:-1]
-    dt = np.diff(track.t)
-    speed = np.hypot(np.diff(track.x), np.diff(track.y)) / dt
-    return speed[both]
+    both = has_velocity(track.contact[1:], track.contact[:-1])
+    return speed_estimate(track.t, track.x, track.y, track.contact)[1:][both]
 
 
 def speed_class(track: FingerTrack) -> str:

@@ -5,7 +5,7 @@ card, takes the finger state from the host (FINGER reports at the track's sample
 wall clock for real and USB/IP devices, on the simulation's clock for ``sim://``), starts
 rendering, collects every STATE report, and stops. :func:`hcard_device.drivers.recording.recording`
 turns the result into a recording in the measurement format (spec/measurement-format.md, device
-columns of rule M12), which ``hcard calibrate`` reads unchanged; :func:`summary` says what
+columns of rule MF12), which ``hcard calibrate`` reads unchanged; :func:`summary` says what
 happened, the rendered friction error against the card's target included
 (:func:`hcard.calibration.rendering.rendering_error`).
 """
@@ -72,7 +72,7 @@ class PlayResult:
         card_title: the card's title.
         limits: the device's limits in force during the session.
         profile: the profile record of the recording's sidecar (``source``, ``name``,
-            ``sha256``, ``content``; spec/measurement-format.md rule M9).
+            ``sha256``, ``content``; spec/measurement-format.md rule MF9).
         uri: the device URI.
         started: when the session started, ISO 8601 UTC.
         host_us: the host time sent with each track sample (FINGER.host_time_us, u32 us):

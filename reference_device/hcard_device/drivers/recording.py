@@ -1,10 +1,10 @@
 """A play session as a recording in the measurement format (spec/measurement-format.md).
 
-One row per STATE report (spec/device-protocol.md section 6), the columns of rule M3 in SI
+One row per STATE report (spec/device-protocol.md section 6), the columns of rule MF3 in SI
 units (``t_s`` device time from the first report, ``x_m``, ``y_m``, ``speed_m_s``, ``fn_n``,
-``fl_n``, ``amplitude_m``, ``voltage_v``, ``contact``) and the device columns of rule M12
+``fl_n``, ``amplitude_m``, ``voltage_v``, ``contact``) and the device columns of rule MF12
 (``sequence``, corner forces, ``current_a``, ``target_uv``, ``target_ev``, ``texture``,
-``faults``, ``flags``, ``echo_s``), with the sidecar keys of rule M9 for what the device and the
+``faults``, ``flags``, ``echo_s``), with the sidecar keys of rule MF9 for what the device and the
 host know: device class, protocol, plate and carrier frequencies, limits in force, the card
 (SHA-256, generation), the profile rendering it and the session's report counts.
 
@@ -79,10 +79,10 @@ def track_speeds(track: FingerTrack) -> np.ndarray:
 
 
 def track_strokes(track: FingerTrack) -> np.ndarray:
-    """The stroke of each track sample by rule S2 (spec/measurement-format.md section 4: a lift
+    """The stroke of each track sample by rule MS2 (spec/measurement-format.md section 4: a lift
     or a reversal of the direction starts one), -1 out of contact. The recording takes a report's
     stroke from the sample it echoes, so reports lost on the way (a gap in the device's time
-    stamps, which S2 would read as a new stroke) cannot cut a stroke in two: on the reference
+    stamps, which MS2 would read as a new stroke) cannot cut a stroke in two: on the reference
     served over usbip, host stalls that lost 1236 of 30000 reports turned the 26 strokes of the
     calibration protocol into 46 and changed which strokes the split held out."""
     return stroke_numbers(track.t, np.asarray(track.contact, dtype=bool), track_speeds(track))
@@ -161,7 +161,7 @@ def public_uri(uri: str) -> str:
 
 def sidecar(result: PlayResult, *, track_path: str | None = None,
             card_path: str | None = None) -> dict[str, Any]:
-    """The conditions of a play session (rule M9 keys)."""
+    """The conditions of a play session (rule MF9 keys)."""
     info = result.info
     has_ev = bool(info.capabilities & Capability.EV)
     conditions: dict[str, Any] = {
@@ -209,7 +209,7 @@ def sidecar(result: PlayResult, *, track_path: str | None = None,
 BLOCK_REPORTS = 8192
 """Reports per block when a recording is written (:func:`write_recording`)."""
 REPORTED_DEVICE_COLUMNS = tuple(q for q in DEVICE_COLUMNS if q != "echo")
-"""The device columns of rule M12 taken from the reports as they are (``echo`` is derived)."""
+"""The device columns of rule MF12 taken from the reports as they are (``echo`` is derived)."""
 FORCE_COLUMNS = ("t", "normal_force", "lateral_force", "speed", "contact")
 """The recording's columns besides the targets that the rendered friction error reads."""
 
@@ -243,7 +243,7 @@ def _blocks(result: PlayResult, rows: np.ndarray, block_reports: int) -> Iterato
         steps = np.diff(stamps) % HOST_TIME_MODULO
         elapsed = elapsed_us + np.cumsum(steps)
         previous_stamp, elapsed_us = int(stamps[-1]), int(elapsed[-1])
-        # a report whose time stamp does not move forward (a repeat) is left out (rule M7)
+        # a report whose time stamp does not move forward (a repeat) is left out (rule MF7)
         keep = steps > 0
         if first == 0:
             keep[0] = True
@@ -253,7 +253,7 @@ def _blocks(result: PlayResult, rows: np.ndarray, block_reports: int) -> Iterato
         at = np.maximum(sample, 0)
         contact = columns["contact"]
         # an echo of no sample of this session: the last host time before the track (rule
-        # M6: no NaN), one microsecond before its first sample
+        # MF6: no NaN), one microsecond before its first sample
         echo = np.where(echoed, track.t[at], track.t[0] - 1e-6)
         device = {name: columns[name] for name in REPORTED_DEVICE_COLUMNS}
         device["echo"] = echo
@@ -277,8 +277,8 @@ def recording(result: PlayResult, *, track_path: str | None = None,
     """The session as a :class:`~hcard.calibration.measurement.Measurement` (module docstring).
 
     Reports whose time stamp does not move forward (a repeated report) are left out, so that time
-    increases strictly (rule M7). A device without a UV channel records no amplitude column, one
-    without EV no voltage column (rule M5 needs one of them).
+    increases strictly (rule MF7). A device without a UV channel records no amplitude column, one
+    without EV no voltage column (rule MF5 needs one of them).
 
     Raises:
         ValueError: no STATE report was received.

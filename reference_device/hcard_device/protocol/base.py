@@ -95,7 +95,7 @@ class Report:
         """Parse a report, report ID byte included.
 
         Bytes beyond the report's size (up to 64 in all) are ignored: some host stacks pad
-        every report to the longest one of its kind (rule P7).
+        every report to the longest one of its kind (spec/device-protocol.md rule PT7).
 
         Raises:
             ProtocolError: wrong type, too short, longer than 64 bytes, wrong report ID, or a

@@ -10,7 +10,8 @@ from __future__ import annotations
 from enum import IntEnum, IntFlag
 
 PROTOCOL_MAJOR = 1
-"""Major protocol version (incompatible changes). A host MUST refuse another major (rule P3)."""
+"""Major protocol version (incompatible changes). A host MUST refuse another major
+(spec/device-protocol.md rule PV2)."""
 PROTOCOL_MINOR = 3
 """Minor protocol version (compatible additions; 1.2 adds session ownership, spec section 14;
 1.3 the echo age of STATE, rule PI3)."""

@@ -1,7 +1,7 @@
 """What a card asks that a device cannot render: the clip report of ``load_card``.
 
 For each texture the grid uses, the extreme targets follow from its baseline and component
-amplitudes per channel group (the renderer's split, spec rule R-split, Eq. 4.1)::
+amplitudes per channel group (the renderer's split, spec rule R11, Eq. 4.1)::
 
     uv_min = clip(1 + b_uv - A_uv, 0, 1) * min(clip(1 + b_bip - A_bip, 0, 4), 1)
     ev_max = min(clip(1 + b_ev + A_ev, 1, 4) * max(clip(1 + b_bip + A_bip, 0, 4), 1), 4)
@@ -21,6 +21,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from hcard.physics.profile import DeviceProfile
+from hcard.render.compiled import compile_texture
+from hcard.render.options import RenderOptions
+from hcard.render.synthesis import channel_targets
 from hcard.v1 import card_pb2 as pb
 
 REFERENCE_SPEED_M_S = 0.120
@@ -29,8 +32,6 @@ REFERENCE_SPEED_M_S = 0.120
 REFERENCE_FORCE_N = 0.5
 """Normal force of the report, N (the track default; the EV force needed grows with it)."""
 _TOLERANCE = 1e-9
-
-_GROUP = {pb.CHANNEL_UV: 0, pb.CHANNEL_EV: 1, pb.CHANNEL_BIPOLAR: 2}
 
 
 @dataclass(frozen=True)
@@ -95,17 +96,16 @@ class ClipReport:
 
 
 def texture_extremes(texture: pb.Texture) -> tuple[float, float]:
-    """``(uv_min, ev_max)`` the texture can ask for (module formula)."""
-    base = np.zeros(3)
-    amp = np.zeros(3)
-    base[_GROUP[texture.channel]] = texture.baseline - 1.0
-    for comp in texture.components:
-        amp[_GROUP[comp.channel or texture.channel]] += abs(comp.amplitude)
-    uv = float(np.clip(1 + base[0] - amp[0], 0, 1) * min(np.clip(1 + base[2] - amp[2], 0, 4), 1))
-    ev = float(
-        min(np.clip(1 + base[1] + amp[1], 1, 4) * max(np.clip(1 + base[2] + amp[2], 0, 4), 1), 4)
-    )
-    return uv, ev
+    """``(uv_min, ev_max)`` the texture can ask for (module formula): the renderer's compiled
+    texture (channel group of each component, baseline deviation of the texture's group) and
+    its R11 split, with every component at its trough for ``uv_min`` and at its crest for
+    ``ev_max``."""
+    compiled = compile_texture(texture, RenderOptions())
+    amplitude = np.zeros(3)  # summed in component order, as the kernel's sum would be
+    np.add.at(amplitude, compiled.group_matrix.argmax(axis=1), np.abs(compiled.amplitude))
+    uv, _ = channel_targets(compiled.baseline_deviation - amplitude)
+    _, ev = channel_targets(compiled.baseline_deviation + amplitude)
+    return float(uv[0]), float(ev[0])
 
 
 def clip_report(

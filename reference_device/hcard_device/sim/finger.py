@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hcard.physics.profile import DeviceProfile
+from hcard.render.touch import speed_estimate, step_speed
 from hcard.track import FingerTrack
 from hcard_builtins.physics.finger import FingerFriction
 from hcard_device.sim.hidden import HiddenPhysics
@@ -128,10 +129,11 @@ class TrackFinger:
         touchdown = self.contact & ~previous
         self.touchdown_t = np.where(touchdown, self.t, -np.inf)
         np.maximum.accumulate(self.touchdown_t, out=self.touchdown_t)
-        dt = np.diff(self.t)
+        # the finger moves straight between samples: each segment's speed is rule R4's estimate
+        # at its end sample, in contact or not (the contact of the segment is applied below)
+        moving = np.ones(len(track), dtype=bool)
         self.speed = np.zeros(len(track))
-        if len(track) > 1:
-            self.speed[:-1] = np.hypot(np.diff(self.x), np.diff(self.y)) / dt * MM
+        self.speed[:-1] = speed_estimate(self.t, self.x, self.y, moving)[1:] * MM
 
     @property
     def end_s(self) -> float:
@@ -177,10 +179,8 @@ class HostFinger:
         interval = t - self.t
         if host_t is not None and self.host_t is not None:
             interval = (host_t - self.host_t) % HOST_TIME_WRAP_S
-        if contact and self.contact and interval > 0:
-            self.speed_m_s = float(np.hypot(x - self.x, y - self.y)) / interval * MM
-        else:
-            self.speed_m_s = 0.0
+        moving = contact and self.contact  # rule R4: no estimate at a touch-down
+        self.speed_m_s = step_speed(x - self.x, y - self.y, interval, moving) * MM
         if contact and not self.contact:
             self.touchdown_s = t
         self.t, self.x, self.y, self.fn, self.contact = t, x, y, max(fn, 0.0), contact

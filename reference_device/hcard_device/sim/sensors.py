@@ -25,6 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hcard.render.touch import has_velocity, speed_estimate
+
 CORNERS = ("top-left", "top-right", "bottom-left", "bottom-right")
 """Order of the four corner sensors in every (N, 4) force array."""
 
@@ -101,13 +103,11 @@ class TouchSamples:
         many times between two touch samples, on the same samples (do not modify them)."""
         m = len(self)
         t = self.t
+        speed = speed_estimate(t, self.x, self.y, self.contact)  # spec rule R4
         dt = t[1:] - t[:-1]
-        moving = self.contact[1:] & self.contact[:-1] & (dt > 0)
-        speed = np.zeros(m)  # 0 where not moving (no division there)
-        distance = np.hypot(self.x[1:] - self.x[:-1], self.y[1:] - self.y[:-1])
-        np.divide(distance, dt, out=speed[1:], where=moving)
         slope = np.zeros(m)
         if m > 2:
+            moving = has_velocity(self.contact[1:], self.contact[:-1]) & (dt > 0)
             valid = np.concatenate(([False], moving))
             both = valid[2:] & valid[1:-1] & valid[:-2]
             np.divide(speed[2:] - speed[:-2], t[2:] - t[:-2], out=slope[2:], where=both)

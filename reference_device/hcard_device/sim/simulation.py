@@ -62,6 +62,7 @@ from hcard.v1 import card_pb2 as pb
 from hcard_device.sim.amplifier import EVAmplifier
 from hcard_device.sim.clip import ClipReport, clip_report
 from hcard_device.sim.config import DeviceConfig
+from hcard_device.sim.counters import DeviceCounters
 from hcard_device.sim.faults import Faults
 from hcard_device.sim.finger import FingerPhysics, FingerTruth, HostFinger, TrackFinger
 from hcard_device.sim.hidden import HiddenPhysics
@@ -266,12 +267,10 @@ class DeviceSimulation:
         self._queued = 0
         self._last_feed = 0.0
         self._events = 0
-        self.stream_overruns = 0
-        """Streamed frames dropped because the queue was full (total)."""
-        self.stream_underruns = 0
-        """Frames played neutral because the stream queue ran dry (total)."""
-        self.invalid_requests = 0
-        """Commands that carried invalid values (total)."""
+        self.counts = DeviceCounters()
+        """The device's counters (the firmware counts into them too): here the streamed frames
+        dropped because the queue was full, the frames played neutral because it ran dry, and
+        the commands that carried invalid values."""
 
     # -- state -----------------------------------------------------------------------------
     @property
@@ -624,7 +623,7 @@ class DeviceSimulation:
         room = self.config.stream_queue_frames - self._queued
         take = min(room, uv_a.shape[0])
         if take < uv_a.shape[0]:
-            self.stream_overruns += uv_a.shape[0] - take
+            self.counts.stream_frames_dropped += uv_a.shape[0] - take
             self._events |= int(Faults.STREAM_OVERRUN)
         if take > 0:
             self._queue.append((uv_a[:take].copy(), ev_a[:take].copy()))
@@ -733,7 +732,7 @@ class DeviceSimulation:
 
     # -- pieces ----------------------------------------------------------------------------
     def _invalid(self) -> None:
-        self.invalid_requests += 1
+        self.counts.invalid_requests += 1
         self._events |= int(Faults.INVALID_REQUEST)
 
     def _last_sample_time(self) -> float:
@@ -829,7 +828,7 @@ class DeviceSimulation:
             else:
                 self._queue[0] = (chunk_uv[take:], chunk_ev[take:])
         self._queued -= filled
-        self.stream_underruns += n - filled
+        self.counts.stream_underruns += n - filled
         return uv, ev
 
     def _clear_queue(self) -> None:

@@ -107,7 +107,7 @@ which a 90 um insulator needs for an electrostatic force comparable to the norma
 
 REST_NOISE_LIMIT_N = 0.009
 """The recorded normal force during rests stays within +- this, N (below the 0.01 N contact
-threshold of rule S2)."""
+threshold of rule MS2)."""
 
 MIN_CONTACT_FORCE_N = 0.011
 """The recorded normal force in contact never falls below this, N (stays a contact sample)."""
@@ -511,7 +511,7 @@ def synthesize(
         lateral = np.where(s.contact, lateral, 0.0)
 
         noise = streams[1]
-        # Signed with the direction of motion (rule M3), the sensor's drifting zero added.
+        # Signed with the direction of motion (rule MF3), the sensor's drifting zero added.
         direction = np.where(s.speed < 0, -1.0, 1.0)
         fl = direction * lateral + _drift(n, protocol.sample_rate_hz, drift_n, streams[2])
         fl = fl + lateral_noise_n * noise.normal(size=n)

@@ -26,19 +26,19 @@ since onset and the Coulomb cap ``C = mu0 F_reac`` (``C(0) = 0``)::
 
     F_l(tau) = min over tau' <= tau of [C(tau') + kl U (tau - tau')],
 
-which is the issue's ``min(kl U tau, C(tau))`` whenever contact starts on the concave part of the
-sinusoid (``h <= 0``, i.e. ``w/2 >= pi Fn / kn``; all of the issue's values): then the spring
-sticks once, slips once, and follows ``C`` down. Just above the critical amplitude (``h > 0``)
-the cap first rises slower than ``kl U``, the slider slips from the start, and when ``C``
-steepens the spring reloads from the slip value rather than from ``kl U tau`` (a slipped spring
-does not get its compression back). ``mu'`` is then lower than with ``min(kl U tau, C)``: by up
-to 0.06 within 10% above the critical amplitude, 3e-3 above ``w/2 = 1.5 Fn/kn`` and 3e-4 above
+which is the simpler ``min(kl U tau, C(tau))`` whenever contact starts on the concave part of the
+sinusoid (``h <= 0``, i.e. ``w/2 >= pi Fn / kn``; so over the whole parameter range of the bench):
+then the spring sticks once, slips once, and follows ``C`` down. Just above the critical amplitude
+(``h > 0``) the cap first rises slower than ``kl U``, the slider slips from the start, and when
+``C`` steepens the spring reloads from the slip value rather than from ``kl U tau`` (a slipped
+spring does not get its compression back). ``mu'`` is then lower than with ``min(kl U tau, C)``: by
+up to 0.06 within 10% above the critical amplitude, 3e-3 above ``w/2 = 1.5 Fn/kn`` and 3e-4 above
 ``2 Fn/kn`` (measured over f 20-60 kHz, U 5-100 mm/s, mu0 0.25-1, Fn 0.1-1 N). This reading
-reproduces the values of Eqs. 2.19-2.28 that tests/test_ultrasonic.py checks (0.387, 0.247,
-0.135 at w = 1, 2, 5 um; the frequency and speed series), is the exact solution of the
-massless Coulomb spring-slider, and is the ``v_r -> inf`` limit of the finite-recovery model below.
-The other reading, a lateral force that once slipping is held at the largest value reached,
-gives 0.447 at 1 um and ``mu' > 1`` at 100 mm/s, so it is rejected.
+reproduces the values of Eqs. 2.19-2.28 that tests/test_ultrasonic.py checks (0.387, 0.247, 0.135
+at w = 1, 2, 5 um; the frequency and speed series), is the exact solution of the massless Coulomb
+spring-slider, and is the ``v_r -> inf`` limit of the finite-recovery model below. The other
+reading, a lateral force that once slipping is held at the largest value reached, gives 0.447 at 1
+um and ``mu' > 1`` at 100 mm/s, so it is rejected.
 
 Finite lateral recovery (Figs. 2.25-2.26, section 2.7.2). The unloading of the lateral spring is
 retarded to a constant speed ``v_r``: with compression ``x``, ``dx/dt = U`` while ``kl x`` is
@@ -54,7 +54,7 @@ Numerics: ``s`` by a vectorised Newton iteration from the right (monotone for a 
 ``g``); the lateral force on a fixed grid of phase samples spanning the contact interval of each
 period (a ``points x samples`` array in chunks; the running minimum above is a cumulative minimum
 along the samples). 512 samples give ``mu'`` within 3e-6 of a 65536-sample reference over the
-issue's parameter ranges (1.1e-5 just above the critical amplitude). The finite-recovery model
+parameter ranges (1.1e-5 just above the critical amplitude). The finite-recovery model
 is stepped sample by sample (vectorised over points): 38 periods of ``samples`` steps each for
 the steady state (36 bisections of the onset compression, then two more periods).
 """
