@@ -21,6 +21,7 @@ from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.ticker import MaxNLocator
 from matplotlib.transforms import Transform
 
+from hcard.physics.units import MS_PER_S, S_PER_MS
 from hcard.preview_text import LINE_STEP_EM, PathLabels
 from hcard.v1 import card_pb2 as pb
 
@@ -135,8 +136,9 @@ def _temporal_terms(texture: pb.Texture) -> tuple[list[Term], float]:
     if not temporal:
         return [], FLAT_WINDOW
     strongest = max(temporal, key=lambda c: c.amplitude).frequency
-    length_ms = _window([c.frequency for c in temporal], strongest, MAX_TEMPORAL_WINDOW_MS, 1e3)
-    return [(c.frequency * 1e-3, c.amplitude, c.phase) for c in temporal], length_ms
+    length_ms = _window(
+        [c.frequency for c in temporal], strongest, MAX_TEMPORAL_WINDOW_MS, MS_PER_S)
+    return [(c.frequency * S_PER_MS, c.amplitude, c.phase) for c in temporal], length_ms
 
 
 def _evaluate(baseline: float, terms: Sequence[Term], x: np.ndarray) -> np.ndarray:

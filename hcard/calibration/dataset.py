@@ -36,6 +36,7 @@ from hcard.calibration.splits import (
     stroke_ids,
 )
 from hcard.physics import Predictor
+from hcard.physics.units import MN_PER_N
 
 ATMOSPHERE_PA = 101_325.0
 """Ambient pressure assumed for a recording whose sidecar gives none, Pa."""
@@ -380,7 +381,7 @@ def prepare(
         stroke_parts.append(np.where(keep, ids + offset, -1))
         if not keep.any():
             raise MeasurementError(
-                f"{label}: no sample in contact (fn >= {threshold * 1e3:.3g} mN)"
+                f"{label}: no sample in contact (fn >= {threshold * MN_PER_N:.3g} mN)"
             )
         n = len(m)
         train = np.zeros(n, dtype=bool)

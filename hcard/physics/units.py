@@ -1,4 +1,17 @@
-"""Quantities with units in user text (``"2um"``, ``"27.5 kHz"``, ``"20 mm/s"``) to SI floats."""
+"""The one vocabulary of quantities and units: names, SI units, display units, parsing.
+
+Inside the code every quantity is a float in its SI unit (m, s, N, V, A, Hz, Pa), except
+positions on the touch surface, which are in mm like the card and the renderer. This module
+holds what crosses that boundary:
+
+- the named conversion factors (``x_mm * M_PER_MM`` is metres, ``force * MN_PER_N`` is mN)
+  that replace bare ``1e-3``/``1e3``/``1e6`` literals;
+- :data:`SI_UNITS`, the SI unit of each quantity name used in memory (``normal_force``: N);
+- :data:`COLUMN_UNITS`, the unit suffixes a measurement column may carry (rule M4 of
+  spec/measurement-format.md) with their scales to SI;
+- parsing of user text (``"2um"``, ``"27.5 kHz"``, ``"20 mm/s"``) to SI floats, and the
+  units a person reads (``display_unit``, ``format_value``).
+"""
 
 from __future__ import annotations
 
@@ -7,12 +20,65 @@ import re
 from typing import Any
 
 import numpy as np
+import scipy.constants
 
 from hcard.errors import HcardError
 
 
 class UnitError(HcardError, ValueError):
     """A quantity's text cannot be read, or its unit does not fit the expected SI unit."""
+
+
+# -- named conversions: multiply a value in the unit on the right to get the unit on the left --
+M_PER_MM = 1e-3
+"""Metres in a millimetre (also m/s in a mm/s)."""
+MM_PER_M = 1e3
+"""Millimetres in a metre (also mm/s in a m/s)."""
+UM_PER_M = 1e6
+"""Micrometres in a metre."""
+UM_PER_MM = 1e3
+"""Micrometres in a millimetre."""
+NM_PER_M = 1e9
+"""Nanometres in a metre."""
+S_PER_MS = 1e-3
+"""Seconds in a millisecond."""
+MS_PER_S = 1e3
+"""Milliseconds in a second."""
+S_PER_US = 1e-6
+"""Seconds in a microsecond."""
+US_PER_S = 1e6
+"""Microseconds in a second."""
+N_PER_MN = 1e-3
+"""Newtons in a millinewton."""
+MN_PER_N = 1e3
+"""Millinewtons in a newton."""
+UA_PER_A = 1e6
+"""Microamperes in an ampere."""
+HZ_PER_KHZ = 1e3
+"""Hertz in a kilohertz."""
+KHZ_PER_HZ = 1e-3
+"""Kilohertz in a hertz."""
+
+SI_UNITS: dict[str, str] = {
+    "time": "s",
+    "amplitude": "m",
+    "voltage": "V",
+    "current": "A",
+    "x": "m",
+    "y": "m",
+    "speed": "m/s",
+    "normal_force": "N",
+    "lateral_force": "N",
+    "frequency": "Hz",
+    "plate_frequency": "Hz",
+    "pressure": "Pa",
+    "target": "",
+    "stroke": "",
+    "direction": "",
+}
+"""SI unit of each quantity as named in memory ("" for pure numbers): the names of
+:class:`hcard.calibration.measurement.Measurement`, the calibration regressors and the
+predictor inputs."""
 
 
 _PREFIXES = {
@@ -63,13 +129,30 @@ _SPECIAL = {
     "kN/m": (1e3, "N/m"),
     "N/mm": (1e3, "N/m"),
     "S/m": (1.0, "S/m"),
-    "atm": (101_325.0, "Pa"),
+    "atm": (scipy.constants.atm, "Pa"),
     "bar": (1e5, "Pa"),
     "kPa": (1e3, "Pa"),
     "min": (60.0, "s"),
     "h": (3600.0, "s"),
 }
 _NUMBER = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(.*?)\s*$")
+
+
+_COLUMN_SPELLING = {
+    "s": "s", "ms": "ms", "us": "us",
+    "m": "m", "mm": "mm", "um": "um", "nm": "nm",
+    "v": "V", "kv": "kV", "mv": "mV",
+    "m_s": "m/s", "mm_s": "mm/s", "um_s": "um/s",
+    "n": "N", "mn": "mN",
+    "hz": "Hz", "khz": "kHz",
+    "a": "A", "ma": "mA", "ua": "uA",
+}
+"""Unit suffix of a measurement column header (lower case, ``_`` for ``/``) -> unit text."""
+
+
+def column_units(*suffixes: str) -> dict[str, float]:
+    """``{suffix: scale to SI}`` for measurement column suffixes (``"mn"`` -> 1e-3)."""
+    return {suffix: parse_unit(_COLUMN_SPELLING[suffix])[0] for suffix in suffixes}
 
 
 def parse_unit(unit: str) -> tuple[float, str]:
@@ -83,6 +166,31 @@ def parse_unit(unit: str) -> tuple[float, str]:
         if base and unit.endswith(base) and unit[: -len(base)] in _PREFIXES:
             return _PREFIXES[unit[: -len(base)]], _BASE[base]
     raise UnitError(f"unknown unit {unit!r}")
+
+
+_TIME = column_units("s", "ms", "us")
+_LENGTH = column_units("m", "mm", "um")
+_FORCE = column_units("n", "mn")
+COLUMN_UNITS: dict[str, dict[str, float]] = {
+    "t": _TIME,
+    "amplitude": column_units("m", "mm", "um", "nm"),
+    "voltage": column_units("v", "kv", "mv"),
+    "x": _LENGTH,
+    "y": _LENGTH,
+    "speed": column_units("m_s", "mm_s", "um_s"),
+    "fn": _FORCE,
+    "fl": _FORCE,
+    "frequency": column_units("hz", "khz"),
+    # device columns (rule M12)
+    "current": column_units("a", "ma", "ua"),
+    "f_tl": _FORCE,
+    "f_tr": _FORCE,
+    "f_bl": _FORCE,
+    "f_br": _FORCE,
+    "echo": _TIME,
+}
+"""Accepted unit suffixes of each measurement column quantity, SI first: suffix -> scale to
+SI (rule M4 of spec/measurement-format.md; device columns rule M12)."""
 
 
 def parse_quantity(text: str, expected_unit: str) -> float:

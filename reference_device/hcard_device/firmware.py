@@ -37,6 +37,7 @@ from collections.abc import Callable
 import numpy as np
 
 from hcard.physics.profile import DeviceProfile
+from hcard.physics.units import MM_PER_M, MS_PER_S
 from hcard.track import FingerTrack, make_track
 from hcard.v1 import card_pb2 as pb
 from hcard_device.protocol import (
@@ -613,7 +614,7 @@ class Firmware:
             max_voltage_dv=_clamp(hw.max_voltage_v / VOLTAGE_UNIT_V, 0, _U16),
             max_current_10na=_clamp(hw.max_current_a / CURRENT_UNIT_A, 0, _U16),
             max_card_bytes=self.upload.max_card_bytes,
-            watchdog_ms=_clamp(cfg.watchdog_s * 1e3, 0, _U16),
+            watchdog_ms=_clamp(cfg.watchdog_s * MS_PER_S, 0, _U16),
             stream_capacity_frames=_clamp(cfg.stream_queue_frames, 0, _U16),
             stream_frames_per_report=STREAM_FRAMES_PER_REPORT,
             surface_width_10um=_clamp(width / POSITION_UNIT_MM, 0, _U16),
@@ -648,7 +649,7 @@ class Firmware:
             "item_count": min(len(items), 512),
             "clipped_textures": len({item.texture for item in items}),
             "flags": flags,
-            "reference_speed_mm_s": _clamp(report.reference_speed_m_s * 1e3, 0, _U16),
+            "reference_speed_mm_s": _clamp(report.reference_speed_m_s * MM_PER_M, 0, _U16),
             "reference_force_mn": _clamp(report.reference_force_n / FORCE_UNIT_N, 0, _U16),
         }
         if not items:

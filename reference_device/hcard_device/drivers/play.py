@@ -25,6 +25,7 @@ import numpy as np
 
 from hcard.calibration.measurement import MeasurementError
 from hcard.card_io import to_bytes
+from hcard.physics.units import S_PER_US, US_PER_S
 from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb
 from hcard_device.drivers.base import Driver, UploadOutcome
@@ -104,7 +105,7 @@ class PlayResult:
         """:attr:`host_us`, or the track's own times for a result built without them."""
         if self.host_us is not None:
             return self.host_us
-        return np.rint(self.track.t * 1e6).astype(np.int64) % HOST_TIME_MODULO
+        return np.rint(self.track.t * US_PER_S).astype(np.int64) % HOST_TIME_MODULO
 
     @property
     def faults(self) -> FaultBits:
@@ -247,7 +248,7 @@ def _drive(driver: Driver, track: FingerTrack, host_us: np.ndarray, start: float
             collect(last_sent)
             driver.keepalive()
         collect(due)
-        driver.send_finger(int(host_us[k]) * 1e-6, float(x), float(y), float(fn), bool(contact))
+        driver.send_finger(int(host_us[k]) * S_PER_US, float(x), float(y), float(fn), bool(contact))
         last_sent = due
     collect(driver.clock() + tail_s)
     return last_report
@@ -269,7 +270,7 @@ def session_host_times(start_s: float, track: FingerTrack) -> np.ndarray:
     (the device times the finger's moves by them, PO2) and differ from every earlier session
     on a monotonic clock; 0 (which a STATE echo uses for "no sample yet") becomes 1 us."""
     seconds = start_s + (track.t - float(track.t[0]))
-    host_us = np.rint(seconds * 1e6).astype(np.int64) % HOST_TIME_MODULO
+    host_us = np.rint(seconds * US_PER_S).astype(np.int64) % HOST_TIME_MODULO
     host_us[host_us == 0] = 1
     return host_us
 

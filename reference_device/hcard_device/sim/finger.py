@@ -29,14 +29,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from hcard.physics.profile import DeviceProfile
+from hcard.physics.units import M_PER_MM, S_PER_US
 from hcard.track import FingerTrack
 from hcard_builtins.physics.finger import FingerFriction
 from hcard_device.sim.hidden import HiddenPhysics
 from hcard_device.sim.sensors import NormalDraws
 
-MM = 1e-3
 """Metres per millimetre."""
-HOST_TIME_WRAP_S = (1 << 32) * 1e-6
+HOST_TIME_WRAP_S = (1 << 32) * S_PER_US
 """A host's FINGER time stamps wrap at 2^32 us, s."""
 
 
@@ -131,7 +131,7 @@ class TrackFinger:
         dt = np.diff(self.t)
         self.speed = np.zeros(len(track))
         if len(track) > 1:
-            self.speed[:-1] = np.hypot(np.diff(self.x), np.diff(self.y)) / dt * MM
+            self.speed[:-1] = np.hypot(np.diff(self.x), np.diff(self.y)) / dt * M_PER_MM
 
     @property
     def end_s(self) -> float:
@@ -178,7 +178,7 @@ class HostFinger:
         if host_t is not None and self.host_t is not None:
             interval = (host_t - self.host_t) % HOST_TIME_WRAP_S
         if contact and self.contact and interval > 0:
-            self.speed_m_s = float(np.hypot(x - self.x, y - self.y)) / interval * MM
+            self.speed_m_s = float(np.hypot(x - self.x, y - self.y)) / interval * M_PER_MM
         else:
             self.speed_m_s = 0.0
         if contact and not self.contact:

@@ -56,6 +56,7 @@ import numpy as np
 
 from hcard.physics.actuation import actuate
 from hcard.physics.profile import DeviceProfile, ProfileError
+from hcard.physics.units import M_PER_MM
 from hcard.render import Renderer, RenderOptions, RenderStream
 from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb
@@ -656,7 +657,7 @@ class DeviceSimulation:
         render_times = times + self._render_shift_s  # the samples' time line
         touch = self._held_touch(samples, render_times)
         speed_est = (
-            predicted_speed(samples, render_times, self._options.dead_reckoning_s) * 1e-3
+            predicted_speed(samples, render_times, self._options.dead_reckoning_s) * M_PER_MM
         )
         self._history = samples.tail(4)
         corners = self.force_sensors.add_noise(split)
