@@ -17,6 +17,8 @@ import numpy as np
 from hcard.csv_rows import numeric_table, read_csv_text
 from hcard.errors import TrackError
 
+TOUCH_RATE_HZ = 50.0
+"""Sampling rate of the capacitive touch screens the thesis uses, Hz (section 5.1.1)."""
 DEFAULT_NORMAL_FORCE_N = 0.5
 REQUIRED_COLUMNS = ("t_s", "x_mm", "y_mm")
 OPTIONAL_COLUMNS = ("fn_n", "contact")
@@ -141,7 +143,7 @@ def straight_stroke(
     velocity_mm_s: tuple[float, float],
     duration_s: float,
     *,
-    rate_hz: float = 50.0,
+    rate_hz: float = TOUCH_RATE_HZ,
     fn: float = DEFAULT_NORMAL_FORCE_N,
     t0: float = 0.0,
 ) -> FingerTrack:

@@ -19,6 +19,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.constants
 
 from hcard.calibration.contact import (
     check_threshold,
@@ -38,7 +39,7 @@ from hcard.calibration.splits import (
 from hcard.physics import Predictor
 from hcard.physics.units import MN_PER_N
 
-ATMOSPHERE_PA = 101_325.0
+ATMOSPHERE_PA = scipy.constants.atm
 """Ambient pressure assumed for a recording whose sidecar gives none, Pa."""
 
 REST_S = 0.5

@@ -13,7 +13,7 @@ import click
 
 from hcard import limits
 from hcard.atomic import write_atomically
-from hcard.bounded_read import STDIN
+from hcard.bounded_read import DEFAULT_MAX_PIXELS, STDIN
 from hcard.card_io import format_for_path, parse_card, save, to_bytes
 from hcard.cli.verbosity import quiet
 from hcard.errors import CardError, HcardError
@@ -21,7 +21,6 @@ from hcard.errors import CardError, HcardError
 if TYPE_CHECKING:
     from hcard.plugins.kinds import EncodeResult
 
-DEFAULT_MAX_PIXELS = 64_000_000  # same as hcard_builtins.image.DEFAULT_MAX_PIXELS (help text)
 
 
 @click.command()

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
+import scipy.constants
 
 from hcard.atomic import write_atomically
 from hcard.bounded_read import MAX_JSON_FILE_BYTES, InputTooLarge, read_bounded
@@ -76,8 +77,8 @@ AMPLITUDE_SEARCH_FACTOR = 8.0
 REFERENCE_VOLTAGE = 1000.0
 """Envelope at which the EV channel's force is evaluated to scale the inverse, V."""
 
-EPSILON_0 = 8.8541878128e-12
-"""Vacuum permittivity, F/m."""
+EPSILON_0 = scipy.constants.epsilon_0
+"""Vacuum permittivity, F/m (CODATA, through scipy.constants)."""
 
 _LAYER_PARAMETERS = (
     "area", "sc_thickness", "sc_permittivity", "insulator_thickness", "insulator_permittivity"

@@ -1,0 +1,56 @@
+"""Each device constant has one definition, with the thesis value (sections 2.4, 3.6.3, 4.2.1,
+5.1.1), and the simulated devices, the predictors and the conformance vectors use it."""
+
+from __future__ import annotations
+
+import pytest
+
+from hcard.bounded_read import DEFAULT_MAX_PIXELS
+from hcard.calibration.dataset import ATMOSPHERE_PA
+from hcard.cli.encode_cmd import encode
+from hcard.physics.profile import COUPLED_STIMULATOR_LIMITS, EPSILON_0
+from hcard.render.options import DEFAULT_FRAME_RATE_HZ
+from hcard.track import TOUCH_RATE_HZ
+from hcard_builtins.effects import ATMOSPHERE as EFFECTS_ATMOSPHERE
+from hcard_builtins.image.loading import DEFAULT_MAX_PIXELS as LOADER_MAX_PIXELS
+from hcard_builtins.physics.coupled import Coupled
+from hcard_builtins.physics.electrovibration._common import EPSILON_0 as EV_EPSILON_0
+from hcard_builtins.physics.ultrasonic.squeeze_film import ATMOSPHERE as FILM_ATMOSPHERE
+from hcard_conformance.vectors.generate import TOLERANCES
+from hcard_conformance.vectors.tracks import TOUCH_RATE_HZ as VECTOR_TOUCH_RATE_HZ
+from hcard_device.sim.config import DeviceConfig
+
+
+def test_the_coupled_stimulator_limits_are_the_thesis_values() -> None:
+    limits = COUPLED_STIMULATOR_LIMITS
+    assert limits.plate_frequency == 38_220.0  # section 4.2.1
+    assert limits.carrier_frequency == 440.0  # section 4.2.1
+    assert limits.max_current == pytest.approx(250e-6, rel=1e-15)  # section 3.6.3
+    assert limits.max_amplitude == pytest.approx(2.5e-6, rel=1e-15)  # section 2.4
+
+
+def test_the_simulated_devices_take_the_limits_from_the_profile() -> None:
+    limits = COUPLED_STIMULATOR_LIMITS
+    for config in (DeviceConfig.evita(), DeviceConfig.coupled()):
+        assert config.max_amplitude_m == limits.max_amplitude
+        assert config.max_current_a == limits.max_current
+        assert config.ev_carrier_hz == limits.carrier_frequency
+    assert DeviceConfig.coupled().plate_frequency_hz == limits.plate_frequency
+    assert Coupled.input_defaults["frequency"] == limits.plate_frequency
+
+
+def test_rates_are_the_thesis_values_everywhere() -> None:
+    assert TOUCH_RATE_HZ == 50.0 and DEFAULT_FRAME_RATE_HZ == 10_000.0  # section 5.1.1
+    assert DeviceConfig.evita().touch_rate_hz == TOUCH_RATE_HZ == VECTOR_TOUCH_RATE_HZ
+    assert DeviceConfig.evita().frame_rate_hz == DEFAULT_FRAME_RATE_HZ
+    assert TOLERANCES["frame_rate_hz"] == DEFAULT_FRAME_RATE_HZ
+
+
+def test_physical_constants() -> None:
+    assert EPSILON_0 == EV_EPSILON_0 == pytest.approx(8.8542e-12, rel=1e-5)  # Table 3.2
+    assert ATMOSPHERE_PA == EFFECTS_ATMOSPHERE == FILM_ATMOSPHERE == 101_325.0
+
+
+def test_the_encoder_and_its_command_share_the_pixel_limit() -> None:
+    option = next(p for p in encode.params if p.name == "max_pixels")
+    assert option.default == DEFAULT_MAX_PIXELS == LOADER_MAX_PIXELS == 64_000_000
