@@ -21,6 +21,7 @@ from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.ticker import MaxNLocator
 from matplotlib.transforms import Transform
 
+from hcard.channels import LABEL_OF_VALUE
 from hcard.physics.units import MS_PER_S, S_PER_MS
 from hcard.preview_text import LINE_STEP_EM, PathLabels
 from hcard.v1 import card_pb2 as pb
@@ -81,6 +82,8 @@ def _enum_label(enum: object, value: int, prefix: str) -> str:
 
 def channel_label(value: int) -> str:
     """Channel name without prefix: ``"UV"``, ``"EV"``, ``"BIPOLAR"``."""
+    if value in LABEL_OF_VALUE:
+        return LABEL_OF_VALUE[value]
     return _enum_label(pb.Channel, value, "CHANNEL_")
 
 

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from hcard import limits
+from hcard import channels, limits
 from hcard.atomic import write_atomically
 from hcard.bounded_read import DEFAULT_MAX_PIXELS, STDIN
 from hcard.card_io import format_for_path, parse_card, save, to_bytes
@@ -104,7 +104,7 @@ if TYPE_CHECKING:
 )
 @click.option(
     "--channel",
-    type=click.Choice(["uv", "ev", "bipolar"]),
+    type=click.Choice(list(channels.NAMES)),
     default="uv",
     show_default=True,
     help="Actuator of the textures: uv lowers friction, ev raises it, bipolar does both.",

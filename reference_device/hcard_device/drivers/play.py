@@ -25,6 +25,7 @@ import numpy as np
 
 from hcard.calibration.measurement import MeasurementError
 from hcard.card_io import to_bytes
+from hcard.channels import LABEL_OF_VALUE
 from hcard.physics.units import S_PER_US, US_PER_S
 from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb
@@ -280,7 +281,7 @@ def clip_text(clip: ClipReport) -> str:
     if not clip.item_count:
         return "renders as written (nothing clipped)"
     name = f" '{clip.texture_name}'" if clip.texture_name else ""
-    channel = {1: "UV", 2: "EV"}.get(clip.channel, "?")
+    channel = LABEL_OF_VALUE.get(clip.channel, "?")
     return (f"clipped: {clip.item_count} item(s) in {clip.clipped_textures} texture(s), e.g. "
             f"texture {clip.texture}{name} {channel} asks {clip.target_x1e4 / FRICTION_SCALE:.3f},"
             f" gets {clip.achievable_x1e4 / FRICTION_SCALE:.3f}")

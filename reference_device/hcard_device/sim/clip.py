@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hcard.channels import GROUP_OF_VALUE
 from hcard.physics.profile import DeviceProfile
 from hcard.physics.units import MM_PER_M, UM_PER_M
 from hcard.v1 import card_pb2 as pb
@@ -30,9 +31,6 @@ REFERENCE_SPEED_M_S = 0.120
 REFERENCE_FORCE_N = 0.5
 """Normal force of the report, N (the track default; the EV force needed grows with it)."""
 _TOLERANCE = 1e-9
-
-_GROUP = {pb.CHANNEL_UV: 0, pb.CHANNEL_EV: 1, pb.CHANNEL_BIPOLAR: 2}
-
 
 @dataclass(frozen=True)
 class ClipItem:
@@ -99,9 +97,9 @@ def texture_extremes(texture: pb.Texture) -> tuple[float, float]:
     """``(uv_min, ev_max)`` the texture can ask for (module formula)."""
     base = np.zeros(3)
     amp = np.zeros(3)
-    base[_GROUP[texture.channel]] = texture.baseline - 1.0
+    base[GROUP_OF_VALUE[texture.channel]] = texture.baseline - 1.0
     for comp in texture.components:
-        amp[_GROUP[comp.channel or texture.channel]] += abs(comp.amplitude)
+        amp[GROUP_OF_VALUE[comp.channel or texture.channel]] += abs(comp.amplitude)
     uv = float(np.clip(1 + base[0] - amp[0], 0, 1) * min(np.clip(1 + base[2] - amp[2], 0, 4), 1))
     ev = float(
         min(np.clip(1 + base[1] + amp[1], 1, 4) * max(np.clip(1 + base[2] + amp[2], 0, 4), 1), 4)
