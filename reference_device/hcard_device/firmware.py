@@ -27,7 +27,6 @@ firmware.
 
 from __future__ import annotations
 
-import functools
 import math
 import threading
 import time
@@ -82,7 +81,7 @@ from hcard_device.protocol import (
 from hcard_device.protocol.constants import DEFAULT_MAX_CARD_BYTES
 from hcard_device.protocol.reports import POSITION_RANGE
 from hcard_device.protocol.upload import UploadStore, detail_text
-from hcard_device.sim import TOUCH_DTYPE, DeviceSimulation, Faults, SimBlock
+from hcard_device.sim import TOUCH_DTYPE, DeviceSimulation, SimBlock
 from hcard_device.sim.clip import ClipItem
 
 DEFAULT_INPUT_QUEUE = 128
@@ -185,25 +184,6 @@ _STATE_ID = State.REPORT_ID
 firmware packs the values it has already saturated to their ranges (rule PI2) without making a
 State, whose range checks cost more than the rest of a report. A host that decodes the report
 checks the ranges (:meth:`State.decode`)."""
-
-
-_FAULT_MAP: tuple[tuple[int, int], ...] = tuple(
-    (int(flag), int(FaultBits[flag.name]))
-    for flag in Faults
-    if flag.value and flag.name in FaultBits.__members__
-)
-"""(simulation bit, wire bit) of every fault both know, matched by name."""
-
-
-@functools.lru_cache(maxsize=1024)
-def _fault_bits(sim_faults: int) -> int:
-    """Wire fault bits of the simulation's :class:`Faults` (memoised: few combinations
-    occur)."""
-    out = 0
-    for sim_bit, wire_bit in _FAULT_MAP:
-        if sim_faults & sim_bit:
-            out |= wire_bit
-    return out
 
 
 class Session:
@@ -820,7 +800,7 @@ class Firmware:
 
     def _count_watchdog_trips(self, faults: np.ndarray) -> None:
         """Count the watchdog's trips (frames where WATCHDOG rises) in a block's faults."""
-        watchdog_bit = int(Faults.WATCHDOG)
+        watchdog_bit = int(FaultBits.WATCHDOG)
         if not self._watchdog_was_tripped and not int(np.bitwise_or.reduce(faults)) & watchdog_bit:
             return  # not tripped before nor during the block
         watchdog = (faults & watchdog_bit) != 0
@@ -863,7 +843,7 @@ class Firmware:
         """STATE faults: the interval's simulation faults, ``clipped`` (CARD_CLIPPED while a
         clipped card plays) and the firmware's events since the previous report (which are
         consumed)."""
-        faults = _fault_bits(sim_faults) | int(self._pending_faults) | clipped
+        faults = sim_faults | int(self._pending_faults) | clipped
         self._pending_faults = 0
         return faults & _U16
 

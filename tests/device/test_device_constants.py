@@ -3,6 +3,10 @@
 
 from __future__ import annotations
 
+import re
+from pathlib import Path
+
+import numpy as np
 import pytest
 
 from hcard.bounded_read import DEFAULT_MAX_PIXELS
@@ -18,6 +22,8 @@ from hcard_builtins.physics.electrovibration._common import EPSILON_0 as EV_EPSI
 from hcard_builtins.physics.ultrasonic.squeeze_film import ATMOSPHERE as FILM_ATMOSPHERE
 from hcard_conformance.vectors.generate import TOLERANCES
 from hcard_conformance.vectors.tracks import TOUCH_RATE_HZ as VECTOR_TOUCH_RATE_HZ
+from hcard_device.protocol import FaultBits
+from hcard_device.sim import DeviceSimulation
 from hcard_device.sim.config import DeviceConfig
 
 
@@ -54,3 +60,32 @@ def test_physical_constants() -> None:
 def test_the_encoder_and_its_command_share_the_pixel_limit() -> None:
     option = next(p for p in encode.params if p.name == "max_pixels")
     assert option.default == DEFAULT_MAX_PIXELS == LOADER_MAX_PIXELS == 64_000_000
+
+
+def _spec_fault_bits() -> dict[str, int]:
+    """The fault flag table of spec/device-protocol.md: name -> bit value."""
+    text = (Path(__file__).parents[2] / "spec" / "device-protocol.md").read_text()
+    table = text[text.index("**Fault flags**"):].split("\n---")[0]
+    return {m.group(2): 1 << int(m.group(1))
+            for m in re.finditer(r"^\| (\d+) \| ([A-Z_]+) \|", table, re.M)}
+
+
+def test_the_protocol_fault_bits_are_the_spec_table() -> None:
+    spec = _spec_fault_bits()
+    assert len(spec) == 10
+    assert {flag.name: int(flag) for flag in FaultBits} == spec
+
+
+def test_the_simulation_raises_the_protocol_bits() -> None:
+    """A stream overrun and an invalid target in one step: the first frame carries bits 5 and 7
+    of the spec's table, nothing else (the simulation has no fault numbering of its own)."""
+    spec = _spec_fault_bits()
+    sim = DeviceSimulation(DeviceConfig.coupled(), seed=5)
+    sim.start()
+    sim.host_finger(0.0, 40.0, 25.0, 0.5, True)
+    sim.host_finger(sim.time_s, 40.0, 25.0, 0.5, True)
+    sim.stream_frames(np.array([np.nan] * 10), np.full(10, 1.0))
+    sim.stream_frames(np.full(DeviceConfig.coupled().stream_queue_frames, 0.9), 1.0)
+    sim.feed_watchdog()
+    block = sim.step(20)
+    assert int(block.faults[0]) == spec["STREAM_OVERRUN"] | spec["INVALID_REQUEST"]

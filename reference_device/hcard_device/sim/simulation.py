@@ -31,7 +31,8 @@ previous one, which the braked plate stays under, is in force). That takes at mo
 :attr:`DeviceSimulation.limit_settle_time_s` (E-ViTa 0.81 ms, coupled stimulator 3.52 ms). The EV
 amplifier's limiter takes lowered voltage and current limits from the next frame.
 
-Faults per frame (:class:`~hcard_device.sim.faults.Faults`): condition flags (limits, watchdog,
+Faults per frame are the protocol's STATE.faults bits
+(:class:`~hcard_device.protocol.constants.FaultBits`): condition flags (limits, watchdog,
 clipped card) are set on every frame they hold; event flags (``STREAM_OVERRUN``,
 ``INVALID_REQUEST``) on the first frame of the step after the event.
 
@@ -60,10 +61,10 @@ from hcard.physics.units import M_PER_MM
 from hcard.render import Renderer, RenderOptions, RenderStream
 from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb
+from hcard_device.protocol.constants import FaultBits
 from hcard_device.sim.amplifier import EVAmplifier
 from hcard_device.sim.clip import ClipReport, clip_report
 from hcard_device.sim.config import DeviceConfig
-from hcard_device.sim.faults import Faults
 from hcard_device.sim.finger import FingerPhysics, FingerTruth, HostFinger, TrackFinger
 from hcard_device.sim.hidden import HiddenPhysics
 from hcard_device.sim.host_clock import HostClock
@@ -138,7 +139,7 @@ class SimBlock:
         finger_x_mm, finger_y_mm: the finger's true position, mm.
         finger_speed_m_s: its true sliding speed, m/s.
         contact: it touches the plate.
-        faults: (N,) :class:`Faults` bits per frame (uint16).
+        faults: (N,) :class:`FaultBits` bits per frame (uint16).
     """
 
     t_s: np.ndarray
@@ -169,7 +170,7 @@ class SimBlock:
         """Total target relative friction ``uv * ev`` (Eq. 4.1)."""
         return self.target_uv * self.target_ev
 
-    def has(self, fault: Faults) -> np.ndarray:
+    def has(self, fault: FaultBits) -> np.ndarray:
         """Per-frame mask of frames with ``fault`` set."""
         return (self.faults & int(fault)) != 0
 
@@ -626,7 +627,7 @@ class DeviceSimulation:
         take = min(room, uv_a.shape[0])
         if take < uv_a.shape[0]:
             self.stream_overruns += uv_a.shape[0] - take
-            self._events |= int(Faults.STREAM_OVERRUN)
+            self._events |= int(FaultBits.STREAM_OVERRUN)
         if take > 0:
             self._queue.append((uv_a[:take].copy(), ev_a[:take].copy()))
             self._queued += take
@@ -677,7 +678,7 @@ class DeviceSimulation:
         # 5. output gain (stop, watchdog).
         gain, tripped = self._output_gain(times)
         if tripped is not None:
-            faults[tripped] |= int(Faults.WATCHDOG)
+            faults[tripped] |= int(FaultBits.WATCHDOG)
         if gain is not None:
             amplitude_raw, voltage_raw = amplitude_raw * gain, voltage_raw * gain
         amplitude_cmd = np.minimum(amplitude_raw, self._limits.max_amplitude_m)
@@ -691,7 +692,7 @@ class DeviceSimulation:
             self._commit_limits()  # the braked plate landed on the lowered limit (PS5)
         if np.logical_or.reduce(plate.clamped):
             faults[np.logical_or.reduce(plate.clamped.reshape(n, m), axis=1)] |= int(
-                Faults.AMPLITUDE_LIMIT)
+                FaultBits.AMPLITUDE_LIMIT)
         if self.amplifier is not None:
             contact = truth.contact
             if np.logical_and.reduce(contact):  # one load for the whole step: a number
@@ -702,8 +703,8 @@ class DeviceSimulation:
                 load = np.where(contact, self.finger_capacitance_f, 0.0)
             ev_run = self.amplifier.run(voltage_cmd, load)
             voltage, current = ev_run.voltage, ev_run.current
-            faults[ev_run.voltage_limited] |= int(Faults.VOLTAGE_LIMIT)
-            faults[ev_run.current_limited] |= int(Faults.CURRENT_LIMIT)
+            faults[ev_run.voltage_limited] |= int(FaultBits.VOLTAGE_LIMIT)
+            faults[ev_run.current_limited] |= int(FaultBits.CURRENT_LIMIT)
         else:
             voltage, current = np.zeros(n), np.zeros(n)
         friction = self.finger_physics.friction(amplitude, voltage, truth, measured=True)
@@ -735,7 +736,7 @@ class DeviceSimulation:
     # -- pieces ----------------------------------------------------------------------------
     def _invalid(self) -> None:
         self.invalid_requests += 1
-        self._events |= int(Faults.INVALID_REQUEST)
+        self._events |= int(FaultBits.INVALID_REQUEST)
 
     def _last_sample_time(self) -> float:
         if len(self._pending):
@@ -871,19 +872,19 @@ class DeviceSimulation:
             return  # every target rendered: nothing to flag
         missing = None  # frames that need a channel the device lacks
         if self._profile.uv_model is not None and self._limits.max_amplitude_m > 0:
-            faults[uv_short] |= int(Faults.AMPLITUDE_LIMIT)
+            faults[uv_short] |= int(FaultBits.AMPLITUDE_LIMIT)
         else:
             missing = uv_short
         if self._profile.ev_model is not None and self._limits.max_voltage_v > 0:
             name = self._profile.voltage_limit[1]
-            flag = Faults.CURRENT_LIMIT if name == "max_current" else Faults.VOLTAGE_LIMIT
+            flag = FaultBits.CURRENT_LIMIT if name == "max_current" else FaultBits.VOLTAGE_LIMIT
             faults[ev_short] |= int(flag)
         else:
             missing = ev_short if missing is None else missing | ev_short
         if not self._streaming and self._card_report.clipped:
-            faults[uv_short | ev_short] |= int(Faults.CARD_CLIPPED)
+            faults[uv_short | ev_short] |= int(FaultBits.CARD_CLIPPED)
         if missing is not None:
-            faults[missing] |= int(Faults.CARD_CLIPPED)
+            faults[missing] |= int(FaultBits.CARD_CLIPPED)
 
     def _output_gain(self, times: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
         """Per-frame output gain (None: 1 throughout) and the frames where the watchdog has
