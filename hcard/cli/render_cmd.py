@@ -52,7 +52,7 @@ def finger_state(track: FingerTrack, t: np.ndarray) -> tuple[np.ndarray, np.ndar
     segment = np.clip(np.searchsorted(track.t, t, side="right") - 1, 0, len(track) - 1)
     touching = track.contact[segment]
     speed = np.where(touching, speed_mm_s[segment] * M_PER_MM, 0.0)
-    force = np.where(touching, np.maximum(np.interp(t, track.t, track.fn), 0.0), 0.0)
+    force = np.where(touching, np.maximum(np.interp(t, track.t, track.normal_force), 0.0), 0.0)
     return speed, force
 
 

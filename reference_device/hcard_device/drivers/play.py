@@ -241,7 +241,7 @@ def _drive(driver: Driver, track: FingerTrack, host_us: np.ndarray, start: float
             last_report = driver.clock()
 
     for k, (t, x, y, fn, contact) in enumerate(
-        zip(track.t, track.x, track.y, track.fn, track.contact, strict=True)
+        zip(track.t, track.x, track.y, track.normal_force, track.contact, strict=True)
     ):
         due = start + (float(t) - t_first)
         while due - last_sent > keepalive_s:

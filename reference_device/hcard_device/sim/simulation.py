@@ -686,7 +686,7 @@ class DeviceSimulation:
 
         # 6. physics.
         m = cfg.loop_samples_per_frame
-        plate = self.plate.run(amplitude_cmd.repeat(m), truth.fn_n.repeat(m))
+        plate = self.plate.run(amplitude_cmd.repeat(m), truth.normal_force_n.repeat(m))
         amplitude = np.add.reduce(plate.amplitude.reshape(n, m), axis=1) / m  # frame mean
         if self.limits_pending and not self.plate.above_limit:
             self._commit_limits()  # the braked plate landed on the lowered limit (PS5)
@@ -722,7 +722,7 @@ class DeviceSimulation:
             current_a=current,
             friction=friction,
             lateral_force_n=lateral,
-            normal_force_n=truth.fn_n,
+            normal_force_n=truth.normal_force_n,
             corner_forces_n=corners,
             touch=touch,
             texture=texture,
@@ -762,7 +762,8 @@ class DeviceSimulation:
         finger, n = self._finger, times.shape[0]
         if not isinstance(finger, TrackFinger):
             truth = finger.state(times) if finger is not None else FingerTruth.absent(n)
-            return truth, self.force_sensors.split(truth.fn_n, truth.x_mm, truth.y_mm), None
+            split = self.force_sensors.split(truth.normal_force_n, truth.x_mm, truth.y_mm)
+            return truth, split, None
         ahead = self._ahead
         if ahead is None or ahead[0] is not finger or not (
             ahead[1] <= self._frame and self._frame + n <= ahead[1] + ahead[3].shape[0]
@@ -770,7 +771,7 @@ class DeviceSimulation:
             count = max(n, LOOKAHEAD_FRAMES)
             frames = (self._frame + np.arange(count, dtype=np.float64)) / self.config.frame_rate_hz
             truth = finger.state(frames)
-            split = self.force_sensors.split(truth.fn_n, truth.x_mm, truth.y_mm)
+            split = self.force_sensors.split(truth.normal_force_n, truth.x_mm, truth.y_mm)
             coefficient = self.finger_physics.coefficient(truth)
             split.flags.writeable = coefficient.flags.writeable = False
             ahead = self._ahead = (finger, self._frame, truth, split, coefficient)
@@ -800,7 +801,7 @@ class DeviceSimulation:
             frames = np.rint(times * rate)
             index = frames - ahead[1]
             truth = ahead[2]
-            if (index[0] >= 0 and index[-1] < truth.fn_n.shape[0]
+            if (index[0] >= 0 and index[-1] < truth.normal_force_n.shape[0]
                     and np.logical_and.reduce(frames / rate == times)):
                 i = index.astype(np.intp)
                 return truth.x_mm[i], truth.y_mm[i], truth.contact[i]
