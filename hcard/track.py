@@ -16,9 +16,8 @@ import numpy as np
 
 from hcard.csv_rows import numeric_table, read_csv_text
 from hcard.errors import TrackError
+from hcard.rates import TOUCH_RATE_HZ
 
-TOUCH_RATE_HZ = 50.0
-"""Sampling rate of the capacitive touch screens the thesis uses, Hz (section 5.1.1)."""
 DEFAULT_NORMAL_FORCE_N = 0.5
 REQUIRED_COLUMNS = ("t_s", "x_mm", "y_mm")
 OPTIONAL_COLUMNS = ("fn_n", "contact")

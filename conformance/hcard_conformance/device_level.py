@@ -756,10 +756,10 @@ class LimitsChange:
         """One line for the result."""
         low = self.lowered
         return (f"{self.over} of {self.reports} reports after the SET over the new limits "
-                f"({low.max_amplitude_m * 1e9:.0f} nm, {low.max_voltage_v:g} V, "
+                f"({low.max_amplitude_m * NM_PER_M:.0f} nm, {low.max_voltage_v:g} V, "
                 f"{low.max_current_a * UA_PER_A:g} uA; read back "
                 f"{'the same' if self.read_back == low else str(self.read_back)}); plate at "
-                f"{self.before_m * 1e9:.0f} nm before; largest output {self.worst:.3f} x its "
+                f"{self.before_m * NM_PER_M:.0f} nm before; largest output {self.worst:.3f} x its "
                 f"new limit (tolerance one report count)")
 
 
@@ -865,8 +865,8 @@ def measure_limits_while_driven(driver: Driver, base: Limits) -> LimitsChange:
                 f"the stream before the change (plate at {driven * NM_PER_M:.0f} nm)")
     if not driven >= MIN_OVER_NEW_LIMIT * lowered.max_amplitude_m:
         raise CannotAssess(f"the plate was at {driven * NM_PER_M:.0f} nm before the change, not "
-                           f"{MIN_OVER_NEW_LIMIT:g} x the new {lowered.max_amplitude_m * 1e9:.0f}"
-                           f" nm limit")
+                           f"{MIN_OVER_NEW_LIMIT:g} x the new "
+                           f"{lowered.max_amplitude_m * NM_PER_M:.0f} nm limit")
     after = [s for s in states if s.host_time_echo_us in finger.after_us]
     if not after:
         raise CannotAssess("no report echoed a FINGER sent after the change")

@@ -32,7 +32,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
-import scipy.constants
 
 from hcard.atomic import write_atomically
 from hcard.bounded_read import MAX_JSON_FILE_BYTES, InputTooLarge, read_bounded
@@ -76,9 +75,6 @@ AMPLITUDE_SEARCH_FACTOR = 8.0
 
 REFERENCE_VOLTAGE = 1000.0
 """Envelope at which the EV channel's force is evaluated to scale the inverse, V."""
-
-EPSILON_0 = scipy.constants.epsilon_0
-"""Vacuum permittivity, F/m (CODATA, through scipy.constants)."""
 
 _LAYER_PARAMETERS = (
     "area", "sc_thickness", "sc_permittivity", "insulator_thickness", "insulator_permittivity"
@@ -467,7 +463,11 @@ class DeviceProfile:
             p["sc_thickness"] / p["sc_permittivity"]
             + p["insulator_thickness"] / p["insulator_permittivity"]
         )
-        return EPSILON_0 * p["area"] / electrical_thickness
+        # scipy.constants imported here: it takes 0.2 s, and hosts that only read a device's
+        # configuration load this module
+        from scipy.constants import epsilon_0
+
+        return epsilon_0 * p["area"] / electrical_thickness
 
     # -- forward and rendering -------------------------------------------------------------
     def forward(

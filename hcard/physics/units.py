@@ -20,7 +20,6 @@ import re
 from typing import Any
 
 import numpy as np
-import scipy.constants
 
 from hcard.errors import HcardError
 
@@ -129,7 +128,6 @@ _SPECIAL = {
     "kN/m": (1e3, "N/m"),
     "N/mm": (1e3, "N/m"),
     "S/m": (1.0, "S/m"),
-    "atm": (scipy.constants.atm, "Pa"),
     "bar": (1e5, "Pa"),
     "kPa": (1e3, "Pa"),
     "min": (60.0, "s"),
@@ -158,6 +156,10 @@ def column_units(*suffixes: str) -> dict[str, float]:
 def parse_unit(unit: str) -> tuple[float, str]:
     """Scale to SI and the SI unit of ``unit`` (``"um"`` -> ``(1e-6, "m")``)."""
     unit = unit.strip()
+    if unit == "atm":  # imported here: scipy.constants takes 0.3 s, the device's hosts load this
+        from scipy.constants import atm
+
+        return atm, "Pa"
     if unit in _SPECIAL:
         return _SPECIAL[unit]
     if unit in _BASE:

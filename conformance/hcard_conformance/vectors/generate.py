@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from hcard import card_io
+from hcard.rates import DEFAULT_FRAME_RATE_HZ
 from hcard.render import Frames, Renderer, RenderOptions
-from hcard.render.options import DEFAULT_FRAME_RATE_HZ
 from hcard.track import track_to_csv
 from hcard_conformance.vectors.cards import vector_cards
 from hcard_conformance.vectors.invalid import invalid_vectors

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hcard.track import TOUCH_RATE_HZ, FingerTrack, make_track
+from hcard.rates import TOUCH_RATE_HZ
+from hcard.track import FingerTrack, make_track
 
 SLOW_MAX_MM_S = 30.0
 """Upper bound of the slow class, mm/s (thesis 5.4)."""

@@ -22,8 +22,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from hcard.physics.profile import COUPLED_STIMULATOR_LIMITS
-from hcard.render.options import DEFAULT_FRAME_RATE_HZ
-from hcard.track import TOUCH_RATE_HZ
+from hcard.rates import DEFAULT_FRAME_RATE_HZ, TOUCH_RATE_HZ
 
 EVITA_PLATE_QUALITY_FACTOR = 300.0
 """Unloaded quality factor of the E-ViTa plate. The envelope of a resonator is first order with
