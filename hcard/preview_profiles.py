@@ -22,8 +22,8 @@ from matplotlib.ticker import MaxNLocator
 from matplotlib.transforms import Transform
 
 from hcard.channels import LABEL_OF_VALUE
-from hcard.physics.units import MS_PER_S, S_PER_MS
 from hcard.preview_text import LINE_STEP_EM, PathLabels
+from hcard.quantities import MS_PER_S, S_PER_MS
 from hcard.v1 import card_pb2 as pb
 
 MAX_SPATIAL_WINDOW_MM = 50.0

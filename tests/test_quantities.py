@@ -1,12 +1,12 @@
-"""The one module of quantities and units (hcard.physics.units): conversions, column units."""
+"""The one module of quantities and units (hcard.quantities): conversions, column units."""
 
 from __future__ import annotations
 
 import pytest
 import scipy.constants as sc
 
+from hcard import quantities as units
 from hcard.calibration.measurement import SI_SUFFIX, read_measurement
-from hcard.physics import units
 
 
 @pytest.mark.parametrize(

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from hcard.physics.units import US_PER_S
+from hcard.quantities import US_PER_S
 from hcard.render import Frames, RenderOptions
 from hcard.render import render as reference_render
 from hcard.track import FingerTrack

@@ -50,7 +50,7 @@ import numpy as np
 
 from hcard import build
 from hcard.physics.profile import DeviceProfile
-from hcard.physics.units import M_PER_MM, MS_PER_S, NM_PER_M, S_PER_MS, S_PER_US, UA_PER_A, US_PER_S
+from hcard.quantities import M_PER_MM, MS_PER_S, NM_PER_M, S_PER_MS, S_PER_US, UA_PER_A, US_PER_S
 from hcard.render import render
 from hcard.track import FingerTrack, straight_stroke
 from hcard.v1 import card_pb2 as pb

@@ -43,7 +43,7 @@ from itertools import pairwise
 
 from hcard import build
 from hcard.card_io import to_bytes
-from hcard.physics.units import MS_PER_S, S_PER_US, US_PER_S
+from hcard.quantities import MS_PER_S, S_PER_US, US_PER_S
 from hcard_conformance.context import Context
 from hcard_conformance.registry import check
 from hcard_conformance.result import CannotAssess, CheckResult, guarded, measured, unassessed

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from hcard.physics.units import MS_PER_S
+from hcard.quantities import MS_PER_S
 from hcard.render import RenderOptions
 from hcard.render.compiled import velocity_locked
 from hcard.track import FingerTrack

@@ -39,7 +39,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 from hcard import build
-from hcard.physics.units import MS_PER_S
+from hcard.quantities import MS_PER_S
 from hcard.track import FingerTrack, straight_stroke
 from hcard.v1 import card_pb2 as pb
 from hcard_conformance.context import Context

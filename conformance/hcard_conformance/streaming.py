@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hcard.physics.units import S_PER_US, US_PER_S
+from hcard.quantities import S_PER_US, US_PER_S
 from hcard_conformance.result import CannotAssess
 from hcard_device.drivers.base import Driver
 from hcard_device.drivers.recording import unwrapped_times

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from hcard.calibration.measurement import CONTACT_THRESHOLD_N, Measurement, MeasurementError
-from hcard.physics.units import MN_PER_N
+from hcard.quantities import MN_PER_N
 
 NOISE_MULTIPLE = 5.0
 """Standard deviations of the lifted normal-force noise below the contact threshold."""

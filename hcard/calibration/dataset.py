@@ -37,7 +37,7 @@ from hcard.calibration.splits import (
     stroke_ids,
 )
 from hcard.physics import Predictor
-from hcard.physics.units import MN_PER_N
+from hcard.quantities import MN_PER_N
 
 ATMOSPHERE_PA = scipy.constants.atm
 """Ambient pressure assumed for a recording whose sidecar gives none, Pa."""

@@ -103,7 +103,7 @@ from hcard.calibration.screening import (
 )
 from hcard.calibration.selection import Comparison, Separation, compare
 from hcard.physics import Predictor, PredictorError
-from hcard.physics.units import MN_PER_N
+from hcard.quantities import MN_PER_N
 
 NO_EFFECT = "no effect needed"
 EXPLAINED = "explained by added effects"

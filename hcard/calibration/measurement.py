@@ -23,7 +23,7 @@ from hcard.bounded_read import MAX_JSON_FILE_BYTES, InputTooLarge, read_bounded
 from hcard.csv_rows import format_rows, numeric_table, read_csv_text
 from hcard.errors import HcardError
 from hcard.json_text import JsonInputError, parse_json
-from hcard.physics.units import COLUMN_UNITS
+from hcard.quantities import COLUMN_UNITS
 
 #: The SI unit suffix each quantity is written in by :func:`write_measurement`.
 SI_SUFFIX = {quantity: next(s for s, scale in units.items() if scale == 1.0)

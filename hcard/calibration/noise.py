@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hcard.physics.units import MN_PER_N
+from hcard.quantities import MN_PER_N
 
 MIN_RUN = 10
 """Lifted samples a run needs to count for the noise model."""

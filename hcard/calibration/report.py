@@ -45,8 +45,8 @@ from hcard.calibration.residuals import ResidualReport
 from hcard.calibration.screening import SCREEN_TOLERANCE, describe_screening, screening_stride
 from hcard.physics import PredictorError
 from hcard.physics.profile import DeviceProfile
-from hcard.physics.units import MN_PER_N, N_PER_MN, SI_UNITS, display_unit
 from hcard.preview_text import PathLabels
+from hcard.quantities import MN_PER_N, N_PER_MN, SI_UNITS, display_unit
 
 FORMAT = "hcard-calibration-report/1"
 """Value of the ``format`` key of ``report.json``."""

@@ -22,7 +22,7 @@ from hcard.physics.actuation import (
     combined_clipping,
     combined_range,
 )
-from hcard.physics.units import M_PER_MM, UM_PER_M
+from hcard.quantities import M_PER_MM, UM_PER_M
 from hcard.render import Frames, Renderer, RenderOptions
 from hcard.render.options import (
     DEFAULT_BAND_LIMIT_HZ,

@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 
 from hcard.physics.predictor import PredictorError
-from hcard.physics.units import UM_PER_M
+from hcard.quantities import UM_PER_M
 
 if TYPE_CHECKING:
     from hcard.physics.profile import DeviceLimits, DeviceProfile

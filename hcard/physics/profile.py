@@ -44,7 +44,7 @@ from hcard.physics.profile_effects import (
     solve_decreasing,
     with_effects,
 )
-from hcard.physics.units import UnitError, parse_quantity, parse_unit
+from hcard.quantities import UnitError, parse_quantity, parse_unit
 
 if TYPE_CHECKING:
     from hcard.physics.actuation import ActuatorCommands

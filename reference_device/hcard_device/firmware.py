@@ -36,7 +36,7 @@ from collections.abc import Callable
 import numpy as np
 
 from hcard.physics.profile import DeviceProfile
-from hcard.physics.units import MM_PER_M, MS_PER_S
+from hcard.quantities import MM_PER_M, MS_PER_S
 from hcard.track import FingerTrack, make_track
 from hcard.v1 import card_pb2 as pb
 from hcard_device.protocol import (

@@ -24,7 +24,7 @@ import numpy as np
 from hcard import limits
 from hcard.build import grid_count
 from hcard.errors import ImageError
-from hcard.physics.units import UM_PER_MM
+from hcard.quantities import UM_PER_MM
 
 MM_PER_INCH = 25.4
 MAX_DPI = 25_400.0

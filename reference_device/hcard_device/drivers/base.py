@@ -35,7 +35,7 @@ from types import TracebackType
 from typing import ClassVar
 
 from hcard.card_io import to_bytes
-from hcard.physics.units import MS_PER_S, S_PER_MS, S_PER_US
+from hcard.quantities import MS_PER_S, S_PER_MS, S_PER_US
 from hcard.v1 import card_pb2 as pb
 from hcard_device.drivers.errors import DeviceError, DeviceStall, SessionBusy, SessionLost
 from hcard_device.drivers.uri import DeviceUri

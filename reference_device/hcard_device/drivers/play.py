@@ -26,7 +26,7 @@ import numpy as np
 from hcard.calibration.measurement import MeasurementError
 from hcard.card_io import to_bytes
 from hcard.channels import LABEL_OF_VALUE
-from hcard.physics.units import S_PER_US, US_PER_S
+from hcard.quantities import S_PER_US, US_PER_S
 from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb
 from hcard_device.drivers.base import Driver, UploadOutcome

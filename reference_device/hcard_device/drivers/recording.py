@@ -26,7 +26,7 @@ import numpy as np
 
 from hcard.calibration.measurement import DEVICE_COLUMNS, Measurement, write_measurement_blocks
 from hcard.calibration.splits import stroke_numbers
-from hcard.physics.units import M_PER_MM, S_PER_US
+from hcard.quantities import M_PER_MM, S_PER_US
 from hcard.track import FingerTrack
 from hcard_device.drivers.state_log import state_field
 from hcard_device.protocol import Capability, DeviceInfo, DeviceKind, State

@@ -22,7 +22,7 @@ import numpy as np
 
 from hcard.channels import GROUP_OF_VALUE
 from hcard.physics.profile import DeviceProfile
-from hcard.physics.units import MM_PER_M, UM_PER_M
+from hcard.quantities import MM_PER_M, UM_PER_M
 from hcard.v1 import card_pb2 as pb
 
 REFERENCE_SPEED_M_S = 0.120

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hcard.physics.profile import DeviceProfile
-from hcard.physics.units import M_PER_MM, S_PER_US
+from hcard.quantities import M_PER_MM, S_PER_US
 from hcard.track import FingerTrack
 from hcard_builtins.physics.finger import FingerFriction
 from hcard_device.sim.hidden import HiddenPhysics

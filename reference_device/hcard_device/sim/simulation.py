@@ -57,7 +57,7 @@ import numpy as np
 
 from hcard.physics.actuation import actuate
 from hcard.physics.profile import DeviceProfile, ProfileError
-from hcard.physics.units import M_PER_MM
+from hcard.quantities import M_PER_MM
 from hcard.render import Renderer, RenderOptions, RenderStream
 from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb

@@ -7,7 +7,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from hcard.physics import PredictorError
-from hcard.physics.units import SI_UNITS
+from hcard.quantities import SI_UNITS
 
 UNITS = {
     **SI_UNITS,
