@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import pytest
 import scipy.constants as sc
 
@@ -69,3 +72,10 @@ def test_si_units_agree_with_the_parser() -> None:
     for name, unit in units.SI_UNITS.items():
         if unit:
             assert units.parse_unit(unit) == (1.0, unit), name
+
+
+def test_the_quantities_module_loads_without_numpy() -> None:
+    """The device's drivers take their conversions from it and never load numpy."""
+    code = ("import sys; import hcard.quantities, hcard.channels, hcard.rates; "
+            "sys.exit('numpy' in sys.modules)")
+    assert subprocess.run([sys.executable, "-c", code], check=False).returncode == 0
