@@ -117,7 +117,7 @@ def stream_costs(renderer: Renderer, track: FingerTrack) -> np.ndarray:
     stream = renderer.stream(t0=float(track.t[0]))
     costs = []
     for i in range(len(track) - 1):
-        stream.push(track.t[i], track.x[i], track.y[i], track.fn[i], track.contact[i])
+        stream.push(track.t[i], track.x[i], track.y[i], track.normal_force[i], track.contact[i])
         for _ in range(blocks_per_sample):
             start = time.perf_counter()
             stream.render(BLOCK_FRAMES)

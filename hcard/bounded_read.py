@@ -20,6 +20,9 @@ a 1 kHz tribometer recording with 12 columns is about 300 MB)."""
 MAX_JSON_FILE_BYTES = 16 * 1024 * 1024
 """Largest JSON side file (a device profile, a measurement's conditions sidecar) a reader
 accepts, bytes (16 MiB, the card file limit)."""
+DEFAULT_MAX_PIXELS = 64_000_000
+"""Largest image an encoder decodes by default: 64 megapixels (a guard against decompression
+bombs; ``hcard encode --max-pixels`` raises it)."""
 
 
 class InputTooLarge(ValueError):

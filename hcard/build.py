@@ -15,10 +15,11 @@ from collections.abc import Sequence
 import numpy as np
 
 from hcard import __version__, limits
+from hcard.channels import VALUE_OF_NAME
 from hcard.errors import CardValidationError, Problem
 from hcard.v1 import card_pb2 as pb
 
-CHANNELS = {"uv": pb.CHANNEL_UV, "ev": pb.CHANNEL_EV, "bipolar": pb.CHANNEL_BIPOLAR}
+CHANNELS = VALUE_OF_NAME
 LOCKINGS = {
     "position": pb.LOCKING_POSITION,
     "velocity": pb.LOCKING_VELOCITY,

@@ -9,14 +9,10 @@ if TYPE_CHECKING:
     import numpy as np
 
 from hcard import limits
+from hcard.channels import LABEL_OF_VALUE
 from hcard.v1 import card_pb2 as pb
 
-CHANNEL_NAMES = {
-    pb.CHANNEL_UNSPECIFIED: "texture",
-    pb.CHANNEL_UV: "UV",
-    pb.CHANNEL_EV: "EV",
-    pb.CHANNEL_BIPOLAR: "BIPOLAR",
-}
+CHANNEL_NAMES = {pb.CHANNEL_UNSPECIFIED: "texture", **LABEL_OF_VALUE}
 LOCKING_NAMES = {
     pb.LOCKING_UNSPECIFIED: "unspecified",
     pb.LOCKING_POSITION: "position",

@@ -21,7 +21,9 @@ from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.ticker import MaxNLocator
 from matplotlib.transforms import Transform
 
+from hcard.channels import LABEL_OF_VALUE
 from hcard.preview_text import LINE_STEP_EM, PathLabels
+from hcard.quantities import MS_PER_S, S_PER_MS
 from hcard.v1 import card_pb2 as pb
 
 MAX_SPATIAL_WINDOW_MM = 50.0
@@ -80,6 +82,8 @@ def _enum_label(enum: object, value: int, prefix: str) -> str:
 
 def channel_label(value: int) -> str:
     """Channel name without prefix: ``"UV"``, ``"EV"``, ``"BIPOLAR"``."""
+    if value in LABEL_OF_VALUE:
+        return LABEL_OF_VALUE[value]
     return _enum_label(pb.Channel, value, "CHANNEL_")
 
 
@@ -135,8 +139,9 @@ def _temporal_terms(texture: pb.Texture) -> tuple[list[Term], float]:
     if not temporal:
         return [], FLAT_WINDOW
     strongest = max(temporal, key=lambda c: c.amplitude).frequency
-    length_ms = _window([c.frequency for c in temporal], strongest, MAX_TEMPORAL_WINDOW_MS, 1e3)
-    return [(c.frequency * 1e-3, c.amplitude, c.phase) for c in temporal], length_ms
+    length_ms = _window(
+        [c.frequency for c in temporal], strongest, MAX_TEMPORAL_WINDOW_MS, MS_PER_S)
+    return [(c.frequency * S_PER_MS, c.amplitude, c.phase) for c in temporal], length_ms
 
 
 def _evaluate(baseline: float, terms: Sequence[Term], x: np.ndarray) -> np.ndarray:

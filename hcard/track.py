@@ -16,6 +16,7 @@ import numpy as np
 
 from hcard.csv_rows import numeric_table, read_csv_text
 from hcard.errors import TrackError
+from hcard.rates import TOUCH_RATE_HZ
 
 DEFAULT_NORMAL_FORCE_N = 0.5
 REQUIRED_COLUMNS = ("t_s", "x_mm", "y_mm")
@@ -29,14 +30,14 @@ class FingerTrack:
     Attributes:
         t: sample times, s, strictly increasing, shape (M,).
         x, y: positions on the surface, mm (origin top-left, +y down), shape (M,).
-        fn: normal force, N, shape (M,).
+        normal_force: normal force, N, shape (M,) (CSV column ``fn_n``).
         contact: True while the finger touches the surface, shape (M,).
     """
 
     t: np.ndarray
     x: np.ndarray
     y: np.ndarray
-    fn: np.ndarray
+    normal_force: np.ndarray
     contact: np.ndarray
 
     def __len__(self) -> int:
@@ -130,7 +131,7 @@ def track_to_csv(track: FingerTrack) -> str:
     """The CSV text of ``track`` (full float precision)."""
     lines = ["t_s,x_mm,y_mm,fn_n,contact"]
     for t, x, y, fn, c in zip(
-        track.t, track.x, track.y, track.fn, track.contact, strict=True
+        track.t, track.x, track.y, track.normal_force, track.contact, strict=True
     ):
         lines.append(f"{float(t)!r},{float(x)!r},{float(y)!r},{float(fn)!r},{int(c)}")
     return "\n".join(lines) + "\n"
@@ -141,7 +142,7 @@ def straight_stroke(
     velocity_mm_s: tuple[float, float],
     duration_s: float,
     *,
-    rate_hz: float = 50.0,
+    rate_hz: float = TOUCH_RATE_HZ,
     fn: float = DEFAULT_NORMAL_FORCE_N,
     t0: float = 0.0,
 ) -> FingerTrack:

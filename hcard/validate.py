@@ -17,10 +17,11 @@ import math
 from collections import Counter
 
 from hcard import limits
+from hcard.channels import VALUES
 from hcard.errors import Problem
 from hcard.v1 import card_pb2 as pb
 
-_CHANNELS = {pb.CHANNEL_UV, pb.CHANNEL_EV, pb.CHANNEL_BIPOLAR}
+_CHANNELS = VALUES
 _LOCKINGS = {pb.LOCKING_POSITION, pb.LOCKING_VELOCITY, pb.LOCKING_AUTO}
 _DOMAINS = {pb.DOMAIN_SPATIAL, pb.DOMAIN_TEMPORAL}
 

@@ -15,8 +15,8 @@ from hcard.cli.main import cli
 from hcard.cli.predict_cmd import evaluate, make_figure, predict
 from hcard.physics.profile import DeviceProfile
 from hcard.physics.sweep import SweepError, parse_sweep, quantity, split_assignment
-from hcard.physics.units import UnitError, display_unit
 from hcard.plugins.registry import get_registry
+from hcard.quantities import UnitError, display_unit
 from hcard_builtins.physics.ultrasonic import DimensionlessGroup
 
 DIMENSIONLESS = DimensionlessGroup.name

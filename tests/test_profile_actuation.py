@@ -9,6 +9,7 @@ from typing import ClassVar
 
 import numpy as np
 import pytest
+import scipy.constants
 from cards import two_texture_card
 from test_physics_velocity_compensation import TOLERANCE, spring_slider_device, stepped_friction
 
@@ -28,7 +29,7 @@ from hcard_builtins.physics.electrovibration import ChargeLeakage, FingerGeometr
 from hcard_builtins.physics.finger import FingerFriction
 from hcard_builtins.physics.ultrasonic import DimensionlessGroup
 
-EPS0 = 8.8541878128e-12
+EPS0 = scipy.constants.epsilon_0
 AREA, D_SC, EPS_SC, D_I, EPS_I = 1e-4, 200e-6, 1560.0, 90e-6, 3.35
 K_EV = EPS0 * AREA / (2 * (D_SC / EPS_SC + D_I / EPS_I) * (D_SC + D_I))
 """Eq. 3.12 written out: F_e / v^2 for the section 3.6 film, N/V^2."""

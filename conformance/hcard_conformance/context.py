@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from hcard.quantities import US_PER_S
 from hcard.render import Frames, RenderOptions
 from hcard.render import render as reference_render
 from hcard.track import FingerTrack
@@ -89,7 +90,7 @@ def session_times(states: Sequence[State], track: FingerTrack, host_us: np.ndarr
     from hcard_device.protocol.constants import ECHO_AGE_UNKNOWN, TIME_UNIT_S
 
     if host_us is None:
-        host_us = np.rint(track.t * 1e6).astype(np.int64) % HOST_TIME_MODULO
+        host_us = np.rint(track.t * US_PER_S).astype(np.int64) % HOST_TIME_MODULO
     device_t = unwrapped_times(states) if states else np.zeros(0)
     echo = state_field(states, "host_time_echo_us").astype(np.int64)
     sample = echoed_samples(host_us, echo)

@@ -50,6 +50,7 @@ import numpy as np
 
 from hcard import build
 from hcard.physics.profile import DeviceProfile
+from hcard.quantities import MS_PER_S, NM_PER_M, S_PER_MS, S_PER_US, UA_PER_A, US_PER_S
 from hcard.render import render
 from hcard.render.touch import speed_estimate
 from hcard.track import FingerTrack, straight_stroke
@@ -539,8 +540,8 @@ def check_dynamics(ctx: Context) -> Iterator[CheckResult]:
     def rise_time() -> Iterator[CheckResult]:
         with open_driver() as driver:
             rise = measure_rise_time(driver, dyn.max_rise_s)
-        yield _result("device.dynamics", "rise-time", "rise_10_90", rise * 1e3,
-                      dyn.max_rise_s * 1e3, "ms", dyn.why)
+        yield _result("device.dynamics", "rise-time", "rise_10_90", rise * MS_PER_S,
+                      dyn.max_rise_s * MS_PER_S, "ms", dyn.why)
 
     yield from guarded("device.dynamics", LEVEL, ["bandwidth"], bandwidth)
     yield from guarded("device.dynamics", LEVEL, ["rise-time"], rise_time)
@@ -640,7 +641,7 @@ def _host_time_since(state: State, start_us: int) -> float | None:
         return None
     modulo = 1 << 32
     since_us = (state.host_time_echo_us - start_us + modulo // 2) % modulo - modulo // 2
-    return since_us * 1e-6 + age
+    return since_us * S_PER_US + age
 
 
 @check(name="device.latency", level=LEVEL,
@@ -663,8 +664,8 @@ def check_latency(ctx: Context) -> Iterator[CheckResult]:
                  "read backlog or the fastest transit" if not timing.keeps_real_time
                  else "reports timed when the host read them")
         yield _result("device.latency", "boundary-move", "median_latency",
-                      float(np.median(lat)) * 1e3, timing.latency_s * 1e3, "ms",
-                      f"{len(lat)} moves, max {np.nanmax(lat) * 1e3:.1f} ms; {timed}; "
+                      float(np.median(lat)) * MS_PER_S, timing.latency_s * MS_PER_S, "ms",
+                      f"{len(lat)} moves, max {np.nanmax(lat) * MS_PER_S:.1f} ms; {timed}; "
                       f"{timing.why}")
 
     def read_lag() -> Iterator[CheckResult]:
@@ -675,8 +676,9 @@ def check_latency(ctx: Context) -> Iterator[CheckResult]:
                                "PI3)")
         lags = np.asarray(runs[0].read_lag_s)
         yield _result("device.latency", "host-read-lag", "median_read_lag",
-                      float(np.median(lags)) * 1e3, timing.read_lag_s * 1e3, "ms",
-                      f"{lags.size} reports, 90th percentile {np.percentile(lags, 90) * 1e3:.1f}"
+                      float(np.median(lags)) * MS_PER_S, timing.read_lag_s * MS_PER_S, "ms",
+                      f"{lags.size} reports, 90th percentile "
+                      f"{np.percentile(lags, 90) * MS_PER_S:.1f}"
                       f" ms (read time less the report's own time on the host clock, PI3); "
                       f"{timing.why}")
 
@@ -766,10 +768,10 @@ class LimitsChange:
         """One line for the result."""
         low = self.lowered
         return (f"{self.over} of {self.reports} reports after the SET over the new limits "
-                f"({low.max_amplitude_m * 1e9:.0f} nm, {low.max_voltage_v:g} V, "
-                f"{low.max_current_a * 1e6:g} uA; read back "
+                f"({low.max_amplitude_m * NM_PER_M:.0f} nm, {low.max_voltage_v:g} V, "
+                f"{low.max_current_a * UA_PER_A:g} uA; read back "
                 f"{'the same' if self.read_back == low else str(self.read_back)}); plate at "
-                f"{self.before_m * 1e9:.0f} nm before; largest output {self.worst:.3f} x its "
+                f"{self.before_m * NM_PER_M:.0f} nm before; largest output {self.worst:.3f} x its "
                 f"new limit (tolerance one report count)")
 
 
@@ -787,9 +789,9 @@ class _Finger:
     def send(self) -> None:
         """Send the finger where the stroke is now."""
         now = self.driver.clock()
-        host_us = max(round(now * 1e6), self.last_us + 1)
+        host_us = max(round(now * US_PER_S), self.last_us + 1)
         x = self.x0_mm + STROKE_SPEED_MM_S * (now - self.start_s)
-        self.driver.send_finger(host_us * 1e-6, x, self.y_mm, 0.5, True)
+        self.driver.send_finger(host_us * S_PER_US, x, self.y_mm, 0.5, True)
         self.last_us = host_us
         if self.marked:
             self.after_us.add(host_us % (1 << 32))
@@ -872,11 +874,11 @@ def measure_limits_while_driven(driver: Driver, base: Limits) -> LimitsChange:
     driven = float(np.median([s.amplitude_m for s in before[-5:]])) if before else 0.0
     settled = before[len(before) // 2:]
     require_fed(sum(s.stream_queued == 0 for s in settled), len(settled),
-                f"the stream before the change (plate at {driven * 1e9:.0f} nm)")
+                f"the stream before the change (plate at {driven * NM_PER_M:.0f} nm)")
     if not driven >= MIN_OVER_NEW_LIMIT * lowered.max_amplitude_m:
-        raise CannotAssess(f"the plate was at {driven * 1e9:.0f} nm before the change, not "
-                           f"{MIN_OVER_NEW_LIMIT:g} x the new {lowered.max_amplitude_m * 1e9:.0f}"
-                           f" nm limit")
+        raise CannotAssess(f"the plate was at {driven * NM_PER_M:.0f} nm before the change, not "
+                           f"{MIN_OVER_NEW_LIMIT:g} x the new "
+                           f"{lowered.max_amplitude_m * NM_PER_M:.0f} nm limit")
     after = [s for s in states if s.host_time_echo_us in finger.after_us]
     if not after:
         raise CannotAssess("no report echoed a FINGER sent after the change")
@@ -973,7 +975,7 @@ def measure_watchdog(driver: Driver) -> tuple[float, bool, float]:
         driver.send_finger(last, w / 4 + STROKE_SPEED_MM_S * (last - start), h / 2, 0.5, True)
         sent.append(Finger.from_si(last, 0.0, 0.0, 0.0, False).host_time_us)
         read += [(s, driver.clock()) for s in _read_briefly(driver, 0.02)]
-    silence_s = info.watchdog_ms * 1e-3 + 0.2
+    silence_s = info.watchdog_ms * S_PER_MS + 0.2
 
     def since_last(batch: list[tuple[State, float]]) -> list[tuple[State, float]]:
         """The reports of ``batch`` after the last FINGER report, each with its time since
@@ -1023,11 +1025,12 @@ def check_watchdog(ctx: Context) -> Iterator[CheckResult]:
 
     def measure() -> Iterator[CheckResult]:
         with open_driver() as driver:
-            limit = driver.info().watchdog_ms * 1e-3 + WATCHDOG_ALLOWANCE_S
+            limit = driver.info().watchdog_ms * S_PER_MS + WATCHDOG_ALLOWANCE_S
             off, reported, driven = measure_watchdog(driver)
-        yield _result("device.watchdog", "host-silent", "time_to_off", off * 1e3,
-                      limit * 1e3, "ms", f"plate at {driven * 1e9:.0f} nm before the host "
-                      f"went silent; off means <= {OFF_AMPLITUDE_M * 1e9:.0f} nm and <= 1 V")
+        yield _result("device.watchdog", "host-silent", "time_to_off", off * MS_PER_S,
+                      limit * MS_PER_S, "ms",
+                      f"plate at {driven * NM_PER_M:.0f} nm before the host went silent; "
+                      f"off means <= {OFF_AMPLITUDE_M * NM_PER_M:.0f} nm and <= 1 V")
         yield CheckResult("device.watchdog", LEVEL, "fault-reported", reported,
                           "watchdog_fault", float(reported), 1.0, "bool",
                           "fault WATCHDOG in STATE")

@@ -43,6 +43,7 @@ from itertools import pairwise
 
 from hcard import build
 from hcard.card_io import to_bytes
+from hcard.quantities import MS_PER_S, S_PER_US, US_PER_S
 from hcard_conformance.context import Context
 from hcard_conformance.registry import check
 from hcard_conformance.result import CannotAssess, CheckResult, guarded, measured, unassessed
@@ -393,7 +394,7 @@ def late_finger(states: Sequence[State]) -> list[bool]:
             device_us += (state.timestamp_us - states[k - 1].timestamp_us) % _TIME_MODULO
         if state.host_time_echo_us != previous_echo:
             if first_seen is not None:
-                is_late = device_us - first_seen > FINGER_GAP_S * 1e6
+                is_late = device_us - first_seen > FINGER_GAP_S * US_PER_S
             first_seen, previous_echo = device_us, state.host_time_echo_us
         late.append(is_late)
     return late
@@ -492,8 +493,8 @@ def _excused_text(attempt: Attempt, excused: int) -> str:
     if not excused:
         return ""
     return (f"; {excused} neutral reports excused (their finger sample came more than "
-            f"{FINGER_GAP_S * 1e3:.0f} ms after the one before; host paused at most "
-            f"{attempt.longest_pause_s * 1e3:.0f} ms)")
+            f"{FINGER_GAP_S * MS_PER_S:.0f} ms after the one before; host paused at most "
+            f"{attempt.longest_pause_s * MS_PER_S:.0f} ms)")
 
 
 def judge_refusal(case: str, attempt: Attempt, expected: UploadResult, card_a: LinkCard,
@@ -767,17 +768,19 @@ class LossSession:
         on a loaded machine)."""
         reasons = []
         if self.longest_pause_s > HOST_PAUSE_MAX_S:
-            reasons.append(f"the host paused {self.longest_pause_s * 1e3:.0f} ms between reads")
+            reasons.append(
+                f"the host paused {self.longest_pause_s * MS_PER_S:.0f} ms between reads")
         if self.late_s > HOST_PAUSE_MAX_S:
-            reasons.append(f"reports reached the host up to {self.late_s * 1e3:.0f} ms late")
+            reasons.append(f"reports reached the host up to {self.late_s * MS_PER_S:.0f} ms late")
         if self.rate_ratio < MIN_RATE_RATIO:
             reasons.append(f"the device's clock ran at {self.rate_ratio:.0%} of the host's")
         return " and ".join(reasons)
 
     def conditions(self) -> str:
         """The session's conditions, for a result's detail."""
-        text = (f"session {self.attempt}: host paused at most {self.longest_pause_s * 1e3:.1f} "
-                f"ms, delay spread {self.late_s * 1e3:.1f} ms, device clock at "
+        text = (f"session {self.attempt}: host paused at most "
+                f"{self.longest_pause_s * MS_PER_S:.1f} ms, delay spread "
+                f"{self.late_s * MS_PER_S:.1f} ms, device clock at "
                 f"{self.rate_ratio:.1%} of the host's")
         if self.disturbed:
             text += f" (disturbed: {self.disturbed})"
@@ -808,7 +811,7 @@ def measure_report_loss(driver: Driver, session_s: float = LOSS_SESSION_S) -> Lo
         raise CannotAssess(f"no STATE report in {session_s:g} s of play")
     rate = max(info.input_rate_hz, 1)
     stats = sequence_stats([s.sequence for s in states], [s.timestamp_us for s in states],
-                           1e6 / rate, arrivals, pauses)
+                           US_PER_S / rate, arrivals, pauses)
     flagged = sum(bool(s.faults & FaultBits.INPUT_DROPPED) for s in states)
     return LossSession(stats, counters, states[-1].dropped_reports, flagged, duration,
                        device_span_s(states) / duration, session.longest_pause_s,
@@ -824,7 +827,8 @@ def delay_spread_s(states: Sequence[State], arrivals_s: Sequence[float]) -> floa
         return 0.0
     device_s, delays = 0.0, [arrivals_s[0]]
     for k in range(1, len(states)):
-        device_s += ((states[k].timestamp_us - states[k - 1].timestamp_us) % _TIME_MODULO) * 1e-6
+        ticks = (states[k].timestamp_us - states[k - 1].timestamp_us) % _TIME_MODULO
+        device_s += ticks * S_PER_US
         delays.append(arrivals_s[k] - device_s)
     return max(delays) - min(delays)
 
@@ -835,7 +839,7 @@ def device_span_s(states: Sequence[State]) -> float:
     total = 0
     for previous, current in pairwise(states):
         total += (current.timestamp_us - previous.timestamp_us) % _TIME_MODULO
-    return total * 1e-6
+    return total * S_PER_US
 
 
 def measure_loss_sessions(driver: Driver, attempts: int = LOSS_ATTEMPTS) -> LossSession:

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from hcard.quantities import MS_PER_S
 from hcard.render import RenderOptions
 from hcard.render.compiled import velocity_locked
 from hcard.render.touch import speed_estimate
@@ -217,7 +218,7 @@ def relative_error(impl: Signal, golden: Signal, tol: Tolerances) -> Metric:
         if value < best[0]:
             best = (value, d)
     return Metric(best[0], f"RMS relative error {best[0]:.4f} over {selected.size} frames "
-                  f"at lag {1e3 * best[1] / fs:.1f} ms")
+                  f"at lag {MS_PER_S * best[1] / fs:.1f} ms")
 
 
 # ---------------------------------------------------------------------------------- A2-A4
@@ -361,7 +362,7 @@ def spatial_phase_error(impl: Signal, golden: Signal, tol: Tolerances, track: Fi
         d = int(lags[top[np.argmin(np.abs(lags[top]))]])
         dx = vbar * abs(d) / fs
         if worst is None or dx > worst[0]:
-            worst = (dx, f"features displaced {dx:.2f} mm (lag {1e3 * d / fs:.1f} ms at "
+            worst = (dx, f"features displaced {dx:.2f} mm (lag {MS_PER_S * d / fs:.1f} ms at "
                      f"{vbar:.0f} mm/s), {golden.t[start]:.2f}-{golden.t[stop - 1]:.2f} s")
     return NOT_APPLICABLE if worst is None else Metric(*worst)
 
@@ -398,7 +399,7 @@ def boundary_error(impl: Signal, golden: Signal, tol: Tolerances, track: FingerT
         else:
             j = int(cand[np.argmin(np.abs(cand - j_star))])
             db = v * abs(j - j_star) / fs
-            text = f"{1e3 * (j - j_star) / fs:+.1f} ms at {v:.0f} mm/s"
+            text = f"{MS_PER_S * (j - j_star) / fs:+.1f} ms at {v:.0f} mm/s"
         if worst is None or db > worst[0]:
             worst = (db, f"boundary {a}->{b} at t={golden.t[j_star]:.3f} s misplaced "
                      f"{db:.2f} mm ({text})")

@@ -39,6 +39,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 from hcard import build
+from hcard.quantities import MS_PER_S
 from hcard.track import FingerTrack, straight_stroke
 from hcard.v1 import card_pb2 as pb
 from hcard_conformance.context import Context
@@ -336,7 +337,7 @@ def case_takeover_reported(hosts: Hosts, read_lag_s: float = 0.0) -> CheckResult
         second, token, at = took_over[0]
         second.send(Control(Command.STOP, token))  # the second host ends its session (PN4)
     if isinstance(first.error, SessionLost):
-        delay_ms = (first.error_at - at) * 1e3
+        delay_ms = (first.error_at - at) * MS_PER_S
         detail = f"the first host's play raised SessionLost {delay_ms:.1f} ms after TAKE_OVER: "
         detail += str(first.error)
     else:
@@ -347,7 +348,7 @@ def case_takeover_reported(hosts: Hosts, read_lag_s: float = 0.0) -> CheckResult
     if read_lag_s:
         detail += f"; threshold includes the timing class's host read lag {read_lag_s:g} s"
     return measured(CHECK, LEVEL, CASES[1], "time_to_loss", delay_ms,
-                    (LOSS_THRESHOLD_S + read_lag_s) * 1e3, unit="ms", detail=detail)
+                    (LOSS_THRESHOLD_S + read_lag_s) * MS_PER_S, unit="ms", detail=detail)
 
 
 def case_released_by_stop(hosts: Hosts) -> CheckResult:

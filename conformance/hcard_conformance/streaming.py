@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hcard.quantities import S_PER_US, US_PER_S
 from hcard_conformance.result import CannotAssess
 from hcard_device.drivers.base import Driver
 from hcard_device.drivers.recording import unwrapped_times
@@ -118,18 +119,18 @@ class SteadyStroke:
     0.01-0.03 % with this schedule."""
 
     def __init__(self, start_s: float, x_mm: float, y_mm: float) -> None:
-        self._start_us = round(start_s * 1e6)
+        self._start_us = round(start_s * US_PER_S)
         self._x0_counts = round(x_mm * 100)
         self._y_mm = y_mm
         self._sent = 0
 
     def send_due(self, driver: Driver, now_s: float) -> None:
         """Send every sample scheduled at or before ``now_s`` (host clock, s) not yet sent."""
-        period_us = round(FINGER_PERIOD_S * 1e6)
+        period_us = round(FINGER_PERIOD_S * US_PER_S)
         step_counts = round(FINGER_SPEED_MM_S * FINGER_PERIOD_S * 100)
-        while (self._start_us + self._sent * period_us) * 1e-6 <= now_s:
+        while (self._start_us + self._sent * period_us) * S_PER_US <= now_s:
             k = self._sent
-            driver.send_finger((self._start_us + k * period_us) * 1e-6,
+            driver.send_finger((self._start_us + k * period_us) * S_PER_US,
                                (self._x0_counts + k * step_counts) * 0.01, self._y_mm,
                                FINGER_FORCE_N, True)
             self._sent += 1

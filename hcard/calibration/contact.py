@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from hcard.calibration.measurement import CONTACT_THRESHOLD_N, Measurement, MeasurementError
+from hcard.quantities import MN_PER_N
 
 NOISE_MULTIPLE = 5.0
 """Standard deviations of the lifted normal-force noise below the contact threshold."""
@@ -95,7 +96,7 @@ def contact_warning(m: Measurement, threshold_n: float, label: str) -> str | Non
                                                      & ~in_contact(m, threshold_n)]))
     return (
         f"{label}: the stroke column puts {count} of its {marked} stroke samples in contact "
-        f"where the normal force is below the contact threshold of {threshold_n * 1e3:.3g} mN "
-        f"(down to {lowest * 1e3:.3g} mN, e.g. a stroke number carried through the lifts); "
+        f"where the normal force is below the contact threshold of {threshold_n * MN_PER_N:.3g} mN "
+        f"(down to {lowest * MN_PER_N:.3g} mN, e.g. a stroke number carried through the lifts); "
         "contact is taken from the normal force"
     )

@@ -19,6 +19,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.constants
 
 from hcard.calibration.contact import (
     check_threshold,
@@ -36,8 +37,9 @@ from hcard.calibration.splits import (
     stroke_ids,
 )
 from hcard.physics import Predictor
+from hcard.quantities import MN_PER_N
 
-ATMOSPHERE_PA = 101_325.0
+ATMOSPHERE_PA = scipy.constants.atm
 """Ambient pressure assumed for a recording whose sidecar gives none, Pa."""
 
 REST_S = 0.5
@@ -380,7 +382,7 @@ def prepare(
         stroke_parts.append(np.where(keep, ids + offset, -1))
         if not keep.any():
             raise MeasurementError(
-                f"{label}: no sample in contact (fn >= {threshold * 1e3:.3g} mN)"
+                f"{label}: no sample in contact (fn >= {threshold * MN_PER_N:.3g} mN)"
             )
         n = len(m)
         train = np.zeros(n, dtype=bool)

@@ -103,6 +103,7 @@ from hcard.calibration.screening import (
 )
 from hcard.calibration.selection import Comparison, Separation, compare
 from hcard.physics import Predictor, PredictorError
+from hcard.quantities import MN_PER_N
 
 NO_EFFECT = "no effect needed"
 EXPLAINED = "explained by added effects"
@@ -387,7 +388,7 @@ Progress = Callable[[str], None]
 def format_error(value: float, unit: str) -> str:
     """An error for people: forces in mN, other units as they are."""
     if unit == "N":
-        return f"{value * 1e3:.4g} mN"
+        return f"{value * MN_PER_N:.4g} mN"
     return f"{value:.4g} {unit}".rstrip()
 
 

@@ -23,29 +23,11 @@ from hcard.bounded_read import MAX_JSON_FILE_BYTES, InputTooLarge, read_bounded
 from hcard.csv_rows import format_rows, numeric_table, read_csv_text
 from hcard.errors import HcardError
 from hcard.json_text import JsonInputError, parse_json
+from hcard.quantities import COLUMN_UNITS
 
-#: Accepted unit suffixes per quantity: suffix -> scale to the SI unit (rule MF4).
-UNITS: dict[str, dict[str, float]] = {
-    "t": {"s": 1.0, "ms": 1e-3, "us": 1e-6},
-    "amplitude": {"m": 1.0, "mm": 1e-3, "um": 1e-6, "nm": 1e-9},
-    "voltage": {"v": 1.0, "kv": 1e3, "mv": 1e-3},
-    "x": {"m": 1.0, "mm": 1e-3, "um": 1e-6},
-    "y": {"m": 1.0, "mm": 1e-3, "um": 1e-6},
-    "speed": {"m_s": 1.0, "mm_s": 1e-3, "um_s": 1e-6},
-    "fn": {"n": 1.0, "mn": 1e-3},
-    "fl": {"n": 1.0, "mn": 1e-3},
-    "frequency": {"hz": 1.0, "khz": 1e3},
-    # device columns (rule MF12)
-    "current": {"a": 1.0, "ma": 1e-3, "ua": 1e-6},
-    "f_tl": {"n": 1.0, "mn": 1e-3},
-    "f_tr": {"n": 1.0, "mn": 1e-3},
-    "f_bl": {"n": 1.0, "mn": 1e-3},
-    "f_br": {"n": 1.0, "mn": 1e-3},
-    "echo": {"s": 1.0, "ms": 1e-3, "us": 1e-6},
-}
 #: The SI unit suffix each quantity is written in by :func:`write_measurement`.
 SI_SUFFIX = {quantity: next(s for s, scale in units.items() if scale == 1.0)
-             for quantity, units in UNITS.items()}
+             for quantity, units in COLUMN_UNITS.items()}
 #: Columns without a unit, named exactly (rules MF3, MF12): name -> integer values only.
 UNITLESS: dict[str, bool] = {
     "stroke": True,
@@ -171,16 +153,16 @@ def _split_header(name: str, source: str, line: int) -> tuple[str, float]:
     """The quantity of a header name and its scale to SI, or raise for an unknown unit."""
     if name in UNITLESS:
         return name, 1.0
-    for quantity in sorted(UNITS, key=len, reverse=True):
+    for quantity in sorted(COLUMN_UNITS, key=len, reverse=True):
         if name.startswith(quantity + "_"):
             unit = name[len(quantity) + 1:]
-            if unit not in UNITS[quantity]:
-                accepted = ", ".join(f"{quantity}_{u}" for u in UNITS[quantity])
+            if unit not in COLUMN_UNITS[quantity]:
+                accepted = ", ".join(f"{quantity}_{u}" for u in COLUMN_UNITS[quantity])
                 raise MeasurementError(
                     f"{source}:{line}: column {name!r}: unknown unit {unit!r} for {quantity} "
                     f"(accepted: {accepted})"
                 )
-            return quantity, UNITS[quantity][unit]
+            return quantity, COLUMN_UNITS[quantity][unit]
     raise MeasurementError(
         f"{source}:{line}: column {name!r} is not a known quantity "
         f"(known: {', '.join(_known_names())})"

@@ -23,6 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hcard.quantities import MN_PER_N
+
 MIN_RUN = 10
 """Lifted samples a run needs to count for the noise model."""
 
@@ -50,7 +52,7 @@ class NoiseModel:
         """The model in words."""
         return (
             f"sensor noise from {self.samples} samples out of contact in {self.runs} lifts and "
-            f"rests: {self.sigma * 1e3:.3g} mN standard deviation, lag-1 autocorrelation "
+            f"rests: {self.sigma * MN_PER_N:.3g} mN standard deviation, lag-1 autocorrelation "
             f"{self.lag1:.2f} (AR(1))"
         )
 

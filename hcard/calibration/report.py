@@ -45,8 +45,8 @@ from hcard.calibration.residuals import ResidualReport
 from hcard.calibration.screening import SCREEN_TOLERANCE, describe_screening, screening_stride
 from hcard.physics import PredictorError
 from hcard.physics.profile import DeviceProfile
-from hcard.physics.units import display_unit
 from hcard.preview_text import PathLabels
+from hcard.quantities import MN_PER_N, N_PER_MN, SI_UNITS, display_unit
 
 FORMAT = "hcard-calibration-report/1"
 """Value of the ``format`` key of ``report.json``."""
@@ -86,21 +86,10 @@ MAX_STRETCH_S = 2.0
 """Longest stretch of held-out samples drawn over time, s."""
 
 REGRESSOR_UNITS = {
-    "normal_force": "N",
-    "speed": "m/s",
-    "amplitude": "m",
-    "voltage": "V",
-    "pressure": "Pa",
-    "frequency": "Hz",
-    "time": "s",
+    **SI_UNITS,
     "occlusion_time": "s",
-    "direction": "",
-    "plate_frequency": "Hz",
-    "stroke": "",
     "amplitude_history": "m",
     "voltage_history": "s",
-    "x": "m",
-    "y": "m",
     "recording": "",
 }
 """SI unit of each regressor (:mod:`hcard.calibration.effects`, :mod:`.dataset`)."""
@@ -131,7 +120,7 @@ def _mn(value: float | None) -> str:
     """A force in N as mN, the way :func:`~hcard.calibration.loop.calibrate` writes it."""
     if value is None or not math.isfinite(value):
         return "n/a"
-    return f"{value * 1e3:.4g}"
+    return f"{value * MN_PER_N:.4g}"
 
 
 def _g(value: float | None, spec: str = ".3g") -> str:
@@ -425,14 +414,14 @@ def report_markdown(
         *(
             f"- Lateral-force zero of {source}: "
             + (
-                f"measured at {lifts} lifts, drift {drift * 1e3:.3g} mN peak to peak, removed"
+                f"measured at {lifts} lifts, drift {drift * MN_PER_N:.3g} mN peak to peak, removed"
                 if lifts
                 else "no lift to measure it (a constant offset is fitted)"
             )
             for source, (lifts, drift) in zip(data.sources, data.zeroing, strict=False)
         ),
         *(
-            f"- Contact of {source}: normal force ≥ {threshold * 1e3:.3g} mN (the larger of "
+            f"- Contact of {source}: normal force ≥ {threshold * MN_PER_N:.3g} mN (the larger of "
             "10 mN and 5 standard deviations of the lifted normal-force noise, unless given)"
             for source, threshold in zip(data.sources, data.contact_threshold_n, strict=False)
         ),
@@ -723,7 +712,7 @@ def _residuals_figure(result: CalibrationResult, names: list[str], rows: int,
     span_high = max(float(high), float(np.nanmax(means, initial=high)))
     # in mN for the usual residuals, N or kN should a fit be far off: tick labels of at most
     # four digits, which the panel's margin holds
-    force_scale, force_unit = (1e-3, "mN") if max(-span_low, span_high) < 1.0 else display_unit(
+    force_scale, force_unit = (N_PER_MN, "mN") if max(-span_low, span_high) < 1.0 else display_unit(
         "N", [span_low, span_high])
     before = before / force_scale
     span_low, span_high = span_low / force_scale, span_high / force_scale
@@ -788,9 +777,9 @@ def _held_out_stretch(result: CalibrationResult) -> np.ndarray:
 def fit_figure(result: CalibrationResult) -> Figure:
     """``fit.png`` as a figure (Agg canvas attached)."""
     data = result.data
-    observed = data.observed * 1e3
-    before = observed - result.before.fit.residuals * 1e3
-    after = observed - result.after.fit.residuals * 1e3
+    observed = data.observed * MN_PER_N
+    before = observed - result.before.fit.residuals * MN_PER_N
+    after = observed - result.after.fit.residuals * MN_PER_N
     fig = Figure(figsize=FIT_INCHES, dpi=DPI)
     FigureCanvasAgg(fig)
     cell = (FIT_INCHES[0] / 3, FIT_INCHES[1])

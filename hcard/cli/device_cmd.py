@@ -174,7 +174,7 @@ def synthesize(device_class: str, uri: str | None, effect_names: tuple[str, ...]
     from hcard.calibration.measurement import write_measurement
     from hcard.calibration.plan import protocol, verification
     from hcard.cli.calibrate_cmd import write_plan
-    from hcard.physics.units import UnitError, parse_quantity
+    from hcard.quantities import UnitError, parse_quantity
     from hcard_device.drivers import open_device
     from hcard_device.drivers.play import play as play_track
     from hcard_device.drivers.play import summary

@@ -11,9 +11,9 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from hcard import limits
+from hcard import channels, limits
 from hcard.atomic import write_atomically
-from hcard.bounded_read import STDIN
+from hcard.bounded_read import DEFAULT_MAX_PIXELS, STDIN
 from hcard.card_io import format_for_path, parse_card, save, to_bytes
 from hcard.cli.verbosity import quiet
 from hcard.errors import CardError, HcardError
@@ -21,7 +21,6 @@ from hcard.errors import CardError, HcardError
 if TYPE_CHECKING:
     from hcard.plugins.kinds import EncodeResult
 
-DEFAULT_MAX_PIXELS = 64_000_000  # same as hcard_builtins.image.DEFAULT_MAX_PIXELS (help text)
 
 
 @click.command()
@@ -105,7 +104,7 @@ DEFAULT_MAX_PIXELS = 64_000_000  # same as hcard_builtins.image.DEFAULT_MAX_PIXE
 )
 @click.option(
     "--channel",
-    type=click.Choice(["uv", "ev", "bipolar"]),
+    type=click.Choice(list(channels.NAMES)),
     default="uv",
     show_default=True,
     help="Actuator of the textures: uv lowers friction, ev raises it, bipolar does both.",

@@ -26,8 +26,8 @@ from hcard.errors import HcardError
 from hcard.physics.predictor import Parameter, Predictor, PredictorError, Variable
 from hcard.physics.profile import DeviceProfile, ProfileError
 from hcard.physics.sweep import Sweep, parse_sweep, quantity, split_assignment
-from hcard.physics.units import display_unit, format_value
 from hcard.plugins.registry import get_registry
+from hcard.quantities import display_unit, format_value
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure

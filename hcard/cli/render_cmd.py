@@ -22,6 +22,7 @@ from hcard.physics.actuation import (
     combined_clipping,
     combined_range,
 )
+from hcard.quantities import M_PER_MM, UM_PER_M
 from hcard.render import Frames, Renderer, RenderOptions
 from hcard.render.options import (
     DEFAULT_BAND_LIMIT_HZ,
@@ -46,8 +47,8 @@ def finger_state(track: FingerTrack, t: np.ndarray) -> tuple[np.ndarray, np.ndar
     speed_mm_s[:-1] = speed_estimate(track.t, track.x, track.y, track.contact)[1:]
     segment = np.clip(np.searchsorted(track.t, t, side="right") - 1, 0, len(track) - 1)
     touching = track.contact[segment]
-    speed = np.where(touching, speed_mm_s[segment] * 1e-3, 0.0)
-    force = np.where(touching, np.maximum(np.interp(t, track.t, track.fn), 0.0), 0.0)
+    speed = np.where(touching, speed_mm_s[segment] * M_PER_MM, 0.0)
+    force = np.where(touching, np.maximum(np.interp(t, track.t, track.normal_force), 0.0), 0.0)
     return speed, force
 
 
@@ -138,8 +139,9 @@ def render(card: Path, track_path: Path, output: Path, frame_rate: float, band_l
         f"friction {summary.friction_min:.3f}..{summary.friction_max:.3f}"
     )
     if profile is not None:
-        click.echo(f"  profile {profile.name}: amplitude up to {summary.amplitude_max * 1e6:.3g}"
-                   f" um, voltage up to {summary.voltage_max:.4g} V")
+        click.echo(f"  profile {profile.name}: amplitude up to "
+                   f"{summary.amplitude_max * UM_PER_M:.3g} um, "
+                   f"voltage up to {summary.voltage_max:.4g} V")
         for line in summary.profile_lines():
             click.echo(f"  {line}")
 

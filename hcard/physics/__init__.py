@@ -1,7 +1,7 @@
 """Physics predictors: actuation and finger state to friction, and back (spec/device-profile.md;
 thesis chapters 2-4).
 
-SI units inside (m, s, N, V, Hz, Pa); :mod:`hcard.physics.units` converts user text such as
+SI units inside (m, s, N, V, Hz, Pa); :mod:`hcard.quantities` converts user text such as
 ``"2um"`` or ``"27.5 kHz"`` at the boundary.
 """
 

@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 
 from hcard.physics.predictor import PredictorError
+from hcard.quantities import UM_PER_M
 
 if TYPE_CHECKING:
     from hcard.physics.profile import DeviceLimits, DeviceProfile
@@ -134,7 +135,7 @@ class UVModelRange:
         if self.below_amplitude_range and self.amplitude_minimum is not None:
             lines.append(
                 f"uv: {self.below_amplitude_range} of {self.frames} frames have an amplitude "
-                f"below {self.amplitude_minimum * 1e6:g} um, outside the UV model's range "
+                f"below {self.amplitude_minimum * UM_PER_M:g} um, outside the UV model's range "
                 f"({self.source}); their friction is extrapolated"
             )
         if self.below_speed_floor:

@@ -44,7 +44,7 @@ from hcard.physics.profile_effects import (
     solve_decreasing,
     with_effects,
 )
-from hcard.physics.units import UnitError, parse_quantity, parse_unit
+from hcard.quantities import UnitError, parse_quantity, parse_unit
 
 if TYPE_CHECKING:
     from hcard.physics.actuation import ActuatorCommands
@@ -75,9 +75,6 @@ AMPLITUDE_SEARCH_FACTOR = 8.0
 
 REFERENCE_VOLTAGE = 1000.0
 """Envelope at which the EV channel's force is evaluated to scale the inverse, V."""
-
-EPSILON_0 = 8.8541878128e-12
-"""Vacuum permittivity, F/m."""
 
 _LAYER_PARAMETERS = (
     "area", "sc_thickness", "sc_permittivity", "insulator_thickness", "insulator_permittivity"
@@ -466,7 +463,11 @@ class DeviceProfile:
             p["sc_thickness"] / p["sc_permittivity"]
             + p["insulator_thickness"] / p["insulator_permittivity"]
         )
-        return EPSILON_0 * p["area"] / electrical_thickness
+        # scipy.constants imported here: it takes 0.2 s, and hosts that only read a device's
+        # configuration load this module
+        from scipy.constants import epsilon_0
+
+        return epsilon_0 * p["area"] / electrical_thickness
 
     # -- forward and rendering -------------------------------------------------------------
     def forward(

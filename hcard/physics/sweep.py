@@ -1,8 +1,8 @@
 """User text for predictor inputs and sweeps: ``name=value`` and ``name=start:stop:count``.
 
 ``hcard predict`` takes ``--param kn=3.9MN/m``, ``--input speed=20mm/s`` and
-``--sweep amplitude=0:5um:51``. Values carry optional units (:func:`hcard.physics.units.
-parse_quantity`); inside the code everything is SI (:mod:`hcard.physics.units`).
+``--sweep amplitude=0:5um:51``. Values carry optional units (:func:`hcard.quantities.
+parse_quantity`); inside the code everything is SI (:mod:`hcard.quantities`).
 
 A sweep is ``START:STOP:COUNT`` with an optional fourth field ``lin`` (default, evenly spaced)
 or ``log`` (geometrically spaced, both ends > 0). When only one end carries a unit the other
@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hcard.errors import HcardError
-from hcard.physics.units import UnitError, parse_quantity
+from hcard.quantities import UnitError, parse_quantity
 
 MAX_SWEEP_POINTS = 1_000_000
 """Largest COUNT of a sweep (a bigger one is a typo, not a plot)."""
@@ -82,7 +82,7 @@ def split_assignment(text: str, what: str) -> tuple[str, str]:
 def quantity(text: str, unit: str, what: str) -> float:
     """The SI value of ``text`` for a quantity in ``unit``; errors name ``what``.
 
-    A bare number is in ``unit``. A unit that :mod:`hcard.physics.units` does not know is
+    A bare number is in ``unit``. A unit that :mod:`hcard.quantities` does not know is
     accepted only when written exactly as ``unit`` (for units such as ``"F/m"``).
 
     Raises:

@@ -7,16 +7,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hcard.channels import GROUP_OF_VALUE
 from hcard.render.options import RenderMode, RenderOptions
 from hcard.v1 import card_pb2 as pb
 
-GROUP_UV, GROUP_EV, GROUP_BIPOLAR = 0, 1, 2
-"""Column of each channel group in the per-frame deviation array."""
-_GROUP_OF_CHANNEL = {
-    pb.CHANNEL_UV: GROUP_UV,
-    pb.CHANNEL_EV: GROUP_EV,
-    pb.CHANNEL_BIPOLAR: GROUP_BIPOLAR,
-}
 PHASE_INPUTS = 6
 """Columns of the per-frame phase input: dead-reckoned x, y (mm), odometer x, y (mm), time
 since touch-down (s), and a constant 1 that carries the phase offset."""
@@ -152,7 +146,7 @@ def compile_texture(texture: pb.Texture, options: RenderOptions) -> CompiledText
         weights[5, c] = comp.phase / (2.0 * math.pi)
         amplitude[c] = comp.amplitude
         channel = comp.channel or texture.channel
-        groups[c, _GROUP_OF_CHANNEL[channel]] = 1.0
+        groups[c, GROUP_OF_VALUE[channel]] = 1.0
         if comp.domain == pb.DOMAIN_TEMPORAL:
             temporal[c] = comp.frequency
             weights[4, c] = comp.frequency
@@ -164,7 +158,7 @@ def compile_texture(texture: pb.Texture, options: RenderOptions) -> CompiledText
         weights[row : row + 2, c] = (kx, ky)
         limited[c] = options.mode is RenderMode.HYBRID
     baseline = np.zeros(3)
-    baseline[_GROUP_OF_CHANNEL[texture.channel]] = texture.baseline - 1.0
+    baseline[GROUP_OF_VALUE[texture.channel]] = texture.baseline - 1.0
     return CompiledTexture(
         phase_weights=weights,
         wave_vectors=wave,

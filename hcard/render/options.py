@@ -7,9 +7,8 @@ from dataclasses import dataclass
 from enum import Enum
 
 from hcard import limits
+from hcard.rates import DEFAULT_FRAME_RATE_HZ
 
-DEFAULT_FRAME_RATE_HZ = 10_000.0
-"""E-ViTa synthesis rate: 500 Hz with 20 points a period (thesis 5.1.1)."""
 DEFAULT_BAND_LIMIT_HZ = 1_000.0
 """Upper edge of the perceptual band of friction signals (thesis 5.2.3: ~800 Hz content felt)."""
 DEFAULT_DEAD_RECKONING_S = 0.1

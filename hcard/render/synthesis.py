@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from hcard.render.compiled import GROUP_BIPOLAR, GROUP_EV, GROUP_UV
+from hcard.channels import GROUP_BIPOLAR, GROUP_EV, GROUP_UV
 from hcard.render.runs import ANCHOR_FRAMES, FIXED_TURN
 
 MAX_RELATIVE_FRICTION = 4.0

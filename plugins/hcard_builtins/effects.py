@@ -14,6 +14,7 @@ from functools import lru_cache
 from typing import ClassVar
 
 import numpy as np
+import scipy.constants
 from scipy.interpolate import PchipInterpolator
 
 from hcard.calibration.effects import (
@@ -27,7 +28,7 @@ from hcard.physics import Parameter, Variable
 from hcard.plugins.hookspecs import hookimpl
 from hcard_builtins.physics.electrovibration import geometry as pad_geometry
 
-ATMOSPHERE = 101_325.0
+ATMOSPHERE = scipy.constants.atm
 """Reference ambient pressure p0 of Eq. 2.10, Pa."""
 
 REFERENCE_FORCE = 1.0

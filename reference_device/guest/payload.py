@@ -365,7 +365,8 @@ def play_track(driver: Any, track: Any, boundary_x_mm: float) -> dict[str, Any]:
             batch = driver.read_inputs(due - now, max_count=PLAY_READ_BATCH)
             states += [(time.monotonic(), s) for s in batch]
         host_t = time.monotonic() - start + 1e-3  # > 0: an echo of 0 means "none yet"
-        driver.send_finger(host_t, track.x[i], track.y[i], track.fn[i], bool(track.contact[i]))
+        driver.send_finger(host_t, track.x[i], track.y[i], track.normal_force[i],
+                           bool(track.contact[i]))
         sent[Finger.from_si(host_t, 0.0, 0.0, 0.0, False).host_time_us] = time.monotonic()
         if crossing_sent is None and track.x[i] >= boundary_x_mm:
             crossing_sent = time.monotonic()

@@ -27,7 +27,6 @@ firmware.
 
 from __future__ import annotations
 
-import functools
 import math
 import threading
 import time
@@ -37,6 +36,7 @@ from collections.abc import Callable
 import numpy as np
 
 from hcard.physics.profile import DeviceProfile
+from hcard.quantities import MM_PER_M, MS_PER_S
 from hcard.track import FingerTrack, make_track
 from hcard.v1 import card_pb2 as pb
 from hcard_device.protocol import (
@@ -81,7 +81,7 @@ from hcard_device.protocol import (
 from hcard_device.protocol.constants import DEFAULT_MAX_CARD_BYTES
 from hcard_device.protocol.reports import POSITION_RANGE
 from hcard_device.protocol.upload import UploadStore, detail_text
-from hcard_device.sim import TOUCH_DTYPE, DeviceSimulation, Faults, SimBlock
+from hcard_device.sim import TOUCH_DTYPE, DeviceSimulation, SimBlock
 from hcard_device.sim.clip import ClipItem
 
 DEFAULT_INPUT_QUEUE = 128
@@ -184,25 +184,6 @@ _STATE_ID = State.REPORT_ID
 firmware packs the values it has already saturated to their ranges (rule PI2) without making a
 State, whose range checks cost more than the rest of a report. A host that decodes the report
 checks the ranges (:meth:`State.decode`)."""
-
-
-_FAULT_MAP: tuple[tuple[int, int], ...] = tuple(
-    (int(flag), int(FaultBits[flag.name]))
-    for flag in Faults
-    if flag.value and flag.name in FaultBits.__members__
-)
-"""(simulation bit, wire bit) of every fault both know, matched by name."""
-
-
-@functools.lru_cache(maxsize=1024)
-def _fault_bits(sim_faults: int) -> int:
-    """Wire fault bits of the simulation's :class:`Faults` (memoised: few combinations
-    occur)."""
-    out = 0
-    for sim_bit, wire_bit in _FAULT_MAP:
-        if sim_faults & sim_bit:
-            out |= wire_bit
-    return out
 
 
 class Session:
@@ -606,7 +587,7 @@ class Firmware:
             max_voltage_dv=_clamp(hw.max_voltage_v / VOLTAGE_UNIT_V, 0, _U16),
             max_current_10na=_clamp(hw.max_current_a / CURRENT_UNIT_A, 0, _U16),
             max_card_bytes=self.upload.max_card_bytes,
-            watchdog_ms=_clamp(cfg.watchdog_s * 1e3, 0, _U16),
+            watchdog_ms=_clamp(cfg.watchdog_s * MS_PER_S, 0, _U16),
             stream_capacity_frames=_clamp(cfg.stream_queue_frames, 0, _U16),
             stream_frames_per_report=STREAM_FRAMES_PER_REPORT,
             surface_width_10um=_clamp(width / POSITION_UNIT_MM, 0, _U16),
@@ -632,7 +613,7 @@ class Firmware:
             "item_count": min(len(items), 512),
             "clipped_textures": len({item.texture for item in items}),
             "flags": flags,
-            "reference_speed_mm_s": _clamp(report.reference_speed_m_s * 1e3, 0, _U16),
+            "reference_speed_mm_s": _clamp(report.reference_speed_m_s * MM_PER_M, 0, _U16),
             "reference_force_mn": _clamp(report.reference_force_n / FORCE_UNIT_N, 0, _U16),
         }
         if not items:
@@ -800,7 +781,7 @@ class Firmware:
 
     def _count_watchdog_trips(self, faults: np.ndarray) -> None:
         """Count the watchdog's trips (frames where WATCHDOG rises) in a block's faults."""
-        watchdog_bit = int(Faults.WATCHDOG)
+        watchdog_bit = int(FaultBits.WATCHDOG)
         if not self._watchdog_was_tripped and not int(np.bitwise_or.reduce(faults)) & watchdog_bit:
             return  # not tripped before nor during the block
         watchdog = (faults & watchdog_bit) != 0
@@ -843,7 +824,7 @@ class Firmware:
         """STATE faults: the interval's simulation faults, ``clipped`` (CARD_CLIPPED while a
         clipped card plays) and the firmware's events since the previous report (which are
         consumed)."""
-        faults = _fault_bits(sim_faults) | int(self._pending_faults) | clipped
+        faults = sim_faults | int(self._pending_faults) | clipped
         self._pending_faults = 0
         return faults & _U16
 

@@ -56,11 +56,12 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.constants
 
 from hcard.calibration.dataset import CalibrationData, prepare
 from hcard.calibration.measurement import Measurement
 
-EPS0 = 8.8541878128e-12
+EPS0 = scipy.constants.epsilon_0
 """Vacuum permittivity, F/m."""
 
 # -- base laws and their parameters (the truths) ----------------------------------------------

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+import scipy.constants
 
 from hcard.calibration.dataset import prepare
 from hcard.calibration.device_model import FINGER_PREFIX, fitted_profile, profile_model
@@ -18,7 +19,7 @@ from hcard.physics.profile import DeviceProfile
 from hcard.plugins.registry import get_registry
 from hcard_device.sim.tribometer import Protocol, synthesize
 
-EPS0 = 8.8541878128e-12
+EPS0 = scipy.constants.epsilon_0
 COUPLED = DeviceProfile.coupled_stimulator()
 LIBRARY = get_registry().calibration_effects
 FINGER = get_registry().get("predictor", "finger-friction")

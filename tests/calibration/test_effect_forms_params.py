@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 import pytest
+import scipy.constants
 
 from hcard.calibration.dataset import accumulated_contact_time
 from hcard.calibration.effects import (
@@ -89,7 +90,7 @@ def test_a_base_that_does_not_broadcast_is_evaluated_per_distinct_value() -> Non
     got = forward_per_sample(base, {"uv_mu0": mu0}, inputs)
     psi = inputs["speed"] / (inputs["amplitude"] * 38_220.0 * mu0 * (1 + base["uv_poisson_ratio"]))
     uv = 1.0 - np.exp(-psi / base["uv_psi_star"])
-    eps0 = 8.8541878128e-12
+    eps0 = scipy.constants.epsilon_0
     electrical = (
         base["ev_sc_thickness"] / base["ev_sc_permittivity"]
         + base["ev_insulator_thickness"] / base["ev_insulator_permittivity"]

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.constants
 
 from hcard.calibration.effects import augment, high_pass, touchdowns
 from hcard.calibration.fit import fit_predictor
@@ -18,7 +19,7 @@ from hcard.physics import PredictorError
 from hcard_builtins.effects import ActuatorBandwidth, ChargeLeakage
 from hcard_builtins.physics.electrovibration import Kaczmarek
 
-EPS0 = 8.8541878128e-12
+EPS0 = scipy.constants.epsilon_0
 AREA = 1.2e-4  # m^2
 SC_D, SC_EPS, INS_D, INS_EPS = 200e-6, 1560.0, 90e-6, 3.35  # section 3.6.1
 TAU_D = 20e-3  # s

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import scipy.constants
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import independent_recordings as ir
@@ -129,7 +130,7 @@ def test_first_order_lag_is_the_exact_step_response() -> None:
 
 def test_air_layer_is_eq_3_17() -> None:
     force = ir.electrostatic_force(np.array([1000.0]), np.array([25e-6]))[0]
-    expected = 8.8541878128e-12 * ir.EV_AREA * 1e6 / (
+    expected = scipy.constants.epsilon_0 * ir.EV_AREA * 1e6 / (
         2 * (200e-6 / 1560 + 25e-6 + 90e-6 / 3.35) * (200e-6 + 25e-6 + 90e-6)
     )
     assert force == pytest.approx(expected, rel=1e-12)

@@ -56,7 +56,7 @@ def test_the_protocol_covers_its_lanes_forces_and_speeds(device, lanes):
     moving = touching[1:] & touching[:-1] & (speed > 0)
     nearest = np.min(np.abs(speed[moving, None] / np.array(SPEEDS_MM_S) - 1.0), axis=1)
     assert np.all(nearest < 0.05)  # each stroke at one of the speeds (a whole sample count)
-    assert np.all(track.fn[~touching] == 0.0)
+    assert np.all(track.normal_force[~touching] == 0.0)
     lifts = np.count_nonzero(np.diff(touching.astype(int)) == -1)
     assert lifts == len(sessions)
 

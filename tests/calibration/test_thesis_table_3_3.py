@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import scipy.constants
 
 from hcard.calibration.loop import NOT_EXPLAINED
 
@@ -32,7 +33,7 @@ THESIS_CONDITIONS = {
     "LDHV": (0.25e-3, 2000.0),
     "LDLV": (0.25e-3, 1414.0),
 }
-EPS0 = 8.8541878128e-12  # F/m
+EPS0 = scipy.constants.epsilon_0  # F/m
 # Table 3.2 / line 1416 layers: stratum corneum 0.2 mm, eps 1650; insulator 0.090 mm, eps 3.35
 D_SC, EPS_SC, D_I, EPS_I = 0.2e-3, 1650.0, 0.090e-3, 3.35
 

@@ -84,7 +84,7 @@ def stroke(delays_s: list[float]) -> Stroke:
         reports += [decode_input(r) for r in fw.take_input_reports()]
     fw.advance(2 * SAMPLE_S)
     reports += [decode_input(r) for r in fw.take_input_reports()]
-    track = FingerTrack(t=t, x=x, y=np.full(n, 27.0), fn=np.full(n, 0.5),
+    track = FingerTrack(t=t, x=x, y=np.full(n, 27.0), normal_force=np.full(n, 0.5),
                         contact=np.ones(n, dtype=bool))
     return Stroke(reports, track, np.rint(host_s * 1e6).astype(np.int64), arrived - host_s)
 

@@ -17,7 +17,8 @@ from hypothesis import strategies as st
 from hcard import build
 from hcard.limits import RELATIVE_FRICTION_JND
 from hcard.track import FingerTrack, make_track, straight_stroke
-from hcard_device.sim import DeviceConfig, DeviceSimulation, Faults, SimBlock
+from hcard_device.protocol import FaultBits
+from hcard_device.sim import DeviceConfig, DeviceSimulation, SimBlock
 from hcard_device.sim.amplifier import EVAmplifier
 from hcard_device.sim.plate import (
     AMPLITUDE_TOLERANCE_M,
@@ -423,11 +424,11 @@ def test_watchdog_ramps_the_outputs_to_zero_and_recovers_when_fed():
         fed.append(sim.step(100))
     live = SimBlock.concatenate(fed)
     assert live.amplitude_m[-1] > 1e-6 and live.voltage_v[-1] > 500.0
-    assert not live.has(Faults.WATCHDOG).any()
+    assert not live.has(FaultBits.WATCHDOG).any()
     expiry = last_feed + config.watchdog_s
     sim.stream_frames(np.full(1500, 0.6), np.full(1500, 1.15))  # frames, but no feeding
     silent = sim.step(1500)
-    tripped = silent.has(Faults.WATCHDOG)
+    tripped = silent.has(FaultBits.WATCHDOG)
     assert tripped.any() and np.all(silent.t_s[tripped] >= expiry - 1e-9)
     assert silent.t_s[np.argmax(tripped)] == pytest.approx(expiry, abs=1e-4)
     after = silent.t_s - expiry
@@ -442,7 +443,7 @@ def test_watchdog_ramps_the_outputs_to_zero_and_recovers_when_fed():
     sim.feed_watchdog()
     sim.stream_frames(np.full(500, 0.6), np.full(500, 1.15))
     back = SimBlock.concatenate([sim.step(100) for _ in range(5)])
-    assert not back.has(Faults.WATCHDOG).any()
+    assert not back.has(FaultBits.WATCHDOG).any()
     assert back.amplitude_m[-1] > 1e-6
 
 
@@ -452,7 +453,7 @@ def test_internal_finger_needs_no_watchdog_and_stop_ramps_to_zero():
     sim.use_internal_finger(straight_stroke((5.0, 27.0), (50.0, 0.0), 1.5, rate_hz=1000.0))
     sim.start()
     running = sim.step(5000)  # 0.5 s without any host report
-    assert not running.has(Faults.WATCHDOG).any()
+    assert not running.has(FaultBits.WATCHDOG).any()
     assert running.amplitude_m[-1000:].max() > 0.5e-6
     sim.stop()
     stopped = sim.step(500)
@@ -541,13 +542,13 @@ def test_malicious_stream_is_clipped_flagged_and_overruns_are_counted():
     assert sim.counts.stream_frames_dropped == 50
     sim.feed_watchdog()
     block = sim.step(400)
-    assert block.has(Faults.STREAM_OVERRUN)[0] and block.has(Faults.INVALID_REQUEST)[0]
-    assert not block.has(Faults.STREAM_OVERRUN)[1:].any()
+    assert block.has(FaultBits.STREAM_OVERRUN)[0] and block.has(FaultBits.INVALID_REQUEST)[0]
+    assert not block.has(FaultBits.STREAM_OVERRUN)[1:].any()
     np.testing.assert_array_equal(block.target_uv[:3], [1.0, 0.0, 1.0])
     assert np.all(block.target_ev[:300] == 4.0) and np.all(block.target_ev[300:] == 1.0)
     assert sim.counts.stream_underruns == 100
     assert (block.texture == -1).all()  # streamed frames play no palette texture
-    assert block.has(Faults.AMPLITUDE_LIMIT).any()  # uv = 0 needs more than 2.5 um
+    assert block.has(FaultBits.AMPLITUDE_LIMIT).any()  # uv = 0 needs more than 2.5 um
     assert block.voltage_v.max() <= 2000.0 and block.amplitude_m.max() <= 2.5e-6 * (1 + 1e-9)
 
 
@@ -630,7 +631,7 @@ def test_host_finger_drives_the_renderer_and_the_physics():
     assert block.finger_speed_m_s[-1] == pytest.approx(0.08)
     assert felt_error(block, settle_s=0.1) <= RELATIVE_FRICTION_JND
     sim.host_finger(sim.time_s, math.nan, 1.0, 0.5, True)
-    assert sim.step(10).has(Faults.INVALID_REQUEST)[0]
+    assert sim.step(10).has(FaultBits.INVALID_REQUEST)[0]
 
 
 @pytest.mark.parametrize(("config", "half_ms", "ninety_ms"), [
@@ -712,4 +713,4 @@ def test_any_valid_card_loads_plays_and_stays_within_the_limits(card, coupled):
     assert np.all(block.current_a <= config.max_current_a * (1 + 1e-9))
     assert np.all(np.isfinite(block.friction))
     if not report.clipped:
-        assert not block.has(Faults.CARD_CLIPPED).any()
+        assert not block.has(FaultBits.CARD_CLIPPED).any()

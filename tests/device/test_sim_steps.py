@@ -107,14 +107,14 @@ def test_the_frames_ahead_and_batched_noise_are_the_direct_computation():
     seed = 7
     block, track = run(EVITA, cards()["uv"], seed, None, True, [50] * 100)  # past the track
     direct = TrackFinger(track, 0.0, EVITA.surface_mm).state(block.t_s)
-    for name in ("x_mm", "y_mm", "fn_n", "contact", "speed_m_s"):
-        field = {"x_mm": "finger_x_mm", "y_mm": "finger_y_mm", "fn_n": "normal_force_n",
+    for name in ("x_mm", "y_mm", "normal_force_n", "contact", "speed_m_s"):
+        field = {"x_mm": "finger_x_mm", "y_mm": "finger_y_mm", "normal_force_n": "normal_force_n",
                  "contact": "contact", "speed_m_s": "finger_speed_m_s"}[name]
         np.testing.assert_array_equal(getattr(block, field), getattr(direct, name))
     force_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(3)[1])
     noise = force_rng.normal(0.0, 1.0, size=(len(block), 4)) * EVITA.force_noise_n
     split = CornerForceSensors(*EVITA.surface_mm, 0.0, np.random.default_rng()).split(
-        direct.fn_n, direct.x_mm, direct.y_mm)
+        direct.normal_force_n, direct.x_mm, direct.y_mm)
     np.testing.assert_array_equal(block.corner_forces_n, split + noise)
     assert len(block) * 4 > NOISE_BATCH  # the draws ran over a batch boundary
     touch_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(3)[0])

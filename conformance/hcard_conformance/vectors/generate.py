@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from hcard import card_io
+from hcard.rates import DEFAULT_FRAME_RATE_HZ
 from hcard.render import Frames, Renderer, RenderOptions
 from hcard.track import track_to_csv
 from hcard_conformance.vectors.cards import vector_cards
@@ -74,7 +75,7 @@ TOLERANCES: dict[str, float] = {
     "latency_s": 0.010,
     "fault_reaction_s": 0.010,
     "safety_violations": 0.0,
-    "frame_rate_hz": 10_000.0,
+    "frame_rate_hz": DEFAULT_FRAME_RATE_HZ,
     "guard_s": 0.020,
     "relative_floor": 0.1,
     "peak_min_amplitude": 0.02,

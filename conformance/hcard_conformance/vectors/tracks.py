@@ -14,11 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hcard.rates import TOUCH_RATE_HZ
 from hcard.render.touch import has_velocity, speed_estimate
 from hcard.track import FingerTrack, make_track
 
-TOUCH_RATE_HZ = 50.0
-"""Capacitive touch sampling rate (thesis 5.1.1)."""
 SLOW_MAX_MM_S = 30.0
 """Upper bound of the slow class, mm/s (thesis 5.4)."""
 FAST_MIN_MM_S = 180.0

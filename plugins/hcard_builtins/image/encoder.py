@@ -31,6 +31,7 @@ import numpy as np
 
 from hcard import __version__, build, limits
 from hcard.card_io import to_bytes
+from hcard.channels import NAMES
 from hcard.errors import CardValidationError
 from hcard.plugins.kinds import Encoder, EncodeResult
 from hcard.v1 import card_pb2 as pb
@@ -50,7 +51,7 @@ DEFAULT_FRICTION_RANGE: dict[str, tuple[float, float]] = {
     "bipolar": (0.5, 1.5),
 }
 """Relative friction of white and black per channel (UV only lowers friction, EV only raises)."""
-CHANNELS = tuple(DEFAULT_FRICTION_RANGE)
+CHANNELS = NAMES
 LOCKINGS = ("auto", "position", "velocity")
 PROGRESS_MIN_PIXELS = 1_000_000
 """Images larger than this (pixels) report their stages through the progress callback."""

@@ -24,6 +24,7 @@ import numpy as np
 from hcard import limits
 from hcard.build import grid_count
 from hcard.errors import ImageError
+from hcard.quantities import UM_PER_MM
 
 MM_PER_INCH = 25.4
 MAX_DPI = 25_400.0
@@ -199,8 +200,9 @@ def resolve_geometry(
     finest = MAX_DPI / MM_PER_INCH
     if max(ppx, ppy) > finest * (1 + 1e-9):
         raise ImageError(
-            f"{str(source) + ': ' if str(source) else ''}pixels of {1e3 / max(ppx, ppy):.3g} um "
-            f"({how}) are finer than the {1e3 / finest:g} um ({MAX_DPI:g} dpi) an encoder "
+            f"{str(source) + ': ' if str(source) else ''}pixels of "
+            f"{UM_PER_MM / max(ppx, ppy):.3g} um "
+            f"({how}) are finer than the {UM_PER_MM / finest:g} um ({MAX_DPI:g} dpi) an encoder "
             "accepts; give a larger --width-mm/--height-mm or a lower --dpi")
     surface_w, surface_h = width_px / ppx, height_px / ppy
     prefix = f"{source}: " if str(source) else ""

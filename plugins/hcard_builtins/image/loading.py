@@ -22,10 +22,8 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
+from hcard.bounded_read import DEFAULT_MAX_PIXELS
 from hcard.errors import ImageError
-
-DEFAULT_MAX_PIXELS = 64_000_000
-"""Largest image the encoder decodes by default: 64 megapixels (64,000,000 pixels)."""
 
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 _HEADER_BYTES = 64

@@ -29,10 +29,11 @@ import numpy as np
 
 from hcard.errors import HcardError
 from hcard.physics import Parameter, Predictor, PredictorError, Variable
+from hcard.physics.profile import COUPLED_STIMULATOR_LIMITS
 from hcard_builtins.physics.electrovibration import Kaczmarek
 from hcard_builtins.physics.ultrasonic import DimensionlessGroup
 
-CHAPTER_4_PLATE_FREQUENCY = 38_220.0
+CHAPTER_4_PLATE_FREQUENCY = COUPLED_STIMULATOR_LIMITS.plate_frequency
 """Resonance of the aluminium plate of the chapter-4 coupled stimulator, Hz (section 4.2.1);
 the default ``frequency`` input of :class:`Coupled`."""
 

@@ -35,6 +35,7 @@ from types import TracebackType
 from typing import ClassVar
 
 from hcard.card_io import to_bytes
+from hcard.quantities import MS_PER_S, S_PER_MS, S_PER_US
 from hcard.v1 import card_pb2 as pb
 from hcard_device.drivers.errors import DeviceError, DeviceStall, SessionBusy, SessionLost
 from hcard_device.drivers.uri import DeviceUri
@@ -471,15 +472,15 @@ class Driver(abc.ABC):
         if not seen or not self._foreign(seen[-1]):
             return
         first = seen[-1]
-        waited = self.info().watchdog_ms * 1e-3 + SESSION_MARGIN_S
+        waited = self.info().watchdog_ms * S_PER_MS + SESSION_MARGIN_S
         later = self._observe(waited)
         now = later[-1] if later else first
         if self._foreign(now) and now.session_number == first.session_number:
             raise SessionBusy(
                 f"{self.uri}: device busy: session {now.session_number} of another host "
-                f"({_owner(now.session_token)}) is live and still fed after {waited * 1e3:.0f} "
-                "ms of silence from this host; wait for it to stop, or take it over (spec "
-                "PN3, PN6)")
+                f"({_owner(now.session_token)}) is live and still fed after "
+                f"{waited * MS_PER_S:.0f} ms of silence from this host; wait for it to stop, or "
+                "take it over (spec PN3, PN6)")
 
     @property
     def last_state(self) -> State | None:
@@ -554,11 +555,11 @@ class Driver(abc.ABC):
                    if self._session_ended else "taken over by")
             self._lose(f"session {number} was lost: {how} session {state.session_number} "
                        f"({_owner(state.session_token)}) at device time "
-                       f"{state.timestamp_us * 1e-6:.3f} s")
+                       f"{state.timestamp_us * S_PER_US:.3f} s")
         if self._session_card is not None and state.card_generation != self._session_card:
             self._lose(f"session {number} was lost: the active card was replaced (generation "
                        f"{self._session_card} -> {state.card_generation}) by another host at "
-                       f"device time {state.timestamp_us * 1e-6:.3f} s")
+                       f"device time {state.timestamp_us * S_PER_US:.3f} s")
 
     def _lose(self, reason: str) -> None:
         self.session_lost = f"{self.uri}: {reason} (spec PN9)"

@@ -23,6 +23,7 @@ from collections.abc import Sequence
 from types import ModuleType
 from typing import Any
 
+from hcard.quantities import MS_PER_S
 from hcard_device.drivers.base import DEFAULT_TIMEOUT_S, DeviceListing, Driver
 from hcard_device.drivers.errors import DeviceError, DeviceStall
 from hcard_device.drivers.uri import DeviceUri, parse_uri
@@ -149,7 +150,7 @@ class HidapiDriver(Driver):
 
     def _read_input(self, timeout_s: float) -> bytes | None:
         # read(n, 0) does not block (the handle is non-blocking); read(n, ms) waits <= ms.
-        timeout_ms = math.ceil(timeout_s * 1000) if timeout_s > 0 else 0
+        timeout_ms = math.ceil(timeout_s * MS_PER_S) if timeout_s > 0 else 0
         try:
             data = self.handle.read(MAX_REPORT_BYTES, timeout_ms)
         except (OSError, ValueError):

@@ -25,6 +25,8 @@ import numpy as np
 
 from hcard.calibration.measurement import MeasurementError
 from hcard.card_io import to_bytes
+from hcard.channels import LABEL_OF_VALUE
+from hcard.quantities import S_PER_US, US_PER_S
 from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb
 from hcard_device.drivers.base import Driver, UploadOutcome
@@ -104,7 +106,7 @@ class PlayResult:
         """:attr:`host_us`, or the track's own times for a result built without them."""
         if self.host_us is not None:
             return self.host_us
-        return np.rint(self.track.t * 1e6).astype(np.int64) % HOST_TIME_MODULO
+        return np.rint(self.track.t * US_PER_S).astype(np.int64) % HOST_TIME_MODULO
 
     @property
     def faults(self) -> FaultBits:
@@ -239,7 +241,7 @@ def _drive(driver: Driver, track: FingerTrack, host_us: np.ndarray, start: float
             last_report = driver.clock()
 
     for k, (t, x, y, fn, contact) in enumerate(
-        zip(track.t, track.x, track.y, track.fn, track.contact, strict=True)
+        zip(track.t, track.x, track.y, track.normal_force, track.contact, strict=True)
     ):
         due = start + (float(t) - t_first)
         while due - last_sent > keepalive_s:
@@ -247,7 +249,7 @@ def _drive(driver: Driver, track: FingerTrack, host_us: np.ndarray, start: float
             collect(last_sent)
             driver.keepalive()
         collect(due)
-        driver.send_finger(int(host_us[k]) * 1e-6, float(x), float(y), float(fn), bool(contact))
+        driver.send_finger(int(host_us[k]) * S_PER_US, float(x), float(y), float(fn), bool(contact))
         last_sent = due
     collect(driver.clock() + tail_s)
     return last_report
@@ -269,7 +271,7 @@ def session_host_times(start_s: float, track: FingerTrack) -> np.ndarray:
     (the device times the finger's moves by them, PO2) and differ from every earlier session
     on a monotonic clock; 0 (which a STATE echo uses for "no sample yet") becomes 1 us."""
     seconds = start_s + (track.t - float(track.t[0]))
-    host_us = np.rint(seconds * 1e6).astype(np.int64) % HOST_TIME_MODULO
+    host_us = np.rint(seconds * US_PER_S).astype(np.int64) % HOST_TIME_MODULO
     host_us[host_us == 0] = 1
     return host_us
 
@@ -279,7 +281,7 @@ def clip_text(clip: ClipReport) -> str:
     if not clip.item_count:
         return "renders as written (nothing clipped)"
     name = f" '{clip.texture_name}'" if clip.texture_name else ""
-    channel = {1: "UV", 2: "EV"}.get(clip.channel, "?")
+    channel = LABEL_OF_VALUE.get(clip.channel, "?")
     return (f"clipped: {clip.item_count} item(s) in {clip.clipped_textures} texture(s), e.g. "
             f"texture {clip.texture}{name} {channel} asks {clip.target_x1e4 / FRICTION_SCALE:.3f},"
             f" gets {clip.achievable_x1e4 / FRICTION_SCALE:.3f}")

@@ -20,6 +20,7 @@ import usb.backend
 import usb.core
 from usbip import host as usbip_host
 
+from hcard.quantities import MS_PER_S
 from hcard_device.drivers.errors import DeviceError, DeviceStall, DeviceTimeout
 from hcard_device.drivers.usbip_link import UsbipLink, reason_of
 from hcard_device.usb.transport import NoDelayUSBIP
@@ -112,7 +113,7 @@ class UsbipBackend(usb.backend.IBackend):
         return link
 
     def _ms(self, timeout_ms: int) -> float:
-        return timeout_ms / 1000 if timeout_ms and timeout_ms > 0 else self.timeout_s
+        return timeout_ms / MS_PER_S if timeout_ms and timeout_ms > 0 else self.timeout_s
 
     @_usb_errors
     def enumerate_devices(self) -> list[SimpleNamespace]:

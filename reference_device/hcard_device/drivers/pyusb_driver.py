@@ -16,6 +16,7 @@ from typing import Any
 import usb.core
 import usb.util
 
+from hcard.quantities import MS_PER_S
 from hcard_device.drivers.base import DEFAULT_TIMEOUT_S, DeviceListing, Driver
 from hcard_device.drivers.errors import DeviceError, DeviceStall, DeviceTimeout
 from hcard_device.drivers.pyusb_backend import UsbipBackend
@@ -35,7 +36,7 @@ from hcard_device.usb.server import DeviceServer
 
 def _ms(seconds: float) -> int:
     """A pyusb timeout, ms: at least 1 (0 would mean "no timeout" to pyusb backends)."""
-    return max(1, math.ceil(seconds * 1000))
+    return max(1, math.ceil(seconds * MS_PER_S))
 
 
 class PyusbDriver(Driver):

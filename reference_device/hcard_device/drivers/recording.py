@@ -26,6 +26,7 @@ import numpy as np
 
 from hcard.calibration.measurement import DEVICE_COLUMNS, Measurement, write_measurement_blocks
 from hcard.calibration.splits import stroke_numbers
+from hcard.quantities import M_PER_MM, S_PER_US
 from hcard.track import FingerTrack
 from hcard_device.drivers.state_log import state_field
 from hcard_device.protocol import Capability, DeviceInfo, DeviceKind, State
@@ -42,7 +43,6 @@ from hcard_device.protocol.constants import (
 if TYPE_CHECKING:
     from hcard_device.drivers.play import PlayResult
 
-MM = 1e-3
 """Metres per millimetre."""
 HOST_TIME_MODULO = 1 << 32
 """FINGER.host_time_us wraps at 2**32 us."""
@@ -60,7 +60,7 @@ def unwrap_stamps(stamps_us: np.ndarray) -> np.ndarray:
 
 def unwrapped_times(states: Sequence[State]) -> np.ndarray:
     """Device time stamps of ``states`` unwrapped (u32 microseconds), from the first, s."""
-    return unwrap_stamps(state_field(states, "timestamp_us")) * 1e-6
+    return unwrap_stamps(state_field(states, "timestamp_us")) * S_PER_US
 
 
 def track_speeds(track: FingerTrack) -> np.ndarray:
@@ -72,7 +72,7 @@ def track_speeds(track: FingerTrack) -> np.ndarray:
     dx, dy, dt = np.diff(track.x), np.diff(track.y), np.diff(track.t)
     moving = track.contact[1:] & track.contact[:-1] & (dt > 0)
     with np.errstate(divide="ignore", invalid="ignore"):
-        magnitude = np.where(moving, np.hypot(dx, dy) / dt * MM, 0.0)
+        magnitude = np.where(moving, np.hypot(dx, dy) / dt * M_PER_MM, 0.0)
     sign = np.where(dx != 0, np.sign(dx), np.where(dy < 0, -1.0, 1.0))
     speed[1:] = magnitude * sign
     return speed
@@ -125,8 +125,8 @@ def state_columns(rows: np.ndarray) -> dict[str, np.ndarray]:
     return {
         "sequence": rows["sequence"].astype(np.int64),
         "contact": (rows["flags"] & StateFlags.CONTACT) != 0,
-        "x": rows["x_10um"] * POSITION_UNIT_MM * MM,
-        "y": rows["y_10um"] * POSITION_UNIT_MM * MM,
+        "x": rows["x_10um"] * POSITION_UNIT_MM * M_PER_MM,
+        "y": rows["y_10um"] * POSITION_UNIT_MM * M_PER_MM,
         "f_tl": corners[:, 0], "f_tr": corners[:, 1],
         "f_bl": corners[:, 2], "f_br": corners[:, 3],
         "fn": corners.sum(axis=1),
@@ -258,7 +258,7 @@ def _blocks(result: PlayResult, rows: np.ndarray, block_reports: int) -> Iterato
         device = {name: columns[name] for name in REPORTED_DEVICE_COLUMNS}
         device["echo"] = echo
         yield Measurement(
-            t=elapsed[keep] * 1e-6,
+            t=elapsed[keep] * S_PER_US,
             normal_force=columns["fn"],
             lateral_force=columns["fl"],
             amplitude=columns["amplitude"] if has_uv else None,

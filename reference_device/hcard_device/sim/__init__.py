@@ -3,7 +3,7 @@ the physics predictors, safety clamps and watchdog (spec/device-protocol.md, the
 
 Usage (the firmware's view)::
 
-    from hcard_device.sim import DeviceConfig, DeviceSimulation, Faults
+    from hcard_device.sim import DeviceConfig, DeviceSimulation
     sim = DeviceSimulation(DeviceConfig.evita(), seed=0)
     report = sim.load_card(card)        # ClipReport: what the device cannot render
     sim.use_internal_finger(track)      # or sim.host_finger(t, x, y, fn, contact)
@@ -20,7 +20,6 @@ _EXPORTS = {
     "ClipItem": "hcard_device.sim.clip",
     "ClipReport": "hcard_device.sim.clip",
     "DeviceConfig": "hcard_device.sim.config",
-    "Faults": "hcard_device.sim.faults",
     "TOUCH_DTYPE": "hcard_device.sim.simulation",
     "DeviceSimulation": "hcard_device.sim.simulation",
     "Limits": "hcard_device.sim.simulation",
@@ -45,7 +44,6 @@ __all__ = [
     "ClipReport",
     "DeviceConfig",
     "DeviceSimulation",
-    "Faults",
     "Limits",
     "SimBlock",
 ]

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hcard.physics.profile import DeviceProfile
+from hcard.quantities import MM_PER_M, UM_PER_M
 from hcard.render.compiled import compile_texture
 from hcard.render.options import RenderOptions
 from hcard.render.synthesis import channel_targets
@@ -86,7 +87,7 @@ class ClipReport:
         if not self.items:
             return "the device renders every texture of the card"
         head = (
-            f"at {self.reference_speed_m_s * 1e3:g} mm/s and {self.reference_force_n:g} N "
+            f"at {self.reference_speed_m_s * MM_PER_M:g} mm/s and {self.reference_force_n:g} N "
             "the device cannot render:"
         )
         return "\n".join([head, *(f"  {item}" for item in self.items)])
@@ -133,8 +134,8 @@ def clip_report(
                     )
                     items.append(ClipItem(
                         index, texture.name, "uv",
-                        f"needs {needed * 1e6:.2f} um > max_amplitude "
-                        f"{limits.max_amplitude * 1e6:.2f} um",
+                        f"needs {needed * UM_PER_M:.2f} um > max_amplitude "
+                        f"{limits.max_amplitude * UM_PER_M:.2f} um",
                         uv_min, best,
                     ))
         if ev_max > 1.0 + _TOLERANCE:

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from hcard.physics.profile import COUPLED_STIMULATOR_LIMITS
+from hcard.rates import DEFAULT_FRAME_RATE_HZ, TOUCH_RATE_HZ
 
 EVITA_PLATE_QUALITY_FACTOR = 300.0
 """Unloaded quality factor of the E-ViTa plate. The envelope of a resonator is first order with
@@ -80,9 +81,9 @@ class DeviceConfig:
     """
 
     name: str
-    frame_rate_hz: float = 10_000.0
+    frame_rate_hz: float = DEFAULT_FRAME_RATE_HZ
     loop_rate_hz: float = 60_000.0
-    touch_rate_hz: float = 50.0
+    touch_rate_hz: float = TOUCH_RATE_HZ
     touch_noise_mm: float = 0.02
     surface_mm: tuple[float, float] = (81.0, 54.0)
     plate_size_m: tuple[float, float, float] = (81e-3, 54e-3, 1.6e-3)
@@ -94,10 +95,10 @@ class DeviceConfig:
     full_drive_amplitude_m: float = 3.7e-6
     pi_dead_time_s: float = 0.385e-3
     pi_tuning_force_n: float = 0.5
-    max_amplitude_m: float = 2.5e-6
+    max_amplitude_m: float = COUPLED_STIMULATOR_LIMITS.max_amplitude
     max_voltage_v: float = 0.0
-    max_current_a: float = 250e-6
-    ev_carrier_hz: float = 440.0
+    max_current_a: float = COUPLED_STIMULATOR_LIMITS.max_current
+    ev_carrier_hz: float = COUPLED_STIMULATOR_LIMITS.carrier_frequency
     amplifier_slew_v_per_s: float = 40e6
     finger_capacitance_f: float | None = None
     force_noise_n: float = 0.005

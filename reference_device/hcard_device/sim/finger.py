@@ -29,15 +29,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from hcard.physics.profile import DeviceProfile
+from hcard.quantities import M_PER_MM, S_PER_US
 from hcard.render.touch import speed_estimate, step_speed
 from hcard.track import FingerTrack
 from hcard_builtins.physics.finger import FingerFriction
 from hcard_device.sim.hidden import HiddenPhysics
 from hcard_device.sim.sensors import NormalDraws
 
-MM = 1e-3
-"""Metres per millimetre."""
-HOST_TIME_WRAP_S = (1 << 32) * 1e-6
+HOST_TIME_WRAP_S = (1 << 32) * S_PER_US
 """A host's FINGER time stamps wrap at 2^32 us, s."""
 
 
@@ -47,7 +46,7 @@ class FingerTruth:
 
     Attributes:
         x_mm, y_mm: position, mm.
-        fn_n: normal force on the plate, N (0 off the plate).
+        normal_force_n: normal force on the plate, N (0 off the plate).
         contact: the finger touches the plate.
         speed_m_s: sliding speed, m/s.
         contact_time_s: time since the touch-down of the current contact, s.
@@ -57,7 +56,7 @@ class FingerTruth:
 
     x_mm: np.ndarray
     y_mm: np.ndarray
-    fn_n: np.ndarray
+    normal_force_n: np.ndarray
     contact: np.ndarray
     speed_m_s: np.ndarray
     contact_time_s: np.ndarray
@@ -68,16 +67,17 @@ class FingerTruth:
         """Force, speed and contact time are all finite and >= 0, so the physics may skip
         its input checks on them (the finger models that know it set it when they build
         the state)."""
-        return finite_non_negative(self.fn_n, self.speed_m_s, self.contact_time_s)
+        return finite_non_negative(self.normal_force_n, self.speed_m_s, self.contact_time_s)
 
     def slice(self, start: int, stop: int) -> FingerTruth:
         """The frames ``start .. stop - 1`` (views; checked when all frames are, which is
         worked out once for the whole state)."""
         part = object.__new__(FingerTruth)
         part.__dict__.update(  # frozen: set as the dataclass __init__ would, without its checks
-            x_mm=self.x_mm[start:stop], y_mm=self.y_mm[start:stop], fn_n=self.fn_n[start:stop],
-            contact=self.contact[start:stop], speed_m_s=self.speed_m_s[start:stop],
-            contact_time_s=self.contact_time_s[start:stop], held=self.held,
+            x_mm=self.x_mm[start:stop], y_mm=self.y_mm[start:stop],
+            normal_force_n=self.normal_force_n[start:stop], contact=self.contact[start:stop],
+            speed_m_s=self.speed_m_s[start:stop], contact_time_s=self.contact_time_s[start:stop],
+            held=self.held,
         )
         if self.checked:
             part.__dict__["checked"] = True  # as the cached property stores it
@@ -122,7 +122,7 @@ class TrackFinger:
 
     def __init__(self, track: FingerTrack, start_s: float, surface_mm: tuple[float, float]):
         self.t = track.t - track.t[0] + start_s
-        self.x, self.y, self.fn = track.x, track.y, track.fn
+        self.x, self.y, self.normal_force = track.x, track.y, track.normal_force
         self.contact = track.contact
         self.surface_mm = surface_mm
         previous = np.concatenate(([False], self.contact[:-1]))
@@ -133,7 +133,7 @@ class TrackFinger:
         # at its end sample, in contact or not (the contact of the segment is applied below)
         moving = np.ones(len(track), dtype=bool)
         self.speed = np.zeros(len(track))
-        self.speed[:-1] = speed_estimate(self.t, self.x, self.y, moving)[1:] * MM
+        self.speed[:-1] = speed_estimate(self.t, self.x, self.y, moving)[1:] * M_PER_MM
 
     @property
     def end_s(self) -> float:
@@ -148,7 +148,7 @@ class TrackFinger:
         j = np.minimum(np.maximum(i, 0), len(self.t) - 1)
         x = np.interp(times, self.t, self.x)
         y = np.interp(times, self.t, self.y)
-        fn = np.maximum(np.interp(times, self.t, self.fn), 0.0)
+        fn = np.maximum(np.interp(times, self.t, self.normal_force), 0.0)
         contact = _on_plate(x, y, inside & self.contact[j], self.surface_mm)
         speed = np.where(contact, self.speed[j], 0.0)
         contact_time = np.where(contact, times - self.touchdown_t[j], 0.0)
@@ -165,7 +165,7 @@ class HostFinger:
 
     def __init__(self, surface_mm: tuple[float, float]) -> None:
         self.surface_mm = surface_mm
-        self.t = self.x = self.y = self.fn = 0.0
+        self.t = self.x = self.y = self.normal_force = 0.0
         self.host_t: float | None = None
         self.contact = False
         self.speed_m_s = 0.0
@@ -180,10 +180,10 @@ class HostFinger:
         if host_t is not None and self.host_t is not None:
             interval = (host_t - self.host_t) % HOST_TIME_WRAP_S
         moving = contact and self.contact  # rule R4: no estimate at a touch-down
-        self.speed_m_s = step_speed(x - self.x, y - self.y, interval, moving) * MM
+        self.speed_m_s = step_speed(x - self.x, y - self.y, interval, moving) * M_PER_MM
         if contact and not self.contact:
             self.touchdown_s = t
-        self.t, self.x, self.y, self.fn, self.contact = t, x, y, max(fn, 0.0), contact
+        self.t, self.x, self.y, self.normal_force, self.contact = t, x, y, max(fn, 0.0), contact
         self.host_t = host_t
 
     def state(self, times: np.ndarray) -> FingerTruth:
@@ -191,7 +191,7 @@ class HostFinger:
         n = times.shape[0]
         width, height = self.surface_mm
         on = bool(self.contact and 0 <= self.x <= width and 0 <= self.y <= height)
-        fn, speed = (self.fn, self.speed_m_s) if on else (0.0, 0.0)
+        fn, speed = (self.normal_force, self.speed_m_s) if on else (0.0, 0.0)
         contact_time = np.maximum(times - self.touchdown_s, 0.0) if on else np.zeros(n)
         x, y, force, sliding = np.array([[self.x], [self.y], [fn], [speed]]).repeat(n, axis=1)
         contact = np.empty(n, dtype=bool)
@@ -245,7 +245,7 @@ class FingerPhysics:
         outputs, one per frame, finite and >= 0 by construction (not checked again)."""
         if not np.logical_or.reduce(truth.contact):  # .any(), without its wrapper
             return np.ones(truth.contact.shape[0])
-        shape = truth.fn_n.shape
+        shape = truth.normal_force_n.shape
         trusted = (
             amplitude_m.shape == shape and voltage_v.shape == shape and truth.checked
             and (measured or (
@@ -254,12 +254,12 @@ class FingerPhysics:
                 and (self.profile.ev_model is None or finite_non_negative(voltage_v))
             ))
         )
-        uv, ev = self.profile.forward(amplitude_m, voltage_v, truth.speed_m_s, truth.fn_n,
+        uv, ev = self.profile.forward(amplitude_m, voltage_v, truth.speed_m_s, truth.normal_force_n,
                                       trusted=trusted)
-        hidden = self.hidden.ev_force(voltage_v, truth.fn_n) if self.hidden else None
+        hidden = self.hidden.ev_force(voltage_v, truth.normal_force_n) if self.hidden else None
         if hidden is not None:
             with np.errstate(divide="ignore", invalid="ignore"):
-                ev = np.where(truth.fn_n > 0, 1.0 + hidden / truth.fn_n, 1.0)
+                ev = np.where(truth.normal_force_n > 0, 1.0 + hidden / truth.normal_force_n, 1.0)
         return np.where(truth.contact, uv * ev, 1.0)
 
     def coefficient(self, truth: FingerTruth) -> np.ndarray:
@@ -267,12 +267,12 @@ class FingerPhysics:
         :class:`FingerFriction`) at each frame where it presses (contact and ``Fn > 0``), 0
         elsewhere. A function of the finger's state alone (the simulation works it out with
         the internal finger's frames ahead)."""
-        pressing = truth.contact & (truth.fn_n > 0)
+        pressing = truth.contact & (truth.normal_force_n > 0)
         if not np.logical_or.reduce(pressing):
             return np.zeros(pressing.shape[0])
         every = np.logical_and.reduce(pressing)  # then no frame needs picking out
         inputs = {
-            "normal_force": truth.fn_n if every else truth.fn_n[pressing],
+            "normal_force": truth.normal_force_n if every else truth.normal_force_n[pressing],
             "speed": truth.speed_m_s if every else truth.speed_m_s[pressing],
             "contact_time": truth.contact_time_s if every else truth.contact_time_s[pressing],
         }
@@ -295,6 +295,6 @@ class FingerPhysics:
         if coefficient is None:
             coefficient = self.coefficient(truth)
         force = coefficient * friction
-        force *= truth.fn_n  # 0 where the finger does not press
+        force *= truth.normal_force_n  # 0 where the finger does not press
         force += self._draws.take(friction.shape[0]) * self.lateral_noise_n
         return force

@@ -111,7 +111,7 @@ def parse_assignments(names: Iterable[str], assignments: Iterable[str]
     Raises:
         HiddenEffectError: a malformed assignment, an unknown effect or parameter, a bad value.
     """
-    from hcard.physics.units import UnitError, parse_quantity
+    from hcard.quantities import UnitError, parse_quantity
 
     chosen: dict[str, dict[str, float]] = {name: {} for name in names}
     for text in assignments:

@@ -31,7 +31,8 @@ previous one, which the braked plate stays under, is in force). That takes at mo
 :attr:`DeviceSimulation.limit_settle_time_s` (E-ViTa 0.81 ms, coupled stimulator 3.52 ms). The EV
 amplifier's limiter takes lowered voltage and current limits from the next frame.
 
-Faults per frame (:class:`~hcard_device.sim.faults.Faults`): condition flags (limits, watchdog,
+Faults per frame are the protocol's STATE.faults bits
+(:class:`~hcard_device.protocol.constants.FaultBits`): condition flags (limits, watchdog,
 clipped card) are set on every frame they hold; event flags (``STREAM_OVERRUN``,
 ``INVALID_REQUEST``) on the first frame of the step after the event.
 
@@ -56,14 +57,15 @@ import numpy as np
 
 from hcard.physics.actuation import actuate
 from hcard.physics.profile import DeviceProfile, ProfileError
+from hcard.quantities import M_PER_MM
 from hcard.render import Renderer, RenderOptions, RenderStream
 from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb
+from hcard_device.protocol.constants import FaultBits
 from hcard_device.sim.amplifier import EVAmplifier
 from hcard_device.sim.clip import ClipReport, clip_report
 from hcard_device.sim.config import DeviceConfig
 from hcard_device.sim.counters import DeviceCounters
-from hcard_device.sim.faults import Faults
 from hcard_device.sim.finger import FingerPhysics, FingerTruth, HostFinger, TrackFinger
 from hcard_device.sim.hidden import HiddenPhysics
 from hcard_device.sim.host_clock import HostClock
@@ -138,7 +140,7 @@ class SimBlock:
         finger_x_mm, finger_y_mm: the finger's true position, mm.
         finger_speed_m_s: its true sliding speed, m/s.
         contact: it touches the plate.
-        faults: (N,) :class:`Faults` bits per frame (uint16).
+        faults: (N,) :class:`FaultBits` bits per frame (uint16).
     """
 
     t_s: np.ndarray
@@ -169,7 +171,7 @@ class SimBlock:
         """Total target relative friction ``uv * ev`` (Eq. 4.1)."""
         return self.target_uv * self.target_ev
 
-    def has(self, fault: Faults) -> np.ndarray:
+    def has(self, fault: FaultBits) -> np.ndarray:
         """Per-frame mask of frames with ``fault`` set."""
         return (self.faults & int(fault)) != 0
 
@@ -624,7 +626,7 @@ class DeviceSimulation:
         take = min(room, uv_a.shape[0])
         if take < uv_a.shape[0]:
             self.counts.stream_frames_dropped += uv_a.shape[0] - take
-            self._events |= int(Faults.STREAM_OVERRUN)
+            self._events |= int(FaultBits.STREAM_OVERRUN)
         if take > 0:
             self._queue.append((uv_a[:take].copy(), ev_a[:take].copy()))
             self._queued += take
@@ -655,7 +657,7 @@ class DeviceSimulation:
         render_times = times + self._render_shift_s  # the samples' time line
         touch = self._held_touch(samples, render_times)
         speed_est = (
-            predicted_speed(samples, render_times, self._options.dead_reckoning_s) * 1e-3
+            predicted_speed(samples, render_times, self._options.dead_reckoning_s) * M_PER_MM
         )
         self._history = samples.tail(4)
         corners = self.force_sensors.add_noise(split)
@@ -675,7 +677,7 @@ class DeviceSimulation:
         # 5. output gain (stop, watchdog).
         gain, tripped = self._output_gain(times)
         if tripped is not None:
-            faults[tripped] |= int(Faults.WATCHDOG)
+            faults[tripped] |= int(FaultBits.WATCHDOG)
         if gain is not None:
             amplitude_raw, voltage_raw = amplitude_raw * gain, voltage_raw * gain
         amplitude_cmd = np.minimum(amplitude_raw, self._limits.max_amplitude_m)
@@ -683,13 +685,13 @@ class DeviceSimulation:
 
         # 6. physics.
         m = cfg.loop_samples_per_frame
-        plate = self.plate.run(amplitude_cmd.repeat(m), truth.fn_n.repeat(m))
+        plate = self.plate.run(amplitude_cmd.repeat(m), truth.normal_force_n.repeat(m))
         amplitude = np.add.reduce(plate.amplitude.reshape(n, m), axis=1) / m  # frame mean
         if self.limits_pending and not self.plate.above_limit:
             self._commit_limits()  # the braked plate landed on the lowered limit (PS5)
         if np.logical_or.reduce(plate.clamped):
             faults[np.logical_or.reduce(plate.clamped.reshape(n, m), axis=1)] |= int(
-                Faults.AMPLITUDE_LIMIT)
+                FaultBits.AMPLITUDE_LIMIT)
         if self.amplifier is not None:
             contact = truth.contact
             if np.logical_and.reduce(contact):  # one load for the whole step: a number
@@ -700,8 +702,8 @@ class DeviceSimulation:
                 load = np.where(contact, self.finger_capacitance_f, 0.0)
             ev_run = self.amplifier.run(voltage_cmd, load)
             voltage, current = ev_run.voltage, ev_run.current
-            faults[ev_run.voltage_limited] |= int(Faults.VOLTAGE_LIMIT)
-            faults[ev_run.current_limited] |= int(Faults.CURRENT_LIMIT)
+            faults[ev_run.voltage_limited] |= int(FaultBits.VOLTAGE_LIMIT)
+            faults[ev_run.current_limited] |= int(FaultBits.CURRENT_LIMIT)
         else:
             voltage, current = np.zeros(n), np.zeros(n)
         friction = self.finger_physics.friction(amplitude, voltage, truth, measured=True)
@@ -719,7 +721,7 @@ class DeviceSimulation:
             current_a=current,
             friction=friction,
             lateral_force_n=lateral,
-            normal_force_n=truth.fn_n,
+            normal_force_n=truth.normal_force_n,
             corner_forces_n=corners,
             touch=touch,
             texture=texture,
@@ -733,7 +735,7 @@ class DeviceSimulation:
     # -- pieces ----------------------------------------------------------------------------
     def _invalid(self) -> None:
         self.counts.invalid_requests += 1
-        self._events |= int(Faults.INVALID_REQUEST)
+        self._events |= int(FaultBits.INVALID_REQUEST)
 
     def _last_sample_time(self) -> float:
         if len(self._pending):
@@ -759,7 +761,8 @@ class DeviceSimulation:
         finger, n = self._finger, times.shape[0]
         if not isinstance(finger, TrackFinger):
             truth = finger.state(times) if finger is not None else FingerTruth.absent(n)
-            return truth, self.force_sensors.split(truth.fn_n, truth.x_mm, truth.y_mm), None
+            split = self.force_sensors.split(truth.normal_force_n, truth.x_mm, truth.y_mm)
+            return truth, split, None
         ahead = self._ahead
         if ahead is None or ahead[0] is not finger or not (
             ahead[1] <= self._frame and self._frame + n <= ahead[1] + ahead[3].shape[0]
@@ -767,7 +770,7 @@ class DeviceSimulation:
             count = max(n, LOOKAHEAD_FRAMES)
             frames = (self._frame + np.arange(count, dtype=np.float64)) / self.config.frame_rate_hz
             truth = finger.state(frames)
-            split = self.force_sensors.split(truth.fn_n, truth.x_mm, truth.y_mm)
+            split = self.force_sensors.split(truth.normal_force_n, truth.x_mm, truth.y_mm)
             coefficient = self.finger_physics.coefficient(truth)
             split.flags.writeable = coefficient.flags.writeable = False
             ahead = self._ahead = (finger, self._frame, truth, split, coefficient)
@@ -797,7 +800,7 @@ class DeviceSimulation:
             frames = np.rint(times * rate)
             index = frames - ahead[1]
             truth = ahead[2]
-            if (index[0] >= 0 and index[-1] < truth.fn_n.shape[0]
+            if (index[0] >= 0 and index[-1] < truth.normal_force_n.shape[0]
                     and np.logical_and.reduce(frames / rate == times)):
                 i = index.astype(np.intp)
                 return truth.x_mm[i], truth.y_mm[i], truth.contact[i]
@@ -869,19 +872,19 @@ class DeviceSimulation:
             return  # every target rendered: nothing to flag
         missing = None  # frames that need a channel the device lacks
         if self._profile.uv_model is not None and self._limits.max_amplitude_m > 0:
-            faults[uv_short] |= int(Faults.AMPLITUDE_LIMIT)
+            faults[uv_short] |= int(FaultBits.AMPLITUDE_LIMIT)
         else:
             missing = uv_short
         if self._profile.ev_model is not None and self._limits.max_voltage_v > 0:
             name = self._profile.voltage_limit[1]
-            flag = Faults.CURRENT_LIMIT if name == "max_current" else Faults.VOLTAGE_LIMIT
+            flag = FaultBits.CURRENT_LIMIT if name == "max_current" else FaultBits.VOLTAGE_LIMIT
             faults[ev_short] |= int(flag)
         else:
             missing = ev_short if missing is None else missing | ev_short
         if not self._streaming and self._card_report.clipped:
-            faults[uv_short | ev_short] |= int(Faults.CARD_CLIPPED)
+            faults[uv_short | ev_short] |= int(FaultBits.CARD_CLIPPED)
         if missing is not None:
-            faults[missing] |= int(Faults.CARD_CLIPPED)
+            faults[missing] |= int(FaultBits.CARD_CLIPPED)
 
     def _output_gain(self, times: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
         """Per-frame output gain (None: 1 throughout) and the frames where the watchdog has

@@ -63,6 +63,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import scipy.constants
 
 from hcard.calibration.measurement import Measurement
 from hcard.physics import Parameter, PredictorError
@@ -149,7 +150,7 @@ class Protocol:
     amplitude_segment_s: float = 0.03
     voltage_segment_s: float = 0.04
     voltage_range_v: tuple[float, float] = VOLTAGE_RANGE_V
-    pressures_pa: tuple[float, ...] = (101325.0,)
+    pressures_pa: tuple[float, ...] = (scipy.constants.atm,)
 
     def __post_init__(self) -> None:
         positive = (

@@ -7,19 +7,16 @@ from collections.abc import Mapping
 import numpy as np
 
 from hcard.physics import PredictorError
+from hcard.quantities import SI_UNITS
 
 UNITS = {
-    "amplitude": "m",
-    "frequency": "Hz",
-    "speed": "m/s",
-    "normal_force": "N",
-    "pressure": "Pa",
-    "target": "",
+    **SI_UNITS,
     "normal_stiffness": "N/m",
     "lateral_stiffness": "N/m",
     "mu0": "",
     "lateral_recovery_speed": "m/s",
 }
+"""SI unit of each predictor input, for the error messages."""
 
 
 def check_inputs(

@@ -42,11 +42,12 @@ import math
 from typing import Any, ClassVar
 
 import numpy as np
+import scipy.constants
 
 from hcard.physics import Parameter, Predictor, PredictorError, Variable
 from hcard_builtins.physics.ultrasonic._checks import check_inputs
 
-ATMOSPHERE = 101_325.0
+ATMOSPHERE = scipy.constants.atm
 """Default ambient pressure (Pa)."""
 
 GAUSS_NODES_PER_HALF_PERIOD = 48
