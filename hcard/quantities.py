@@ -9,7 +9,7 @@ holds what crosses that boundary:
 - the named conversion factors (``x_mm * M_PER_MM`` is metres, ``force * MN_PER_N`` is mN)
   that replace bare ``1e-3``/``1e3``/``1e6`` literals;
 - :data:`SI_UNITS`, the SI unit of each quantity name used in memory (``normal_force``: N);
-- :data:`COLUMN_UNITS`, the unit suffixes a measurement column may carry (rule M4 of
+- :data:`COLUMN_UNITS`, the unit suffixes a measurement column may carry (rule MF4 of
   spec/measurement-format.md) with their scales to SI;
 - parsing of user text (``"2um"``, ``"27.5 kHz"``, ``"20 mm/s"``) to SI floats, and the
   units a person reads (``display_unit``, ``format_value``).
@@ -183,7 +183,7 @@ COLUMN_UNITS: dict[str, dict[str, float]] = {
     "fn": _FORCE,
     "fl": _FORCE,
     "frequency": column_units("hz", "khz"),
-    # device columns (rule M12)
+    # device columns (rule MF12)
     "current": column_units("a", "ma", "ua"),
     "f_tl": _FORCE,
     "f_tr": _FORCE,
@@ -192,7 +192,7 @@ COLUMN_UNITS: dict[str, dict[str, float]] = {
     "echo": _TIME,
 }
 """Accepted unit suffixes of each measurement column quantity, SI first: suffix -> scale to
-SI (rule M4 of spec/measurement-format.md; device columns rule M12)."""
+SI (rule MF4 of spec/measurement-format.md; device columns rule MF12)."""
 
 
 def parse_quantity(text: str, expected_unit: str) -> float:

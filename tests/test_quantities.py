@@ -51,7 +51,7 @@ def test_column_units_scale_to_si(quantity: str, suffix: str, scale: float) -> N
 
 
 def test_every_column_quantity_is_written_in_its_si_unit() -> None:
-    """Rule M4: each quantity has exactly one suffix of scale 1, the one the writer uses."""
+    """Rule MF4: each quantity has exactly one suffix of scale 1, the one the writer uses."""
     for quantity, accepted in units.COLUMN_UNITS.items():
         si = [suffix for suffix, scale in accepted.items() if scale == 1.0]
         assert si == [SI_SUFFIX[quantity]], quantity
