@@ -22,7 +22,7 @@ def plate_loop_response(frequency_hz: float, config: DeviceConfig,
     from its difference equations in z: plant ``A[k+1] = a A[k] + (1 - a) G u[k]``, controller
     ``u = Kp e + I``, ``I[k+1] = I[k] + Ki T e[k]``, times the zero-order hold of one stream
     frame on the reference."""
-    plate = PlateModel(config.plate_frequency_hz, config.plate_quality_factor,
+    plate = PlateModel(config.limits.plate_frequency, config.plate_quality_factor,
                        config.finger_damping_per_n, config.full_drive_amplitude_m)
     gains = PIGains.ziegler_nichols(plate, config.pi_dead_time_s, config.pi_tuning_force_n)
     period = 1.0 / config.loop_rate_hz

@@ -42,7 +42,7 @@ def reference_profile(info: DeviceInfo) -> DeviceProfile | None:
     except (KeyError, ValueError):
         return None
     config = variant_config(variant)
-    if info.plate_frequency_hz != round(config.plate_frequency_hz):
+    if info.plate_frequency_hz != round(config.limits.plate_frequency):
         return None
     return device_profile(config)
 

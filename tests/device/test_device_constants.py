@@ -22,9 +22,11 @@ from hcard_builtins.physics.electrovibration._common import EPSILON_0 as EV_EPSI
 from hcard_builtins.physics.ultrasonic.squeeze_film import ATMOSPHERE as FILM_ATMOSPHERE
 from hcard_conformance.vectors.generate import TOLERANCES
 from hcard_conformance.vectors.tracks import TOUCH_RATE_HZ as VECTOR_TOUCH_RATE_HZ
+from hcard_device.firmware import Firmware
 from hcard_device.protocol import FaultBits
 from hcard_device.sim import DeviceSimulation
 from hcard_device.sim.config import DeviceConfig
+from hcard_device.sim.models import device_profile
 
 
 def test_the_coupled_stimulator_limits_are_the_thesis_values() -> None:
@@ -37,12 +39,27 @@ def test_the_coupled_stimulator_limits_are_the_thesis_values() -> None:
 
 def test_the_simulated_devices_take_the_limits_from_the_profile() -> None:
     limits = COUPLED_STIMULATOR_LIMITS
-    for config in (DeviceConfig.evita(), DeviceConfig.coupled()):
-        assert config.max_amplitude_m == limits.max_amplitude
-        assert config.max_current_a == limits.max_current
-        assert config.ev_carrier_hz == limits.carrier_frequency
-    assert DeviceConfig.coupled().plate_frequency_hz == limits.plate_frequency
+    evita, coupled = DeviceConfig.evita().limits, DeviceConfig.coupled().limits
+    assert coupled is limits
+    assert (evita.max_amplitude, evita.max_current, evita.carrier_frequency) == (
+        2.5e-6, 250e-6, 440.0)  # sections 2.4, 3.6.3
+    assert evita.max_voltage == 0.0 and evita.plate_frequency == 60_750.0  # section 5.1.1
     assert Coupled.input_defaults["frequency"] == limits.plate_frequency
+
+
+def test_the_device_reports_and_its_model_take_the_limits_from_the_config() -> None:
+    for config in (DeviceConfig.evita(), DeviceConfig.coupled()):
+        sim = DeviceSimulation(config)
+        model = device_profile(config).limits
+        assert model == config.limits  # the firmware's model renders with the hardware's limits
+        assert sim.hardware_limits.max_amplitude_m == config.limits.max_amplitude
+        assert sim.hardware_limits.max_voltage_v == config.limits.max_voltage
+        assert sim.hardware_limits.max_current_a == config.limits.max_current
+        info = Firmware(sim).device_info()
+        assert info.plate_frequency_hz == round(config.limits.plate_frequency)
+        assert info.ev_carrier_hz == (440 if config.has_ev else 0)
+        assert info.max_amplitude_nm == 2500 and info.max_current_10na == 25_000
+        assert info.max_voltage_dv == (20_000 if config.has_ev else 0)
 
 
 def test_rates_are_the_thesis_values_everywhere() -> None:

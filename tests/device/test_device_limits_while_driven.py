@@ -54,10 +54,10 @@ QUANTA = (1e-9, 0.1, 1e-8)
 
 def loop_of(config: DeviceConfig, brake: float) -> PlateLoop:
     """The device's plate under its PI loop, at the hardware limit, with ``brake``."""
-    plate = PlateModel(config.plate_frequency_hz, config.plate_quality_factor,
+    plate = PlateModel(config.limits.plate_frequency, config.plate_quality_factor,
                        config.finger_damping_per_n, config.full_drive_amplitude_m)
     gains = PIGains.ziegler_nichols(plate, config.pi_dead_time_s, config.pi_tuning_force_n)
-    return PlateLoop(plate, gains, LOOP_HZ, config.max_amplitude_m, brake_drive=brake)
+    return PlateLoop(plate, gains, LOOP_HZ, config.limits.max_amplitude, brake_drive=brake)
 
 
 @dataclass(frozen=True)
@@ -243,7 +243,7 @@ def test_hardware_limit_to_zero_takes_at_most_the_settle_time(config, bound_s):
 
 @pytest.mark.parametrize("phase", range(10))
 def test_evita_at_2_um_lowered_to_1_25_um_every_report_after_the_set_is_under(phase):
-    lowered = (1.25e-6, 0.0, EVITA.max_current_a)
+    lowered = (1.25e-6, 0.0, EVITA.limits.max_current)
     fixed = lower_while_driven(DeviceSimulation(EVITA), 2.0e-6, lowered, phase)
     assert fixed.before[-1].amplitude_m == pytest.approx(2.0e-6, abs=2e-9)
     assert fixed.read_back == Limits.from_si(*lowered)
@@ -273,7 +273,8 @@ def test_coupled_lowered_amplitude_voltage_and_current_hold_after_the_set(phase)
     assert before.voltage_v == pytest.approx(2000.0, abs=0.1) and before.current_a > 150e-6
     assert worst(fixed.after, lowered) == (0, pytest.approx(1.0, abs=1e-3))
     # The current limit binds first: the envelope settles at I / (2 pi f_c C), 689 V.
-    omega_c = 2 * math.pi * COUPLED.ev_carrier_hz * DeviceSimulation(COUPLED).finger_capacitance_f
+    carrier_hz = COUPLED.limits.carrier_frequency
+    omega_c = 2 * math.pi * carrier_hz * DeviceSimulation(COUPLED).finger_capacitance_f
     assert max(s.voltage_v for s in fixed.after) == pytest.approx(62.5e-6 / omega_c, abs=0.2)
     assert max(s.current_a for s in fixed.after) <= 62.5e-6 + 1e-8
     # tau ln((2 + G) / (1.25 + G)) at 0.5 N (tau 6.73 ms, G 3.65 um): 0.96 ms, 10 frames

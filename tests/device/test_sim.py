@@ -36,9 +36,9 @@ EVITA = DeviceConfig.evita()
 TWO_UM = 2e-6
 
 
-def evita_loop(limit: float = EVITA.max_amplitude_m) -> PlateLoop:
+def evita_loop(limit: float = EVITA.limits.max_amplitude) -> PlateLoop:
     plate = PlateModel(
-        EVITA.plate_frequency_hz,
+        EVITA.limits.plate_frequency,
         EVITA.plate_quality_factor,
         EVITA.finger_damping_per_n,
         EVITA.full_drive_amplitude_m,
@@ -516,7 +516,7 @@ def test_amplitude_voltage_and_current_never_exceed_the_limits(commands, capacit
                 decay_from * np.exp(-(block.t_s - decay_t) / tau) * (1 + 1e-9),
             )
             assert np.all(block.amplitude_m <= allowed + AMPLITUDE_TOLERANCE_M)
-            assert np.all(block.amplitude_m <= config.max_amplitude_m * (1 + 1e-9))
+            assert np.all(block.amplitude_m <= config.limits.max_amplitude * (1 + 1e-9))
             assert np.all(block.voltage_v <= limits.max_voltage_v * (1 + 1e-12))
             assert np.all(block.current_a <= limits.max_current_a * (1 + 1e-9))
             assert np.all(np.isfinite(block.friction)) and np.all(block.voltage_v >= 0)
@@ -708,9 +708,9 @@ def test_any_valid_card_loads_plays_and_stays_within_the_limits(card, coupled):
     sim.use_internal_finger(moderate_stroke(20.0, duration=0.3))
     sim.start()
     block = sim.step(3000)
-    assert np.all(block.amplitude_m <= config.max_amplitude_m * (1 + 1e-9))
-    assert np.all(block.voltage_v <= config.max_voltage_v)
-    assert np.all(block.current_a <= config.max_current_a * (1 + 1e-9))
+    assert np.all(block.amplitude_m <= config.limits.max_amplitude * (1 + 1e-9))
+    assert np.all(block.voltage_v <= config.limits.max_voltage)
+    assert np.all(block.current_a <= config.limits.max_current * (1 + 1e-9))
     assert np.all(np.isfinite(block.friction))
     if not report.clipped:
         assert not block.has(FaultBits.CARD_CLIPPED).any()

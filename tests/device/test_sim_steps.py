@@ -130,10 +130,10 @@ def test_the_frames_ahead_and_batched_noise_are_the_direct_computation():
 
 
 def coupled_loop() -> PlateLoop:
-    plate = PlateModel(COUPLED.plate_frequency_hz, COUPLED.plate_quality_factor,
+    plate = PlateModel(COUPLED.limits.plate_frequency, COUPLED.plate_quality_factor,
                        COUPLED.finger_damping_per_n, COUPLED.full_drive_amplitude_m)
     gains = PIGains.ziegler_nichols(plate, COUPLED.pi_dead_time_s, COUPLED.pi_tuning_force_n)
-    return PlateLoop(plate, gains, COUPLED.loop_rate_hz, COUPLED.max_amplitude_m)
+    return PlateLoop(plate, gains, COUPLED.loop_rate_hz, COUPLED.limits.max_amplitude)
 
 
 def loop_recursion(loop: PlateLoop, ref: np.ndarray, force: float) -> tuple[np.ndarray, ...]:
@@ -182,7 +182,7 @@ def test_a_chattering_plate_loop_is_the_sample_recursion(monkeypatch):
     assert np.count_nonzero(np.diff(modes)) > 60  # through zero drive, linear and full drive
     for result in (at_once.amplitude, np.concatenate([s.amplitude for s in stepped])):
         np.testing.assert_allclose(result, np.maximum(expected, 0.0), rtol=0, atol=1e-15)
-        assert result.max() <= COUPLED.max_amplitude_m * (1 + 1e-9) + 1e-14
+        assert result.max() <= COUPLED.limits.max_amplitude * (1 + 1e-9) + 1e-14
     np.testing.assert_allclose(at_once.drive, drive, rtol=0, atol=1e-6)
     assert (at_once.drive == 0).any() and (at_once.drive == 1).any() and at_once.clamped.any()
 

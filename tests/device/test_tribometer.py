@@ -27,7 +27,8 @@ def friction(m):
 
 def _uv_model(device: str = "uv") -> tuple[DimensionlessGroup, float]:
     config = DeviceConfig.evita() if device == "uv" else DeviceConfig.coupled()
-    return DimensionlessGroup(mu0=config.mu0, psi_star=config.psi_star), config.plate_frequency_hz
+    uv = DimensionlessGroup(mu0=config.mu0, psi_star=config.psi_star)
+    return uv, config.limits.plate_frequency
 
 
 def _contact(m) -> np.ndarray:

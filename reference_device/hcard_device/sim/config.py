@@ -12,7 +12,7 @@ Two presets (thesis chapters 4 and 5):
 
 SI units (s, m, N, V, A, Hz, F) except positions on the touch surface, which are in mm like the
 card and the renderer. Values the thesis does not give are marked "assumption" in
-:data:`SOURCES` together with the reason for the value chosen.
+:data:`EVITA_SOURCES` and :data:`COUPLED_SOURCES` together with the reason for the value chosen.
 """
 
 from __future__ import annotations
@@ -21,8 +21,22 @@ import math
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from hcard.physics.profile import COUPLED_STIMULATOR_LIMITS
+from hcard.physics.profile import COUPLED_STIMULATOR_LIMITS, DeviceLimits
 from hcard.rates import DEFAULT_FRAME_RATE_HZ, TOUCH_RATE_HZ
+
+EVITA_LIMITS = DeviceLimits(
+    max_amplitude=COUPLED_STIMULATOR_LIMITS.max_amplitude,
+    max_voltage=0.0,
+    max_current=COUPLED_STIMULATOR_LIMITS.max_current,
+    carrier_frequency=COUPLED_STIMULATOR_LIMITS.carrier_frequency,
+    plate_frequency=60_750.0,
+)
+"""The E-ViTa of chapter 5: a glass plate resonating at 60,750 Hz (section 5.1.1), no EV
+amplifier (0 V, section 5.1), and the coupled stimulator's 2.5 um peak-to-peak amplitude range
+(section 2.4); its current limit and carrier are the coupled stimulator's (unused without EV)."""
+
+COUPLED_LIMITS = COUPLED_STIMULATOR_LIMITS
+"""The coupled UV+EV stimulator of chapter 4 (section 4.2.1), as the physics core defines it."""
 
 EVITA_PLATE_QUALITY_FACTOR = 300.0
 """Unloaded quality factor of the E-ViTa plate. The envelope of a resonator is first order with
@@ -52,24 +66,26 @@ class DeviceConfig:
             its corners and the card's coordinates are those of this surface.
         plate_size_m: (length, width, thickness) of the vibrating plate, m.
         plate_material: material of the plate.
-        plate_frequency_hz: resonance of the plate, Hz.
+        limits: the hardware limits, plate resonance and EV carrier (:data:`EVITA_LIMITS`,
+            :data:`COUPLED_LIMITS`), SI units; the firmware's model renders with them and the
+            simulated hardware enforces them. ``limits.load_capacitance`` is the model's
+            (None: Eq. 3.8's 33 pF).
         half_wavelength_m: half wavelength of the vibration mode, m.
         plate_quality_factor: unloaded quality factor ``Q0`` of the plate.
         finger_damping_per_n: relative increase of the plate's damping ``1/Q`` per newton of
             finger force: ``1/Q(Fn) = (1 + d Fn) / Q0``.
         full_drive_amplitude_m: peak-to-peak amplitude the unloaded plate settles at under full
-            drive, m (drive headroom over ``max_amplitude_m``).
+            drive, m (drive headroom over ``limits.max_amplitude``).
         pi_dead_time_s: apparent dead time ``L`` of the amplitude measurement chain used by
             the Ziegler-Nichols reaction-curve tuning of the PI loop, s.
         pi_tuning_force_n: finger force at which the PI loop was tuned, N.
-        max_amplitude_m: largest peak-to-peak plate amplitude, m (hardware safety limit).
-        max_voltage_v: largest peak EV voltage, V (0: no EV channel).
-        max_current_a: largest peak current through the user, A.
-        ev_carrier_hz: EV carrier frequency, Hz.
         amplifier_slew_v_per_s: output slew-rate limit of the EV amplifier, V/s.
         finger_capacitance_f: physical capacitance the EV amplifier drives through a finger in
-            contact, F; None: the EV model's (Eq. 3.8, 33 pF). The firmware's model always
-            assumes Eq. 3.8's value; the amplifier enforces the current on the physical one.
+            contact, F; None: the model's (``limits.load_capacitance``, else Eq. 3.8, 33 pF).
+            Not a limit, so not in ``limits``: it is the simulated hardware's load, which may
+            differ from the load the firmware's model assumes (``limits.load_capacitance``);
+            the model computes the voltage for the current limit on the assumed load, the
+            amplifier enforces the current on the physical one.
         force_noise_n: standard deviation of each corner force sensor, N.
         lateral_force_noise_n: standard deviation of the tribometer's lateral force, N.
         mu0: friction coefficient without vibration in the dimensionless group (Eq. 2.30).
@@ -88,17 +104,13 @@ class DeviceConfig:
     surface_mm: tuple[float, float] = (81.0, 54.0)
     plate_size_m: tuple[float, float, float] = (81e-3, 54e-3, 1.6e-3)
     plate_material: str = "glass"
-    plate_frequency_hz: float = 60_750.0
+    limits: DeviceLimits = EVITA_LIMITS
     half_wavelength_m: float = 8e-3
     plate_quality_factor: float = EVITA_PLATE_QUALITY_FACTOR
     finger_damping_per_n: float = 0.03
     full_drive_amplitude_m: float = 3.7e-6
     pi_dead_time_s: float = 0.385e-3
     pi_tuning_force_n: float = 0.5
-    max_amplitude_m: float = COUPLED_STIMULATOR_LIMITS.max_amplitude
-    max_voltage_v: float = 0.0
-    max_current_a: float = COUPLED_STIMULATOR_LIMITS.max_current
-    ev_carrier_hz: float = COUPLED_STIMULATOR_LIMITS.carrier_frequency
     amplifier_slew_v_per_s: float = 40e6
     finger_capacitance_f: float | None = None
     force_noise_n: float = 0.005
@@ -111,10 +123,14 @@ class DeviceConfig:
     sources: dict[str, str] = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.limits, DeviceLimits):
+            raise ValueError(
+                f"DeviceConfig.limits must be a DeviceLimits, got {type(self.limits).__name__}"
+            )
         positive = (
-            "frame_rate_hz", "loop_rate_hz", "touch_rate_hz", "plate_frequency_hz",
+            "frame_rate_hz", "loop_rate_hz", "touch_rate_hz",
             "plate_quality_factor", "full_drive_amplitude_m", "pi_dead_time_s",
-            "max_current_a", "ev_carrier_hz", "amplifier_slew_v_per_s", "mu0", "psi_star",
+            "amplifier_slew_v_per_s", "mu0", "psi_star",
             "watchdog_s", "ramp_down_s", "half_wavelength_m",
         )
         for name in positive:
@@ -122,8 +138,8 @@ class DeviceConfig:
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"DeviceConfig.{name} must be a finite number > 0, got {value}")
         non_negative = (
-            "touch_noise_mm", "finger_damping_per_n", "pi_tuning_force_n", "max_amplitude_m",
-            "max_voltage_v", "force_noise_n", "lateral_force_noise_n",
+            "touch_noise_mm", "finger_damping_per_n", "pi_tuning_force_n",
+            "force_noise_n", "lateral_force_noise_n",
         )
         for name in non_negative:
             value = float(getattr(self, name))
@@ -140,10 +156,10 @@ class DeviceConfig:
         ):
             raise ValueError("DeviceConfig.finger_capacitance_f must be None or a number > 0 F")
         loaded_full_drive = self.full_drive_amplitude_m / (1 + 3 * self.finger_damping_per_n)
-        if self.max_amplitude_m >= loaded_full_drive:
+        if self.limits.max_amplitude >= loaded_full_drive:
             raise ValueError(
                 "DeviceConfig.full_drive_amplitude_m leaves no drive headroom over "
-                "max_amplitude_m at a 3 N finger"
+                "limits.max_amplitude at a 3 N finger"
             )
         width, height = self.surface_mm
         if not (width > 0 and height > 0):
@@ -160,17 +176,17 @@ class DeviceConfig:
     @property
     def has_uv(self) -> bool:
         """Whether the device can vibrate its plate (UV channel)."""
-        return self.max_amplitude_m > 0
+        return self.limits.max_amplitude > 0
 
     @property
     def has_ev(self) -> bool:
         """Whether the device has an EV amplifier (EV channel)."""
-        return self.max_voltage_v > 0
+        return self.limits.max_voltage > 0
 
     @property
     def plate_time_constant_s(self) -> float:
         """Unloaded envelope time constant ``tau = Q0 / (pi f0)``, s."""
-        return self.plate_quality_factor / (math.pi * self.plate_frequency_hz)
+        return self.plate_quality_factor / (math.pi * self.limits.plate_frequency)
 
     def replace(self, **changes: Any) -> DeviceConfig:
         """A copy with some fields changed (:func:`dataclasses.replace`)."""
@@ -187,19 +203,15 @@ class DeviceConfig:
     def coupled(cls, **changes: Any) -> DeviceConfig:
         """The coupled UV+EV stimulator of thesis section 4.2.1; ``changes`` replace fields."""
         tau = COUPLED_PLATE_RESPONSE_S / math.log(9.0)
-        frequency = COUPLED_STIMULATOR_LIMITS.plate_frequency
+        frequency = COUPLED_LIMITS.plate_frequency
         config = cls(
             name="coupled-stimulator",
             surface_mm=(80.0, 50.0),
             plate_size_m=(80e-3, 50e-3, 2e-3),
             plate_material="aluminium",
-            plate_frequency_hz=frequency,
+            limits=COUPLED_LIMITS,
             half_wavelength_m=8e-3,
             plate_quality_factor=math.pi * frequency * tau,
-            max_amplitude_m=COUPLED_STIMULATOR_LIMITS.max_amplitude,
-            max_voltage_v=COUPLED_STIMULATOR_LIMITS.max_voltage,
-            max_current_a=COUPLED_STIMULATOR_LIMITS.max_current,
-            ev_carrier_hz=COUPLED_STIMULATOR_LIMITS.carrier_frequency,
             sources={**EVITA_SOURCES, **COUPLED_SOURCES},
         )
         return replace(config, **changes) if changes else config
@@ -215,7 +227,7 @@ EVITA_SOURCES: dict[str, str] = {
     ),
     "surface_mm": "section 5.1.1: the 81 x 54 mm glass plate is the touched surface",
     "plate_size_m": "section 5.1.1: glass plate 54 x 81 x 1.6 mm^3",
-    "plate_frequency_hz": "section 5.1.1: resonating at 60,750 Hz",
+    "limits.plate_frequency": "section 5.1.1: resonating at 60,750 Hz",
     "half_wavelength_m": "section 5.1.1: half wavelength of the vibration mode 8 mm",
     "plate_quality_factor": (
         "assumption from section 4.3.2/4.4: envelope tau = Q/(pi f0) = 1.57 ms, the ~1.5 ms "
@@ -235,13 +247,13 @@ EVITA_SOURCES: dict[str, str] = {
         "tuning (section 5.1.1: 'PI ... tuned with the Ziegler-Nichols method'); the value "
         "for which the tuned loop has the 400 Hz bandwidth at 2 um of Fig. 5.3b"
     ),
-    "max_amplitude_m": (
+    "limits.max_amplitude": (
         "section 2.4: amplitudes up to 2.5 um peak-to-peak, the range of ultrasonic displays "
         "(hcard.physics.profile.COUPLED_STIMULATOR_LIMITS)"
     ),
-    "max_voltage_v": "section 5.1: the E-ViTa has no EV amplifier (0 V)",
-    "max_current_a": "section 3.6.3 / [84]: user current limited to 250 uA",
-    "ev_carrier_hz": "section 4.2.1: voltage modulated at 440 Hz",
+    "limits.max_voltage": "section 5.1: the E-ViTa has no EV amplifier (0 V)",
+    "limits.max_current": "section 3.6.3 / [84]: user current limited to 250 uA",
+    "limits.carrier_frequency": "section 4.2.1: voltage modulated at 440 Hz",
     "amplifier_slew_v_per_s": (
         "assumption: 40 V/us, fast enough that the amplifier's rise 'can be neglected' "
         "(section 4.4); the current limit binds first"
@@ -260,14 +272,14 @@ EVITA_SOURCES: dict[str, str] = {
 COUPLED_SOURCES: dict[str, str] = {
     "surface_mm": "assumption: an 80 x 50 mm STIMTAC-size plate (size not given in 4.2.1)",
     "plate_size_m": "assumption: 80 x 50 x 2 mm aluminium plate (size not given in 4.2.1)",
-    "plate_frequency_hz": "section 4.2.1: aluminium plate resonating at 38,220 Hz",
+    "limits.plate_frequency": "section 4.2.1: aluminium plate resonating at 38,220 Hz",
     "half_wavelength_m": "section 4.2.2: same wavelength as the fast stimulator (assumed 8 mm)",
     "plate_quality_factor": (
         "section 4.3.2: the standalone design responds in about 15 ms (10-90 %), "
         "tau = 15 ms / ln 9, Q = pi f0 tau"
     ),
-    "max_voltage_v": "section 4.2.1: UVA2kV amplifier, programmable voltage up to 2000 V",
-    "max_current_a": "section 3.6.3 / [84]: current limited to I_s = 250 uA",
-    "ev_carrier_hz": "section 4.2.1: voltage modulated at 440 Hz",
+    "limits.max_voltage": "section 4.2.1: UVA2kV amplifier, programmable voltage up to 2000 V",
+    "limits.max_current": "section 3.6.3 / [84]: current limited to I_s = 250 uA",
+    "limits.carrier_frequency": "section 4.2.1: voltage modulated at 440 Hz",
 }
 """Where the coupled stimulator's values differ from the E-ViTa's."""

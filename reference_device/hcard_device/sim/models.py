@@ -12,7 +12,9 @@ measured amplitude and voltage (:mod:`.finger`):
 
 from __future__ import annotations
 
-from hcard.physics.profile import DeviceLimits, DeviceProfile
+from dataclasses import replace
+
+from hcard.physics.profile import DeviceProfile
 from hcard_builtins.physics.coupled import Coupled
 from hcard_builtins.physics.electrovibration import ChargeLeakage, Kaczmarek
 from hcard_builtins.physics.ultrasonic import DimensionlessGroup
@@ -32,28 +34,23 @@ def device_profile(
 ) -> DeviceProfile:
     """The device profile of ``config`` with its hardware limits, or lower ones.
 
-    The profile is the firmware's model: its load capacitance is Eq. 3.8's (33 pF), whatever
-    the physical finger's (``config.finger_capacitance_f``); the amplifier enforces the current
-    limit on the physical load.
+    The profile is the firmware's model: its limits are ``config.limits`` with the lower ones
+    given here, its load capacitance ``config.limits.load_capacitance`` (None: Eq. 3.8's,
+    33 pF), whatever the physical finger's (``config.finger_capacitance_f``); the amplifier
+    enforces the current limit on the physical load.
 
-    A UV-only device (``max_voltage_v == 0`` in the config) gets the dimensionless group alone;
+    A UV-only device (``limits.max_voltage == 0`` in the config) gets the dimensionless group alone;
     the coupled stimulator gets ``coupled`` (dimensionless group + Kaczmarek) with the
     charge-leakage gain at its carrier.
     """
-    amplitude = config.max_amplitude_m if max_amplitude_m is None else max_amplitude_m
-    voltage = config.max_voltage_v if max_voltage_v is None else max_voltage_v
-    current = config.max_current_a if max_current_a is None else max_current_a
+    hardware = config.limits
+    amplitude = hardware.max_amplitude if max_amplitude_m is None else max_amplitude_m
+    voltage = hardware.max_voltage if max_voltage_v is None else max_voltage_v
+    current = hardware.max_current if max_current_a is None else max_current_a
     if current <= 0:
         voltage, current = 0.0, MIN_PROFILE_CURRENT_A
     uv = DimensionlessGroup(mu0=config.mu0, psi_star=config.psi_star)
-    limits = DeviceLimits(
-        max_amplitude=amplitude,
-        max_voltage=voltage,
-        max_current=current,
-        carrier_frequency=config.ev_carrier_hz,
-        plate_frequency=config.plate_frequency_hz,
-        load_capacitance=None,
-    )
+    limits = replace(hardware, max_amplitude=amplitude, max_voltage=voltage, max_current=current)
     if not config.has_ev:
         return DeviceProfile(predictor=uv, limits=limits, name=config.name)
     return DeviceProfile(

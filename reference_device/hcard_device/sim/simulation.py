@@ -210,14 +210,14 @@ class DeviceSimulation:
             np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(3)
         )
         self.hardware_limits = Limits(
-            config.max_amplitude_m, config.max_voltage_v, config.max_current_a
+            config.limits.max_amplitude, config.limits.max_voltage, config.limits.max_current
         )
         self._limits = self.hardware_limits  # the limits set (commands, rendering, clamps)
         self._amplitude_in_force = self._limits.max_amplitude_m
         self._host_profile: DeviceProfile | None = None
         self._profile = device_profile(config)
         plate = PlateModel(
-            config.plate_frequency_hz,
+            config.limits.plate_frequency,
             config.plate_quality_factor,
             config.finger_damping_per_n,
             config.full_drive_amplitude_m,
@@ -226,15 +226,15 @@ class DeviceSimulation:
             plate,
             PIGains.ziegler_nichols(plate, config.pi_dead_time_s, config.pi_tuning_force_n),
             config.loop_rate_hz,
-            config.max_amplitude_m,
+            config.limits.max_amplitude,
             brake_drive=BRAKE_DRIVE,
         )
         self.amplifier = (
             EVAmplifier(
-                config.ev_carrier_hz,
+                config.limits.carrier_frequency,
                 config.frame_rate_hz,
-                config.max_voltage_v,
-                config.max_current_a,
+                config.limits.max_voltage,
+                config.limits.max_current,
                 config.amplifier_slew_v_per_s,
             )
             if config.has_ev
@@ -341,7 +341,7 @@ class DeviceSimulation:
         coupled stimulator: 10 + 37.7 ms = 47.7 ms)."""
         config = self.config
         decay = config.plate_time_constant_s * math.log(
-            max(config.max_amplitude_m / OFF_AMPLITUDE_M, 1.0)
+            max(config.limits.max_amplitude / OFF_AMPLITUDE_M, 1.0)
         )
         return config.ramp_down_s + decay
 

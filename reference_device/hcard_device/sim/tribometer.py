@@ -473,7 +473,7 @@ def synthesize(
             uv_in = _apply_inputs(on_uv, total_in)
             mu_uv = uv_model.forward(
                 amplitude=uv_in["amplitude"],
-                frequency=config.plate_frequency_hz,
+                frequency=config.limits.plate_frequency,
                 speed=np.abs(uv_in["speed"]),
                 normal_force=uv_in["normal_force"],
             )
@@ -534,7 +534,7 @@ def synthesize(
                 speed=s.speed,
                 conditions={
                     "device": f"hcard reference {device}",
-                    "plate_frequency_hz": config.plate_frequency_hz if uv_ok else None,
+                    "plate_frequency_hz": config.limits.plate_frequency if uv_ok else None,
                     "ambient_pressure_pa": float(pressure),
                     "probe": "simulated finger",
                     "surface": "glass",

@@ -50,13 +50,14 @@ def make_firmware(variant: str, seed: int = 0,
             (:class:`~hcard_device.sim.hidden.HiddenEffectError`).
     """
     from hcard_device.firmware import Firmware
-    from hcard_device.sim import DeviceConfig, DeviceSimulation
+    from hcard_device.profiles import variant_config
+    from hcard_device.sim import DeviceSimulation
     from hcard_device.sim.hidden import HiddenPhysics, resolve
     from hcard_device.sim.models import device_profile
 
     if variant not in PRODUCTS:
         raise ValueError(f"unknown device {variant!r}; known: {', '.join(PRODUCTS)}")
-    config = DeviceConfig.evita() if variant == "evita" else DeviceConfig.coupled()
+    config = variant_config(variant)
     hidden = HiddenPhysics(device_profile(config), resolve(variant, effects))
     return Firmware(DeviceSimulation(config, seed=seed, hidden=hidden))
 
