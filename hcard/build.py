@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import cast
 
 import numpy as np
 
@@ -18,8 +19,8 @@ from hcard import __version__, limits
 from hcard.errors import CardValidationError, Problem
 from hcard.v1 import card_pb2 as pb
 
-CHANNELS = {"uv": pb.CHANNEL_UV, "ev": pb.CHANNEL_EV, "bipolar": pb.CHANNEL_BIPOLAR}
-LOCKINGS = {
+CHANNELS: dict[str, int] = {"uv": pb.CHANNEL_UV, "ev": pb.CHANNEL_EV, "bipolar": pb.CHANNEL_BIPOLAR}
+LOCKINGS: dict[str, int] = {
     "position": pb.LOCKING_POSITION,
     "velocity": pb.LOCKING_VELOCITY,
     "auto": pb.LOCKING_AUTO,
@@ -37,14 +38,15 @@ def _enum(value: str | int | None, table: dict[str, int], what: str, default: in
     return int(value)
 
 
-def channel_value(name: str | int | None, default: int = pb.CHANNEL_UNSPECIFIED) -> int:
+def channel_value(name: str | int | None, default: int = pb.CHANNEL_UNSPECIFIED) -> pb.Channel:
     """The ``Channel`` enum value for ``"uv"``, ``"ev"``, ``"bipolar"`` (or an enum int)."""
-    return _enum(name, CHANNELS, "channel", default)
+    # protoc's stubs type an enum value as its wrapper class; at run time it is the int.
+    return cast("pb.Channel", _enum(name, CHANNELS, "channel", default))
 
 
-def locking_value(name: str | int | None, default: int = pb.LOCKING_AUTO) -> int:
+def locking_value(name: str | int | None, default: int = pb.LOCKING_AUTO) -> pb.Locking:
     """The ``Locking`` enum value for ``"position"``, ``"velocity"``, ``"auto"``."""
-    return _enum(name, LOCKINGS, "locking", default)
+    return cast("pb.Locking", _enum(name, LOCKINGS, "locking", default))
 
 
 def spatial(
@@ -130,6 +132,7 @@ def card(
             "grid", f"{width_mm:g} x {height_mm:g} mm in taxtels of {tw:g} x {th:g} mm needs "
             f"{cols} x {rows} taxtels, over the limits of {limits.MAX_GRID_COLS} x "
             f"{limits.MAX_GRID_ROWS} and {limits.MAX_TAXTELS} in all", "error", "G3")])
+    index: np.ndarray
     if texture_index is None:
         index = np.zeros(cols * rows, dtype=np.uint32)
     else:

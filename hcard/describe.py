@@ -11,13 +11,13 @@ if TYPE_CHECKING:
 from hcard import limits
 from hcard.v1 import card_pb2 as pb
 
-CHANNEL_NAMES = {
+CHANNEL_NAMES: dict[int, str] = {
     pb.CHANNEL_UNSPECIFIED: "texture",
     pb.CHANNEL_UV: "UV",
     pb.CHANNEL_EV: "EV",
     pb.CHANNEL_BIPOLAR: "BIPOLAR",
 }
-LOCKING_NAMES = {
+LOCKING_NAMES: dict[int, str] = {
     pb.LOCKING_UNSPECIFIED: "unspecified",
     pb.LOCKING_POSITION: "position",
     pb.LOCKING_VELOCITY: "velocity",

@@ -8,10 +8,10 @@ from typing import Any
 
 import numpy as np
 
-from hcard.errors import HcardError
+from hcard.errors import InputError
 
 
-class UnitError(HcardError, ValueError):
+class UnitError(InputError, ValueError):
     """A quantity's text cannot be read, or its unit does not fit the expected SI unit."""
 
 
