@@ -1,10 +1,12 @@
 """Constructors for cards, textures and components in code, with wire units and names.
 
-Example::
+Example (a 60 x 40 mm card in 5 mm taxtels: 12 x 8 of them)::
 
-    from hcard import build
-    grating = build.texture(0.7, [build.spatial(1.0, 0.2)], channel="uv", locking="velocity")
-    card = build.card(60.0, 40.0, taxtel_mm=5.0, textures=[grating])
+    >>> from hcard import build
+    >>> grating = build.texture(0.7, [build.spatial(1.0, 0.2)], channel="uv", locking="velocity")
+    >>> card = build.card(60.0, 40.0, taxtel_mm=5.0, textures=[grating])
+    >>> card.grid.cols, card.grid.rows, len(card.grid.texture_index)
+    (12, 8, 96)
 """
 
 from __future__ import annotations
