@@ -132,11 +132,6 @@ class Context:
     _manifest: Any = field(default=None, init=False, repr=False)
 
     @property
-    def is_reference(self) -> bool:
-        """True for the reference implementation (no device)."""
-        return self.open_driver is None
-
-    @property
     def frame_exact(self) -> bool:
         """True when the implementation renders frame by frame at the golden frame times (the
         reference, or a software renderer given as :attr:`renderer`), so the exact metric A0

@@ -164,11 +164,6 @@ def _table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> list[str]:
     return lines
 
 
-def _uncertainty(fit_params: Mapping[str, dict[str, Any]], name: str) -> float | None:
-    entry = fit_params[name]
-    return entry["uncertainty"] if entry["fitted"] else None
-
-
 # -- JSON ---------------------------------------------------------------------------------------
 def _finite(value: Any) -> Any:
     """``value`` with numpy types as Python ones and NaN/inf as None, recursively."""

@@ -526,9 +526,6 @@ class DeviceProfile:
             uv = np.array(uv, dtype=np.float64)  # the model's output may be a view or an input
         return uv, ev
 
-    def _plate_frequency(self) -> float | None:
-        return None if self.limits is None else self.limits.plate_frequency
-
     def _uv_call(self, speed: Any, normal_force: Any) -> tuple[Predictor, dict[str, Any]]:
         """The UV channel's model and its inputs: finger state and the plate frequency (those
         it takes)."""

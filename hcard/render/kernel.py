@@ -11,6 +11,7 @@ stroke speed. A batch rendering's blocks write into its output columns.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -146,7 +147,8 @@ def render_block(
     return block if out is None else _copy_into(block, out)
 
 
-def _frame_targets(card: CompiledCard, parameters: RunParameters, lengths: np.ndarray | None,
+def _frame_targets(card: CompiledCard, parameters: RunParameters,
+                   lengths: np.ndarray | Sequence[int] | None,
                    offset: np.ndarray, uv: np.ndarray, ev: np.ndarray) -> None:
     """UV and EV targets of frames ``offset`` frames after their runs' anchors (R9-R11),
     written into ``uv`` and ``ev``."""

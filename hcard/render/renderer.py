@@ -78,7 +78,7 @@ class Frames:
         """Frames of ``parts`` one after another."""
         phase = None
         if parts and all(p.phase is not None for p in parts):
-            phase = np.concatenate([p.phase for p in parts])  # type: ignore[misc]
+            phase = np.concatenate([p.phase for p in parts])
         return Frames(
             np.concatenate([p.t for p in parts]),
             np.concatenate([p.uv for p in parts]),

@@ -349,14 +349,6 @@ class DeviceSimulation:
         """The host drives the finger or streams frames (the watchdog is armed)."""
         return isinstance(self._finger, HostFinger) or self._streaming
 
-    @property
-    def watchdog_expired(self) -> bool:
-        """The watchdog has expired (a host-driven device not fed for ``watchdog_s``)."""
-        return (
-            self.host_driven
-            and self._running
-            and self.time_s >= self._last_feed + self.config.watchdog_s
-        )
 
     # -- commands --------------------------------------------------------------------------
     def load_card(self, card: pb.Card) -> ClipReport:
