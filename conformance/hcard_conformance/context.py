@@ -49,7 +49,7 @@ this session's fastest."""
 Renderer = Callable[[pb.Card, FingerTrack, RenderOptions], Frames]
 
 
-def reported_frames(states: list[State], track: FingerTrack,
+def reported_frames(states: Sequence[State], track: FingerTrack,
                     host_us: np.ndarray | None = None) -> Frames:
     """The targets a device reported, as frames on the track's time base (spec Q5).
 

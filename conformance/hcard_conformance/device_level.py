@@ -43,7 +43,7 @@ reads STATE input reports (spec/device-protocol.md). Thresholds (spec/conformanc
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -674,7 +674,7 @@ def check_latency(ctx: Context) -> Iterator[CheckResult]:
 
 # ---------------------------------------------------------------------- (d) safety
 
-def _over(states: list[State], driver: Driver) -> tuple[int, float]:
+def _over(states: Sequence[State], driver: Driver) -> tuple[int, float]:
     """Reports with a measured output above its limit in force (one report count of
     quantisation allowed) or a target outside [0, 1] x [1, 4], and the worst output/limit."""
     limits = driver.limits()

@@ -73,7 +73,9 @@ class Prediction:
 
     def unit_of(self, name: str) -> str:
         """SI unit of an input or parameter of the predictor."""
-        for item in (*self.predictor.inputs, *self.predictor.parameters):
+        items: tuple[Variable | Parameter, ...] = (*self.predictor.inputs,
+                                                   *self.predictor.parameters)
+        for item in items:
             if item.name == name:
                 return item.unit
         raise PredictorError(f"{self.predictor.name}: no input or parameter {name!r}")

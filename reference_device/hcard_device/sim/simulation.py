@@ -794,6 +794,7 @@ class DeviceSimulation:
                     and np.logical_and.reduce(frames / rate == times)):
                 i = index.astype(np.intp)
                 return truth.x_mm[i], truth.y_mm[i], truth.contact[i]
+        assert self._finger is not None  # called for the internal finger only
         state = self._finger.state(times)
         return state.x_mm, state.y_mm, state.contact
 
@@ -889,7 +890,7 @@ class DeviceSimulation:
             if n:
                 self._gain = 1.0
             return None, None
-        off = tripped if self._running else np.ones(n, dtype=bool)
+        off = np.ones(n, dtype=bool) if tripped is None else tripped  # None: stopped
         gain = np.ones(n)
         if off.any():
             first = int(np.argmax(off))
