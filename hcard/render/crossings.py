@@ -123,11 +123,13 @@ class Line:
     def __init__(self, card: CompiledCard, times: np.ndarray, horizon_s: float,
                  on_y: np.ndarray, sample_t: np.ndarray, start: np.ndarray,
                  velocity: np.ndarray) -> None:
+        rows: int
+        cols: int
         rows, cols = card.grid.shape
         self.times, self.horizon_s = times, horizon_s
         self.sample_t, self.start, self.velocity = sample_t, start, velocity
         self.pitch = np.where(on_y, card.taxtel_height_mm, card.taxtel_width_mm)
-        self.count: np.ndarray = np.where(on_y, rows, cols)
+        self.count = np.where(on_y, rows, cols)
         self.extent = np.where(on_y, card.height_mm, card.width_mm)
 
     def reached(self, direction: np.ndarray, target: np.ndarray, frame: np.ndarray,

@@ -11,7 +11,6 @@ stroke speed. A batch rendering's blocks write into its output columns.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -135,7 +134,7 @@ def render_block(
         offset = np.arange(count, dtype=np.uint32)  # frames since the anchor (wraps from < 0)
         offset -= np.repeat(np.asarray(runs.anchors).astype(np.uint32), runs.lengths)
         uv, ev = (np.empty(count), np.empty(count)) if out is None else (out.uv, out.ev)
-        _frame_targets(card, parameters, runs.lengths, offset, uv, ev)
+        _frame_targets(card, parameters, np.asarray(runs.lengths), offset, uv, ev)
     phase = None
     if with_phase:
         if parameters is None:
@@ -147,8 +146,7 @@ def render_block(
     return block if out is None else _copy_into(block, out)
 
 
-def _frame_targets(card: CompiledCard, parameters: RunParameters,
-                   lengths: np.ndarray | Sequence[int] | None,
+def _frame_targets(card: CompiledCard, parameters: RunParameters, lengths: np.ndarray | None,
                    offset: np.ndarray, uv: np.ndarray, ev: np.ndarray) -> None:
     """UV and EV targets of frames ``offset`` frames after their runs' anchors (R9-R11),
     written into ``uv`` and ``ev``."""
