@@ -248,7 +248,7 @@ def speed_known_s(result: PlayResult) -> float:
 
     keep, t = session_times(result.states, result.track, result.host_us)
     echo = state_field(result.states, "host_time_echo_us").astype(np.int64)
-    later = keep & (echoed_samples(result.host_us, echo) >= 1)
+    later = keep & (echoed_samples(result.sent_host_us(), echo) >= 1)
     return float(t[later][0]) if later.any() else math.inf
 
 

@@ -442,7 +442,9 @@ class DeviceProfile:
             return 1.0
         frequency = self.limits.carrier_frequency
         try:
-            response = np.asarray(self.leakage.frequency_response(np.asarray([frequency])))
+            # __post_init__ checked that the leakage model has frequency_response (Eq. 3.22)
+            response = np.asarray(self.leakage.frequency_response(  # type: ignore[attr-defined]
+                np.asarray([frequency])))
         except HcardError as exc:
             raise ProfileError(f"leakage: {exc}") from None
         gain = float(np.abs(response).ravel()[0])
