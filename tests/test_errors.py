@@ -47,9 +47,11 @@ def test_every_exception_class_derives_from_the_root():
 def test_device_timeout_is_a_timeout_error():
     from hcard_device.drivers import DeviceError, DeviceTimeout
 
-    with pytest.raises(TimeoutError):
-        raise DeviceTimeout("usbip://127.0.0.1: GET_REPORT timed out after 1 s")
+    message = "usbip://127.0.0.1: GET_REPORT timed out after 1 s"
+    with pytest.raises(TimeoutError) as caught:
+        raise DeviceTimeout(message)
     assert issubclass(DeviceTimeout, DeviceError)
+    assert str(caught.value) == message  # the one-line CLI message, not OSError's "[Errno ...]"
 
 
 @pytest.mark.parametrize(("name", "group", "builtin"), [
