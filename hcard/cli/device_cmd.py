@@ -13,7 +13,7 @@ from pathlib import Path
 import click
 
 from hcard.card_io import load
-from hcard.errors import HcardError
+from hcard.errors import HcardError, UsageError
 from hcard.terminal_text import printable
 from hcard.track import read_track_csv
 
@@ -133,7 +133,7 @@ def list_devices(hosts: tuple[str, ...], timeout: float) -> None:
         click.echo(f"{listing.uri.ljust(width)}  {listing.driver:6s} {listing.description}")
 
 
-class SynthesizeUsageError(HcardError):
+class SynthesizeUsageError(UsageError):
     """A bad option of ``hcard device synthesize`` (one line, exit status 1)."""
 
 

@@ -199,7 +199,7 @@ def encode(
             merge_tolerance=merge_tolerance,
             channel=channel,
             locking=locking,
-            friction_range=tuple(friction_range) if friction_range else None,
+            friction_range=(friction_range[0], friction_range[1]) if friction_range else None,
             max_pixels=max_pixels,
             title=title,
             author=author,

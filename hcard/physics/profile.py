@@ -439,7 +439,9 @@ class DeviceProfile:
             return 1.0
         frequency = self.limits.carrier_frequency
         try:
-            response = np.asarray(self.leakage.frequency_response(np.asarray([frequency])))
+            # __post_init__ checked that the leakage model has frequency_response (Eq. 3.22)
+            response = np.asarray(self.leakage.frequency_response(  # type: ignore[attr-defined]
+                np.asarray([frequency])))
         except HcardError as exc:
             raise ProfileError(f"leakage: {exc}") from None
         gain = float(np.abs(response).ravel()[0])
@@ -526,9 +528,6 @@ class DeviceProfile:
         if not (trusted and _owned(uv, shape)):
             uv = np.array(uv, dtype=np.float64)  # the model's output may be a view or an input
         return uv, ev
-
-    def _plate_frequency(self) -> float | None:
-        return None if self.limits is None else self.limits.plate_frequency
 
     def _uv_call(self, speed: Any, normal_force: Any) -> tuple[Predictor, dict[str, Any]]:
         """The UV channel's model and its inputs: finger state and the plate frequency (those

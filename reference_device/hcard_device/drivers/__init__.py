@@ -62,8 +62,8 @@ def driver_classes(*, plugins: bool = True) -> dict[str, Any]:
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # `hcard plugins` reports broken plugins
-        plugins = get_registry().drivers
-    for driver in plugins.values():
+        registered = get_registry().drivers
+    for driver in registered.values():
         for scheme in getattr(driver, "schemes", ()):
             by_scheme.setdefault(str(scheme), driver)
     return by_scheme
