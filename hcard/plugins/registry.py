@@ -28,7 +28,7 @@ import pluggy
 
 from hcard.errors import PluginError
 from hcard.plugins import hookspecs
-from hcard.plugins.kinds import KINDS
+from hcard.plugins.kinds import KINDS, CommandPlugin
 
 HOOK_KINDS: dict[str, str] = {
     "hcard_encoders": "encoder",
@@ -38,6 +38,10 @@ HOOK_KINDS: dict[str, str] = {
     "hcard_conformance_checks": "conformance-check",
 }
 """Hook name -> kind of the objects it returns (one entry per kind of :data:`KINDS`)."""
+
+COMMAND_HOOK = "hcard_commands"
+"""The hook contributing subcommands (:class:`~hcard.plugins.kinds.CommandPlugin`), which are
+kept apart from the plugin kinds: ``hcard --help`` lists them, ``hcard plugins`` does not."""
 
 _PLUGGY_DIR = os.path.dirname(pluggy.__file__)
 
@@ -142,6 +146,7 @@ class PluginRegistry:
         self.plugin_manager = pluggy.PluginManager(hookspecs.PROJECT)
         self.plugin_manager.add_hookspecs(hookspecs)
         self._by_kind: dict[str, dict[str, PluginInfo]] = {kind: {} for kind in KINDS}
+        self._commands: dict[str, tuple[CommandPlugin, _Source]] = {}
         self.broken: list[BrokenPlugin] = []
         """Problems found so far, in discovery order."""
 
@@ -233,8 +238,10 @@ class PluginRegistry:
             registered = None
             problems.append(f"{source.label()} could not be registered: {_describe(exc)}")
         infos: list[PluginInfo] = []
+        commands: dict[str, CommandPlugin] = {}
         if registered is not None:
             infos = self._collect(plugin, source, problems)
+            commands = self._collect_commands(plugin, source, problems)
         if strict and problems:
             if registered is not None:
                 pm.unregister(plugin)
@@ -243,6 +250,8 @@ class PluginRegistry:
             self._problem(source.entry_point, reason)
         for info in infos:
             self._by_kind[info.kind][info.name] = info
+        for name, command in commands.items():
+            self._commands[name] = (command, source)
         return infos
 
     def _collect(self, plugin: Any, source: _Source, problems: list[str]) -> list[PluginInfo]:
@@ -253,7 +262,7 @@ class PluginRegistry:
         if unknown:
             problems.append(
                 f"{source.label()} implements unknown hook(s) {', '.join(unknown)} "
-                f"(known: {', '.join(HOOK_KINDS)}); they are ignored"
+                f"(known: {', '.join((*HOOK_KINDS, COMMAND_HOOK))}); they are ignored"
             )
         if not callers:
             problems.append(
@@ -281,6 +290,37 @@ class PluginRegistry:
                         staged[(kind, info.name)] = info
                         infos.append(info)
         return infos
+
+    def _collect_commands(
+        self, plugin: Any, source: _Source, problems: list[str]
+    ) -> dict[str, CommandPlugin]:
+        """The subcommands ``plugin`` contributes through :data:`COMMAND_HOOK`, by name."""
+        found: dict[str, CommandPlugin] = {}
+        for impl in getattr(self.plugin_manager.hook, COMMAND_HOOK).get_hookimpls():
+            if impl.plugin is not plugin:
+                continue
+            try:
+                result = impl.function()
+            except (Exception, SystemExit) as exc:
+                problems.append(f"{source.label()}: {COMMAND_HOOK}() raised {_describe(exc)}")
+                continue
+            where = f"{source.label()}: {COMMAND_HOOK}() returned"
+            for command in self._objects_of(result, COMMAND_HOOK, source, problems):
+                name = getattr(command, "name", None)
+                if not isinstance(command, CommandPlugin) or not isinstance(name, str) or not (
+                    name.strip() and isinstance(command.summary, str)
+                ):
+                    problems.append(
+                        f"{where} an object of type '{type(command).__name__}' that is not a "
+                        "command (a string 'name' and 'summary', and load())"
+                    )
+                    continue
+                taken = found.get(name) or self._commands.get(name, (None, None))[0]
+                if taken is not None:
+                    problems.append(f"{where} command '{name}', a name already taken; ignored")
+                    continue
+                found[name] = command
+        return found
 
     @staticmethod
     def _objects_of(
@@ -378,6 +418,11 @@ class PluginRegistry:
         """Conformance checks by name."""
         return self.of_kind("conformance-check")
 
+    @property
+    def commands(self) -> dict[str, CommandPlugin]:
+        """Subcommands contributed through the ``hcard_commands`` hook, by name (a copy)."""
+        return {name: command for name, (command, _) in self._commands.items()}
+
     def all(self) -> list[PluginInfo]:
         """Every plugin, sorted by kind (in :data:`KINDS` order), then name."""
         return [info for kind in KINDS for _, info in sorted(self._by_kind[kind].items())]
@@ -421,3 +466,17 @@ def get_registry(*, refresh: bool = False) -> PluginRegistry:
         if _default is None or refresh:
             _default = PluginRegistry.discover()
         return _default
+
+
+_commands: PluginRegistry | None = None
+
+
+def get_command_registry(*, refresh: bool = False) -> PluginRegistry:
+    """The registry of the entry-point group ``hcard.commands``: the light modules whose
+    ``hcard_commands`` hook contributes subcommands. ``hcard --help`` loads only these, not
+    the plugins of :func:`get_registry` (which import models, checks and effects)."""
+    global _commands
+    with _default_lock:
+        if _commands is None or refresh:
+            _commands = PluginRegistry.discover(hookspecs.COMMAND_ENTRY_POINT_GROUP)
+        return _commands
