@@ -45,14 +45,15 @@ importing any command module (tests/test_cli.py checks them against the commands
 def contributed_commands() -> dict[str, CommandPlugin]:
     """Commands other packages contribute (``hcard_commands`` hook, entry-point group
     ``hcard.commands``), by name, without the core's names. Problems (a plugin that fails to
-    import, a name taken by a core command) are ``warning:`` lines; the rest still works."""
-    from hcard.plugins.registry import get_command_registry
+    import, a name taken by a core command) are ``warning:`` lines; the rest still works.
 
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        commands = get_command_registry().commands
-    for warning in caught:
-        _show_warning(warning.message, warning.category)
+    What an earlier run found is reused while the installed packages are unchanged
+    (:mod:`hcard.plugins.command_cache`), so that ``hcard --help`` needs no entry-point scan."""
+    from hcard.plugins import command_cache
+
+    commands = None if _discovered() else command_cache.load()
+    if commands is None:
+        commands = _discover_commands()
     for name in sorted(set(commands) & set(COMMAND_MODULES)):
         if name not in _WARNED_SHADOWING:
             _WARNED_SHADOWING.add(name)
@@ -64,6 +65,31 @@ def contributed_commands() -> dict[str, CommandPlugin]:
 
 _WARNED_SHADOWING: set[str] = set()
 """Core command names a plugin command was found to shadow (each is warned once)."""
+
+
+def _discovered() -> bool:
+    registry = sys.modules.get("hcard.plugins.registry")  # not imported: not discovered
+    return registry is not None and bool(registry.command_registry_discovered())
+
+
+def _discover_commands() -> dict[str, CommandPlugin]:
+    """The commands of the command registry, warning about its problems; remembered for the
+    next run when there were none."""
+    from hcard.plugins import command_cache
+    from hcard.plugins.registry import get_command_registry
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        registry = get_command_registry()
+        commands = registry.commands
+        broken = registry.broken
+    for warning in caught:
+        _show_warning(warning.message, warning.category)
+    if not broken:
+        modules = [getattr(plugin, "__file__", None)
+                   for plugin in registry.plugin_manager.get_plugins()]
+        command_cache.store(commands, [path for path in modules if isinstance(path, str)])
+    return commands
 
 
 class LazyCommandGroup(UserErrorGroup):
@@ -96,6 +122,9 @@ def _load(command: CommandPlugin) -> click.Command | None:
     try:
         loaded = command.load()
     except Exception as exc:  # a broken plugin must not crash the tool
+        from hcard.plugins import command_cache
+
+        command_cache.forget()  # perhaps remembered from before the package changed
         _show_warning(f"command '{command.name}' cannot be loaded: {type(exc).__name__}: {exc}",
                       UserWarning)
         return None

@@ -543,6 +543,11 @@ def get_registry(*, refresh: bool = False) -> PluginRegistry:
 _commands: PluginRegistry | None = None
 
 
+def command_registry_discovered() -> bool:
+    """Whether this process has discovered (or been given) the registry of commands."""
+    return _commands is not None
+
+
 def get_command_registry(*, refresh: bool = False) -> PluginRegistry:
     """The registry of the entry-point group ``hcard.commands``: the light modules whose
     ``hcard_commands`` hook contributes subcommands. ``hcard --help`` loads only these, not

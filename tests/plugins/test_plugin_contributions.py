@@ -125,7 +125,7 @@ def test_a_broken_command_plugin_is_named_and_hcard_keeps_working(tmp_path: Path
     )
     (tmp_path / "hcardtest_broken_cli.py").write_text(textwrap.dedent(BROKEN_COMMANDS),
                                                      encoding="utf-8")
-    env = dict(os.environ)
+    env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path / "cache"))
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(tmp_path), env.get("PYTHONPATH")) if p)
     done = subprocess.run([sys.executable, "-m", "hcard", "--help"], capture_output=True,
                           text=True, env=env, cwd=tmp_path, timeout=120)
