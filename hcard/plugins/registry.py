@@ -163,6 +163,8 @@ class PluginRegistry:
         self._registered: list[_Registered] = []
         self._collected: set[str] = set()
         """Hooks every registered plugin has answered (the rest are called when first asked)."""
+        self._collecting = threading.RLock()
+        """Held while hooks are called: a thread asking for a kind waits for all its plugins."""
 
     @property
     def broken(self) -> list[BrokenPlugin]:
@@ -181,7 +183,8 @@ class PluginRegistry:
         return registry
 
     def load_entry_points(self, group: str = hookspecs.ENTRY_POINT_GROUP) -> None:
-        """Load, register and collect every entry point of ``group``.
+        """Load and register every entry point of ``group`` (its hooks are called when their
+        kind is first asked for).
 
         Entry points of the ``hcard`` distribution come first, then the others sorted by
         distribution and entry-point name, so the outcome does not depend on ``sys.path`` order.
@@ -241,6 +244,10 @@ class PluginRegistry:
         return self._add(plugin, source, strict=True)
 
     def _add(self, plugin: Any, source: _Source, *, strict: bool) -> list[PluginInfo]:
+        with self._collecting:
+            return self._add_unlocked(plugin, source, strict=strict)
+
+    def _add_unlocked(self, plugin: Any, source: _Source, *, strict: bool) -> list[PluginInfo]:
         """Register ``plugin`` with pluggy; collect its objects now (strict) or when first asked.
 
         Not strict (discovery): problems are warned and the usable objects kept; each hook is
@@ -299,21 +306,22 @@ class PluginRegistry:
         registration order (so the first plugin keeps a name), warning about problems."""
         if hook_name in self._collected:
             return
-        self._collected.add(hook_name)
-        for entry in self._registered:
-            if hook_name in entry.collected:
-                continue
-            entry.collected.add(hook_name)
-            problems: list[str] = []
-            if hook_name == COMMAND_HOOK:
-                commands = self._collect_commands(entry.plugin, entry.source, problems)
-                infos: list[PluginInfo] = []
-            else:
-                commands = {}
-                infos = self._collect(entry.plugin, entry.source, hook_name, problems)
-            for reason in problems:
-                self._problem(entry.source.entry_point, reason)
-            self._keep(infos, commands, entry.source)
+        with self._collecting:
+            for entry in self._registered:
+                if hook_name in entry.collected:
+                    continue
+                entry.collected.add(hook_name)
+                problems: list[str] = []
+                if hook_name == COMMAND_HOOK:
+                    commands = self._collect_commands(entry.plugin, entry.source, problems)
+                    infos: list[PluginInfo] = []
+                else:
+                    commands = {}
+                    infos = self._collect(entry.plugin, entry.source, hook_name, problems)
+                for reason in problems:
+                    self._problem(entry.source.entry_point, reason)
+                self._keep(infos, commands, entry.source)
+            self._collected.add(hook_name)
 
     def collect(self) -> None:
         """Call every hook not called yet (warning about problems): after it, :attr:`broken`
