@@ -49,11 +49,15 @@ def contributed_commands() -> dict[str, CommandPlugin]:
 
     What an earlier run found is reused while the installed packages are unchanged
     (:mod:`hcard.plugins.command_cache`), so that ``hcard --help`` needs no entry-point scan."""
-    from hcard.plugins import command_cache
-
-    commands = None if _discovered() else command_cache.load()
-    if commands is None:
+    global _remembered
+    if _discovered():
         commands = _discover_commands()
+    else:
+        if _remembered is None:
+            from hcard.plugins import command_cache
+
+            _remembered = command_cache.load()
+        commands = dict(_remembered) if _remembered is not None else _discover_commands()
     for name in sorted(set(commands) & set(COMMAND_MODULES)):
         if name not in _WARNED_SHADOWING:
             _WARNED_SHADOWING.add(name)
@@ -62,6 +66,9 @@ def contributed_commands() -> dict[str, CommandPlugin]:
         del commands[name]
     return commands
 
+
+_remembered: dict[str, CommandPlugin] | None = None
+"""The commands :mod:`hcard.plugins.command_cache` remembered, read once per process."""
 
 _WARNED_SHADOWING: set[str] = set()
 """Core command names a plugin command was found to shadow (each is warned once)."""
@@ -73,11 +80,12 @@ def _discovered() -> bool:
 
 
 def _discover_commands() -> dict[str, CommandPlugin]:
-    """The commands of the command registry, warning about its problems; remembered for the
-    next run when there were none."""
+    """The commands of the command registry, warning about its problems; when this call
+    discovered them and there were none, remembered for the next run."""
     from hcard.plugins import command_cache
     from hcard.plugins.registry import get_command_registry
 
+    fresh = not _discovered()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         registry = get_command_registry()
@@ -85,7 +93,7 @@ def _discover_commands() -> dict[str, CommandPlugin]:
         broken = registry.broken
     for warning in caught:
         _show_warning(warning.message, warning.category)
-    if not broken:
+    if fresh and not broken:
         modules = [getattr(plugin, "__file__", None)
                    for plugin in registry.plugin_manager.get_plugins()]
         command_cache.store(commands, [path for path in modules if isinstance(path, str)])

@@ -26,29 +26,21 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-from hcard.plugins.kinds import (
-    KINDS,
-    PROTOCOL_OF_KIND,
-    CheckPlugin,
-    CommandPlugin,
-    DriverPlugin,
-    EffectPlugin,
-    Encoder,
-    EncodeResult,
-    EncoderPlugin,
-    LazyCommand,
-    Plugin,
-    PredictorPlugin,
-)
-
 _LAZY = {
     "ENTRY_POINT_GROUP": "hookspecs", "PROJECT": "hookspecs", "hookimpl": "hookspecs",
     "hookspec": "hookspecs", "BrokenPlugin": "registry", "HcardPluginWarning": "registry",
     "PluginInfo": "registry", "PluginRegistry": "registry", "get_registry": "registry",
     "COMMAND_ENTRY_POINT_GROUP": "hookspecs", "get_command_registry": "registry",
+    **dict.fromkeys(
+        ("KINDS", "PROTOCOL_OF_KIND", "CheckPlugin", "CommandPlugin", "DriverPlugin",
+         "EffectPlugin", "EncodeResult", "Encoder", "EncoderPlugin", "Plugin", "PredictorPlugin"),
+        "kinds",
+    ),
+    "LazyCommand": "lazy_command",
 }
-"""Names of the hook and registry modules, imported on first use: the plugin kinds alone (an
-encoder's base class) do not need pluggy or the entry-point machinery (importlib.metadata)."""
+"""The module of each name, imported on first use: the plugin kinds alone (an encoder's base
+class) do not need pluggy or the entry-point machinery (importlib.metadata), and ``hcard --help``
+reads remembered commands without the kinds."""
 
 
 def __getattr__(name: str) -> Any:

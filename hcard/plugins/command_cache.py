@@ -23,9 +23,12 @@ import json
 import os
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from hcard.plugins.kinds import CommandPlugin, LazyCommand
+from hcard.plugins.lazy_command import LazyCommand
+
+if TYPE_CHECKING:
+    from hcard.plugins.kinds import CommandPlugin
 
 CACHE_FORMAT = "hcard-command-cache/1"
 """The ``format`` of the cache file; another value is ignored."""

@@ -15,12 +15,12 @@ named for type checkers.
 from __future__ import annotations
 
 import abc
-import importlib
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
 
+from hcard.plugins.lazy_command import LazyCommand
 from hcard.v1 import card_pb2 as pb
 
 if TYPE_CHECKING:
@@ -240,25 +240,20 @@ class CommandPlugin(Protocol):
         """The click command (importing its module)."""
 
 
-@dataclass(frozen=True)
-class LazyCommand:
-    """A :class:`CommandPlugin` naming the click command by import path.
-
-    Attributes:
-        name: the subcommand.
-        target: ``"package.module:attribute"`` of the ``click.Command``.
-        summary: the first sentence of the command's help, on one line.
-    """
-
-    name: str
-    target: str
-    summary: str
-
-    def load(self) -> click.Command:
-        """Import ``target`` and return the command it names."""
-        module_name, _, attribute = self.target.partition(":")
-        return getattr(importlib.import_module(module_name), attribute)  # type: ignore[no-any-return]
-
+__all__ = [
+    "KINDS",
+    "PROTOCOL_OF_KIND",
+    "CheckPlugin",
+    "CommandPlugin",
+    "DriverPlugin",
+    "EffectPlugin",
+    "EncodeResult",
+    "Encoder",
+    "EncoderPlugin",
+    "LazyCommand",
+    "Plugin",
+    "PredictorPlugin",
+]
 
 PROTOCOL_OF_KIND: dict[str, type] = {
     "encoder": EncoderPlugin,
