@@ -133,7 +133,7 @@ def builtin_checks() -> list[Check]:
 
 
 @hookimpl
-def hcard_conformance_checks() -> list[Any]:
+def hcard_conformance_checks() -> list[Check]:
     """The built-in conformance checks (format, renderer and device levels)."""
     return list(builtin_checks())
 
