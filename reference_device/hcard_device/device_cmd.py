@@ -2,7 +2,8 @@
 drivers, and synthetic tribometer recordings.
 
 The device side lives in :mod:`hcard_device.usb`, the drivers in :mod:`hcard_device.drivers`
-(imported when a command runs, so ``hcard`` starts fast without them).
+(imported when a command runs). :mod:`hcard_device.commands` contributes the commands to
+``hcard``, which imports this module only when one of them runs.
 """
 
 from __future__ import annotations
