@@ -439,7 +439,7 @@ class DeviceProfile:
         frequency = self.limits.carrier_frequency
         try:
             # __post_init__ checked that the leakage model has frequency_response (Eq. 3.22)
-            response = np.asarray(self.leakage.frequency_response(  # type: ignore[attr-defined]
+            response = np.asarray(self.leakage.frequency_response(
                 np.asarray([frequency])))
         except HcardError as exc:
             raise ProfileError(f"leakage: {exc}") from None

@@ -33,31 +33,31 @@ hookimpl = pluggy.HookimplMarker(PROJECT)
 
 
 @hookspec
-def hcard_encoders() -> list[EncoderPlugin]:  # type: ignore[empty-body]
+def hcard_encoders() -> list[EncoderPlugin]:
     """Return encoders: objects turning a source (image, recipe, recording) into a card."""
 
 
 @hookspec
-def hcard_predictors() -> list[PredictorPlugin]:  # type: ignore[empty-body]
+def hcard_predictors() -> list[PredictorPlugin]:
     """Return physics predictors: actuation and finger state to friction, and back."""
 
 
 @hookspec
-def hcard_drivers() -> list[DriverPlugin]:  # type: ignore[empty-body]
+def hcard_drivers() -> list[DriverPlugin]:
     """Return device drivers: transports that upload cards and stream tracks to a device."""
 
 
 @hookspec
-def hcard_calibration_effects() -> list[EffectPlugin]:  # type: ignore[empty-body]
+def hcard_calibration_effects() -> list[EffectPlugin]:
     """Return calibration effects: physical effects a fitted model may lack."""
 
 
 @hookspec
-def hcard_conformance_checks() -> list[CheckPlugin]:  # type: ignore[empty-body]
+def hcard_conformance_checks() -> list[CheckPlugin]:
     """Return conformance checks run by ``hcard conformance``."""
 
 
 @hookspec
-def hcard_commands() -> list[CommandPlugin]:  # type: ignore[empty-body]
+def hcard_commands() -> list[CommandPlugin]:
     """Return subcommands of ``hcard`` (usually :class:`~hcard.plugins.kinds.LazyCommand`:
     name, import path, one-line summary), as pytest plugins add options."""

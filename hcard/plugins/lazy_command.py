@@ -31,4 +31,4 @@ class LazyCommand:
     def load(self) -> click.Command:
         """Import ``target`` and return the command it names."""
         module_name, _, attribute = self.target.partition(":")
-        return getattr(importlib.import_module(module_name), attribute)  # type: ignore[no-any-return]
+        return getattr(importlib.import_module(module_name), attribute)

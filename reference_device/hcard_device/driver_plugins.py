@@ -21,4 +21,4 @@ def hcard_drivers() -> list[DriverPlugin]:
     from hcard_device.drivers.sim import SimDriver
     from hcard_device.drivers.usbip_client import UsbipDriver
 
-    return [SimDriver, UsbipDriver, PyusbDriver, HidapiDriver]  # type: ignore[list-item]
+    return [SimDriver, UsbipDriver, PyusbDriver, HidapiDriver]
