@@ -87,7 +87,7 @@ def remove_stale_temporaries(target: Path, *, now: float | None = None) -> list[
     directory = target.parent if str(target.parent) else Path(".")
     pattern = re.compile(rf"\.{re.escape(target.name)}\.(\d+)\.[^.]+\.tmp")
     now = time.time() if now is None else now
-    removed = []
+    removed: list[Path] = []
     try:
         names = os.listdir(directory)
     except OSError:

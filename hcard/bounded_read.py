@@ -14,6 +14,8 @@ import stat
 from pathlib import Path
 from typing import BinaryIO
 
+from hcard.errors import InputError
+
 MAX_TEXT_FILE_BYTES = 512 * 1024 * 1024
 """Largest finger-track or measurement CSV file a reader accepts, bytes (512 MiB: an hour of
 a 1 kHz tribometer recording with 12 columns is about 300 MB)."""
@@ -25,7 +27,7 @@ DEFAULT_MAX_PIXELS = 64_000_000
 bombs; ``hcard encode --max-pixels`` raises it)."""
 
 
-class InputTooLarge(ValueError):
+class InputTooLarge(InputError, ValueError):
     """A file holds more than a reader's limit.
 
     Attributes:

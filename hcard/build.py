@@ -1,16 +1,19 @@
 """Constructors for cards, textures and components in code, with wire units and names.
 
-Example::
+Example (a 60 x 40 mm card in 5 mm taxtels: 12 x 8 of them)::
 
-    from hcard import build
-    grating = build.texture(0.7, [build.spatial(1.0, 0.2)], channel="uv", locking="velocity")
-    card = build.card(60.0, 40.0, taxtel_mm=5.0, textures=[grating])
+    >>> from hcard import build
+    >>> grating = build.texture(0.7, [build.spatial(1.0, 0.2)], channel="uv", locking="velocity")
+    >>> card = build.card(60.0, 40.0, taxtel_mm=5.0, textures=[grating])
+    >>> card.grid.cols, card.grid.rows, len(card.grid.texture_index)
+    (12, 8, 96)
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import cast
 
 import numpy as np
 
@@ -19,8 +22,8 @@ from hcard.channels import VALUE_OF_NAME
 from hcard.errors import CardValidationError, Problem
 from hcard.v1 import card_pb2 as pb
 
-CHANNELS = VALUE_OF_NAME
-LOCKINGS = {
+CHANNELS: dict[str, int] = VALUE_OF_NAME
+LOCKINGS: dict[str, int] = {
     "position": pb.LOCKING_POSITION,
     "velocity": pb.LOCKING_VELOCITY,
     "auto": pb.LOCKING_AUTO,
@@ -38,14 +41,15 @@ def _enum(value: str | int | None, table: dict[str, int], what: str, default: in
     return int(value)
 
 
-def channel_value(name: str | int | None, default: int = pb.CHANNEL_UNSPECIFIED) -> int:
+def channel_value(name: str | int | None, default: int = pb.CHANNEL_UNSPECIFIED) -> pb.Channel:
     """The ``Channel`` enum value for ``"uv"``, ``"ev"``, ``"bipolar"`` (or an enum int)."""
-    return _enum(name, CHANNELS, "channel", default)
+    # protoc's stubs type an enum value as its wrapper class; at run time it is the int.
+    return cast("pb.Channel", _enum(name, CHANNELS, "channel", default))
 
 
-def locking_value(name: str | int | None, default: int = pb.LOCKING_AUTO) -> int:
+def locking_value(name: str | int | None, default: int = pb.LOCKING_AUTO) -> pb.Locking:
     """The ``Locking`` enum value for ``"position"``, ``"velocity"``, ``"auto"``."""
-    return _enum(name, LOCKINGS, "locking", default)
+    return cast("pb.Locking", _enum(name, LOCKINGS, "locking", default))
 
 
 def spatial(
@@ -131,6 +135,7 @@ def card(
             "grid", f"{width_mm:g} x {height_mm:g} mm in taxtels of {tw:g} x {th:g} mm needs "
             f"{cols} x {rows} taxtels, over the limits of {limits.MAX_GRID_COLS} x "
             f"{limits.MAX_GRID_ROWS} and {limits.MAX_TAXTELS} in all", "error", "G3")])
+    index: np.ndarray
     if texture_index is None:
         index = np.zeros(cols * rows, dtype=np.uint32)
     else:

@@ -68,7 +68,7 @@ def header_names(header: list[str], line: int, source: str,
 
 
 def numeric_table(text: str, source: str, error: type[HcardError],
-                  header_check: Callable[[list[str], int], int] | None = None,
+                  header_check: Callable[[list[str], int], None] | None = None,
                   ) -> tuple[int, list[str], np.ndarray, np.ndarray]:
     """A CSV of numbers under one header row: the header's line, its names
     (:func:`header_names`), the data as an ``(n, columns)`` float array (an empty cell is NaN:

@@ -12,8 +12,8 @@ from hcard import limits
 from hcard.channels import LABEL_OF_VALUE
 from hcard.v1 import card_pb2 as pb
 
-CHANNEL_NAMES = {pb.CHANNEL_UNSPECIFIED: "texture", **LABEL_OF_VALUE}
-LOCKING_NAMES = {
+CHANNEL_NAMES: dict[int, str] = {pb.CHANNEL_UNSPECIFIED: "texture", **LABEL_OF_VALUE}
+LOCKING_NAMES: dict[int, str] = {
     pb.LOCKING_UNSPECIFIED: "unspecified",
     pb.LOCKING_POSITION: "position",
     pb.LOCKING_VELOCITY: "velocity",

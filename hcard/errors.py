@@ -1,18 +1,44 @@
 """Error types of the hcard core.
 
-Every failure caused by user input (a file, a card, a track, an image) raises a subclass of
-:class:`HcardError`. The command line turns these into a one-line message and a non-zero exit;
-anything else escaping is a bug.
+Every failure caused by user input (a file, a card, a track, an image), a device or a model
+raises a subclass of :class:`HcardError`. The command line turns these into a one-line message
+and a non-zero exit; anything else escaping is a bug. The one hierarchy, by kind:
+
+- :class:`InputError`: a file or value given is malformed: :class:`CardError` (and
+  :class:`CardValidationError`), :class:`TrackError`, :class:`ImageError`,
+  ``json_text.JsonInputError``, ``bounded_read.InputTooLarge``,
+  ``calibration.measurement.MeasurementError``, ``physics.units.UnitError``,
+  ``physics.sweep.SweepError`` and the device's ``HiddenEffectError``. Those that were
+  ``ValueError`` before still are.
+- :class:`UsageError`: a request that cannot be carried out as asked: the commands'
+  ``*UsageError``, ``calibration.plan.PlanError``, ``render.renderer.RenderTooLong`` and the
+  device's ``PlayTooLong`` and ``UriError``.
+- :class:`PluginError`: a plugin is missing or unusable.
+- ``physics.predictor.PredictorError``: a model's parameters or inputs (``ProfileError``,
+  ``EffectError``).
+- ``hcard_device.drivers.errors.DeviceError``: the device failed (``DeviceTimeout``, also a
+  :class:`TimeoutError`; ``DeviceStall``, ``SessionBusy``, ``SessionLost``), and
+  ``hcard_device.protocol.base.ProtocolError`` for malformed reports.
+- The conformance suite's ``CannotAssess`` and ``ConformanceFailure``.
 """
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
-from pathlib import Path
 
 
 class HcardError(Exception):
     """Base class of all user-facing hcard errors."""
+
+
+class InputError(HcardError):
+    """A file or value given to hcard is malformed (the message names where and why)."""
+
+
+class UsageError(HcardError):
+    """A request that cannot be carried out as asked (options that do not fit together, a
+    rendering or play that would last too long)."""
 
 
 @dataclass(frozen=True)
@@ -36,14 +62,15 @@ class Problem:
         return f"{self.path}: {self.reason}" if self.path else self.reason
 
 
-class CardError(HcardError):
+class CardError(InputError):
     """A card could not be read or written.
 
     The documented error type of the card reader: corrupt or truncated bytes, bad JSON, an
     unsupported major version and failed validation all raise this (or a subclass).
     """
 
-    def __init__(self, reason: str, *, source: str | Path | None = None, path: str = "") -> None:
+    def __init__(self, reason: str, *, source: str | os.PathLike[str] | None = None,
+                 path: str = "") -> None:
         self.reason = reason
         self.source = str(source) if source is not None else None
         self.field_path = path
@@ -54,7 +81,8 @@ class CardError(HcardError):
 class CardValidationError(CardError):
     """A card parsed but breaks the rules of spec/README.md; ``problems`` lists every error."""
 
-    def __init__(self, problems: list[Problem], *, source: str | Path | None = None) -> None:
+    def __init__(self, problems: list[Problem], *,
+                 source: str | os.PathLike[str] | None = None) -> None:
         self.problems = [p for p in problems if p.severity == "error"]
         first = self.problems[0] if self.problems else Problem("", "invalid card")
         more = len(self.problems) - 1
@@ -62,11 +90,11 @@ class CardValidationError(CardError):
         super().__init__(reason, source=source, path=first.path)
 
 
-class TrackError(HcardError):
+class TrackError(InputError):
     """A finger track file or array is malformed."""
 
 
-class ImageError(HcardError):
+class ImageError(InputError):
     """An image cannot be encoded (not an image, empty, too large)."""
 
 

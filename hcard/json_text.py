@@ -21,6 +21,8 @@ from typing import Any
 
 from google.protobuf.descriptor import Descriptor, FieldDescriptor
 
+from hcard.errors import InputError
+
 MAX_JSON_DEPTH = 32
 """Deepest nesting of arrays and objects a JSON input may have (a card needs 5)."""
 
@@ -39,7 +41,7 @@ _INTEGERS = (
 )
 
 
-class JsonInputError(ValueError):
+class JsonInputError(InputError, ValueError):
     """A JSON input that cannot be taken: the message says where (line and column, or the
     field path) and why.
 

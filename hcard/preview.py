@@ -107,7 +107,11 @@ def texture_colors(count: int) -> np.ndarray:
     return rgba
 
 
-def _draw_grid(fig: Figure, rect: Sequence[float], bar_rect: Sequence[float], card: pb.Card,
+Rect = tuple[float, float, float, float]
+"""A figure-fraction rectangle: left, bottom, width, height."""
+
+
+def _draw_grid(fig: Figure, rect: Rect, bar_rect: Rect, card: pb.Card,
                colours: np.ndarray) -> Axes:
     """The taxtel map in ``rect`` and a colour bar of texture numbers (and names) in
     ``bar_rect`` (figure fractions)."""
@@ -217,10 +221,10 @@ def preview_figure(
     fig = Figure(figsize=(FIGURE_WIDTH_IN, height), dpi=dpi)
     FigureCanvasAgg(fig)
 
-    def rect(left_in: float, top_in: float, width_in: float, height_in: float) -> list[float]:
+    def rect(left_in: float, top_in: float, width_in: float, height_in: float) -> Rect:
         """Figure-fraction rectangle of a box given in inches from the top-left."""
-        return [left_in / FIGURE_WIDTH_IN, 1.0 - (top_in + height_in) / height,
-                width_in / FIGURE_WIDTH_IN, height_in / height]
+        return (left_in / FIGURE_WIDTH_IN, 1.0 - (top_in + height_in) / height,
+                width_in / FIGURE_WIDTH_IN, height_in / height)
 
     colours = texture_colors(len(textures))
     bar_left = _MAP_LEFT_IN + map_w + _BAR_GAP_IN

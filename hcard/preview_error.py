@@ -144,14 +144,18 @@ def draw_error_map(fig: Figure, ax: Axes, cax: Axes, panel: ErrorPanel,
         extent=(0.0, grid.cols * tw, grid.rows * th, 0.0),
     )
     above = panel.above
-    ax.add_collection(LineCollection(outline_segments(above, tw, th), colors="black",
+    # LineCollection takes the (n, 2, 2) array; its stubs ask for a sequence of segments.
+    ax.add_collection(LineCollection(outline_segments(above, tw, th),  # type: ignore[arg-type]
+                                     colors="black",
                                      linewidths=0.9, label=OUTLINE_LABEL, zorder=3))
     counted = int(np.count_nonzero(~np.isnan(panel.values)))
     ax.set_title(f"{panel.label} (JND): {int(above.sum())} of {counted} taxtels above "
                  f"{THRESHOLD_JND:g} JND, outlined", fontsize=9, loc="left")
 
-    upper = [v for v in MaxNLocator(nbins=4).tick_values(THRESHOLD_JND, norm.vmax)
-             if THRESHOLD_JND < v <= norm.vmax]
+    top = norm.vmax
+    assert top is not None  # error_norm sets both ends
+    upper = [v for v in MaxNLocator(nbins=4).tick_values(THRESHOLD_JND, top)
+             if THRESHOLD_JND < v <= top]
     bar = fig.colorbar(image, cax=cax, ticks=[0.0, 0.5, THRESHOLD_JND, *upper])
     bar.ax.axhline(THRESHOLD_JND, color="black", linewidth=1.2)
     bar.set_label(f"JND (1 JND = {RELATIVE_FRICTION_JND:g} μ/μ0)", fontsize=8)

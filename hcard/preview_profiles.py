@@ -475,7 +475,7 @@ def _add_strip(marks: _Marks, s: PlotSeries, box: tuple[float, float, float, flo
     xs = left + s.x * ((right - left) / s.window)
     if s.band > 0.0:
         marks.bands.append(np.column_stack([np.concatenate([xs, xs[::-1]]), np.concatenate(
-            [y_of(s.friction + s.band), y_of(s.friction - s.band)[::-1]])]))
+            [y_of(s.friction + s.band), np.asarray(y_of(s.friction - s.band))[::-1]])]))
     marks.curves.append(np.column_stack([xs, y_of(s.friction)]))
 
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 from matplotlib import ft2font
@@ -28,7 +29,7 @@ LINE_STEP_EM = 1.2
 CAP_HEIGHT_CHAR = "H"
 """The character whose height anchors ``va="top"`` and ``va="center"``."""
 _NO_HINTING = (ft2font.LoadFlags.NO_HINTING if hasattr(ft2font, "LoadFlags")
-               else ft2font.LOAD_NO_HINTING)  # matplotlib < 3.10
+               else ft2font.LOAD_NO_HINTING)  # type: ignore[attr-defined]  # matplotlib < 3.10
 
 
 @lru_cache(maxsize=4)
@@ -113,7 +114,7 @@ class PathLabels(PathCollection):
 
     def __init__(self, texts: Sequence[str], offsets: np.ndarray, *, size_pt: float,
                  inches: Transform, offset_transform: Transform, ha: str = "left",
-                 va: str = "top", colors: object = "black", **kwargs: object) -> None:
+                 va: str = "top", colors: object = "black", **kwargs: Any) -> None:
         self.texts = list(texts)
         font = findfont(FontProperties())
         paths = [label_outline(text, ha=ha, va=va, font=font, size=size_pt / 72.0)

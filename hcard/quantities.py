@@ -21,10 +21,10 @@ import math
 import re
 from typing import Any
 
-from hcard.errors import HcardError
+from hcard.errors import InputError
 
 
-class UnitError(HcardError, ValueError):
+class UnitError(InputError, ValueError):
     """A quantity's text cannot be read, or its unit does not fit the expected SI unit."""
 
 

@@ -50,9 +50,9 @@ class FingerTrack:
 
 
 def make_track(
-    t: np.ndarray,
-    x: np.ndarray,
-    y: np.ndarray,
+    t: np.ndarray | float,
+    x: np.ndarray | float,
+    y: np.ndarray | float,
     fn: np.ndarray | float | None = None,
     contact: np.ndarray | bool | None = None,
     *,

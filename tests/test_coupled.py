@@ -274,6 +274,7 @@ def test_a_broken_model_module_is_reported_and_the_others_still_register(monkeyp
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         registry.load_entry_points()
+        registry.collect()  # hooks are called when their kind is first asked for
     problems = [b.reason for b in registry.broken if b.entry_point == "builtin-predictors"]
     assert len(problems) == 1
     assert "raised ModuleNotFoundError" in problems[0]

@@ -50,7 +50,7 @@ this session's fastest."""
 Renderer = Callable[[pb.Card, FingerTrack, RenderOptions], Frames]
 
 
-def reported_frames(states: list[State], track: FingerTrack,
+def reported_frames(states: Sequence[State], track: FingerTrack,
                     host_us: np.ndarray | None = None) -> Frames:
     """The targets a device reported, as frames on the track's time base (spec Q5).
 
@@ -131,11 +131,6 @@ class Context:
     renderer: Renderer | None = None
     cache: dict[Any, Any] = field(default_factory=dict, repr=False)
     _manifest: Any = field(default=None, init=False, repr=False)
-
-    @property
-    def is_reference(self) -> bool:
-        """True for the reference implementation (no device)."""
-        return self.open_driver is None
 
     @property
     def frame_exact(self) -> bool:

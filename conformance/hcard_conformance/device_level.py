@@ -43,7 +43,7 @@ reads STATE input reports (spec/device-protocol.md). Thresholds (spec/conformanc
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -261,7 +261,7 @@ def speed_known_s(result: PlayResult) -> float:
 
     keep, t = session_times(result.states, result.track, result.host_us)
     echo = state_field(result.states, "host_time_echo_us").astype(np.int64)
-    later = keep & (echoed_samples(result.host_us, echo) >= 1)
+    later = keep & (echoed_samples(result.sent_host_us(), echo) >= 1)
     return float(t[later][0]) if later.any() else math.inf
 
 
@@ -688,7 +688,7 @@ def check_latency(ctx: Context) -> Iterator[CheckResult]:
 
 # ---------------------------------------------------------------------- (d) safety
 
-def _over(states: list[State], driver: Driver) -> tuple[int, float]:
+def _over(states: Sequence[State], driver: Driver) -> tuple[int, float]:
     """Reports with a measured output above its limit in force (one report count of
     quantisation allowed) or a target outside [0, 1] x [1, 4], and the worst output/limit."""
     limits = driver.limits()

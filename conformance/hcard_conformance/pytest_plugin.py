@@ -26,10 +26,11 @@ from typing import Any
 
 import pytest
 
+from hcard.errors import HcardError
 from hcard_conformance.result import LEVELS, CheckResult
 
 
-class ConformanceFailure(Exception):
+class ConformanceFailure(HcardError):
     """A conformance case failed (its result is in ``args[0]``)."""
 
 

@@ -133,7 +133,7 @@ def builtin_checks() -> list[Check]:
 
 
 @hookimpl
-def hcard_conformance_checks() -> list[Any]:
+def hcard_conformance_checks() -> list[Check]:
     """The built-in conformance checks (format, renderer and device levels)."""
     return list(builtin_checks())
 
@@ -162,7 +162,10 @@ def all_checks(levels: Sequence[str] = LEVELS, *, plugins: bool = True,
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # `hcard plugins` reports broken plugins
                 registry = get_registry()
-        for name, obj in sorted(registry.conformance_checks.items()):
+                plugin_checks = registry.conformance_checks
+        else:
+            plugin_checks = registry.conformance_checks
+        for name, obj in sorted(plugin_checks.items()):
             if name in names:
                 if obj is not next(c for c in found if c.name == name):
                     warnings.warn(f"plugin conformance check {name!r} shadows a built-in one; "

@@ -18,12 +18,14 @@ from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass
 from typing import Any
 
+from hcard.errors import HcardError
+
 PASS, FAIL, ERROR, UNASSESSED = "PASS", "FAIL", "ERROR", "UNASSESSED"
 OUTCOMES = (PASS, FAIL, ERROR, UNASSESSED)
 """Outcomes of a case; only PASS passes."""
 
 
-class CannotAssess(Exception):
+class CannotAssess(HcardError):
     """Raised by a measurement that cannot assess its case (the reason is the message): the
     case is reported UNASSESSED, never dropped."""
 

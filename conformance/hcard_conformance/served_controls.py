@@ -94,6 +94,7 @@ def open_no_ownership() -> ServedControlDriver:
     server = lease("no-ownership")
     try:
         driver = ServedControlDriver.open(server.uri)
+        assert isinstance(driver, ServedControlDriver)  # open() makes an instance of cls
     except BaseException:
         release("no-ownership")
         raise

@@ -400,7 +400,8 @@ def forward_per_sample(
     arrays = _checked_values(base, changed)
     if set(arrays) <= samplewise_parameters(base):
         view = copy.copy(base)
-        view._values = {**base.params, **arrays}  # type: ignore[assignment]
+        # Samplewise parameters: arrays where the attribute is typed for floats.
+        view._values = {**base.params, **arrays}  # type: ignore[dict-item]
         return view.forward(**inputs)
     return _forward_by_distinct_values(base, arrays, inputs)
 

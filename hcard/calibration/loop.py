@@ -236,6 +236,12 @@ class Candidate:
     screened: bool = False
 
 
+def _known(figure: float | None) -> float:
+    """A :class:`Candidate` figure that its fit has set (every fitted candidate has them)."""
+    assert figure is not None
+    return figure
+
+
 @dataclass(frozen=True)
 class Structure:
     """Where the residual of the final model is still structured.
@@ -1016,7 +1022,8 @@ def calibrate(
             tic = time.perf_counter()
             key = frozenset([*(e.name for e in added), effect.name])
             try:
-                result = pool[key][1] if key in pool else screen_with(added, effect, current.fit)
+                result: FitResult | None = (pool[key][1] if key in pool
+                                            else screen_with(added, effect, current.fit))
             except PredictorError as exc:
                 tried.append(
                     (
@@ -1068,7 +1075,7 @@ def calibrate(
         # `target` by more than the tolerance.
         target = (1.0 - settings.min_improvement) * current.test_rmse
         for index, (cand, _) in enumerate(tried):
-            if is_screened(tried[index]) and may_fall_to(float(cand.test_rmse), target):
+            if is_screened(tried[index]) and may_fall_to(float(_known(cand.test_rmse)), target):
                 settle(tried, index, round_number, n_eff, current_score)
         fitted = [item for item in tried if item[1] is not None]
         # The round's effective sample count: from the best-fitting of the current model and
@@ -1091,9 +1098,9 @@ def calibrate(
 
         def failure(cand: Candidate) -> str:
             """Why ``cand`` cannot be added (empty: it passes every check of the criterion)."""
-            if cand.score_change >= 0:
+            if _known(cand.score_change) >= 0:
                 return "does not lower the held-out criterion"
-            if cand.improvement < settings.min_improvement:
+            if _known(cand.improvement) < settings.min_improvement:
                 return (
                     f"cuts the held-out RMSE by {cand.improvement:.1%}, less than "
                     f"{settings.min_improvement:.0%}"
@@ -1103,8 +1110,8 @@ def calibrate(
             return ""
 
         passing = [item for item in fitted if not failure(item[0])]
-        best = min(fitted, key=lambda item: item[0].score_change, default=None)
-        chosen = min(passing, key=lambda item: item[0].score_change, default=None)
+        best = min(fitted, key=lambda item: _known(item[0].score_change), default=None)
+        chosen = min(passing, key=lambda item: _known(item[0].score_change), default=None)
         accepted_name = chosen[0].effect if chosen is not None else None
         reason = failure(best[0]) if best is not None else ""
         for cand, _fit in tried:

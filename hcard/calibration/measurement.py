@@ -21,7 +21,7 @@ import numpy as np
 from hcard.atomic import atomic_output, write_atomically
 from hcard.bounded_read import MAX_JSON_FILE_BYTES, InputTooLarge, read_bounded
 from hcard.csv_rows import format_rows, numeric_table, read_csv_text
-from hcard.errors import HcardError
+from hcard.errors import InputError
 from hcard.json_text import JsonInputError, parse_json
 from hcard.quantities import COLUMN_UNITS
 
@@ -64,7 +64,7 @@ VOLTAGE_FORMS = ("instantaneous", "envelope")
 (the default) or the peak envelope of a sinusoidal carrier at ``carrier_frequency_hz``."""
 
 
-class MeasurementError(HcardError):
+class MeasurementError(InputError):
     """A measurement file or its sidecar is malformed (the message names file, line, column)."""
 
 

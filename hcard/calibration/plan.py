@@ -49,7 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hcard import build
-from hcard.errors import HcardError
+from hcard.errors import UsageError
 from hcard.track import FingerTrack, make_track
 from hcard.v1 import card_pb2 as pb
 
@@ -123,7 +123,7 @@ DEFAULT_VERIFY_DURATION_S = 24.0
 """Default length of the verification track, s."""
 
 
-class PlanError(HcardError):
+class PlanError(UsageError):
     """A plan that cannot be made (unknown device class, a duration too short)."""
 
 
@@ -206,7 +206,11 @@ def _session_track(
     back, lift, rest; the finger moves to the next lane while lifted."""
     x0, x1 = STROKE_X_MM
     dt = 1.0 / rate_hz
-    t_parts, x_parts, y_parts, f_parts, c_parts = [], [], [], [], []
+    t_parts: list[np.ndarray] = []
+    x_parts: list[np.ndarray] = []
+    y_parts: list[np.ndarray] = []
+    f_parts: list[np.ndarray] = []
+    c_parts: list[np.ndarray] = []
     now = 0.0
     for row, force, (there, back) in sessions:
         y = (row + 0.5) * LANE_MM

@@ -93,7 +93,8 @@ def profile_of(result: CalibrationResult, base: DeviceProfile | None = None, *,
         finger = _finger_of(inner)
     else:
         added = getattr(inner, "effect_list", ())
-        predictor = inner.base if added else inner
+        # with effects, ``inner`` is calibration.effects' augmented predictor: it has ``base``
+        predictor = inner.base if added else inner  # type: ignore[union-attr]
         effects = tuple(
             FittedEffect(e, {p.name: table[f"{e.name}.{p.name}"]["value"] for p in e.parameters})
             for e in added
@@ -137,7 +138,7 @@ def profile_of(result: CalibrationResult, base: DeviceProfile | None = None, *,
     description = (f"{result.verdict}; held-out error "
                    f"{_finite(result.before.test_rmse)} -> {_finite(result.after.test_rmse)} "
                    f"{result.unit}")
-    values = {
+    values: dict[str, Any] = {
         "predictor": predictor,
         "effects": effects,
         "observation": observation,

@@ -153,11 +153,6 @@ def _table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> list[str]:
     return lines
 
 
-def _uncertainty(fit_params: Mapping[str, dict[str, Any]], name: str) -> float | None:
-    entry = fit_params[name]
-    return entry["uncertainty"] if entry["fitted"] else None
-
-
 # -- JSON ---------------------------------------------------------------------------------------
 def _finite(value: Any) -> Any:
     """``value`` with numpy types as Python ones and NaN/inf as None, recursively."""
@@ -618,7 +613,7 @@ def _fixed_ticks(ax: Axes) -> None:
     again at every stage of a draw, and took about half of the drawing of a panel."""
     for axis, limits in ((ax.xaxis, ax.get_xlim()), (ax.yaxis, ax.get_ylim())):
         low, high = sorted(limits)
-        ticks = TICKS.tick_values(low, high)
+        ticks = np.asarray(TICKS.tick_values(low, high))
         slack = 1e-9 * (high - low)
         axis.set_ticks(ticks[(ticks >= low - slack) & (ticks <= high + slack)])
 
@@ -636,7 +631,7 @@ def _tick_texts(ticks: np.ndarray) -> list[str]:
     ten taken out (the panels have no room for the offset text)."""
     formatter = ScalarFormatter(useOffset=False)
     formatter.set_scientific(False)
-    formatter.set_locs(ticks)
+    formatter.set_locs(ticks)  # type: ignore[arg-type]  # stubs say list; any sequence works
     return [formatter(value) for value in ticks]
 
 
@@ -647,7 +642,7 @@ def _outlined_tick_labels(ax: Axes, *, left: bool) -> None:
     label to lay out and draw: the ~100 tick labels of a figure of 11 panels took a third of
     it."""
     fig = ax.get_figure()
-    assert fig is not None
+    assert isinstance(fig, Figure)  # the residual panels' axes sit on the figure itself
     inches = fig.dpi_scale_trans
     gap = TICK_GAP_PT / 72.0
     ax.tick_params(labelbottom=False, labelleft=False)
@@ -663,8 +658,9 @@ def _outlined_tick_labels(ax: Axes, *, left: bool) -> None:
     # from the top of the capitals down to the lowest control point (the outlines' control
     # points bound their curves; Path.get_extents solves for the curves' extrema and took a
     # third of the figure's time)
-    label_height_in = max((-float(path.vertices[:, 1].min()) for path in x_labels.get_paths()
-                           if len(path.vertices)), default=0.0)
+    label_height_in = max((-float(np.asarray(path.vertices)[:, 1].min())
+                           for path in x_labels.get_paths() if len(np.asarray(path.vertices))),
+                          default=0.0)
     ax.xaxis.set_label_coords(
         0.5, -(gap + label_height_in + LABEL_GAP_PT / 72.0) / axes_height_in)
     if not left:
@@ -676,8 +672,8 @@ def _outlined_tick_labels(ax: Axes, *, left: bool) -> None:
                         size_pt=TICK_LABEL_PT, inches=inches, offset_transform=beside,
                         ha="right", va="center", clip_on=False)
     ax.add_collection(labels, autolim=False)
-    widest_in = max((float(np.ptp(path.vertices[:, 0])) for path in labels.get_paths()
-                     if len(path.vertices)), default=0.0)
+    widest_in = max((float(np.ptp(np.asarray(path.vertices)[:, 0])) for path in labels.get_paths()
+                     if len(np.asarray(path.vertices))), default=0.0)
     ax.yaxis.set_label_coords(
         -(gap + widest_in + LABEL_GAP_PT / 72.0) / axes_width_in, 0.5)
 
@@ -686,7 +682,8 @@ def residuals_figure(result: CalibrationResult) -> Figure:
     """``residuals.png`` as a figure (Agg canvas attached)."""
     names = list(result.data.regressors)
     rows, columns = residuals_grid(len(names))
-    with rc_context(PANEL_STYLE):  # ticks are made with these sizes, not restyled after
+    # ticks are made with these sizes, not restyled after (the stubs type rc keys as literals)
+    with rc_context(PANEL_STYLE):  # type: ignore[arg-type]
         return _residuals_figure(result, names, rows, columns)
 
 

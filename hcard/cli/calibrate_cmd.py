@@ -35,14 +35,14 @@ from hcard.calibration.plan import (
 from hcard.calibration.splits import SPLITS
 from hcard.cli.errors import EXIT_FAILED, UserErrorGroup
 from hcard.cli.verbosity import quiet as global_quiet
-from hcard.errors import HcardError
+from hcard.errors import HcardError, UsageError
 from hcard.physics import Predictor
 from hcard.physics.profile import DeviceProfile
 from hcard.physics.sweep import quantity, split_assignment
 from hcard.plugins.registry import get_registry
 
 
-class CalibrateUsageError(HcardError):
+class CalibrateUsageError(UsageError):
     """Options of ``hcard calibrate`` that do not fit together."""
 
 

@@ -19,7 +19,7 @@ from hcard.cli.verbosity import quiet
 from hcard.errors import CardError, HcardError
 
 if TYPE_CHECKING:
-    from hcard.plugins.kinds import EncodeResult
+    from hcard.plugins.kinds import EncodeResult, EncoderPlugin
 
 
 
@@ -184,7 +184,7 @@ def encode(
       hcard encode photo.png -o - --dpi 300 | hcard info -
     """
     _single_threaded_blas()
-    from hcard_builtins.image import EncodeOptions, encode_image
+    from hcard_builtins.image import EncodeOptions
 
     try:
         options = EncodeOptions(
@@ -199,7 +199,7 @@ def encode(
             merge_tolerance=merge_tolerance,
             channel=channel,
             locking=locking,
-            friction_range=tuple(friction_range) if friction_range else None,
+            friction_range=(friction_range[0], friction_range[1]) if friction_range else None,
             max_pixels=max_pixels,
             title=title,
             author=author,
@@ -217,7 +217,7 @@ def encode(
             _check_writable(output, "card")
         if preview is not None:
             _check_writable(preview, "preview")
-        result = encode_image(image, options, progress=_progress)
+        result = _image_encoder().encode(image, options=options, progress=_progress)
         # The preview is rendered before the card is saved: a preview that cannot be made
         # leaves the previous card in place.
         png = _preview_bytes(result, max_error) if preview is not None else None
@@ -271,6 +271,14 @@ def _single_threaded_blas() -> None:
     2-core machine) and threads competing with the main one (bench/bench_encoder.py)."""
     if "numpy" not in sys.modules:
         os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+
+def _image_encoder() -> EncoderPlugin:
+    """The encoder plugin ``image`` of the plugin registry (the built-in one; a third party
+    cannot take its name), whose options are :class:`hcard_builtins.image.EncodeOptions`."""
+    from hcard.plugins.registry import get_registry
+
+    return get_registry().get("encoder", "image")
 
 
 def _option_names(message: str) -> str:

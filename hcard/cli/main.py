@@ -5,7 +5,7 @@ from __future__ import annotations
 import importlib
 import sys
 import warnings
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -14,52 +14,133 @@ from hcard.cli.errors import UserErrorGroup
 from hcard.cli.verbosity import set_verbosity
 from hcard.limits import FORMAT_MAJOR, FORMAT_MINOR
 
+if TYPE_CHECKING:
+    from hcard.plugins.kinds import CommandPlugin
+
 COMMAND_MODULES = {
     "encode": "encode_cmd", "info": "card_cmds", "validate": "card_cmds",
     "render": "render_cmd", "preview": "preview_cmd", "predict": "predict_cmd",
-    "plugins": "plugins_cmd", "device": "device_cmd", "play": "device_cmd",
-    "conformance": "conformance_cmd", "calibrate": "calibrate_cmd",
+    "plugins": "plugins_cmd", "calibrate": "calibrate_cmd",
 }
-"""Each command's module under ``hcard.cli``, imported only when the command runs: ``hcard
-validate`` loads the card modules and not the renderer, the calibration loop or the device
-drivers (bench/bench_cli_startup.py)."""
+"""Each core command's module under ``hcard.cli``, imported only when the command runs: ``hcard
+validate`` loads the card modules and not the renderer or the calibration loop
+(bench/bench_cli_startup.py). Other packages contribute commands through the ``hcard_commands``
+hook (``hcard device`` and ``hcard play`` from ``hcard_device``, ``hcard conformance`` from
+``hcard_conformance``)."""
 
 COMMAND_SUMMARIES = {
     "calibrate": "Fit a model to recordings, find what it lacks, verify it.",
-    "conformance": "Run the conformance suite against an implementation.",
-    "device": "Serve the reference device over USB/IP, or list devices.",
     "encode": "Encode a grayscale IMAGE: black is high friction, white low.",
     "info": "Describe each CARD: metadata, surface, grid and every texture.",
-    "play": "Play CARD on a device along a finger track and record it.",
     "plugins": "List installed encoders, predictors, drivers, effects, checks.",
     "predict": "Evaluate a physics predictor MODEL at a point or over a sweep.",
     "preview": "Draw CARD as a PNG picture of its taxtels and textures.",
     "render": "Render CARD along a finger track into target friction.",
     "validate": "Check each CARD against the spec; list problems by rule.",
 }
-"""The first sentence of each command's help, which ``hcard --help`` lists without importing
-any command module (tests/test_cli_help.py checks them against the commands' own help)."""
+"""The first sentence of each core command's help, which ``hcard --help`` lists without
+importing any command module (tests/test_cli.py checks them against the commands' own help)."""
+
+
+def contributed_commands() -> dict[str, CommandPlugin]:
+    """Commands other packages contribute (``hcard_commands`` hook, entry-point group
+    ``hcard.commands``), by name, without the core's names. Problems (a plugin that fails to
+    import, a name taken by a core command) are ``warning:`` lines; the rest still works.
+
+    What an earlier run found is reused while the installed packages are unchanged
+    (:mod:`hcard.plugins.command_cache`), so that ``hcard --help`` needs no entry-point scan."""
+    global _remembered
+    if _discovered():
+        commands = _discover_commands()
+    else:
+        if _remembered is None:
+            from hcard.plugins import command_cache
+
+            _remembered = command_cache.load()
+        commands = dict(_remembered) if _remembered is not None else _discover_commands()
+    for name in sorted(set(commands) & set(COMMAND_MODULES)):
+        if name not in _WARNED_SHADOWING:
+            _WARNED_SHADOWING.add(name)
+            _show_warning(f"plugin command '{name}' has the name of a core command; it is "
+                          "ignored", UserWarning)
+        del commands[name]
+    return commands
+
+
+_remembered: dict[str, CommandPlugin] | None = None
+"""The commands :mod:`hcard.plugins.command_cache` remembered, read once per process."""
+
+_WARNED_SHADOWING: set[str] = set()
+"""Core command names a plugin command was found to shadow (each is warned once)."""
+
+
+def _discovered() -> bool:
+    registry = sys.modules.get("hcard.plugins.registry")  # not imported: not discovered
+    return registry is not None and bool(registry.command_registry_discovered())
+
+
+def _discover_commands() -> dict[str, CommandPlugin]:
+    """The commands of the command registry, warning about its problems; when this call
+    discovered them and there were none, remembered for the next run."""
+    from hcard.plugins import command_cache
+    from hcard.plugins.registry import get_command_registry
+
+    fresh = not _discovered()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        registry = get_command_registry()
+        commands = registry.commands
+        broken = registry.broken
+    for warning in caught:
+        _show_warning(warning.message, warning.category)
+    if fresh and not broken:
+        modules = [getattr(plugin, "__file__", None)
+                   for plugin in registry.plugin_manager.get_plugins()]
+        command_cache.store(commands, [path for path in modules if isinstance(path, str)])
+    return commands
 
 
 class LazyCommandGroup(UserErrorGroup):
-    """The ``hcard`` group: commands listed from :data:`COMMAND_MODULES`, each module imported
-    when its command is asked for."""
+    """The ``hcard`` group: the core commands of :data:`COMMAND_MODULES` and the commands of
+    :func:`contributed_commands`, each module imported when its command is asked for."""
 
     def list_commands(self, ctx: click.Context) -> list[str]:
-        return sorted(COMMAND_MODULES)
+        return sorted({*COMMAND_MODULES, *contributed_commands()})
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
-        """The command list of ``hcard --help``, from :data:`COMMAND_SUMMARIES`."""
+        """The command list of ``hcard --help``: :data:`COMMAND_SUMMARIES` and the summaries
+        of the contributed commands."""
+        summaries = {name: command.summary for name, command in contributed_commands().items()}
+        summaries.update(COMMAND_SUMMARIES)
         with formatter.section("Commands"):
-            formatter.write_dl([(name, COMMAND_SUMMARIES[name])
-                                for name in self.list_commands(ctx)])
+            formatter.write_dl(sorted(summaries.items()))
 
     def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
         module_name = COMMAND_MODULES.get(cmd_name)
         if module_name is None:
-            return None
+            contributed = contributed_commands().get(cmd_name)
+            return None if contributed is None else _load(contributed)
         module = importlib.import_module(f"hcard.cli.{module_name}")
         return next(command for command in module.COMMANDS if command.name == cmd_name)
+
+
+def _load(command: CommandPlugin) -> click.Command | None:
+    """The click command of a contributed ``command``; None, with a warning naming it, when it
+    cannot be loaded (click then reports no such command)."""
+    try:
+        loaded = command.load()
+    except Exception as exc:  # a broken plugin must not crash the tool
+        from hcard.plugins import command_cache
+
+        command_cache.forget()  # perhaps remembered from before the package changed
+        _show_warning(f"command '{command.name}' cannot be loaded: {type(exc).__name__}: {exc}",
+                      UserWarning)
+        return None
+    if not isinstance(loaded, click.Command):
+        _show_warning(f"command '{command.name}' loaded a {type(loaded).__name__}, not a click "
+                      "command; it is ignored", UserWarning)
+        return None
+    return loaded
 
 
 @click.group(cls=LazyCommandGroup, context_settings={"help_option_names": ["-h", "--help"]})

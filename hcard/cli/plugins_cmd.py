@@ -38,6 +38,7 @@ def plugins(as_json: bool) -> None:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", HcardPluginWarning)
         registry = get_registry()
+        registry.collect()  # every hook, so that every problem is warned here
     # The registry is cached: problems found by an earlier discovery in this process are in
     # ``broken`` but were not warned again, so report from there and show other warnings as is.
     messages = [problem.reason for problem in registry.broken]

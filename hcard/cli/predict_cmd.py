@@ -22,7 +22,7 @@ import click
 import numpy as np
 
 from hcard.atomic import write_atomically
-from hcard.errors import HcardError
+from hcard.errors import HcardError, UsageError
 from hcard.physics.predictor import Parameter, Predictor, PredictorError, Variable
 from hcard.physics.profile import DeviceProfile, ProfileError
 from hcard.physics.sweep import Sweep, parse_sweep, quantity, split_assignment
@@ -42,7 +42,7 @@ Y_LABEL_DESCRIPTION = 30
 """The output's description joins the y label only when at most this long."""
 
 
-class PredictUsageError(HcardError):
+class PredictUsageError(UsageError):
     """Options of ``hcard predict`` that do not fit together."""
 
 
@@ -73,7 +73,9 @@ class Prediction:
 
     def unit_of(self, name: str) -> str:
         """SI unit of an input or parameter of the predictor."""
-        for item in (*self.predictor.inputs, *self.predictor.parameters):
+        items: tuple[Variable | Parameter, ...] = (*self.predictor.inputs,
+                                                   *self.predictor.parameters)
+        for item in items:
             if item.name == name:
                 return item.unit
         raise PredictorError(f"{self.predictor.name}: no input or parameter {name!r}")

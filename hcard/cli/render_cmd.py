@@ -28,6 +28,7 @@ from hcard.render.options import (
     DEFAULT_BAND_LIMIT_HZ,
     DEFAULT_DEAD_RECKONING_S,
     DEFAULT_FRAME_RATE_HZ,
+    RenderMode,
 )
 from hcard.render.output import frame_writer
 from hcard.render.touch import speed_estimate
@@ -115,7 +116,7 @@ def render(card: Path, track_path: Path, output: Path, frame_rate: float, band_l
     track = read_track_csv(track_path)
     try:
         options = RenderOptions(frame_rate_hz=frame_rate, band_limit_hz=band_limit,
-                                dead_reckoning_s=dead_reckoning, mode=mode)
+                                dead_reckoning_s=dead_reckoning, mode=RenderMode(mode))
     except ValueError as exc:
         raise click.UsageError(str(exc)) from None
     renderer = Renderer(loaded, options)

@@ -37,6 +37,7 @@ from hcard.atomic import write_atomically
 from hcard.bounded_read import MAX_JSON_FILE_BYTES, InputTooLarge, read_bounded
 from hcard.errors import HcardError
 from hcard.json_text import JsonInputError, parse_json
+from hcard.physics.contracts import FrequencyResponse, TwoChannelModel
 from hcard.physics.predictor import Predictor, PredictorError
 from hcard.physics.profile_effects import (
     EffectError,
@@ -261,9 +262,9 @@ class DeviceProfile:
             that describes a model but cannot render, e.g. a calibration of the bare finger)
             any predictor.
         limits: the device limits (None: not known; the profile then cannot render).
-        leakage: optional charge-leakage model (Eqs. 3.19-3.23) with a
-            ``frequency_response(f)`` method; its gain at the carrier frequency scales the EV
-            voltage that acts on the finger.
+        leakage: optional charge-leakage model (Eqs. 3.19-3.23), a
+            :class:`~hcard.physics.contracts.FrequencyResponse`: its gain at the carrier
+            frequency scales the EV voltage that acts on the finger.
         name: a short identifier of the device.
         description: one line.
         effects: the effects a calibration added, in the order added
@@ -321,9 +322,7 @@ class DeviceProfile:
                     f"leakage: the EV model {ev.name!r} already depends on the carrier "
                     "frequency; a separate leakage model would count the leak twice"
                 )
-        if self.leakage is not None and not callable(
-            getattr(self.leakage, "frequency_response", None)
-        ):
+        if self.leakage is not None and not isinstance(self.leakage, FrequencyResponse):
             raise ProfileError(
                 f"leakage: model {self.leakage.name!r} has no frequency_response(f) method"
             )
@@ -435,11 +434,13 @@ class DeviceProfile:
         return limits.max_voltage, "max_voltage"
 
     def _leakage_gain(self) -> float:
-        if self.leakage is None or self.limits is None:
-            return 1.0
+        if not isinstance(self.leakage, FrequencyResponse) or self.limits is None:
+            return 1.0  # no leakage (__post_init__ refuses a leakage model without a response)
         frequency = self.limits.carrier_frequency
         try:
-            response = np.asarray(self.leakage.frequency_response(np.asarray([frequency])))
+            # __post_init__ checked that the leakage model has frequency_response (Eq. 3.22)
+            response = np.asarray(self.leakage.frequency_response(
+                np.asarray([frequency])))
         except HcardError as exc:
             raise ProfileError(f"leakage: {exc}") from None
         gain = float(np.abs(response).ravel()[0])
@@ -526,9 +527,6 @@ class DeviceProfile:
         if not (trusted and _owned(uv, shape)):
             uv = np.array(uv, dtype=np.float64)  # the model's output may be a view or an input
         return uv, ev
-
-    def _plate_frequency(self) -> float | None:
-        return None if self.limits is None else self.limits.plate_frequency
 
     def _uv_call(self, speed: Any, normal_force: Any) -> tuple[Predictor, dict[str, Any]]:
         """The UV channel's model and its inputs: finger state and the plate frequency (those
@@ -865,10 +863,13 @@ def read_json(file: Path) -> Any:
 
 
 def channels_of(predictor: Predictor) -> tuple[Predictor | None, Predictor | None]:
-    """(UV relative-friction model, EV force model) rendered by ``predictor``."""
-    uv = getattr(predictor, "uv", None)
-    ev = getattr(predictor, "ev", None)
-    if isinstance(uv, Predictor) and isinstance(ev, Predictor):
+    """(UV relative-friction model, EV force model) rendered by ``predictor``: the parts of a
+    :class:`~hcard.physics.contracts.TwoChannelModel`, else the predictor itself on the channel
+    its output and inverse fit."""
+    if isinstance(predictor, TwoChannelModel) and isinstance(predictor.uv, Predictor) and (
+        isinstance(predictor.ev, Predictor)
+    ):
+        uv, ev = predictor.uv, predictor.ev
         return (
             uv if uv.inverse_input == "amplitude" else None,
             ev if ev.inverse_input == "voltage" else None,

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hcard.errors import HcardError
+from hcard.errors import InputError
 from hcard.quantities import UnitError, parse_quantity
 
 MAX_SWEEP_POINTS = 1_000_000
@@ -28,7 +28,7 @@ _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.]*$")
 _NUMBER_PREFIX = re.compile(r"^\s*[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?\s*")
 
 
-class SweepError(HcardError, ValueError):
+class SweepError(InputError, ValueError):
     """A ``name=value`` assignment or a sweep specification cannot be read."""
 
 

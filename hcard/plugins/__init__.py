@@ -14,6 +14,10 @@ hooks of :mod:`hcard.plugins.hookspecs` with :data:`hookimpl`::
     def hcard_encoders():
         return [AcmeEncoder()]
 
+Each kind's contract is a Protocol of :mod:`hcard.plugins.kinds`. A package adds subcommands
+to ``hcard`` with the ``hcard_commands`` hook, in a light module named by an entry point of the
+``hcard.commands`` group (``hcard --help`` imports only those modules).
+
 ``hcard plugins`` lists what is installed; :func:`get_registry` gives it to code.
 """
 
@@ -22,15 +26,21 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-from hcard.plugins.kinds import KINDS, Encoder, EncodeResult
-
 _LAZY = {
     "ENTRY_POINT_GROUP": "hookspecs", "PROJECT": "hookspecs", "hookimpl": "hookspecs",
     "hookspec": "hookspecs", "BrokenPlugin": "registry", "HcardPluginWarning": "registry",
     "PluginInfo": "registry", "PluginRegistry": "registry", "get_registry": "registry",
+    "COMMAND_ENTRY_POINT_GROUP": "hookspecs", "get_command_registry": "registry",
+    **dict.fromkeys(
+        ("KINDS", "PROTOCOL_OF_KIND", "CheckPlugin", "CommandPlugin", "DriverPlugin",
+         "EffectPlugin", "EncodeResult", "Encoder", "EncoderPlugin", "Plugin", "PredictorPlugin"),
+        "kinds",
+    ),
+    "LazyCommand": "lazy_command",
 }
-"""Names of the hook and registry modules, imported on first use: the plugin kinds alone (an
-encoder's base class) do not need pluggy or the entry-point machinery (importlib.metadata)."""
+"""The module of each name, imported on first use: the plugin kinds alone (an encoder's base
+class) do not need pluggy or the entry-point machinery (importlib.metadata), and ``hcard --help``
+reads remembered commands without the kinds."""
 
 
 def __getattr__(name: str) -> Any:
@@ -41,15 +51,26 @@ def __getattr__(name: str) -> Any:
 
 
 __all__ = [
+    "COMMAND_ENTRY_POINT_GROUP",
     "ENTRY_POINT_GROUP",
     "KINDS",
     "PROJECT",
+    "PROTOCOL_OF_KIND",
     "BrokenPlugin",
+    "CheckPlugin",
+    "CommandPlugin",
+    "DriverPlugin",
+    "EffectPlugin",
     "EncodeResult",
     "Encoder",
+    "EncoderPlugin",
     "HcardPluginWarning",
+    "LazyCommand",
+    "Plugin",
     "PluginInfo",
     "PluginRegistry",
+    "PredictorPlugin",
+    "get_command_registry",
     "get_registry",
     "hookimpl",
     "hookspec",

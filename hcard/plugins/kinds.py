@@ -1,16 +1,53 @@
-"""Base classes of the plugin kinds. Plugins may subclass them or just match their shape."""
+"""The contracts of the plugin kinds: one :class:`typing.Protocol` per kind.
+
+A plugin object is anything a hook of :mod:`hcard.plugins.hookspecs` returns; it must match
+the Protocol of its kind. The Protocols are ``runtime_checkable``, so ``isinstance(obj,
+PredictorPlugin)`` checks that the members are there (not their signatures). Base classes with
+shared behaviour implement them and may be subclassed: :class:`Encoder` (here),
+:class:`hcard.physics.Predictor`, :class:`hcard.calibration.effects.Effect`,
+``hcard_device.drivers.Driver`` and ``hcard_conformance.registry.Check``.
+
+Every kind has ``kind`` (its name in :data:`KINDS`), ``name`` (unique within the kind) and a
+one-line ``description``. This module imports nothing heavy: the types of the members are only
+named for type checkers.
+"""
 
 from __future__ import annotations
 
 import abc
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
 
+from hcard.plugins.lazy_command import LazyCommand
 from hcard.v1 import card_pb2 as pb
+
+if TYPE_CHECKING:
+    import click
+    import numpy as np
+
+    from hcard.physics.predictor import Parameter, Variable
 
 KINDS = ("encoder", "predictor", "driver", "calibration-effect", "conformance-check")
 """Plugin kinds, in the order ``hcard plugins`` lists them."""
+
+
+@runtime_checkable
+class Plugin(Protocol):
+    """What every plugin object has, whatever its kind."""
+
+    @property
+    def kind(self) -> str:
+        """The kind, one of :data:`KINDS`."""
+
+    @property
+    def name(self) -> str:
+        """Unique within the kind, e.g. ``"image"``."""
+
+    @property
+    def description(self) -> str:
+        """One line: what it does."""
 
 
 @dataclass
@@ -27,13 +64,202 @@ class EncodeResult:
     maps: dict[str, Any] = field(default_factory=dict)
 
 
-class Encoder(abc.ABC):
-    """Turns a source file into a card."""
+@runtime_checkable
+class EncoderPlugin(Plugin, Protocol):
+    """Kind ``encoder`` (hook ``hcard_encoders``): turns a source file into a card."""
 
-    kind = "encoder"
-    name: str = ""
-    description: str = ""
+    def encode(self, source: Path, **options: Any) -> EncodeResult:
+        """Encode ``source``; options are encoder specific. Raise an HcardError on bad input."""
+
+
+class Encoder(abc.ABC):
+    """Base class of encoders (an :class:`EncoderPlugin`): subclasses define ``encode``."""
+
+    kind: ClassVar[str] = "encoder"
+    name: ClassVar[str] = ""
+    description: ClassVar[str] = ""
 
     @abc.abstractmethod
     def encode(self, source: Path, **options: Any) -> EncodeResult:
         """Encode ``source``; options are encoder specific. Raise an HcardError on bad input."""
+
+
+@runtime_checkable
+class PredictorPlugin(Plugin, Protocol):
+    """Kind ``predictor`` (hook ``hcard_predictors``): a physics model mapping actuation and
+    finger state to an output (relative friction, a force), and back. SI units throughout.
+
+    Implemented by :class:`hcard.physics.Predictor`, which checks inputs against
+    :attr:`inputs` and reads and writes device-profile objects.
+    """
+
+    @property
+    def parameters(self) -> tuple[Parameter, ...]:
+        """The model's parameters: name, unit, default, bounds and thesis source."""
+
+    @property
+    def inputs(self) -> tuple[Variable, ...]:
+        """The variables :meth:`forward` takes (name, SI unit, default)."""
+
+    @property
+    def output(self) -> Variable:
+        """What :meth:`forward` returns."""
+
+    @property
+    def inverse_input(self) -> str | None:
+        """The input :meth:`inverse` solves for (``"amplitude"``, ``"voltage"``), or None."""
+
+    @property
+    def params(self) -> dict[str, float]:
+        """Parameter values by name (their units)."""
+
+    def forward(self, **inputs: Any) -> np.ndarray:
+        """The output for inputs broadcast together; vectorised."""
+
+    def inverse(self, target: Any, **inputs: Any) -> np.ndarray:
+        """The value of :attr:`inverse_input` that makes the output equal ``target``."""
+
+    def with_params(self, **changes: float) -> PredictorPlugin:
+        """A copy with some parameters changed."""
+
+    def to_profile(self) -> dict[str, Any]:
+        """The ``predictor`` object of a device profile: model name and parameters."""
+
+
+@runtime_checkable
+class EffectPlugin(Plugin, Protocol):
+    """Kind ``calibration-effect`` (hook ``hcard_calibration_effects``): a physical effect a
+    fitted predictor may lack, which calibration can add (spec/calibration.md).
+
+    Implemented by :class:`hcard.calibration.effects.Effect`, whose transforms default to the
+    identity.
+    """
+
+    @property
+    def reason(self) -> str:
+        """Why its absence leaves a residual."""
+
+    @property
+    def signature(self) -> tuple[str, ...]:
+        """Regressors the residual of its absence shows against."""
+
+    @property
+    def parameters(self) -> tuple[Parameter, ...]:
+        """The effect's own parameters."""
+
+    @property
+    def inputs(self) -> tuple[Variable, ...]:
+        """Inputs it adds to the model it augments."""
+
+    @property
+    def neutral(self) -> dict[str, float]:
+        """Parameter values at which it is off exactly."""
+
+    def applies_to(self, base: Any) -> str | None:
+        """Why it cannot augment the predictor ``base``, or None."""
+
+    def transform_inputs(
+        self, inputs: Mapping[str, np.ndarray], params: Mapping[str, float]
+    ) -> dict[str, np.ndarray]:
+        """The inputs the base model sees."""
+
+    def transform_params(
+        self,
+        params: Mapping[str, Any],
+        inputs: Mapping[str, np.ndarray],
+        effect_params: Mapping[str, float],
+        per_sample: frozenset[str] = ...,
+    ) -> dict[str, Any]:
+        """The base model's parameter values its forward map uses."""
+
+    def transform_output(
+        self, output: np.ndarray, inputs: Mapping[str, np.ndarray], params: Mapping[str, float]
+    ) -> np.ndarray:
+        """The augmented output from the base output."""
+
+    def transform_output_of(
+        self,
+        quantity: str,
+        output: np.ndarray,
+        inputs: Mapping[str, np.ndarray],
+        params: Mapping[str, float],
+    ) -> np.ndarray:
+        """:meth:`transform_output` for a base whose output is ``quantity``."""
+
+
+@runtime_checkable
+class DriverPlugin(Plugin, Protocol):
+    """Kind ``driver`` (hook ``hcard_drivers``): a transport to devices of some URI schemes.
+
+    The plugin object is usually a class (``hcard_device.drivers.Driver`` subclass) whose
+    ``open`` returns a connected instance.
+    """
+
+    @property
+    def schemes(self) -> tuple[str, ...]:
+        """URI schemes it opens, e.g. ``("sim",)``."""
+
+    def open(self, uri: Any, *, timeout_s: float = ...) -> Any:
+        """Connect to the device ``uri`` names (a ``DeviceUri``); raise a DeviceError."""
+
+    def enumerate(self, hosts: Sequence[tuple[str, int]] = ..., *,
+                  timeout_s: float = ...) -> list[Any]:
+        """``DeviceListing`` of every device it reaches now; never raises for a missing one."""
+
+
+@runtime_checkable
+class CheckPlugin(Plugin, Protocol):
+    """Kind ``conformance-check`` (hook ``hcard_conformance_checks``): one check of the
+    conformance suite, ``hcard_conformance.registry.Check`` for the built-ins."""
+
+    @property
+    def level(self) -> str:
+        """``format``, ``renderer`` or ``device``."""
+
+    def run(self, ctx: Any) -> Iterable[Any]:
+        """``CheckResult`` objects, one per case, on the conformance ``Context`` ``ctx``."""
+
+
+@runtime_checkable
+class CommandPlugin(Protocol):
+    """A subcommand of ``hcard`` (hook ``hcard_commands``), loaded only when it runs.
+
+    :class:`LazyCommand` is the usual implementation: ``hcard --help`` lists ``name`` and
+    ``summary`` without importing the command's module.
+    """
+
+    @property
+    def name(self) -> str:
+        """The subcommand, e.g. ``"device"``."""
+
+    @property
+    def summary(self) -> str:
+        """The first sentence of its help: the line ``hcard --help`` lists."""
+
+    def load(self) -> click.Command:
+        """The click command (importing its module)."""
+
+
+__all__ = [
+    "KINDS",
+    "PROTOCOL_OF_KIND",
+    "CheckPlugin",
+    "CommandPlugin",
+    "DriverPlugin",
+    "EffectPlugin",
+    "EncodeResult",
+    "Encoder",
+    "EncoderPlugin",
+    "LazyCommand",
+    "Plugin",
+    "PredictorPlugin",
+]
+
+PROTOCOL_OF_KIND: dict[str, type] = {
+    "encoder": EncoderPlugin,
+    "predictor": PredictorPlugin,
+    "driver": DriverPlugin,
+    "calibration-effect": EffectPlugin,
+    "conformance-check": CheckPlugin,
+}
+"""The Protocol each kind of :data:`KINDS` implements."""

@@ -6,7 +6,8 @@ raises because of a third-party package: a plugin that fails to import, to regis
 raises, or whose hook returns unusable objects is skipped with an :class:`HcardPluginWarning`
 naming the entry point, its distribution and the reason, and is listed in
 :attr:`PluginRegistry.broken`. Every hook implementation is called on its own, so one broken
-plugin never hides the others.
+plugin never hides the others, and only when its kind is first asked for: looking up the image
+encoder imports no predictor, effect or conformance check.
 
 >>> from hcard.plugins import get_registry
 >>> encoder = get_registry().get("encoder", "image")      # doctest: +SKIP
@@ -21,14 +22,14 @@ import traceback
 import types
 import warnings
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
 import pluggy
 
 from hcard.errors import PluginError
 from hcard.plugins import hookspecs
-from hcard.plugins.kinds import KINDS
+from hcard.plugins.kinds import KINDS, CommandPlugin
 
 HOOK_KINDS: dict[str, str] = {
     "hcard_encoders": "encoder",
@@ -38,6 +39,12 @@ HOOK_KINDS: dict[str, str] = {
     "hcard_conformance_checks": "conformance-check",
 }
 """Hook name -> kind of the objects it returns (one entry per kind of :data:`KINDS`)."""
+
+_HOOK_OF_KIND = {kind: hook_name for hook_name, kind in HOOK_KINDS.items()}
+
+COMMAND_HOOK = "hcard_commands"
+"""The hook contributing subcommands (:class:`~hcard.plugins.kinds.CommandPlugin`), which are
+kept apart from the plugin kinds: ``hcard --help`` lists them, ``hcard plugins`` does not."""
 
 _PLUGGY_DIR = os.path.dirname(pluggy.__file__)
 
@@ -99,6 +106,15 @@ class _Source:
         return f"plugin '{self.entry_point}' from package '{self.package}'{version}"
 
 
+@dataclass
+class _Registered:
+    """A registered plugin and the hooks it has answered."""
+
+    plugin: Any
+    source: _Source
+    collected: set[str] = field(default_factory=set)
+
+
 def _describe(exc: BaseException) -> str:
     """``Type: message (at file:line)`` of an exception raised by plugin code."""
     message = " ".join(str(exc).split())  # one line, whatever the plugin raised
@@ -142,8 +158,20 @@ class PluginRegistry:
         self.plugin_manager = pluggy.PluginManager(hookspecs.PROJECT)
         self.plugin_manager.add_hookspecs(hookspecs)
         self._by_kind: dict[str, dict[str, PluginInfo]] = {kind: {} for kind in KINDS}
-        self.broken: list[BrokenPlugin] = []
-        """Problems found so far, in discovery order."""
+        self._commands: dict[str, tuple[CommandPlugin, _Source]] = {}
+        self._broken: list[BrokenPlugin] = []
+        self._registered: list[_Registered] = []
+        self._collected: set[str] = set()
+        """Hooks every registered plugin has answered (the rest are called when first asked)."""
+        self._collecting = threading.RLock()
+        """Held while hooks are called: a thread asking for a kind waits for all its plugins."""
+
+    @property
+    def broken(self) -> list[BrokenPlugin]:
+        """Every problem of the registered plugins, in the order found (calls the hooks not
+        called yet)."""
+        self.collect()
+        return self._broken
 
     # ----------------------------------------------------------------------------- discovery
 
@@ -155,7 +183,8 @@ class PluginRegistry:
         return registry
 
     def load_entry_points(self, group: str = hookspecs.ENTRY_POINT_GROUP) -> None:
-        """Load, register and collect every entry point of ``group``.
+        """Load and register every entry point of ``group`` (its hooks are called when their
+        kind is first asked for).
 
         Entry points of the ``hcard`` distribution come first, then the others sorted by
         distribution and entry-point name, so the outcome does not depend on ``sys.path`` order.
@@ -215,10 +244,16 @@ class PluginRegistry:
         return self._add(plugin, source, strict=True)
 
     def _add(self, plugin: Any, source: _Source, *, strict: bool) -> list[PluginInfo]:
-        """Register ``plugin`` with pluggy and collect its objects.
+        with self._collecting:
+            return self._add_unlocked(plugin, source, strict=strict)
 
-        Not strict: problems are warned and the usable objects kept. Strict: all problems are
-        raised in one :class:`PluginError` and nothing is kept.
+    def _add_unlocked(self, plugin: Any, source: _Source, *, strict: bool) -> list[PluginInfo]:
+        """Register ``plugin`` with pluggy; collect its objects now (strict) or when first asked.
+
+        Not strict (discovery): problems are warned and the usable objects kept; each hook is
+        called when its kind is first queried (:meth:`_ensure`), so looking up an encoder does
+        not import every predictor, effect and check. Strict: every hook is called now, all
+        problems are raised in one :class:`PluginError` and nothing is kept.
         """
         pm = self.plugin_manager
         if pm.is_registered(plugin):
@@ -226,61 +261,142 @@ class PluginRegistry:
                 raise PluginError(f"{source.label()} is already registered")
             # The same module named by two entry points: its hooks are collected once.
             return []
+        if strict:
+            self.collect()  # a name clash with a plugin not collected yet must be seen now
         problems: list[str] = []
         try:
             registered = pm.register(plugin, name=f"{source.package}:{source.entry_point}")
         except Exception as exc:
             registered = None
             problems.append(f"{source.label()} could not be registered: {_describe(exc)}")
-        infos: list[PluginInfo] = []
         if registered is not None:
-            infos = self._collect(plugin, source, problems)
+            self._check_hooks(plugin, source, problems)
+        entry = _Registered(plugin, source)
+        infos: list[PluginInfo] = []
+        commands: dict[str, CommandPlugin] = {}
+        if registered is not None:
+            for hook_name in (*HOOK_KINDS, COMMAND_HOOK):
+                if strict or hook_name in self._collected:
+                    entry.collected.add(hook_name)
+                    if hook_name == COMMAND_HOOK:
+                        commands = self._collect_commands(plugin, source, problems)
+                    else:
+                        infos += self._collect(plugin, source, hook_name, problems)
         if strict and problems:
             if registered is not None:
                 pm.unregister(plugin)
             raise PluginError("; ".join(problems))
         for reason in problems:
             self._problem(source.entry_point, reason)
-        for info in infos:
-            self._by_kind[info.kind][info.name] = info
+        self._keep(infos, commands, source)
+        if registered is not None:
+            self._registered.append(entry)
         return infos
 
-    def _collect(self, plugin: Any, source: _Source, problems: list[str]) -> list[PluginInfo]:
-        """Call each hook implementation of ``plugin`` on its own and check what it returns."""
+    def _keep(
+        self, infos: list[PluginInfo], commands: dict[str, CommandPlugin], source: _Source
+    ) -> None:
+        for info in infos:
+            self._by_kind[info.kind][info.name] = info
+        for name, command in commands.items():
+            self._commands[name] = (command, source)
+
+    def _ensure(self, hook_name: str) -> None:
+        """Call ``hook_name`` of every registered plugin that has not answered it yet, in
+        registration order (so the first plugin keeps a name), warning about problems."""
+        if hook_name in self._collected:
+            return
+        with self._collecting:
+            for entry in self._registered:
+                if hook_name in entry.collected:
+                    continue
+                entry.collected.add(hook_name)
+                problems: list[str] = []
+                if hook_name == COMMAND_HOOK:
+                    commands = self._collect_commands(entry.plugin, entry.source, problems)
+                    infos: list[PluginInfo] = []
+                else:
+                    commands = {}
+                    infos = self._collect(entry.plugin, entry.source, hook_name, problems)
+                for reason in problems:
+                    self._problem(entry.source.entry_point, reason)
+                self._keep(infos, commands, entry.source)
+            self._collected.add(hook_name)
+
+    def collect(self) -> None:
+        """Call every hook not called yet (warning about problems): after it, :attr:`broken`
+        holds every problem of the registered plugins."""
+        for hook_name in (*HOOK_KINDS, COMMAND_HOOK):
+            self._ensure(hook_name)
+
+    def _check_hooks(self, plugin: Any, source: _Source, problems: list[str]) -> None:
+        """Problems of ``plugin``'s hook implementations found without calling them."""
         pm = self.plugin_manager
         callers = pm.get_hookcallers(plugin) or []
         unknown = sorted(c.name for c in callers if not c.has_spec())
         if unknown:
             problems.append(
                 f"{source.label()} implements unknown hook(s) {', '.join(unknown)} "
-                f"(known: {', '.join(HOOK_KINDS)}); they are ignored"
+                f"(known: {', '.join((*HOOK_KINDS, COMMAND_HOOK))}); they are ignored"
             )
         if not callers:
             problems.append(
                 f"{source.label()} defines no hcard hook implementations "
                 "(are its hooks decorated with hcard.plugins.hookimpl?)"
             )
+
+    def _results(
+        self, plugin: Any, source: _Source, hook_name: str, problems: list[str]
+    ) -> Iterable[Any]:
+        """What each implementation of ``hook_name`` by ``plugin`` returns, called on its own."""
+        for impl in getattr(self.plugin_manager.hook, hook_name).get_hookimpls():
+            if impl.plugin is not plugin:
+                continue
+            if impl.hookwrapper or impl.wrapper:
+                problems.append(f"{source.label()}: {hook_name} must not be a hook wrapper")
+                continue
+            try:
+                result = impl.function()
+            except (Exception, SystemExit) as exc:
+                problems.append(f"{source.label()}: {hook_name}() raised {_describe(exc)}")
+                continue
+            yield from self._objects_of(result, hook_name, source, problems)
+
+    def _collect(
+        self, plugin: Any, source: _Source, hook_name: str, problems: list[str]
+    ) -> list[PluginInfo]:
+        """The valid plugin objects ``plugin``'s ``hook_name`` returns."""
+        kind = HOOK_KINDS[hook_name]
         infos: list[PluginInfo] = []
         staged: dict[tuple[str, str], PluginInfo] = {}
-        for hook_name, kind in HOOK_KINDS.items():
-            caller = getattr(pm.hook, hook_name)
-            for impl in caller.get_hookimpls():
-                if impl.plugin is not plugin:
-                    continue
-                if impl.hookwrapper or impl.wrapper:
-                    problems.append(f"{source.label()}: {hook_name} must not be a hook wrapper")
-                    continue
-                try:
-                    result = impl.function()
-                except (Exception, SystemExit) as exc:
-                    problems.append(f"{source.label()}: {hook_name}() raised {_describe(exc)}")
-                    continue
-                for obj in self._objects_of(result, hook_name, source, problems):
-                    info = self._check(obj, kind, hook_name, source, staged, problems)
-                    if info is not None:
-                        staged[(kind, info.name)] = info
-                        infos.append(info)
+        for obj in self._results(plugin, source, hook_name, problems):
+            info = self._check(obj, kind, hook_name, source, staged, problems)
+            if info is not None:
+                staged[(kind, info.name)] = info
+                infos.append(info)
         return infos
+
+    def _collect_commands(
+        self, plugin: Any, source: _Source, problems: list[str]
+    ) -> dict[str, CommandPlugin]:
+        """The subcommands ``plugin`` contributes through :data:`COMMAND_HOOK`, by name."""
+        found: dict[str, CommandPlugin] = {}
+        where = f"{source.label()}: {COMMAND_HOOK}() returned"
+        for command in self._results(plugin, source, COMMAND_HOOK, problems):
+            name = getattr(command, "name", None)
+            if not isinstance(command, CommandPlugin) or not isinstance(name, str) or not (
+                name.strip() and isinstance(command.summary, str)
+            ):
+                problems.append(
+                    f"{where} an object of type '{type(command).__name__}' that is not a "
+                    "command (a string 'name' and 'summary', and load())"
+                )
+                continue
+            if name in found or name in self._commands:
+                problems.append(f"{where} command '{name}', a name already taken; it is ignored")
+                continue
+            found[name] = command
+        return found
 
     @staticmethod
     def _objects_of(
@@ -336,7 +452,7 @@ class PluginRegistry:
         )
 
     def _problem(self, entry_point: str, reason: str) -> None:
-        self.broken.append(BrokenPlugin(entry_point, reason))
+        self._broken.append(BrokenPlugin(entry_point, reason))
         warnings.warn(reason, HcardPluginWarning, stacklevel=3)
 
     # ---------------------------------------------------------------------------- queries
@@ -346,12 +462,10 @@ class PluginRegistry:
         return {name: info.obj for name, info in self._infos_of(kind).items()}
 
     def _infos_of(self, kind: str) -> dict[str, PluginInfo]:
-        try:
-            return self._by_kind[kind]
-        except KeyError:
-            raise PluginError(
-                f"unknown plugin kind '{kind}'; kinds are: {', '.join(KINDS)}"
-            ) from None
+        if kind not in self._by_kind:
+            raise PluginError(f"unknown plugin kind '{kind}'; kinds are: {', '.join(KINDS)}")
+        self._ensure(_HOOK_OF_KIND[kind])
+        return self._by_kind[kind]
 
     @property
     def encoders(self) -> dict[str, Any]:
@@ -378,8 +492,19 @@ class PluginRegistry:
         """Conformance checks by name."""
         return self.of_kind("conformance-check")
 
+    @property
+    def commands(self) -> dict[str, CommandPlugin]:
+        """Subcommands contributed through the ``hcard_commands`` hook, by name (a copy)."""
+        self._ensure(COMMAND_HOOK)
+        return {name: command for name, (command, _) in self._commands.items()}
+
+    def infos(self, kind: str) -> list[PluginInfo]:
+        """The :class:`PluginInfo` of every plugin of ``kind``, sorted by name."""
+        return [info for _, info in sorted(self._infos_of(kind).items())]
+
     def all(self) -> list[PluginInfo]:
         """Every plugin, sorted by kind (in :data:`KINDS` order), then name."""
+        self.collect()
         return [info for kind in KINDS for _, info in sorted(self._by_kind[kind].items())]
 
     def info(self, kind: str, name: str) -> PluginInfo:
@@ -421,3 +546,22 @@ def get_registry(*, refresh: bool = False) -> PluginRegistry:
         if _default is None or refresh:
             _default = PluginRegistry.discover()
         return _default
+
+
+_commands: PluginRegistry | None = None
+
+
+def command_registry_discovered() -> bool:
+    """Whether this process has discovered (or been given) the registry of commands."""
+    return _commands is not None
+
+
+def get_command_registry(*, refresh: bool = False) -> PluginRegistry:
+    """The registry of the entry-point group ``hcard.commands``: the light modules whose
+    ``hcard_commands`` hook contributes subcommands. ``hcard --help`` loads only these, not
+    the plugins of :func:`get_registry` (which import models, checks and effects)."""
+    global _commands
+    with _default_lock:
+        if _commands is None or refresh:
+            _commands = PluginRegistry.discover(hookspecs.COMMAND_ENTRY_POINT_GROUP)
+        return _commands

@@ -123,6 +123,8 @@ class Line:
     def __init__(self, card: CompiledCard, times: np.ndarray, horizon_s: float,
                  on_y: np.ndarray, sample_t: np.ndarray, start: np.ndarray,
                  velocity: np.ndarray) -> None:
+        rows: int
+        cols: int
         rows, cols = card.grid.shape
         self.times, self.horizon_s = times, horizon_s
         self.sample_t, self.start, self.velocity = sample_t, start, velocity

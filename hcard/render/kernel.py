@@ -134,7 +134,7 @@ def render_block(
         offset = np.arange(count, dtype=np.uint32)  # frames since the anchor (wraps from < 0)
         offset -= np.repeat(np.asarray(runs.anchors).astype(np.uint32), runs.lengths)
         uv, ev = (np.empty(count), np.empty(count)) if out is None else (out.uv, out.ev)
-        _frame_targets(card, parameters, runs.lengths, offset, uv, ev)
+        _frame_targets(card, parameters, np.asarray(runs.lengths), offset, uv, ev)
     phase = None
     if with_phase:
         if parameters is None:

@@ -106,8 +106,8 @@ class NpzFrameWriter(_FrameWriter):
         """Append one block of each column to its spill file."""
         if not self._columns:
             for name, values in columns:
-                spill = Path(self._spill.name) / f"{name}.raw"
-                self._columns[name] = (values.dtype, spill.open("wb"))
+                spill_path = Path(self._spill.name) / f"{name}.raw"
+                self._columns[name] = (values.dtype, spill_path.open("wb"))
         lengths = {values.shape[0] for _, values in columns}
         if len(lengths) != 1 or [n for n, _ in columns] != list(self._columns):
             raise ValueError("every block must hold the same columns, of one length")

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hcard.errors import CardValidationError, HcardError, TrackError
+from hcard.errors import CardValidationError, TrackError, UsageError
 from hcard.render.clock import FrameClock
 from hcard.render.compiled import CompiledCard, compile_card
 from hcard.render.kernel import Block, Workspace, render_block
@@ -35,7 +35,7 @@ checked before any work, so a track with a 100,000 s gap or ``--frame-rate 1e12`
 once instead of ending in a MemoryError (spec/README.md section 4)."""
 
 
-class RenderTooLong(HcardError):
+class RenderTooLong(UsageError):
     """A rendering would exceed :data:`MAX_RENDER_FRAMES` frames."""
 
 
@@ -78,7 +78,7 @@ class Frames:
         """Frames of ``parts`` one after another."""
         phase = None
         if parts and all(p.phase is not None for p in parts):
-            phase = np.concatenate([p.phase for p in parts])  # type: ignore[misc]
+            phase = np.concatenate([p.phase for p in parts])
         return Frames(
             np.concatenate([p.t for p in parts]),
             np.concatenate([p.uv for p in parts]),

@@ -78,7 +78,8 @@ def find_runs(table: TouchTable, clock: FrameClock, first: int, frames: TouchFra
     if len(frames.starts) == 1:
         row, horizon = frames.sample[0], frames.horizon[0]
         parts = _parts_of_first_segment(table, clock, first, row, horizon, count, horizon_s)
-        anchors, capped = [], []
+        anchors: list[int] = []
+        capped: list[bool] = []
         for start, end, base, past in parts:
             anchor = base + (first + start - base) // ANCHOR_FRAMES * ANCHOR_FRAMES
             while anchor < first + end:
@@ -86,9 +87,11 @@ def find_runs(table: TouchTable, clock: FrameClock, first: int, frames: TouchFra
                 capped.append(past)
                 anchor += ANCHOR_FRAMES
         if frames.one_texture:  # the common streaming block
-            starts = [max(a, 0) for a in anchors]
-            return Runs(starts, [b - a for a, b in zip(starts, [*starts[1:], count], strict=True)],
-                        anchors, [row] * len(starts), [frames.texture.item(0)] * len(starts),
+            run_starts = [max(a, 0) for a in anchors]
+            return Runs(run_starts,
+                        [b - a for a, b in zip(run_starts, [*run_starts[1:], count], strict=True)],
+                        anchors, [row] * len(run_starts),
+                        [frames.texture.item(0)] * len(run_starts),
                         capped, [clock.time(first + a) for a in anchors])
         anchor_at, part_capped = np.array(anchors, dtype=np.intp), np.array(capped)
         sample = np.full(len(anchors), row)
@@ -96,6 +99,7 @@ def find_runs(table: TouchTable, clock: FrameClock, first: int, frames: TouchFra
         anchor_at, part_capped, sample = _anchors_of_segments(table, clock, first, frames,
                                                               horizon_s)
     anchor_start = np.maximum(anchor_at, 0)
+    starts: np.ndarray
     if frames.one_texture:
         starts, which = anchor_start, np.arange(anchor_at.shape[0])
     else:
@@ -109,9 +113,9 @@ def find_runs(table: TouchTable, clock: FrameClock, first: int, frames: TouchFra
     lengths = np.empty_like(starts)
     np.subtract(starts[1:], starts[:-1], out=lengths[:-1])
     lengths[-1] = count - starts[-1]
-    anchors = anchor_at.take(which)
-    return Runs(starts, lengths, anchors, sample.take(which), frames.texture.take(starts),
-                part_capped.take(which), clock.times_of(anchors + first))
+    run_anchors = anchor_at.take(which)
+    return Runs(starts, lengths, run_anchors, sample.take(which), frames.texture.take(starts),
+                part_capped.take(which), clock.times_of(run_anchors + first))
 
 
 def _parts_of_first_segment(table: TouchTable, clock: FrameClock, first: int, row: int,
@@ -145,7 +149,8 @@ def _anchors_of_segments(table: TouchTable, clock: FrameClock, first: int,
     parts = _parts_of_first_segment(table, clock, first, frames.sample[0], horizon[0],
                                     ends[0], horizon_s)
     rest = slice(1, None)  # the other segments start in the block
-    before, past = horizon[rest] > starts[rest], horizon[rest] < ends[rest]
+    before = np.greater(horizon[rest], starts[rest])
+    past = np.less(horizon[rest], ends[rest])
     part_start = np.concatenate(([p[0] for p in parts], starts[rest][before],
                                  horizon[rest][past]))
     part_end = np.concatenate(([p[1] for p in parts], np.minimum(horizon, ends)[rest][before],

@@ -161,6 +161,7 @@ def split_channels(deviation: np.ndarray, columns: list[int], uv: np.ndarray,
     uv_group = group(GROUP_UV, 0.0, 1.0)
     ev_group = group(GROUP_EV, 1.0, MAX_RELATIVE_FRICTION)
     bipolar = group(GROUP_BIPOLAR, 0.0, MAX_RELATIVE_FRICTION)
+    assert bipolar is not None  # GROUP_BIPOLAR is in columns (above)
     np.minimum(bipolar, 1.0, out=uv)  # the bipolar group's lowering
     if uv_group is not None:
         uv *= uv_group

@@ -1,5 +1,6 @@
 """Built-in calibration effects (spec/calibration.md), registered through the ``hcard.plugins``
-entry point ``builtin-effects`` like any vendor's plugin.
+entry point ``builtin-effects`` (:mod:`hcard_builtins.calibration_effects`, which imports this
+module when the effects are first asked for) like any vendor's plugin.
 
 Each effect is a :class:`~hcard.calibration.effects.Effect`: what it changes, why its absence
 leaves a residual, the regressors that residual shows against, and its parameters with the thesis
@@ -25,7 +26,6 @@ from hcard.calibration.effects import (
     touchdowns,
 )
 from hcard.physics import Parameter, Variable
-from hcard.plugins.hookspecs import hookimpl
 from hcard_builtins.physics.electrovibration import geometry as pad_geometry
 
 ATMOSPHERE = scipy.constants.atm
@@ -687,7 +687,6 @@ BUILTIN_EFFECTS: tuple[type[Effect], ...] = (
 """The built-in effect classes, in the order spec/calibration.md lists them."""
 
 
-@hookimpl
 def hcard_calibration_effects() -> list[Effect]:
     """The built-in calibration effects, one instance each."""
     return [cls() for cls in BUILTIN_EFFECTS]

@@ -10,8 +10,12 @@ still register.
 
 from __future__ import annotations
 
-from hcard.physics import Predictor
+from typing import TYPE_CHECKING
+
 from hcard.plugins.hookspecs import hookimpl
+
+if TYPE_CHECKING:
+    from hcard.physics import Predictor
 
 
 @hookimpl(specname="hcard_predictors")

@@ -618,7 +618,7 @@ class Firmware:
         }
         if not items:
             return ClipReport(**common, item_index=ClipReport.NO_ITEM, texture=-1, channel=0,
-                              reason=0, target_x1e4=0, achievable_x1e4=0)
+                              reason=0, target_x1e4=0, achievable_x1e4=0, texture_name="")
         index = min(self._clip_index, len(items) - 1)
         item = items[index]
         return ClipReport(

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from hcard.cli.conformance_cmd import TIMING_NAMES
 from hcard.cli.main import cli
+from hcard_conformance.conformance_cmd import TIMING_NAMES
 from hcard_conformance.context import Context
 from hcard_conformance.device_level import BANDWIDTH_UV_MEAN, BANDWIDTH_UV_SWING, amplitude_gain
 from hcard_conformance.result import CannotAssess

@@ -430,7 +430,7 @@ def test_unencodable_host_values_are_device_errors():
 
 def test_drivers_register_as_a_plugin():
     from hcard.plugins.registry import PluginRegistry
-    from hcard_device.drivers import plugin
+    from hcard_device import driver_plugins as plugin
 
     registry = PluginRegistry()
     infos = registry.register(plugin, name="builtin-drivers")

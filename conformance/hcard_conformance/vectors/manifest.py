@@ -14,6 +14,7 @@ import numpy as np
 
 from hcard.card_io import load, parse_card, read_card_file
 from hcard.render import RenderOptions
+from hcard.render.options import RenderMode
 from hcard.track import FingerTrack, read_track_csv
 from hcard.v1 import card_pb2 as pb
 
@@ -84,7 +85,7 @@ class RenderEntry:
             frame_rate_hz=self.frame_rate_hz,
             band_limit_hz=self.band_limit_hz,
             dead_reckoning_s=self.dead_reckoning_s,
-            mode=self.mode,
+            mode=RenderMode(self.mode),
         )
 
     def load_arrays(self) -> dict[str, np.ndarray]:
@@ -137,13 +138,6 @@ class Manifest:
                 return entry
         raise KeyError(f"no vector track {name!r}")
 
-    def cards_tagged(self, tag: str) -> tuple[CardEntry, ...]:
-        """Cards carrying ``tag``."""
-        return tuple(entry for entry in self.cards if tag in entry.tags)
-
-    def renders_of(self, card: str) -> tuple[RenderEntry, ...]:
-        """Golden renders of the card called ``card``."""
-        return tuple(entry for entry in self.renders if entry.card == card)
 
 
 def load_manifest(root: str | Path | None = None) -> Manifest:

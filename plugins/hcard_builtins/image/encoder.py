@@ -225,6 +225,8 @@ def encode_image(
         ValueError: an option is out of range.
     """
     opts = _options(options, overrides)
+    components, max_textures = opts.components, opts.max_textures
+    assert components is not None and max_textures is not None  # filled in by checked()
     started = time.perf_counter()
     image = load_gray(path, max_pixels=opts.max_pixels)
     large = image.width * image.height > PROGRESS_MIN_PIXELS
@@ -252,7 +254,7 @@ def encode_image(
         image,
         geometry,
         mapping,
-        peaks=opts.components if target is None else min(opts.components, SPECTRAL_PEAKS),
+        peaks=components if target is None else min(components, SPECTRAL_PEAKS),
         min_amplitude=opts.min_amplitude,
         low=low,
         target=target,
@@ -263,7 +265,7 @@ def encode_image(
         tile_centres(geometry),
         bin_width=1.0 / opts.taxtel_mm,
         tolerance=merge_tolerance(taxtels, target, opts.merge_tolerance),
-        max_textures=opts.max_textures,
+        max_textures=max_textures,
         min_amplitude=opts.min_amplitude,
         keyed=target is not None,
         fixed=taxtels.pursued,
@@ -287,7 +289,7 @@ def encode_image(
         from .shortfall import shortfall  # only with a target (start-up of hcard encode)
 
         missed = shortfall(error, taxtels, target,
-                           palette_full=palette.leaders > opts.max_textures)
+                           palette_full=palette.leaders > max_textures)
         stats["target"] = missed.figures()
         maps["shortfall"] = missed.reason
     stats["seconds"] = time.perf_counter() - started
@@ -298,6 +300,7 @@ def _target(opts: EncodeOptions) -> Target | None:
     """The error target of ``opts`` in relative friction, or None."""
     if opts.max_error is None:
         return None
+    assert opts.components is not None  # filled in by checked()
     return Target(p95=opts.max_error * limits.RELATIVE_FRICTION_JND, components=opts.components)
 
 

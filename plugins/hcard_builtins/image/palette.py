@@ -134,8 +134,9 @@ class _Matched:
                                                             + self.energy)
         if c0.size and self.owner.size:
             everything = c0.size * self.owner.size <= _ALL_PAIRS
-            pick = slice(None) if everything else self._near(k0[:, 0])
-            if everything or pick.size:
+            near = None if everything else self._near(k0[:, 0])
+            if near is None or near.size:
+                pick: slice | np.ndarray = slice(None) if near is None else near
                 limit = self.bin_width * self.bin_width
                 kx, ky = k0[:, 0:1], k0[:, 1:2]  # (q, 1) against the candidates
                 cx, cy = self.kx[pick], self.ky[pick]

@@ -185,7 +185,8 @@ class Coupled(Predictor):
                     f"coupled: {part.name!r} carries settings beyond its parameters (for "
                     "example a curve) that a coupled model cannot keep; use it on its own"
                 )
-        model = coupled_class(type(uv), type(ev))
+        # (classes are hashable; mypy takes type[Predictor] for an unhashable instance type)
+        model = coupled_class(type(uv), type(ev))  # type: ignore[arg-type]
         return model(
             **{UV_PREFIX + k: v for k, v in uv.params.items()},
             **{EV_PREFIX + k: v for k, v in ev.params.items()},
@@ -260,7 +261,7 @@ class Coupled(Predictor):
             try:
                 uv_cls = type(registry.get("predictor", str(uv_name)))
                 ev_cls = type(registry.get("predictor", str(ev_name)))
-                model = coupled_class(uv_cls, ev_cls)
+                model = coupled_class(uv_cls, ev_cls)  # type: ignore[arg-type]  # as above
             except HcardError as exc:  # no such plugin, or not a UV / EV pair
                 raise PredictorError(f"{source}: components: {exc}") from None
         return super(Coupled, model).from_profile(profile, source=source)

@@ -11,6 +11,7 @@ import warnings
 from collections.abc import Sequence
 from typing import Any
 
+from hcard.plugins.kinds import DriverPlugin
 from hcard_device.drivers.base import DEFAULT_TIMEOUT_S, DeviceListing, Driver
 from hcard_device.drivers.errors import (
     DeviceError,
@@ -43,29 +44,21 @@ __all__ = [
 ]
 
 
-def _builtin_drivers() -> list[Any]:
-    from hcard_device.drivers.plugin import hcard_drivers
-
-    return hcard_drivers()
-
-
-def driver_classes(*, plugins: bool = True) -> dict[str, Any]:
-    """Driver plugins by URI scheme: the built-ins, then (``plugins``) the installed driver
-    plugins for other schemes."""
-    by_scheme: dict[str, Any] = {}
-    for driver in _builtin_drivers():
-        for scheme in driver.schemes:
-            by_scheme[scheme] = driver
-    if not plugins:
-        return by_scheme
-    from hcard.plugins import get_registry
+def driver_classes(*, plugins: bool = True) -> dict[str, DriverPlugin]:
+    """Driver plugins of the plugin registry by URI scheme: the built-ins (package ``hcard``:
+    ``sim``, ``usbip``, ``pyusb``, ``hid``), then (``plugins``) the other installed or
+    registered drivers for other schemes."""
+    from hcard.plugins.registry import CORE_DISTRIBUTION, get_registry
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # `hcard plugins` reports broken plugins
-        plugins = get_registry().drivers
-    for driver in plugins.values():
-        for scheme in getattr(driver, "schemes", ()):
-            by_scheme.setdefault(str(scheme), driver)
+        infos = get_registry().infos("driver")
+    by_scheme: dict[str, DriverPlugin] = {}
+    for info in sorted(infos, key=lambda info: info.package != CORE_DISTRIBUTION):
+        if info.package != CORE_DISTRIBUTION and not plugins:
+            continue
+        for scheme in getattr(info.obj, "schemes", ()):
+            by_scheme.setdefault(str(scheme), info.obj)
     return by_scheme
 
 
@@ -77,7 +70,7 @@ def open_device(uri: str | DeviceUri, *, timeout_s: float = DEFAULT_TIMEOUT_S) -
         DeviceError: the device is missing, unreachable or not an hcard device.
     """
     scheme = (uri.split("://", 1)[0].lower() if isinstance(uri, str) else uri.scheme)
-    drivers = driver_classes(plugins=scheme not in SCHEMES)  # plugins only when needed
+    drivers = driver_classes(plugins=scheme not in SCHEMES)  # a built-in scheme: a built-in
     if isinstance(uri, str):
         uri = parse_uri(uri, schemes=tuple(dict.fromkeys((*SCHEMES, *drivers))))
     driver = drivers.get(uri.scheme)

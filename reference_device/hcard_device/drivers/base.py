@@ -32,7 +32,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from types import TracebackType
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 from hcard.card_io import to_bytes
 from hcard.quantities import MS_PER_S, S_PER_MS, S_PER_US
@@ -63,6 +63,9 @@ from hcard_device.protocol import (
     stream_reports,
     upload_reports,
 )
+
+if TYPE_CHECKING:
+    import numpy as np
 
 DEFAULT_TIMEOUT_S = 1.0
 """Longest wait for one transfer (or for one report in :meth:`Driver.read_inputs`), s."""
@@ -436,7 +439,8 @@ class Driver(abc.ABC):
             raise DeviceError(f"{self.uri}: cannot send the finger state ({exc})") from None
         self.send(report)
 
-    def stream_frames(self, uv: Sequence[float], ev: Sequence[float]) -> int:
+    def stream_frames(self, uv: Sequence[float] | np.ndarray,
+                      ev: Sequence[float] | np.ndarray) -> int:
         """Stream frames of target relative friction (UV in [0, 1], EV in [1, 4]), 15 per
         report; returns the number of reports sent."""
         try:

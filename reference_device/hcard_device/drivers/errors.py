@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from hcard.errors import HcardError
+from hcard.errors import HcardError, UsageError
 
 
 class DeviceError(HcardError):
@@ -10,8 +10,9 @@ class DeviceError(HcardError):
     timeout, refused a request, or sent something the driver cannot use."""
 
 
-class DeviceTimeout(DeviceError):
-    """A transfer got no answer within its timeout (the device is hung or gone)."""
+class DeviceTimeout(DeviceError, TimeoutError):
+    """A transfer got no answer within its timeout (the device is hung or gone); also a
+    :class:`TimeoutError`, as any other timeout."""
 
 
 class DeviceStall(DeviceError):
@@ -31,10 +32,10 @@ class SessionLost(DeviceError):
     the driver sends nothing more that changes the device."""
 
 
-class UriError(HcardError):
+class UriError(UsageError):
     """A device URI is malformed or names an unknown scheme."""
 
 
-class PlayTooLong(HcardError):
+class PlayTooLong(UsageError):
     """A track would play for longer than one session may last
     (:data:`hcard_device.drivers.play.MAX_PLAY_S`)."""

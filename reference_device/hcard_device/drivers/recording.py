@@ -303,7 +303,8 @@ def force_recording(result: PlayResult) -> Measurement:
                     | {name: block.device[name] for name in ("target_uv", "target_ev")})
     joined = {name: np.concatenate([part[name] for part in kept]) for name in kept[0]}
     return Measurement(**{name: joined[name] for name in FORCE_COLUMNS},
-                       device={name: joined[name] for name in ("target_uv", "target_ev")})
+                       device={name: joined[name] for name in ("target_uv", "target_ev")},
+                       conditions={})
 
 
 def write_recording(result: PlayResult, path: str | os.PathLike[str], *,

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import zlib
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from hcard_device.protocol.base import ProtocolError, Report
 from hcard_device.protocol.constants import (
@@ -22,6 +23,9 @@ from hcard_device.protocol.reports import (
     UploadData,
     UploadEnd,
 )
+
+if TYPE_CHECKING:
+    import numpy as np
 
 _BY_KEY: dict[tuple[ReportKind, int], type[Report]] = {
     (cls.KIND, cls.REPORT_ID): cls for cls in REPORT_CLASSES
@@ -105,7 +109,8 @@ def upload_reports(data: bytes, action: UploadAction = UploadAction.COMMIT) -> l
     return out
 
 
-def stream_reports(uv: Sequence[float], ev: Sequence[float], first_seq: int = 0) -> list[bytes]:
+def stream_reports(uv: Sequence[float] | np.ndarray, ev: Sequence[float] | np.ndarray,
+                   first_seq: int = 0) -> list[bytes]:
     """STREAM output reports carrying the frames (relative friction: UV in [0, 1], EV in [1, 4]),
     15 frames each, sequence numbers from ``first_seq`` (wrapping u16)."""
     if len(uv) != len(ev):

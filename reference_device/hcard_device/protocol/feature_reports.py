@@ -290,7 +290,7 @@ class UploadStatus(Report):
 
     @classmethod
     def _from_values(cls, values: tuple[Any, ...]) -> UploadStatus:
-        return cls(*values[:7], text_from_wire(values[7]))
+        return cls(*(*values[:7], text_from_wire(values[7])))
 
 
 @dataclass(frozen=True)
@@ -369,7 +369,7 @@ class ClipReport(Report):
 
     @classmethod
     def _from_values(cls, values: tuple[Any, ...]) -> ClipReport:
-        return cls(*values[:12], text_from_wire(values[12]))
+        return cls(*(*values[:12], text_from_wire(values[12])))
 
     @property
     def target(self) -> float:

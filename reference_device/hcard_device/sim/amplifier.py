@@ -99,7 +99,7 @@ class EVAmplifier:
         np.divide(limit, capacitance, out=by_current, where=capacitance > 0)
         return np.minimum(self.slew_v_per_s, by_current), by_current < self.slew_v_per_s
 
-    def run(self, command: np.ndarray, capacitance: np.ndarray) -> AmplifierRun:
+    def run(self, command: np.ndarray, capacitance: np.ndarray | float) -> AmplifierRun:
         """Advance over ``len(command)`` frames.
 
         Args:

@@ -64,13 +64,10 @@ class DeviceConfig:
         touch_noise_mm: standard deviation of the touch position jitter, mm (assumption).
         surface_mm: (width, height) of the touch surface, mm; the corner force sensors sit at
             its corners and the card's coordinates are those of this surface.
-        plate_size_m: (length, width, thickness) of the vibrating plate, m.
-        plate_material: material of the plate.
         limits: the hardware limits, plate resonance and EV carrier (:data:`EVITA_LIMITS`,
             :data:`COUPLED_LIMITS`), SI units; the firmware's model renders with them and the
             simulated hardware enforces them. ``limits.load_capacitance`` is the model's
             (None: Eq. 3.8's 33 pF).
-        half_wavelength_m: half wavelength of the vibration mode, m.
         plate_quality_factor: unloaded quality factor ``Q0`` of the plate.
         finger_damping_per_n: relative increase of the plate's damping ``1/Q`` per newton of
             finger force: ``1/Q(Fn) = (1 + d Fn) / Q0``.
@@ -102,10 +99,7 @@ class DeviceConfig:
     touch_rate_hz: float = TOUCH_RATE_HZ
     touch_noise_mm: float = 0.02
     surface_mm: tuple[float, float] = (81.0, 54.0)
-    plate_size_m: tuple[float, float, float] = (81e-3, 54e-3, 1.6e-3)
-    plate_material: str = "glass"
     limits: DeviceLimits = EVITA_LIMITS
-    half_wavelength_m: float = 8e-3
     plate_quality_factor: float = EVITA_PLATE_QUALITY_FACTOR
     finger_damping_per_n: float = 0.03
     full_drive_amplitude_m: float = 3.7e-6
@@ -131,7 +125,7 @@ class DeviceConfig:
             "frame_rate_hz", "loop_rate_hz", "touch_rate_hz",
             "plate_quality_factor", "full_drive_amplitude_m", "pi_dead_time_s",
             "amplifier_slew_v_per_s", "mu0", "psi_star",
-            "watchdog_s", "ramp_down_s", "half_wavelength_m",
+            "watchdog_s", "ramp_down_s",
         )
         for name in positive:
             value = float(getattr(self, name))
@@ -207,10 +201,7 @@ class DeviceConfig:
         config = cls(
             name="coupled-stimulator",
             surface_mm=(80.0, 50.0),
-            plate_size_m=(80e-3, 50e-3, 2e-3),
-            plate_material="aluminium",
             limits=COUPLED_LIMITS,
-            half_wavelength_m=8e-3,
             plate_quality_factor=math.pi * frequency * tau,
             sources={**EVITA_SOURCES, **COUPLED_SOURCES},
         )
@@ -226,9 +217,7 @@ EVITA_SOURCES: dict[str, str] = {
         "renderer's two-sample velocity (x 50 Hz x sqrt 2) turns 0.02 mm into 1.4 mm/s"
     ),
     "surface_mm": "section 5.1.1: the 81 x 54 mm glass plate is the touched surface",
-    "plate_size_m": "section 5.1.1: glass plate 54 x 81 x 1.6 mm^3",
     "limits.plate_frequency": "section 5.1.1: resonating at 60,750 Hz",
-    "half_wavelength_m": "section 5.1.1: half wavelength of the vibration mode 8 mm",
     "plate_quality_factor": (
         "assumption from section 4.3.2/4.4: envelope tau = Q/(pi f0) = 1.57 ms, the ~1.5 ms "
         "mechanical response of a fast plate"
@@ -271,9 +260,7 @@ EVITA_SOURCES: dict[str, str] = {
 
 COUPLED_SOURCES: dict[str, str] = {
     "surface_mm": "assumption: an 80 x 50 mm STIMTAC-size plate (size not given in 4.2.1)",
-    "plate_size_m": "assumption: 80 x 50 x 2 mm aluminium plate (size not given in 4.2.1)",
     "limits.plate_frequency": "section 4.2.1: aluminium plate resonating at 38,220 Hz",
-    "half_wavelength_m": "section 4.2.2: same wavelength as the fast stimulator (assumed 8 mm)",
     "plate_quality_factor": (
         "section 4.3.2: the standalone design responds in about 15 ms (10-90 %), "
         "tau = 15 ms / ln 9, Q = pi f0 tau"

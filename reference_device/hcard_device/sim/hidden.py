@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hcard.errors import InputError
 from hcard.physics import Parameter, PredictorError
 from hcard.physics.profile import DeviceProfile
 from hcard_builtins.physics.electrovibration import AirLayer
@@ -35,7 +36,7 @@ MIN_FORCE_N = 1e-3
 """The air gap is evaluated at no less than this normal force, N (a finger barely touching)."""
 
 
-class HiddenEffectError(ValueError):
+class HiddenEffectError(InputError, ValueError):
     """An unknown hidden effect or parameter, a bad value, or an effect the device cannot have."""
 
 

@@ -450,6 +450,8 @@ class PlateLoop:
             decay = co.decay[: rest.shape[0] + 1]
             integs = np.empty(rest.shape[0] + 1)
             integs[0] = integ
+            applied: np.ndarray | None  # the drive while clamped or braked, None at zero drive
+            clamp: np.ndarray | None
             if mode == _HIGH:
                 amps = co.full + (amp - co.full) * decay
                 np.minimum(amps, lim, out=amps)
@@ -488,7 +490,7 @@ class PlateLoop:
             j = int(leave.argmax())  # the first sample that leaves the mode (0: none)
             if j == 0:
                 j = rest.shape[0]
-            if applied is None:
+            if applied is None or clamp is None:  # both None at zero drive
                 drive_out[k : k + j] = 0.0
             else:
                 drive_out[k : k + j] = applied[:j]

@@ -350,14 +350,6 @@ class DeviceSimulation:
         """The host drives the finger or streams frames (the watchdog is armed)."""
         return isinstance(self._finger, HostFinger) or self._streaming
 
-    @property
-    def watchdog_expired(self) -> bool:
-        """The watchdog has expired (a host-driven device not fed for ``watchdog_s``)."""
-        return (
-            self.host_driven
-            and self._running
-            and self.time_s >= self._last_feed + self.config.watchdog_s
-        )
 
     # -- commands --------------------------------------------------------------------------
     def load_card(self, card: pb.Card) -> ClipReport:
@@ -804,6 +796,7 @@ class DeviceSimulation:
                     and np.logical_and.reduce(frames / rate == times)):
                 i = index.astype(np.intp)
                 return truth.x_mm[i], truth.y_mm[i], truth.contact[i]
+        assert self._finger is not None  # called for the internal finger only
         state = self._finger.state(times)
         return state.x_mm, state.y_mm, state.contact
 
@@ -899,7 +892,7 @@ class DeviceSimulation:
             if n:
                 self._gain = 1.0
             return None, None
-        off = tripped if self._running else np.ones(n, dtype=bool)
+        off = np.ones(n, dtype=bool) if tripped is None else tripped  # None: stopped
         gain = np.ones(n)
         if off.any():
             first = int(np.argmax(off))

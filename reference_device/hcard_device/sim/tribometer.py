@@ -274,16 +274,16 @@ def _schedule(protocol: Protocol, rng: np.random.Generator) -> _Schedule:
     time, x_pos, direction, magnitude = 0.0, X_START_M, 1.0, protocol.voltage_range_v[0]
     while time <= end:
         for k in range(protocol.strokes_per_session):
-            speed = rng.uniform(*protocol.speed_range_m_s)
-            force = rng.uniform(*protocol.force_range_n)
+            stroke_speed = rng.uniform(*protocol.speed_range_m_s)
+            stroke_force = rng.uniform(*protocol.force_range_n)
             magnitude = rng.uniform(*protocol.voltage_range_v)
             starts.append(time)
-            speeds.append(direction * speed)
-            forces.append(force)
+            speeds.append(direction * stroke_speed)
+            forces.append(stroke_force)
             magnitudes.append(magnitude)
             strokes.append(k)
             x_starts.append(x_pos)
-            time += protocol.stroke_length_m / speed
+            time += protocol.stroke_length_m / stroke_speed
             x_pos += direction * protocol.stroke_length_m
             direction = -direction
             if time > end:
@@ -448,6 +448,7 @@ def synthesize(
         voltage = s.voltage if ev_model is not None else np.zeros(n)
         if ev_model is not None and "charge-leakage" in chosen:
             leakage = ChargeLeakage(  # a constant tau_d: Eq. 3.22 as the pure high pass
+                tau_d_curve=None,
                 tau_d=chosen["charge-leakage"]["time_constant"], tau_d_exponent=0.0,
                 **{p.name: ev_model[p.name] for p in Kaczmarek.parameters},
             )
@@ -469,7 +470,7 @@ def synthesize(
                     base[variable.name] = np.full(n, float(variable.default))
         total_in = _apply_inputs(on_total, base)
 
-        if uv_ok:
+        if uv_model is not None:  # uv_ok
             uv_in = _apply_inputs(on_uv, total_in)
             mu_uv = uv_model.forward(
                 amplitude=uv_in["amplitude"],

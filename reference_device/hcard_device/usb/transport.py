@@ -51,6 +51,9 @@ class NoDelayUSBIP(usbip.USBIP):
     One transport serves one device (bus ID ``1-1`` unless the device was given another).
     """
 
+    host: str
+    port: int
+
     def __init__(
         self,
         host: str = DEFAULT_HOST,

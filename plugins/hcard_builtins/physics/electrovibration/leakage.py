@@ -388,7 +388,7 @@ class ChargeLeakage(Predictor):
         profile = super().to_profile()
         if self._curve is not None:
             profile["curves"] = {
-                "tau_d": {"unit": ["Hz", "s"], "points": [list(p) for p in self.tau_d_curve]}
+                "tau_d": {"unit": ["Hz", "s"], "points": self._curve.tolist()}
             }
         return profile
 
@@ -401,7 +401,7 @@ class ChargeLeakage(Predictor):
             raise PredictorError(f"{source}: 'curves' must be an object")
         entry = curves.get("tau_d")
         if entry is None:
-            return cls(**base.params)
+            return cls(tau_d_curve=None, **base.params)
         if not isinstance(entry, Mapping) or not isinstance(entry.get("points"), list):
             raise PredictorError(f"{source}: curves.tau_d must be an object with 'points'")
         if entry.get("unit", ["Hz", "s"]) != ["Hz", "s"]:

@@ -290,7 +290,7 @@ class DimensionlessGroup(Predictor):
         ``Psi = -Psi* ln(1 - mu')`` (m) for checked ``goal`` (mu') and inputs."""
         with np.errstate(divide="ignore"):
             psi = -psi_star * np.log1p(-goal)
-        frequency = arrays["frequency"]
+        frequency: np.ndarray | float = arrays["frequency"]
         if np.ndim(frequency) == 0:  # one plate frequency: the same product, in floats
             frequency = float(frequency)
         scale = frequency * self["mu0"] * (1 + self["poisson_ratio"])

@@ -2,7 +2,8 @@
 drivers, and synthetic tribometer recordings.
 
 The device side lives in :mod:`hcard_device.usb`, the drivers in :mod:`hcard_device.drivers`
-(imported when a command runs, so ``hcard`` starts fast without them).
+(imported when a command runs). :mod:`hcard_device.commands` contributes the commands to
+``hcard``, which imports this module only when one of them runs.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from pathlib import Path
 import click
 
 from hcard.card_io import load
-from hcard.errors import HcardError
+from hcard.errors import HcardError, UsageError
 from hcard.terminal_text import printable
 from hcard.track import read_track_csv
 
@@ -133,7 +134,7 @@ def list_devices(hosts: tuple[str, ...], timeout: float) -> None:
         click.echo(f"{listing.uri.ljust(width)}  {listing.driver:6s} {listing.description}")
 
 
-class SynthesizeUsageError(HcardError):
+class SynthesizeUsageError(UsageError):
     """A bad option of ``hcard device synthesize`` (one line, exit status 1)."""
 
 

@@ -1,0 +1,34 @@
+"""A subcommand of ``hcard`` named by import path (a :class:`~hcard.plugins.kinds.CommandPlugin`).
+
+Its own small module: ``hcard --help`` reads remembered commands
+(:mod:`hcard.plugins.command_cache`) without importing the plugin kinds.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import click
+
+
+@dataclass(frozen=True)
+class LazyCommand:
+    """A :class:`CommandPlugin` naming the click command by import path.
+
+    Attributes:
+        name: the subcommand.
+        target: ``"package.module:attribute"`` of the ``click.Command``.
+        summary: the first sentence of the command's help, on one line.
+    """
+
+    name: str
+    target: str
+    summary: str
+
+    def load(self) -> click.Command:
+        """Import ``target`` and return the command it names."""
+        module_name, _, attribute = self.target.partition(":")
+        return getattr(importlib.import_module(module_name), attribute)

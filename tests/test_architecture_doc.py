@@ -1,0 +1,93 @@
+"""ARCHITECTURE.md names files, modules and hooks: each name must exist, so the map cannot drift
+from the code it describes without a test failing."""
+
+from __future__ import annotations
+
+import importlib.util
+import re
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+DOC = ROOT / "ARCHITECTURE.md"
+PATH_LIKE = re.compile(r"^[\w./-]+\.(py|md|proto|toml)$|^[\w-]+(/[\w-]+)+/$")
+MODULE_LIKE = re.compile(r"^hcard(_builtins|_device|_conformance)?(\.\w+)*$")
+HOOK_LIKE = re.compile(r"^hcard_[a-z_]+s$")
+
+
+def _names(text: str) -> list[str]:
+    """The code spans of ``text`` (``...``), outside fenced blocks, less the entry-point groups
+    of pyproject.toml (``hcard.plugins`` is a group and a module; ``hcard.commands`` a group)."""
+    prose = re.sub(r"```.*?```", "", text, flags=re.S)
+    pyproject = (ROOT / "pyproject.toml").read_text(encoding="utf-8")
+    groups = set(re.findall(r'^\[project\.entry-points\."([^"]+)"\]', pyproject, flags=re.M))
+    return [n for n in re.findall(r"`([^`\n]+)`", prose) if n not in groups]
+
+
+def _repository_files() -> list[str]:
+    skip = {".git", "build", "__pycache__"}
+    return [p.relative_to(ROOT).as_posix() for p in ROOT.rglob("*")
+            if not skip.intersection(p.relative_to(ROOT).parts)]
+
+
+def missing_paths(names: list[str], files: list[str]) -> list[str]:
+    """Path-like names that no file or folder of the repository ends with."""
+    candidates = [n for n in names if PATH_LIKE.match(n)]
+    return [n for n in candidates
+            if not any(f == n.rstrip("/") or f.endswith("/" + n.rstrip("/")) for f in files)]
+
+
+def _is_module(name: str) -> bool:
+    try:
+        return importlib.util.find_spec(name) is not None
+    except ModuleNotFoundError:  # a parent is a module, not a package
+        return False
+
+
+def missing_modules(names: list[str]) -> list[str]:
+    """Dotted names of the packages that are neither a module nor an attribute of one."""
+    missing = []
+    for name in (n for n in names if MODULE_LIKE.match(n)):
+        module, attribute = name, ""
+        while module and not _is_module(module):
+            module, _, attribute = module.rpartition(".")  # the last name is an attribute
+        if not module or (attribute and not hasattr(importlib.import_module(module), attribute)):
+            missing.append(name)
+    return missing
+
+
+def test_every_named_file_exists() -> None:
+    names = _names(DOC.read_text(encoding="utf-8"))
+    assert len([n for n in names if PATH_LIKE.match(n)]) >= 30
+    assert missing_paths(names, _repository_files()) == []
+
+
+def test_every_named_module_exists() -> None:
+    names = _names(DOC.read_text(encoding="utf-8"))
+    assert len([n for n in names if MODULE_LIKE.match(n)]) >= 10
+    assert missing_modules(names) == []
+
+
+def test_every_named_hook_is_a_hookspec() -> None:
+    from hcard.plugins import hookspecs
+
+    names = _names(DOC.read_text(encoding="utf-8"))
+    hooks = {n for n in names if HOOK_LIKE.match(n) and not _is_module(n)}
+    assert len(hooks) >= 5
+    assert sorted(h for h in hooks if not hasattr(hookspecs, h)) == []
+
+
+@pytest.mark.parametrize(
+    ("name", "found"),
+    [("hcard/render/touch.py", True), ("render/touch.py", True), ("render/tuch.py", False),
+     ("spec/vectors/", True), ("spec/vector/", False)],
+)
+def test_the_path_check_can_fail(name: str, found: bool) -> None:
+    assert (missing_paths([name], _repository_files()) == []) is found
+
+
+def test_the_module_check_can_fail() -> None:
+    assert missing_modules(["hcard.render.touch", "hcard.render.touch.speed_estimate"]) == []
+    assert missing_modules(["hcard.render.tuch", "hcard.render.touch.no_such_rule"]) == [
+        "hcard.render.tuch", "hcard.render.touch.no_such_rule"]
