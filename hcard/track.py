@@ -53,12 +53,16 @@ def make_track(
     t: np.ndarray | float,
     x: np.ndarray | float,
     y: np.ndarray | float,
-    fn: np.ndarray | float | None = None,
+    normal_force: np.ndarray | float | None = None,
     contact: np.ndarray | bool | None = None,
     *,
     source: str = "track",
 ) -> FingerTrack:
-    """Build a checked :class:`FingerTrack` from array-likes; raise :class:`TrackError`."""
+    """Build a checked :class:`FingerTrack` from array-likes; raise :class:`TrackError`.
+
+    ``normal_force`` (N) defaults to :data:`DEFAULT_NORMAL_FORCE_N` and ``contact`` to True;
+    errors name the CSV columns (``fn_n`` for the normal force, spec/track-format.md).
+    """
     t_arr = np.atleast_1d(np.asarray(t, dtype=np.float64))
     n = t_arr.shape[0]
     if n == 0:
@@ -77,7 +81,7 @@ def make_track(
 
     x_arr = column(x, "x_mm", math.nan)
     y_arr = column(y, "y_mm", math.nan)
-    fn_arr = column(fn, "fn_n", DEFAULT_NORMAL_FORCE_N)
+    fn_arr = column(normal_force, "fn_n", DEFAULT_NORMAL_FORCE_N)
     contact_arr = column(contact, "contact", 1.0)
     # each check is one pass that finds nothing in a valid track (a stream pushes one sample
     # at a time); only a failed one looks for the sample to name
@@ -143,12 +147,13 @@ def straight_stroke(
     duration_s: float,
     *,
     rate_hz: float = TOUCH_RATE_HZ,
-    fn: float = DEFAULT_NORMAL_FORCE_N,
+    normal_force_n: float = DEFAULT_NORMAL_FORCE_N,
     t0: float = 0.0,
 ) -> FingerTrack:
-    """A constant-velocity stroke sampled at ``rate_hz`` (a capacitive touch screen: 50 Hz)."""
+    """A constant-velocity stroke sampled at ``rate_hz`` (a capacitive touch screen: 50 Hz)
+    at the normal force ``normal_force_n``, N."""
     n = math.floor(duration_s * rate_hz + 1e-9) + 1
     t = t0 + np.arange(n) / rate_hz
     x = start_mm[0] + velocity_mm_s[0] * (t - t0)
     y = start_mm[1] + velocity_mm_s[1] * (t - t0)
-    return make_track(t, x, y, fn)
+    return make_track(t, x, y, normal_force_n)

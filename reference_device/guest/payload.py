@@ -290,7 +290,7 @@ def default_track() -> Any:
     """The finger track the hcard mode plays unless --track is given: 2 -> 18 mm in 1.6 s."""
     from hcard.track import straight_stroke
 
-    return straight_stroke((2.0, 5.0), (10.0, 0.0), 1.6, rate_hz=50.0, fn=0.5)
+    return straight_stroke((2.0, 5.0), (10.0, 0.0), 1.6, rate_hz=50.0, normal_force_n=0.5)
 
 
 def mode_hcard(args: argparse.Namespace) -> dict[str, Any]:

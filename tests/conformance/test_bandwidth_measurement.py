@@ -102,11 +102,11 @@ class StallingRecordingHost(SimDriver):
         self.fingers: list[tuple[int, int, float]] = []  # host time us, x 10 um, sent at (s)
         self.frames_sent, self.stalled = 0, False
 
-    def send_finger(self, t_s: float, x_mm: float, y_mm: float, fn_n: float,
+    def send_finger(self, t_s: float, x_mm: float, y_mm: float, normal_force_n: float,
                     contact: bool) -> None:
-        wire = Finger.from_si(t_s, x_mm, y_mm, fn_n, contact)
+        wire = Finger.from_si(t_s, x_mm, y_mm, normal_force_n, contact)
         self.fingers.append((wire.host_time_us, wire.x_10um, self.clock()))
-        super().send_finger(t_s, x_mm, y_mm, fn_n, contact)
+        super().send_finger(t_s, x_mm, y_mm, normal_force_n, contact)
 
     def stream_frames(self, uv: Any, ev: Any) -> Any:
         self.frames_sent += len(uv)

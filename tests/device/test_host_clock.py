@@ -215,7 +215,7 @@ def test_the_internal_finger_takes_over_from_a_host_time_line_ahead_of_the_devic
                              host_time_s=7.0 + k * SAMPLE_S - delay)
         switched.feed_watchdog()
     assert switched._render_shift_s > 0.02  # the host's time line runs ahead of the device
-    track = straight_stroke((20.0, 20.0), (SPEED_MM_S, 0.0), 1.0, rate_hz=200.0, fn=0.5,
+    track = straight_stroke((20.0, 20.0), (SPEED_MM_S, 0.0), 1.0, rate_hz=200.0, normal_force_n=0.5,
                             t0=0.0)
     switched.use_internal_finger(track)
     fresh = DeviceSimulation(DeviceConfig.evita(), seed=3)

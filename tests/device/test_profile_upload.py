@@ -24,7 +24,7 @@ from hcard_device.sim.models import device_profile
 EV_CARD = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[
     build.texture(1.0, channel="ev", name="plain"), build.texture(1.08, channel="ev", name="ev")],
     texture_index=[0, 1], title="ev step")
-STROKE = straight_stroke((2.0, 5.0), (40.0, 0.0), 0.45, fn=0.5)
+STROKE = straight_stroke((2.0, 5.0), (40.0, 0.0), 0.45, normal_force_n=0.5)
 
 
 def coupled_profile(**changes: float) -> DeviceProfile:

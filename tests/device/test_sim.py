@@ -386,7 +386,7 @@ def test_bipolar_card_on_the_coupled_stimulator_is_felt_within_the_jnd():
 
 def test_tribometer_measures_the_coupled_lateral_force():
     block = play(DeviceConfig.coupled(), bipolar_card(), straight_stroke(
-        (5.0, 25.0), (60.0, 0.0), 1.0, rate_hz=1000.0, fn=0.8), 1.0)
+        (5.0, 25.0), (60.0, 0.0), 1.0, rate_hz=1000.0, normal_force_n=0.8), 1.0)
     on = block.contact & (block.t_s > 0.1)
     from hcard_builtins.physics.finger import FingerFriction
 

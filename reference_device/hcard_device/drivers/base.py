@@ -430,11 +430,11 @@ class Driver(abc.ABC):
         self.command(Command.SET_TOUCH_SOURCE,
                      int(TouchSource.HOST if host else TouchSource.INTERNAL))
 
-    def send_finger(self, t_s: float, x_mm: float, y_mm: float, fn_n: float,
+    def send_finger(self, t_s: float, x_mm: float, y_mm: float, normal_force_n: float,
                     contact: bool) -> None:
         """Send the host's finger state: host time (s), position (mm), normal force (N)."""
         try:
-            report = Finger.from_si(t_s, x_mm, y_mm, fn_n, contact)
+            report = Finger.from_si(t_s, x_mm, y_mm, normal_force_n, contact)
         except ProtocolError as exc:
             raise DeviceError(f"{self.uri}: cannot send the finger state ({exc})") from None
         self.send(report)

@@ -6,7 +6,7 @@ Usage (the firmware's view)::
     from hcard_device.sim import DeviceConfig, DeviceSimulation
     sim = DeviceSimulation(DeviceConfig.evita(), seed=0)
     report = sim.load_card(card)        # ClipReport: what the device cannot render
-    sim.use_internal_finger(track)      # or sim.host_finger(t, x, y, fn, contact)
+    sim.use_internal_finger(track)      # or sim.host_finger(t, x, y, normal_force_n, contact)
     sim.start()
     block = sim.step(1000)              # 0.1 s of 10 kHz frames: a SimBlock of arrays
 """

@@ -171,9 +171,10 @@ class HostFinger:
         self.speed_m_s = 0.0
         self.touchdown_s = 0.0
 
-    def update(self, t: float, x: float, y: float, fn: float, contact: bool,
+    def update(self, t: float, x: float, y: float, normal_force: float, contact: bool,
                host_t: float | None = None) -> None:
-        """A new report at time ``t`` (s, device clock), later than the previous one;
+        """A new report at time ``t`` (s, device clock), later than the previous one, of a
+        finger at ``x``, ``y`` (mm) pressing with ``normal_force`` (N, negative counts as 0);
         ``host_t``: the host's time of the sample (s, wrapping at 2^32 us), which times the
         move from the previous sample when both have one (else the device's times do)."""
         interval = t - self.t
@@ -183,7 +184,8 @@ class HostFinger:
         self.speed_m_s = step_speed(x - self.x, y - self.y, interval, moving) * M_PER_MM
         if contact and not self.contact:
             self.touchdown_s = t
-        self.t, self.x, self.y, self.normal_force, self.contact = t, x, y, max(fn, 0.0), contact
+        self.t, self.x, self.y, self.contact = t, x, y, contact
+        self.normal_force = max(normal_force, 0.0)
         self.host_t = host_t
 
     def state(self, times: np.ndarray) -> FingerTruth:

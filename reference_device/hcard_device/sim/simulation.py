@@ -496,7 +496,7 @@ class DeviceSimulation:
         self._last_feed = self.time_s
 
     def host_finger(
-        self, t_s: float, x_mm: float, y_mm: float, fn_n: float, contact: bool,
+        self, t_s: float, x_mm: float, y_mm: float, normal_force_n: float, contact: bool,
         host_time_s: float | None = None,
     ) -> float | None:
         """A finger state from the host (touch sensing on the host side); returns the device
@@ -511,14 +511,14 @@ class DeviceSimulation:
         arrival: reports that arrive late and in bursts keep the spacing the host gave them.
         """
         try:
-            values = [float(v) for v in (t_s, x_mm, y_mm, fn_n)]
+            values = [float(v) for v in (t_s, x_mm, y_mm, normal_force_n)]
         except (TypeError, ValueError):
             self._invalid()
             return None
         if not all(math.isfinite(v) for v in values):
             self._invalid()
             return None
-        t, x, y, fn = values
+        t, x, y, normal_force = values
         if not isinstance(self._finger, HostFinger):
             if not self.host_driven:
                 self._last_feed = self.time_s
@@ -539,8 +539,8 @@ class DeviceSimulation:
         )
         self._pending = self._pending.concat(sample)
         if self._stream is not None:
-            self._stream.push(render_t, x, y, max(fn, 0.0), bool(contact))
-        self._finger.update(t, x, y, fn, bool(contact), host_time_s)
+            self._stream.push(render_t, x, y, max(normal_force, 0.0), bool(contact))
+        self._finger.update(t, x, y, normal_force, bool(contact), host_time_s)
         return t
 
     def _render_time(self, placed_s: float, host_s: float | None) -> float:
