@@ -106,6 +106,11 @@ _TARGET_TOLERANCE = 1e-9
 class Limits:
     """Limits in force (hardware limits, or lower ones set by the host).
 
+    Not a :class:`~hcard.physics.profile.DeviceLimits`: a host may set a current limit of 0 A
+    (no EV output), which a device profile cannot hold (its ``max_current`` is > 0;
+    :func:`.models.device_profile` gives the model no voltage instead). The hardware values are
+    ``config.limits``'.
+
     Attributes:
         max_amplitude_m: peak-to-peak plate amplitude, m.
         max_voltage_v: peak EV voltage, V.
