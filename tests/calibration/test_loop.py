@@ -23,7 +23,6 @@ from hcard.calibration.loop import (
     EXPLAINED,
     NO_EFFECT,
     NOT_EXPLAINED,
-    LoopSettings,
     calibrate,
 )
 from hcard.calibration.measurement import Measurement, MeasurementError
@@ -143,26 +142,6 @@ def test_without_re_zeroing_the_drift_would_look_like_structure() -> None:
     assert calibrate(rezeroed, registry.get("predictor", UV), library).verdict == NO_EFFECT
     raw = calibrate(prepare(measured, rezero=False), registry.get("predictor", UV), library)
     assert raw.verdict != NO_EFFECT  # the drift is taken for occlusion or left as structure
-
-
-def test_a_gain_below_the_floor_is_reported_not_added() -> None:
-    settings = LoopSettings(min_improvement=0.99)
-    result = run("uv", {"load-index": {"load_index": 0.75}}, UV, settings=settings)
-    assert result.effects_added == ()
-    assert result.verdict == NOT_EXPLAINED
-    best = min(result.candidates, key=lambda c: c.score_change)
-    assert best.effect == "load-index"
-    assert "less than 99%" in best.note
-    assert result.structure.regressors[0][0] == "normal_force"
-
-
-def test_effects_that_cannot_apply_are_skipped_with_the_reason() -> None:
-    result = run("uv", {}, UV)
-    assert "needs input(s) voltage" in result.skipped["charge-leakage"]
-    assert "electrostatic_force" in result.skipped["air-layer"]
-    assert "does not vary" in result.skipped["squeeze-film-share"]  # one pressure only
-    tried = {c.effect for c in result.candidates}
-    assert tried.isdisjoint(result.skipped)
 
 
 def test_effective_sample_count_follows_the_lag_one_autocorrelation() -> None:
