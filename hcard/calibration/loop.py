@@ -58,7 +58,7 @@ is never credited for an error it does not explain where it says it would. When 
 holds structure against a *foreign* regressor, one no model input or effect signature covers
 (the sliding direction, the position, the recording), and that structure is at least
 :data:`FOREIGN_DOMINANCE` times the signature's, (c) is judged with it taken out
-(:func:`_beyond_foreign_structure`).
+(:func:`beyond_foreign_structure`).
 
 **Screening** (:mod:`hcard.calibration.screening`). Candidate models (steps 2 and 4) are first
 fitted on one training sample in ``k`` (about ``screen_samples`` of them); one whose screened
@@ -123,7 +123,7 @@ AMBIGUOUS = "ambiguous: the data cannot separate the final model from its runner
 
 FOREIGN_DOMINANCE = 2.0
 """How many times the signature's eta2 a foreign regressor's must be before the signature test
-is judged with the foreign structure taken out (:func:`_beyond_foreign_structure`)."""
+is judged with the foreign structure taken out (:func:`beyond_foreign_structure`)."""
 
 CRITERION = (
     "held-out information criterion H = n_eff ln(MSE_held-out) + 2k (k free parameters, n_eff "
@@ -432,7 +432,7 @@ def _signature_eta2(effect: Effect, analysis: ResidualReport, residual: np.ndarr
     return max(values, default=0.0)
 
 
-def _beyond_foreign_structure(
+def beyond_foreign_structure(
     effect: Effect,
     analysis: ResidualReport,
     residual: np.ndarray,
@@ -575,7 +575,7 @@ def usable_effects(
 def claimed_regressors(base: Predictor, usable: Sequence[Effect]) -> frozenset[str]:
     """What the models can act on: the inputs of ``base`` and every input and signature
     regressor of the ``usable`` effects. Structure against any other regressor (the sliding
-    direction, the position, the recording) is *foreign* (:func:`_beyond_foreign_structure`)."""
+    direction, the position, the recording) is *foreign* (:func:`beyond_foreign_structure`)."""
     return frozenset(
         {v.name for v in base.inputs}
         | {name for effect in usable for name in effect.signature}
@@ -730,13 +730,13 @@ class EffectSearch:
     def credited(self, effect: Effect, effects: Sequence[Effect]) -> bool:
         """Whether ``effect`` may come into the set ``effects`` by a move: not when a dominant
         foreign regressor explains its signature's structure in the residual of the set
-        without it (:func:`_beyond_foreign_structure`). A move judged by ``H`` alone may
+        without it (:func:`beyond_foreign_structure`). A move judged by ``H`` alone may
         otherwise bring in a signature that shows little structure at low power (a load
         index over a few force levels)."""
         without = self.pool.fitted_set([e for e in effects if e is not effect], exact=True)
         if without is None:
             return False
-        eta2, foreign = _beyond_foreign_structure(
+        eta2, foreign = beyond_foreign_structure(
             effect, self.analyse(without), without.residuals[self.analyse.used],
             self.analyse.regressors, self.claimed, self.settings)
         return foreign is None or eta2 >= self.settings.signature_eta2
@@ -926,11 +926,11 @@ class EffectSearch:
         it may be), with its row of the candidate table: held-out RMSE (N for a lateral
         force), its relative fall, the change of ``H`` at ``n_eff`` against
         ``current_score``, and the current residual's structure against its signature
-        (:func:`_beyond_foreign_structure`); a failed fit gives a row without figures."""
+        (:func:`beyond_foreign_structure`); a failed fit gives a row without figures."""
         current, pool = self.current, self.pool
         tried: list[tuple[Candidate, FitResult | None]] = []
         for effect in remaining:
-            eta2, _ = _beyond_foreign_structure(effect, current.analysis,
+            eta2, _ = beyond_foreign_structure(effect, current.analysis,
                                                 current.fit.residuals[self.analyse.used],
                                                 self.analyse.regressors, self.claimed,
                                                 self.settings)

@@ -27,6 +27,7 @@ from hcard.calibration.loop import (
     ResidualAnalyser,
     Structure,
     alternative_sets,
+    beyond_foreign_structure,
     check_arguments,
     claimed_regressors,
     criterion_failure,
@@ -36,6 +37,7 @@ from hcard.calibration.loop import (
     verdict_of,
 )
 from hcard.calibration.model_pool import ModelPool, held_out_criterion
+from hcard.calibration.residuals import analyse_residuals
 from hcard.calibration.selection import Comparison
 from hcard.physics import PredictorError
 from hcard.plugins.registry import get_registry
@@ -309,3 +311,37 @@ def test_clean_data_leave_no_candidate_passing() -> None:
     assert search.added == [] and len(search.steps) == 1
     (row,) = search.candidates
     assert not row.accepted and row.note.startswith("best of the round, not added")
+
+
+# -- structure against an effect's signature --------------------------------------------------
+
+
+def strokes_and_directions() -> tuple[np.ndarray, np.ndarray]:
+    """40 sessions of 8 strokes of 20 samples, back and forth; three sessions in four start
+    towards +x, so the stroke count since rest carries half of the direction: the stroke
+    count, the direction (+-1) per sample."""
+    stroke = np.tile(np.repeat(np.arange(8), 20), 40).astype(np.float64)
+    start = np.repeat(np.where(np.arange(40) % 4 == 0, -1.0, 1.0), 160)
+    return stroke, start * np.where(stroke % 2 == 0, 1.0, -1.0)
+
+
+def test_structure_a_foreign_regressor_explains_is_not_credited_to_the_signature() -> None:
+    stroke, direction = strokes_and_directions()
+    rng = np.random.default_rng(3)
+    # friction 0.2 mN higher towards +x: seen through the stroke count's parity (eta2 ~0.23)
+    residual = 2e-4 * direction + rng.normal(0.0, 5e-5, stroke.size)
+    regressors = {"stroke": stroke, "direction": direction}
+    settings = LoopSettings()
+    analysis = analyse_residuals(residual, regressors, bins=settings.bins)
+    assert 0.15 < analysis.regressors["stroke"].eta2 < 0.35
+    skin = library()["skin-recovery"]  # signature: the stroke count
+    eta2, foreign = beyond_foreign_structure(skin, analysis, residual, regressors,
+                                             frozenset({"stroke"}), settings)
+    assert foreign == "direction" and eta2 < settings.signature_eta2
+    # a recovery over the first strokes after a rest: the stroke count's own structure
+    recovering = 2e-4 * np.exp(-stroke / 1.5) + rng.normal(0.0, 5e-5, stroke.size)
+    analysis = analyse_residuals(recovering, regressors, bins=settings.bins)
+    eta2, foreign = beyond_foreign_structure(skin, analysis, recovering, regressors,
+                                             frozenset({"stroke"}), settings)
+    assert foreign is None and eta2 == pytest.approx(analysis.regressors["stroke"].eta2)
+    assert eta2 > 0.5
