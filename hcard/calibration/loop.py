@@ -31,7 +31,7 @@ on its training split, then repeats:
 (:meth:`EffectSearch.rescored`), decides (:func:`judge_round`, :func:`criterion_failure`) and lets
 the selection undo itself (:meth:`EffectSearch.revise`: :func:`alternative_sets`, a move to a
 credited set, :meth:`EffectSearch.prune` with :func:`earns_place`). The end: what structure is left
-(:func:`residual_structure`), the runner-up (:func:`_runner_up`), :func:`verdict_of` and
+(:func:`residual_structure`), the runner-up (:func:`runner_up`), :func:`verdict_of` and
 :func:`summarise`.
 
 **Runner-up.** The final model is compared with the best other fitted model of as many effects
@@ -69,7 +69,7 @@ accepted model's fit are those the loop reaches without screening (``screen_samp
 so is the runner-up whenever it may come within the separation thresholds of the final model;
 the figures of candidates far from every decision are the screened fits' (marked in the
 candidate table), and among rivals far from the final model the one named runner-up may be
-another within the tolerance of the best (:func:`_runner_up`).
+another within the tolerance of the best (:func:`runner_up`).
 
 **Verdicts.** When no candidate passes, the residual of the final model is analysed once more.
 Structure left against a regressor (p < ``alpha`` and ``eta^2 >= min_eta2``) or in time
@@ -1134,8 +1134,7 @@ def calibrate(
     current = search.current
     structure = residual_structure(current.analysis, settings, data.time_ordered, data.noise)
     names = tuple(e.name for e in search.added)
-    comparison = _runner_up(current, pool.fits, data, data.used, settings, pool.screened,
-                            pool.confirmed, pool.scale)
+    comparison = runner_up(current, pool, data, settings)
     verdict = verdict_of(structure, names, comparison)
     summary = summarise(base.name, verdict, search.steps[0], current, names, structure, unit)
     if comparison is not None:
@@ -1181,121 +1180,121 @@ def with_bootstrap(
     return replace(result, bootstrap=boot)
 
 
-def _runner_up(
-    final: ModelFit,
-    pool: Mapping[frozenset[str], tuple[tuple[Effect, ...], FitResult]],
-    data: CalibrationData,
-    used: np.ndarray,
-    settings: LoopSettings,
-    screened: Container[frozenset[str]] = frozenset(),
-    confirmed: Callable[[frozenset[str]], FitResult | None] | None = None,
-    scale: Mapping[frozenset[str], float] | None = None,
-) -> Comparison | None:
+class RivalFigures:
+    """The criterion and held-out RMSE of the pooled models of one size, read as bounds of their
+    full fits (a screened model's lie within the screening tolerance of its scaled figures),
+    against the final model, at the final model's effective held-out sample count."""
+
+    def __init__(self, final: ModelFit, pool: ModelPool, settings: LoopSettings) -> None:
+        """``final``: the loop's final model; ``pool``: every model fitted; ``settings``: the
+        thresholds of earning a place and of separation."""
+        self.final = final
+        self.pool = pool
+        self.settings = settings
+        self.size = max(len(final.effects), 1)
+        self.own = frozenset(final.effects)
+        self.n_eff = effective_samples(final.fit.residuals[final.fit.test])
+        self.band = criterion_band(self.n_eff)
+        self.final_score = held_out_criterion(final.fit, self.n_eff)
+
+    def score(self, key: EffectSet) -> tuple[float, float, float]:
+        """``H`` of the pooled model ``key``, and the bounds within which its full fit's
+        lies."""
+        screened = key in self.pool.screened
+        factor = self.pool.scale.get(key, 1.0) if screened else 1.0
+        value = held_out_criterion(self.pool.fits[key][1], self.n_eff) \
+            + 2.0 * self.n_eff * math.log(factor)
+        spread = self.band if screened else 0.0
+        return value, value - spread, value + spread
+
+    def rmse(self, key: EffectSet) -> tuple[float, float]:
+        """Bounds of the held-out RMSE of the pooled model ``key`` fitted in full (output
+        unit)."""
+        screened = key in self.pool.screened
+        factor = self.pool.scale.get(key, 1.0) if screened else 1.0
+        value = float(self.pool.fits[key][1].test_rmse or math.nan) * factor
+        spread = SCREEN_TOLERANCE if screened else 0.0
+        return value * (1.0 - spread), value * (1.0 + spread)
+
+    def settle(self, keys: Sequence[EffectSet]) -> None:
+        """Fit the screened ones of ``keys`` on every training sample (failures leave the
+        pool)."""
+        for key in keys:
+            if key in self.pool.screened and key in self.pool.fits:
+                self.pool.confirmed(key)
+
+    def earns(self, key: EffectSet) -> bool | None:
+        """Whether every effect of ``key`` earns its place against the pooled model without
+        it (lower ``H``, held-out RMSE ``min_improvement`` lower; no verdict where the model
+        without it was not fitted); None when a full fit could decide otherwise."""
+        _, low, high = self.score(key)
+        fall, rise = self.rmse(key)
+        verdict: bool | None = True
+        for name in key:
+            smaller = key - {name}
+            if smaller not in self.pool.fits:
+                continue
+            _, small_low, small_high = self.score(smaller)
+            small_fall, small_rise = self.rmse(smaller)
+            floor = self.settings.min_improvement
+            if low >= small_high or not (1.0 - fall / small_rise >= floor):
+                return False
+            if high >= small_low or not (1.0 - rise / small_fall >= floor):
+                verdict = None
+        return verdict
+
+    def rivals(self) -> list[EffectSet]:
+        """The pooled models with as many effects as the final one (one for the base), other
+        than it."""
+        return [key for key in self.pool.fits if len(key) == self.size and key != self.own]
+
+    def may_be_close(self, key: EffectSet) -> bool:
+        """Whether the full fit of ``key`` may lie within the separation thresholds."""
+        settings = self.settings
+        return (self.score(key)[1] - self.final_score < settings.separation_criterion
+                or self.rmse(key)[0] / self.final.test_rmse - 1.0 < settings.separation_rmse)
+
+
+def runner_up(final: ModelFit, pool: ModelPool, data: CalibrationData,
+              settings: LoopSettings) -> Comparison | None:
     """The final model against its runner-up: the best other fitted model with as many effects
     (one effect when the final model has none) in which every effect earns its place (lowers
     ``H`` and cuts the held-out RMSE by ``min_improvement`` against the same model without it,
     where that was fitted; a pair of a real effect and one left at its neutral values is the
     single effect again, not a rival), else the best of them all; both scored at the final
-    model's effective held-out sample count (:mod:`hcard.calibration.selection`).
+    model's effective held-out sample count (:mod:`hcard.calibration.selection`). None when
+    ``pool`` holds no rival.
 
-    ``screened``: the pool's models fitted on the screening samples only, which
-    ``confirmed(key)`` fits on every training sample (returning None when that fails), their
-    held-out RMSE read multiplied by ``scale[key]`` (their start's full over screened). Every
-    decision a screened figure could get wrong by :data:`SCREEN_TOLERANCE` is made on full
-    fits: whether a rival earns its place, and, when some rival may come within the
-    separation thresholds of the final model, which rival is best. When none can (or the
-    final model is the base model, whose comparison decides nothing), the comparison is not
-    ambiguous whichever rival it is: the runner-up is the rival of lowest ``H`` taking
-    screened figures as they are, fitted in full, and fitted again while another screened
-    rival looks better than its full fit. It is the runner-up without screening, or a rival
-    whose ``H`` lies within the tolerance band (:func:`~hcard.calibration.screening.
-    criterion_band`) of it."""
-    size = max(len(final.effects), 1)
-    own = frozenset(final.effects)
-    n_eff = effective_samples(final.fit.residuals[final.fit.test])
-    band = criterion_band(n_eff)
-    final_score = held_out_criterion(final.fit, n_eff)
-
-    def score(key: frozenset[str]) -> tuple[float, float, float]:
-        """``H`` of the pool's model ``key``, and the bounds within which its full fit's
-        lies."""
-        factor = (scale or {}).get(key, 1.0) if key in screened else 1.0
-        value = held_out_criterion(pool[key][1], n_eff) + 2.0 * n_eff * math.log(factor)
-        spread = band if key in screened else 0.0
-        return value, value - spread, value + spread
-
-    def rmse(key: frozenset[str]) -> tuple[float, float]:
-        """Bounds of the held-out RMSE of the pool's model ``key`` fitted in full."""
-        factor = (scale or {}).get(key, 1.0) if key in screened else 1.0
-        value = float(pool[key][1].test_rmse or math.nan) * factor
-        spread = SCREEN_TOLERANCE if key in screened else 0.0
-        return value * (1.0 - spread), value * (1.0 + spread)
-
-    def settle(keys: Sequence[frozenset[str]]) -> None:
-        """Fit the screened ones of ``keys`` on every training sample (failures leave the
-        pool)."""
-        for key in keys:
-            if key in screened and key in pool and confirmed is not None:
-                confirmed(key)
-
-    def earns(key: frozenset[str]) -> bool | None:
-        """Whether every effect of ``key`` earns its place against the pool's model without
-        it; None when a full fit could decide otherwise."""
-        _, low, high = score(key)
-        fall, rise = rmse(key)
-        verdict: bool | None = True
-        for name in key:
-            smaller = key - {name}
-            if smaller not in pool:
-                continue
-            _, small_low, small_high = score(smaller)
-            small_fall, small_rise = rmse(smaller)
-            if low >= small_high or not (1.0 - fall / small_rise >= settings.min_improvement):
-                return False
-            if high >= small_low or not (1.0 - rise / small_fall >= settings.min_improvement):
-                verdict = None
-        return verdict
-
-    def rivals() -> list[frozenset[str]]:
-        return [key for key in pool if len(key) == size and key != own]
-
-    for key in rivals():
-        if key in pool and earns(key) is None:
-            settle([key, *(key - {name} for name in key)])
-    if not rivals():
+    Models of ``pool`` fitted on the screening samples only are fitted on every training
+    sample (:meth:`~hcard.calibration.model_pool.ModelPool.confirmed`) before any decision a
+    screened figure could get wrong by :data:`SCREEN_TOLERANCE` (:class:`RivalFigures`):
+    whether a rival earns its place, and, when some rival may come within the separation
+    thresholds of the final model, which rival is best. When none can (or the final model is
+    the base model, whose comparison decides nothing), the comparison is not ambiguous
+    whichever rival it is: the runner-up is the rival of lowest ``H`` taking screened figures
+    as they are, fitted in full, and fitted again while another screened rival looks better
+    than its full fit. It is the runner-up without screening, or a rival whose ``H`` lies
+    within the tolerance band (:func:`~hcard.calibration.screening.criterion_band`) of it."""
+    figures = RivalFigures(final, pool, settings)
+    for key in figures.rivals():
+        if key in pool.fits and figures.earns(key) is None:
+            figures.settle([key, *(key - {name} for name in key)])
+    if not figures.rivals():
         return None
-    admissible = [key for key in rivals() if earns(key)]
-    candidates = admissible or rivals()
-
-    def may_be_close(key: frozenset[str]) -> bool:
-        """Whether the full fit of ``key`` may lie within the separation thresholds."""
-        return (score(key)[1] - final_score < settings.separation_criterion
-                or rmse(key)[0] / final.test_rmse - 1.0 < settings.separation_rmse)
-
-    # When a rival may make the comparison ambiguous, the best rival by full fits: every
-    # screened one whose full fit may beat the best is fitted on every training sample. Else
-    # the comparison is not ambiguous whichever rival it is: the best taking screened figures
-    # as they are, fitted in full, again while another screened one looks better.
-    exact = bool(final.effects) and any(may_be_close(key) for key in candidates)
-    while True:
-        candidates = [key for key in candidates if key in pool]
-        if not candidates:
-            return None
-        best = min(candidates, key=lambda k: score(k)[0])
-        doubtful = [key for key in candidates if key in screened and (
-            score(key)[1] < score(best)[2] if exact else key == best)]
-        if not doubtful or confirmed is None:
-            break
-        settle(doubtful)
-    effects, rival = pool[best]
+    admissible = [key for key in figures.rivals() if figures.earns(key)]
+    best = _best_rival(figures, admissible or figures.rivals())
+    if best is None:
+        return None
+    effects, rival = pool.fits[best]
+    used = data.used
     observed = data.observed[used]
     return compare(
         final.effects,
-        final_score,
+        figures.final_score,
         final.test_rmse,
         observed - final.fit.residuals[used],
         tuple(e.name for e in effects),
-        held_out_criterion(rival, n_eff),
+        held_out_criterion(rival, figures.n_eff),
         float(rival.test_rmse or math.nan),
         observed - rival.residuals[used],
         {name: values[used] for name, values in data.regressors.items()},
@@ -1303,6 +1302,26 @@ def _runner_up(
         settings.bins,
         decides=bool(final.effects),
     )
+
+
+def _best_rival(figures: RivalFigures, candidates: list[EffectSet]) -> EffectSet | None:
+    """The rival of ``candidates`` of lowest ``H``. When a rival may make the comparison
+    ambiguous, by full fits: every screened one whose full fit may beat the best is fitted on
+    every training sample. Else the best taking screened figures as they are, fitted in full,
+    again while another screened one looks better. None when every fit failed."""
+    pool = figures.pool
+    exact = bool(figures.final.effects) and any(figures.may_be_close(key)
+                                                for key in candidates)
+    while True:
+        candidates = [key for key in candidates if key in pool.fits]
+        if not candidates:
+            return None
+        best = min(candidates, key=lambda k: figures.score(k)[0])
+        doubtful = [key for key in candidates if key in pool.screened and (
+            figures.score(key)[1] < figures.score(best)[2] if exact else key == best)]
+        if not doubtful:
+            return best
+        figures.settle(doubtful)
 
 
 def summarise(

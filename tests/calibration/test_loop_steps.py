@@ -24,7 +24,9 @@ from hcard.calibration.loop import (
     Candidate,
     EffectSearch,
     LoopSettings,
+    ModelFit,
     ResidualAnalyser,
+    RivalFigures,
     Structure,
     alternative_sets,
     beyond_foreign_structure,
@@ -33,6 +35,7 @@ from hcard.calibration.loop import (
     criterion_failure,
     earns_place,
     judge_round,
+    runner_up,
     usable_effects,
     verdict_of,
 )
@@ -345,3 +348,28 @@ def test_structure_a_foreign_regressor_explains_is_not_credited_to_the_signature
                                              frozenset({"stroke"}), settings)
     assert foreign is None and eta2 == pytest.approx(analysis.regressors["stroke"].eta2)
     assert eta2 > 0.5
+
+
+# -- the runner-up ----------------------------------------------------------------------------
+
+
+def test_the_runner_up_is_the_best_rival_of_as_many_effects() -> None:
+    data = coulomb_data(LOAD_INDEX)
+    search = search_on(data, LoopSettings(screen_samples=0), ("ultrasonic-speed", "load-index"))
+    pool = search.pool
+    speed, index = library()["ultrasonic-speed"], library()["load-index"]
+    for effects in ([index], [speed], [speed, index]):
+        assert pool.fitted_set(effects, exact=True) is not None
+    key = frozenset({"load-index"})
+    final = ModelFit(("load-index",), pool.fits[key][1], search.analyse(pool.fits[key][1]), 0.0)
+    figures = RivalFigures(final, pool, LoopSettings())
+    assert figures.rivals() == [frozenset({"ultrasonic-speed"})]
+    assert figures.earns(key) is True
+    assert figures.earns(frozenset({"ultrasonic-speed"})) is False  # no vibration: no gain
+    comparison = runner_up(final, pool, data, LoopSettings())
+    assert comparison is not None and comparison.runner_up == ("ultrasonic-speed",)
+    assert not comparison.ambiguous
+    # the rival is the Coulomb model again: its error over the final one's
+    base_rmse = float(np.sqrt(np.mean(pool.fits[frozenset()][1].residuals[data.test] ** 2)))
+    assert comparison.rmse_margin == pytest.approx(base_rmse / final.test_rmse - 1.0, rel=0.01)
+    assert comparison.rmse_margin > 1.0
