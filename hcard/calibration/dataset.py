@@ -286,6 +286,223 @@ def _label(m: Measurement, index: int) -> str:
     return f"{source} ({device})" if source else f"recording {index} ({device})"
 
 
+INPUT_NAMES = (
+    "normal_force",
+    "time",
+    "contact_time",
+    "occlusion_time",
+    "stroke",
+    "pressure",
+    "amplitude",
+    "voltage",
+    "speed",
+    "plate_frequency",
+)
+"""The columns of a recording that are model inputs (:attr:`CalibrationData.inputs`)."""
+
+REGRESSOR_NAMES = (
+    "normal_force",
+    "speed",
+    "direction",
+    "amplitude",
+    "voltage",
+    "pressure",
+    "plate_frequency",
+    "time",
+    "occlusion_time",
+    "stroke",
+    "amplitude_history",
+    "voltage_history",
+    "x",
+    "y",
+)
+"""The columns of a recording the residual analysis looks at, when they vary
+(:attr:`CalibrationData.regressors`; ``recording`` is added for several recordings)."""
+
+
+def check_recordings(measurements: Sequence[Measurement], split: str,
+                     test_fraction: float) -> None:
+    """Refuse what :func:`prepare` cannot concatenate or split.
+
+    Raises:
+        MeasurementError: no recordings, an unknown ``split``, a ``test_fraction`` outside
+            (0, 1), recordings with different actuation columns (amplitude, voltage), a column
+            (speed, x, y, stroke) or a plate frequency in some recordings but not all (naming
+            the recordings that lack it).
+    """
+    if not measurements:
+        raise MeasurementError("no recordings to calibrate on")
+    if split not in SPLITS:
+        raise MeasurementError(f"split must be one of {', '.join(SPLITS)}, got {split!r}")
+    if not 0.0 < test_fraction < 1.0:
+        raise MeasurementError(f"test_fraction must lie in (0, 1), got {test_fraction}")
+    columns = {(m.amplitude is not None, m.voltage is not None) for m in measurements}
+    if len(columns) > 1:
+        raise MeasurementError(
+            "recordings differ in their actuation columns (amplitude, voltage); calibrate "
+            "recordings of one kind together"
+        )
+    for column in ("speed", "x", "y", "stroke"):
+        have = [getattr(m, column) is not None for m in measurements]
+        if any(have) and not all(have):
+            lacking = ", ".join(
+                _label(m, i) for i, m in enumerate(measurements) if getattr(m, column) is None
+            )
+            raise MeasurementError(
+                f"column {column} is in some recordings but not in {lacking}; calibrate "
+                "recordings with the same columns together"
+            )
+    plate = [
+        m.plate_frequency is not None or bool(m.conditions.get("plate_frequency_hz"))
+        for m in measurements
+    ]
+    if any(plate) and not all(plate):
+        raise MeasurementError(
+            "the plate frequency (column frequency or sidecar plate_frequency_hz) is given for "
+            "some recordings but not all"
+        )
+
+
+def contact_time(t: np.ndarray, contact: np.ndarray) -> np.ndarray:
+    """Per sample, the time since the current contact began, s (``t`` in s; the sample where
+    ``contact`` turns True counts 0); 0 out of contact."""
+    n = len(t)
+    starts = np.flatnonzero(np.diff(contact.astype(np.int8), prepend=0) == 1)
+    began = np.zeros(n, dtype=np.int64)
+    began[starts] = starts
+    began = np.maximum.accumulate(began)
+    return np.where(contact, t - t[began], 0.0)
+
+
+def split_masks(m: Measurement, label: str, split: str, test_fraction: float, seed: int,
+                threshold: float, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Masks ``(train, test)`` of the samples of ``m`` (``label`` names it in errors):
+    ``split`` ``"stroke"`` holds out ``test_fraction`` of its strokes (drawn with ``seed``,
+    strokes where the normal force reaches ``threshold``, N), ``"time"`` the last
+    ``test_fraction`` of its duration; both only where ``keep`` (in contact)."""
+    n = len(m)
+    train = np.zeros(n, dtype=bool)
+    test = np.zeros(n, dtype=bool)
+    try:
+        if split == "stroke":
+            train_idx, test_idx = split_by_stroke(m, test_fraction, seed, threshold)
+        else:
+            train_idx, test_idx = split_by_time_fraction(m, test_fraction)
+    except MeasurementError as exc:
+        raise MeasurementError(f"{label}: {exc}") from None
+    train[train_idx] = True
+    test[test_idx] = True
+    return train & keep, test & keep
+
+
+def recording_columns(m: Measurement, index: int, ids: np.ndarray, threshold: float,
+                      force: np.ndarray, rest_s: float) -> dict[str, np.ndarray | None]:
+    """Every column of the recording ``m`` (the ``index``-th) the loop may use, SI units,
+    None where ``m`` lacks it: the model inputs (:data:`INPUT_NAMES`), the regressors
+    (:data:`REGRESSOR_NAMES`), the ``observed`` friction ``force`` (N) and the ``recording``
+    index. ``ids``: stroke ids (-1 out of contact); ``threshold``: contact threshold, N;
+    ``rest_s``: pause that rests the finger, s."""
+    n = len(m)
+    speed = m.speed
+    pressure = m.conditions.get("ambient_pressure_pa") or ATMOSPHERE_PA
+    frequency = m.plate_frequency
+    if frequency is None and m.conditions.get("plate_frequency_hz"):
+        frequency = np.full(n, float(m.conditions["plate_frequency_hz"]))
+    contact = in_contact(m, threshold)
+    return {
+        # Out of contact the recorded force is sensor noise around 0, which some models
+        # refuse (Eq. 4.1 divides by Fn): those samples, never fitted, take the threshold.
+        # In contact it is the recorded force smoothed over NORMAL_FORCE_WINDOW_S (K16).
+        "normal_force": np.maximum(
+            smoothed_within(m.normal_force, m.t, contact, NORMAL_FORCE_WINDOW_S),
+            CONTACT_THRESHOLD_N,
+        ),
+        "time": m.t - m.t[0],
+        "contact_time": contact_time(m.t, contact),
+        "occlusion_time": accumulated_contact_time(m.t, contact),
+        "stroke": strokes_since_rest(m.t, ids, rest_s).astype(np.float64),
+        "pressure": np.full(n, float(pressure)),
+        "observed": force,
+        "recording": np.full(n, float(index)),
+        "amplitude": m.amplitude,
+        "voltage": m.voltage,
+        "speed": None if speed is None else np.abs(speed),
+        # the sliding direction: a friction that differs between the two directions shows
+        # against it, not only "in time"
+        "direction": None if speed is None else np.sign(speed),
+        "plate_frequency": frequency,
+        "x": m.x,
+        "y": m.y,
+        "amplitude_history": None
+        if m.amplitude is None
+        else recent_change(m.amplitude, m.t, HISTORY_WINDOW_S),
+        "voltage_history": None if m.voltage is None else time_since_change(m.voltage, m.t),
+    }
+
+
+@dataclass
+class _Parts:
+    """The per-recording pieces :func:`prepare` concatenates, in recording order."""
+
+    columns: dict[str, list[np.ndarray]] = field(default_factory=dict)
+    train: list[np.ndarray] = field(default_factory=list)
+    test: list[np.ndarray] = field(default_factory=list)
+    rates: list[float] = field(default_factory=list)
+    labels: list[str] = field(default_factory=list)
+    zeroing: list[tuple[int, float]] = field(default_factory=list)
+    thresholds: list[float] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    strokes: list[np.ndarray] = field(default_factory=list)
+    lifted: list[np.ndarray] = field(default_factory=list)
+    lifted_force: list[np.ndarray] = field(default_factory=list)
+
+    def add(self, m: Measurement, index: int, *, split: str, test_fraction: float, seed: int,
+            rest_s: float, rezero: bool, contact_threshold_n: float | None) -> None:
+        """Add the ``index``-th recording ``m`` (arguments of :func:`prepare`).
+
+        Raises:
+            MeasurementError: no sample in contact, or too few strokes (or samples) to split.
+        """
+        label = _label(m, index)
+        threshold = (
+            default_contact_threshold(m.normal_force)
+            if contact_threshold_n is None
+            else contact_threshold_n
+        )
+        self.thresholds.append(threshold)
+        disagreement = contact_warning(m, threshold, label)
+        if disagreement:
+            self.warnings.append(disagreement)
+        ids = stroke_ids(m, contact_threshold_n=threshold)
+        keep = ids >= 0
+        offset = max((int(part.max(initial=-1)) for part in self.strokes), default=-1) + 1
+        self.strokes.append(np.where(keep, ids + offset, -1))
+        if not keep.any():
+            raise MeasurementError(
+                f"{label}: no sample in contact (fn >= {threshold * MN_PER_N:.3g} mN)"
+            )
+        train, test = split_masks(m, label, split, test_fraction, seed + index, threshold,
+                                  keep)
+        self.train.append(train)
+        self.test.append(test)
+
+        lateral = m.lateral_force
+        if rezero:
+            zero, lifts = sensor_zero(m.t, lateral, keep)
+            lateral = lateral - zero
+            self.zeroing.append((lifts, float(np.ptp(zero))))
+        force = friction_force(lateral, m.speed, keep)
+        self.lifted.append(~in_contact(m, threshold))
+        self.lifted_force.append(lateral)
+        columns = recording_columns(m, index, ids, threshold, force, rest_s)
+        for name, values in columns.items():
+            if values is not None:
+                self.columns.setdefault(name, []).append(np.asarray(values, dtype=np.float64))
+        if len(m) > 1:
+            self.rates.append(1.0 / float(np.median(np.diff(m.t))))
+        self.labels.append(label)
+
+
 def prepare(
     measurements: Sequence[Measurement],
     *,
@@ -319,184 +536,25 @@ def prepare(
         MeasurementError: no recordings, recordings with different actuation columns, a
             recording with too few strokes to split, or no sample in contact.
     """
-    if not measurements:
-        raise MeasurementError("no recordings to calibrate on")
-    if split not in SPLITS:
-        raise MeasurementError(f"split must be one of {', '.join(SPLITS)}, got {split!r}")
-    if not 0.0 < test_fraction < 1.0:
-        raise MeasurementError(f"test_fraction must lie in (0, 1), got {test_fraction}")
-    columns = {(m.amplitude is not None, m.voltage is not None) for m in measurements}
-    if len(columns) > 1:
-        raise MeasurementError(
-            "recordings differ in their actuation columns (amplitude, voltage); calibrate "
-            "recordings of one kind together"
-        )
-
-    for column in ("speed", "x", "y", "stroke"):
-        have = [getattr(m, column) is not None for m in measurements]
-        if any(have) and not all(have):
-            lacking = ", ".join(
-                _label(m, i) for i, m in enumerate(measurements) if getattr(m, column) is None
-            )
-            raise MeasurementError(
-                f"column {column} is in some recordings but not in {lacking}; calibrate "
-                "recordings with the same columns together"
-            )
-    plate = [
-        m.plate_frequency is not None or bool(m.conditions.get("plate_frequency_hz"))
-        for m in measurements
-    ]
-    if any(plate) and not all(plate):
-        raise MeasurementError(
-            "the plate frequency (column frequency or sidecar plate_frequency_hz) is given for "
-            "some recordings but not all"
-        )
-
-    parts: dict[str, list[np.ndarray]] = {}
-    train_parts: list[np.ndarray] = []
-    test_parts: list[np.ndarray] = []
-    rates: list[float] = []
-    labels: list[str] = []
-    zeroing: list[tuple[int, float]] = []
-    thresholds: list[float] = []
-    warnings: list[str] = []
-    stroke_parts: list[np.ndarray] = []
-    lifted_parts: list[np.ndarray] = []
-    lifted_force: list[np.ndarray] = []
+    check_recordings(measurements, split, test_fraction)
     if contact_threshold_n is not None:
         contact_threshold_n = check_threshold(contact_threshold_n)
+    parts = _Parts()
     for index, m in enumerate(measurements):
-        label = _label(m, index)
-        threshold = (
-            default_contact_threshold(m.normal_force)
-            if contact_threshold_n is None
-            else contact_threshold_n
-        )
-        thresholds.append(threshold)
-        disagreement = contact_warning(m, threshold, label)
-        if disagreement:
-            warnings.append(disagreement)
-        ids = stroke_ids(m, contact_threshold_n=threshold)
-        keep = ids >= 0
-        offset = max((int(part.max(initial=-1)) for part in stroke_parts), default=-1) + 1
-        stroke_parts.append(np.where(keep, ids + offset, -1))
-        if not keep.any():
-            raise MeasurementError(
-                f"{label}: no sample in contact (fn >= {threshold * MN_PER_N:.3g} mN)"
-            )
-        n = len(m)
-        train = np.zeros(n, dtype=bool)
-        test = np.zeros(n, dtype=bool)
-        try:
-            if split == "stroke":
-                train_idx, test_idx = split_by_stroke(m, test_fraction, seed + index, threshold)
-            else:
-                train_idx, test_idx = split_by_time_fraction(m, test_fraction)
-        except MeasurementError as exc:
-            raise MeasurementError(f"{label}: {exc}") from None
-        train[train_idx] = True
-        test[test_idx] = True
-        train &= keep
-        test &= keep
-        train_parts.append(train)
-        test_parts.append(test)
-
-        t = m.t - m.t[0]
-        speed = m.speed
-        lateral = m.lateral_force
-        if rezero:
-            zero, lifts = sensor_zero(m.t, lateral, keep)
-            lateral = lateral - zero
-            zeroing.append((lifts, float(np.ptp(zero))))
-        force = friction_force(lateral, speed, keep)
-        lifted_parts.append(~in_contact(m, threshold))
-        lifted_force.append(lateral)
-        pressure = m.conditions.get("ambient_pressure_pa") or ATMOSPHERE_PA
-        frequency = m.plate_frequency
-        if frequency is None and m.conditions.get("plate_frequency_hz"):
-            frequency = np.full(n, float(m.conditions["plate_frequency_hz"]))
-        contact = in_contact(m, threshold)
-        starts = np.flatnonzero(np.diff(contact.astype(np.int8), prepend=0) == 1)
-        began = np.zeros(n, dtype=np.int64)
-        began[starts] = starts
-        began = np.maximum.accumulate(began)
-        contact_time = np.where(contact, m.t - m.t[began], 0.0)
-        occlusion_time = accumulated_contact_time(m.t, contact)
-        columns_of = {
-            # Out of contact the recorded force is sensor noise around 0, which some models
-            # refuse (Eq. 4.1 divides by Fn): those samples, never fitted, take the threshold.
-            # In contact it is the recorded force smoothed over NORMAL_FORCE_WINDOW_S (K16).
-            "normal_force": np.maximum(
-                smoothed_within(m.normal_force, m.t, contact, NORMAL_FORCE_WINDOW_S),
-                CONTACT_THRESHOLD_N,
-            ),
-            "time": t,
-            "contact_time": contact_time,
-            "occlusion_time": occlusion_time,
-            "stroke": strokes_since_rest(m.t, ids, rest_s).astype(np.float64),
-            "pressure": np.full(n, float(pressure)),
-            "observed": force,
-            "recording": np.full(n, float(index)),
-            "amplitude": m.amplitude,
-            "voltage": m.voltage,
-            "speed": None if speed is None else np.abs(speed),
-            # the sliding direction: a friction that differs between the two directions shows
-            # against it, not only "in time"
-            "direction": None if speed is None else np.sign(speed),
-            "plate_frequency": frequency,
-            "x": m.x,
-            "y": m.y,
-            "amplitude_history": None
-            if m.amplitude is None
-            else recent_change(m.amplitude, m.t, HISTORY_WINDOW_S),
-            "voltage_history": None if m.voltage is None else time_since_change(m.voltage, m.t),
-        }
-        for name, values in columns_of.items():
-            if values is not None:
-                parts.setdefault(name, []).append(np.asarray(values, dtype=np.float64))
-        if n > 1:
-            rates.append(1.0 / float(np.median(np.diff(m.t))))
-        labels.append(label)
+        parts.add(m, index, split=split, test_fraction=test_fraction, seed=seed, rest_s=rest_s,
+                  rezero=rezero, contact_threshold_n=contact_threshold_n)
 
     joined = {
         name: np.concatenate(values)
-        for name, values in parts.items()
+        for name, values in parts.columns.items()
         if len(values) == len(measurements)
     }
     observed = joined.pop("observed")
     recording = joined.pop("recording").astype(np.int64)
-    input_names = (
-        "normal_force",
-        "time",
-        "contact_time",
-        "occlusion_time",
-        "stroke",
-        "pressure",
-        "amplitude",
-        "voltage",
-        "speed",
-        "plate_frequency",
-    )
-    inputs = {name: joined[name] for name in input_names if name in joined}
-    regressor_names = (
-        "normal_force",
-        "speed",
-        "direction",
-        "amplitude",
-        "voltage",
-        "pressure",
-        "plate_frequency",
-        "time",
-        "occlusion_time",
-        "stroke",
-        "amplitude_history",
-        "voltage_history",
-        "x",
-        "y",
-    )
+    inputs = {name: joined[name] for name in INPUT_NAMES if name in joined}
     regressors = {
         name: joined[name]
-        for name in regressor_names
+        for name in REGRESSOR_NAMES
         if name in joined and np.ptp(joined[name]) > 0
     }
     if len(measurements) > 1:
@@ -510,16 +568,16 @@ def prepare(
         inputs=inputs,
         observed=observed,
         regressors=regressors,
-        train=np.concatenate(train_parts),
-        test=np.concatenate(test_parts),
+        train=np.concatenate(parts.train),
+        test=np.concatenate(parts.test),
         recording=recording,
-        sources=tuple(labels),
-        sample_rate_hz=float(np.median(rates)) if rates else 1.0,
+        sources=tuple(parts.labels),
+        sample_rate_hz=float(np.median(parts.rates)) if parts.rates else 1.0,
         split=how,
         conditions=tuple(dict(m.conditions) for m in measurements),
-        zeroing=tuple(zeroing),
-        contact_threshold_n=tuple(thresholds),
-        warnings=tuple(warnings),
-        strokes=np.concatenate(stroke_parts),
-        noise=measure_noise(np.concatenate(lifted_force), np.concatenate(lifted_parts)),
+        zeroing=tuple(parts.zeroing),
+        contact_threshold_n=tuple(parts.thresholds),
+        warnings=tuple(parts.warnings),
+        strokes=np.concatenate(parts.strokes),
+        noise=measure_noise(np.concatenate(parts.lifted_force), np.concatenate(parts.lifted)),
     )

@@ -22,6 +22,18 @@ on its training split, then repeats:
    alone named skin-recovery + load-index at 5.40 mN where occlusion + load-index, in the
    library, reached the truth's 5.01 mN.
 
+**Steps.** :func:`calibrate` checks its arguments (:func:`check_arguments`), sorts the library
+(:func:`usable_effects`, :func:`claimed_regressors`) and fits every model once through a
+:class:`~hcard.calibration.model_pool.ModelPool` (screening included). A round
+(:meth:`EffectSearch.run_round`) fits each remaining effect added to the current model
+(:meth:`EffectSearch.try_candidates`), fits in full those near the threshold
+(:meth:`EffectSearch.settle_near_target`), scores them at the best residual's ``n_eff``
+(:meth:`EffectSearch.rescored`), decides (:func:`judge_round`, :func:`criterion_failure`) and lets
+the selection undo itself (:meth:`EffectSearch.revise`: :func:`alternative_sets`, a move to a
+credited set, :meth:`EffectSearch.prune` with :func:`earns_place`). The end: what structure is left
+(:func:`residual_structure`), the runner-up (:func:`runner_up`), :func:`verdict_of` and
+:func:`summarise`.
+
 **Runner-up.** The final model is compared with the best other fitted model of as many effects
 (:mod:`hcard.calibration.selection`): the margin in ``H`` and in held-out RMSE is reported, and
 when it is below :class:`~hcard.calibration.selection.Separation`'s thresholds the verdict is
@@ -46,7 +58,7 @@ is never credited for an error it does not explain where it says it would. When 
 holds structure against a *foreign* regressor, one no model input or effect signature covers
 (the sliding direction, the position, the recording), and that structure is at least
 :data:`FOREIGN_DOMINANCE` times the signature's, (c) is judged with it taken out
-(:func:`_beyond_foreign_structure`).
+(:func:`beyond_foreign_structure`).
 
 **Screening** (:mod:`hcard.calibration.screening`). Candidate models (steps 2 and 4) are first
 fitted on one training sample in ``k`` (about ``screen_samples`` of them); one whose screened
@@ -57,7 +69,7 @@ accepted model's fit are those the loop reaches without screening (``screen_samp
 so is the runner-up whenever it may come within the separation thresholds of the final model;
 the figures of candidates far from every decision are the screened fits' (marked in the
 candidate table), and among rivals far from the final model the one named runner-up may be
-another within the tolerance of the best (:func:`_runner_up`).
+another within the tolerance of the best (:func:`runner_up`).
 
 **Verdicts.** When no candidate passes, the residual of the final model is analysed once more.
 Structure left against a regressor (p < ``alpha`` and ``eta^2 >= min_eta2``) or in time
@@ -78,14 +90,14 @@ import numpy as np
 
 from hcard.calibration.bootstrap import BootstrapResult, stroke_bootstrap
 from hcard.calibration.dataset import CalibrationData
-from hcard.calibration.effects import Effect, augment
-from hcard.calibration.fit import FitResult, fit_predictor
-from hcard.calibration.noise import NoiseModel, detectable_eta2, time_structure_threshold
-from hcard.calibration.observation import (
-    FORCE_OFFSET,
-    FRICTION_COEFFICIENT,
-    lateral_force_model,
+from hcard.calibration.effects import Effect
+from hcard.calibration.fit import FitResult
+from hcard.calibration.model_pool import (
+    EffectSet,
+    ModelPool,
+    held_out_criterion,
 )
+from hcard.calibration.noise import NoiseModel, detectable_eta2, time_structure_threshold
 from hcard.calibration.residuals import (
     MIN_BIN_COUNT,
     ResidualReport,
@@ -112,13 +124,7 @@ AMBIGUOUS = "ambiguous: the data cannot separate the final model from its runner
 
 FOREIGN_DOMINANCE = 2.0
 """How many times the signature's eta2 a foreign regressor's must be before the signature test
-is judged with the foreign structure taken out (:func:`_beyond_foreign_structure`)."""
-
-CANDIDATE_EVALUATIONS = 120
-"""Most model evaluations of a candidate's fit from the effect's defaults (K7). A fit that
-converges needs a few tens; one from defaults far from the data (an effect the data do not
-hold, next to a finger model that already explains the drift it would) crawls for hundreds,
-ends no better than the current model, and is then fitted again from the neutral values."""
+is judged with the foreign structure taken out (:func:`beyond_foreign_structure`)."""
 
 CRITERION = (
     "held-out information criterion H = n_eff ln(MSE_held-out) + 2k (k free parameters, n_eff "
@@ -236,11 +242,11 @@ class Candidate:
     screened: bool = False
 
 
+
 def _known(figure: float | None) -> float:
     """A :class:`Candidate` figure that its fit has set (every fitted candidate has them)."""
     assert figure is not None
     return figure
-
 
 @dataclass(frozen=True)
 class Structure:
@@ -411,37 +417,6 @@ wrapped by :func:`~hcard.calibration.observation.lateral_force_model`), or the m
 (e.g. an electrostatic force measured on a scale)."""
 
 
-def _model(
-    base: Predictor, effects: Sequence[Effect], start: Mapping[str, float], observation: str
-) -> Predictor:
-    """The model of the observation of ``base`` with ``effects``, at ``start`` where it names
-    one."""
-    model = augment(base, effects)
-    if observation == "lateral_force":
-        model = lateral_force_model(model)
-    known = {p.name for p in model.parameters}
-    return model.with_params(**{k: v for k, v in start.items() if k in known})
-
-
-def _free(model: Predictor, base_free: Sequence[str], effects: Sequence[Effect]) -> list[str]:
-    names = {p.name for p in model.parameters}
-    free = [name for name in base_free if name in names]
-    free += [name for name in (FRICTION_COEFFICIENT, FORCE_OFFSET) if name in names]
-    free += [f"{e.name}.{p.name}" for e in effects for p in e.parameters]
-    return list(dict.fromkeys(free))
-
-
-def _rss(fit: FitResult, samples: np.ndarray) -> float:
-    """Residual sum of squares of ``fit`` over the ``samples`` mask (its residuals cover every
-    sample, so a fit on the screening samples is measured on the whole training split too)."""
-    return float(np.sum(fit.residuals[samples] ** 2))
-
-
-def _score(fit: FitResult, n_eff: float) -> float:
-    mse = float(np.mean(fit.residuals[fit.test] ** 2))
-    return n_eff * math.log(max(mse, np.finfo(float).tiny)) + 2 * fit.n_free
-
-
 def _signature_eta2(effect: Effect, analysis: ResidualReport, residual: np.ndarray,
                     regressors: Mapping[str, np.ndarray], alpha: float) -> float:
     """How much of ``residual`` (the current model's, on the samples in use) lies where
@@ -464,7 +439,7 @@ def _signature_eta2(effect: Effect, analysis: ResidualReport, residual: np.ndarr
     return max(values, default=0.0)
 
 
-def _beyond_foreign_structure(
+def beyond_foreign_structure(
     effect: Effect,
     analysis: ResidualReport,
     residual: np.ndarray,
@@ -508,12 +483,17 @@ def _beyond_foreign_structure(
         strongest.name
 
 
-def _structure(
+def residual_structure(
     analysis: ResidualReport,
     settings: LoopSettings,
     time_ordered: bool,
     noise: NoiseModel | None = None,
 ) -> Structure:
+    """Where the residual analysed in ``analysis`` is still structured (:class:`Structure`):
+    regressors with p < ``alpha`` and ``eta^2 >= min_eta2`` (those below it as ``small``), the
+    detectable ``eta^2`` of each regressor's F-test, and structure in time when
+    ``time_ordered`` and the lag-1 autocorrelation reaches the threshold set by the sensor
+    ``noise`` (:func:`~hcard.calibration.noise.time_structure_threshold`)."""
     rho = analysis.time.lag1_autocorrelation
     threshold = time_structure_threshold(settings.min_autocorrelation, noise)
     significant = analysis.structured(settings.alpha, 0.0)
@@ -539,6 +519,576 @@ def _structure(
         min_eta2=settings.min_eta2,
         detectable=detectable,
     )
+
+
+def check_arguments(
+    data: CalibrationData, base: Predictor, free: Sequence[str] | None, observation: str
+) -> tuple[str, ...]:
+    """The base parameters a calibration of ``base`` on ``data`` fits (``free``, default
+    :func:`default_free`), once the arguments are checked.
+
+    Raises:
+        PredictorError: ``observation`` not one of :data:`OBSERVATIONS`, ``data`` without
+            held-out samples, a name in ``free`` that is not a parameter of ``base``, or an
+            input of ``base`` without a default that ``data`` do not provide.
+    """
+    if observation not in OBSERVATIONS:
+        raise PredictorError(
+            f"observation must be one of {', '.join(OBSERVATIONS)}, got {observation!r}"
+        )
+    if not data.test.any():
+        raise PredictorError("the data have no held-out samples; the loop needs a split")
+    base_free = tuple(free) if free is not None else default_free(base)
+    unknown = sorted(set(base_free) - {p.name for p in base.parameters})
+    if unknown:
+        raise PredictorError(
+            f"{base.name}: unknown parameter(s) {', '.join(unknown)} to fit; parameters: "
+            f"{', '.join(p.name for p in base.parameters)}"
+        )
+    given = data.inputs_for(base)
+    missing = sorted(v.name for v in base.inputs if v.default is None and v.name not in given)
+    if missing:
+        raise PredictorError(
+            f"model {base.name} needs input(s) {', '.join(missing)}, which these recordings "
+            f"do not provide (they give {', '.join(sorted(data.inputs))})"
+        )
+    return base_free
+
+
+def usable_effects(
+    library: Sequence[Effect], base: Predictor, varying: Container[str]
+) -> tuple[list[Effect], dict[str, str]]:
+    """The effects of ``library`` the loop can try on ``base``, in library order, and why
+    each other one cannot be tried (effect name -> reason): it does not apply to ``base``
+    (:meth:`~hcard.calibration.effects.Effect.applies_to`), or none of its signature
+    regressors is in ``varying`` (the regressors that vary in the data), so that it cannot be
+    identified."""
+    skipped: dict[str, str] = {}
+    usable: list[Effect] = []
+    for effect in library:
+        why = effect.applies_to(base)
+        if why is None and not any(name in varying for name in effect.signature):
+            why = (
+                f"its signature ({', '.join(effect.signature)}) does not vary in these data, "
+                "so it cannot be identified"
+            )
+        if why:
+            skipped[effect.name] = why
+        else:
+            usable.append(effect)
+    return usable, skipped
+
+
+def claimed_regressors(base: Predictor, usable: Sequence[Effect]) -> frozenset[str]:
+    """What the models can act on: the inputs of ``base`` and every input and signature
+    regressor of the ``usable`` effects. Structure against any other regressor (the sliding
+    direction, the position, the recording) is *foreign* (:func:`beyond_foreign_structure`)."""
+    return frozenset(
+        {v.name for v in base.inputs}
+        | {name for effect in usable for name in effect.signature}
+        | {v.name for effect in usable for v in effect.inputs}
+    )
+
+
+class ResidualAnalyser:
+    """The residual analysis of a fit on the samples in contact of one
+    :class:`~hcard.calibration.dataset.CalibrationData` (:func:`~hcard.calibration.residuals.
+    analyse_residuals` against every regressor, with ``bins`` quantile bins; in time on the
+    recording's own sample grid, 0 where not fitted)."""
+
+    def __init__(self, data: CalibrationData, bins: int) -> None:
+        self.data = data
+        self.bins = bins
+        self.used = data.used
+        self.regressors = {name: values[self.used] for name, values in data.regressors.items()}
+
+    def __call__(self, result: FitResult) -> ResidualReport:
+        """The analysis of ``result``'s residuals (output unit) on the samples in contact."""
+        return analyse_residuals(
+            result.residuals[self.used],
+            self.regressors,
+            sample_rate_hz=self.data.sample_rate_hz,
+            bins=self.bins,
+            series=np.where(self.used, result.residuals, 0.0),
+            time_ordered=self.data.time_ordered,
+        )
+
+
+def criterion_failure(candidate: Candidate, settings: LoopSettings) -> str:
+    """Why a fitted ``candidate`` cannot be added (empty: it passes every check of the
+    criterion, module docstring): (a) its ``score_change`` of ``H`` must be negative, (b) its
+    ``improvement`` (relative fall of the held-out RMSE) at least ``min_improvement``, (c) its
+    ``signature_eta2`` at least ``signature_eta2``; the first check it fails is named."""
+    assert candidate.score_change is not None and candidate.improvement is not None
+    if candidate.score_change >= 0:
+        return "does not lower the held-out criterion"
+    if candidate.improvement < settings.min_improvement:
+        return (
+            f"cuts the held-out RMSE by {candidate.improvement:.1%}, less than "
+            f"{settings.min_improvement:.0%}"
+        )
+    if candidate.signature_eta2 < settings.signature_eta2:
+        return "the residual shows no structure against its signature"
+    return ""
+
+
+def judge_round(
+    tried: Sequence[tuple[Candidate, bool]], settings: LoopSettings
+) -> tuple[str | None, list[Candidate]]:
+    """The decision of one round on its candidates ``tried`` (each with whether it was fitted):
+    the name of the effect added, the passing candidate (:func:`criterion_failure`) of lowest
+    ``score_change``, or None; and every candidate again, in order, marked ``accepted`` or not
+    with its ``note`` saying why (a candidate not fitted keeps its own note)."""
+    fitted = [cand for cand, ok in tried if ok]
+    passing = [cand for cand in fitted if not criterion_failure(cand, settings)]
+    best = min(fitted, key=lambda cand: _known(cand.score_change), default=None)
+    chosen = min(passing, key=lambda cand: _known(cand.score_change), default=None)
+    accepted = chosen.effect if chosen is not None else None
+    reason = criterion_failure(best, settings) if best is not None else ""
+    rows = []
+    for cand, _ok in tried:
+        if cand.effect == accepted:
+            note = (
+                "added: best held-out criterion"
+                if best is not None and cand is best
+                else "added: best held-out criterion of the candidates that pass every check"
+            )
+        elif cand.test_rmse is None:
+            note = cand.note
+        elif accepted is None and best is not None and cand is best:
+            note = f"best of the round, not added: {reason}"
+        elif criterion_failure(cand, settings):
+            note = f"not added: {criterion_failure(cand, settings)}"
+        else:
+            note = "a better candidate in this round"
+        rows.append(replace(cand, accepted=cand.effect == accepted, note=note))
+    return accepted, rows
+
+
+def earns_place(with_it: FitResult, without: FitResult, n_eff: float,
+                min_improvement: float) -> str:
+    """Why the effect that makes the fit ``without`` into ``with_it`` does not earn its place
+    (empty: it does): it must lower ``H`` at ``n_eff`` (:func:`held_out_criterion`) and cut the
+    held-out RMSE by ``min_improvement`` (a fraction)."""
+    if held_out_criterion(with_it, n_eff) >= held_out_criterion(without, n_eff):
+        return "does not lower the held-out criterion"
+    gain = 1.0 - float(with_it.test_rmse or math.nan) / float(without.test_rmse or math.nan)
+    if not gain >= min_improvement:
+        return f"cuts the held-out RMSE by {gain:.1%}, less than {min_improvement:.0%}"
+    return ""
+
+
+def alternative_sets(
+    chosen: Sequence[Effect], usable: Sequence[Effect], size: int
+) -> tuple[list[list[Effect]], str]:
+    """The sets of effects a revision of ``chosen`` scores, and how they were formed (the
+    candidate table's note): for a ``size`` of one or two, every set of that size of the
+    ``usable`` effects (library order); else every swap of one effect of ``chosen`` for an
+    unused one."""
+    if size <= 2:
+        alternatives = [list(group) for group in itertools.combinations(usable, size)]
+        return alternatives, f"{'pair' if size == 2 else 'swap'}, every one of the library scored"
+    alternatives = [
+        [*(e for e in chosen if e is not out), swap]
+        for out in chosen
+        for swap in usable
+        if swap not in chosen
+    ]
+    return alternatives, "swap of one accepted effect for an unused one"
+
+
+def verdict_of(structure: Structure, added: Sequence[str], comparison: Comparison | None) -> str:
+    """The loop's verdict (module docstring): :data:`NOT_EXPLAINED` while ``structure`` is
+    left, else :data:`AMBIGUOUS` when effects were ``added`` and the ``comparison`` with the
+    runner-up is ambiguous, :data:`EXPLAINED` when effects were added, :data:`NO_EFFECT`
+    when none was."""
+    if structure.any:
+        return NOT_EXPLAINED
+    if added and comparison is not None and comparison.ambiguous:
+        return AMBIGUOUS
+    return EXPLAINED if added else NO_EFFECT
+
+
+class EffectSearch:
+    """The rounds of the loop on one base model: the state they share (the pool of fitted
+    models, the effects added, the current model, the accepted models and the candidate table)
+    and one method per step of a round."""
+
+    def __init__(self, data: CalibrationData, pool: ModelPool, usable: Sequence[Effect],
+                 claimed: frozenset[str], settings: LoopSettings, analyse: ResidualAnalyser,
+                 say: Callable[[str], None], unit: str) -> None:
+        self.data = data
+        self.pool = pool
+        self.usable = list(usable)
+        self.claimed = claimed
+        self.settings = settings
+        self.analyse = analyse
+        self.say = say
+        self.unit = unit
+        first = pool.fit([], {})
+        pool.fits[frozenset()] = ((), first)
+        n_eff = effective_samples(first.residuals[first.test])
+        self.current = ModelFit((), first, analyse(first), held_out_criterion(first, n_eff))
+        self.steps = [self.current]
+        self.added: list[Effect] = []
+        self.candidates: list[Candidate] = []
+        self.visited: set[EffectSet] = {frozenset()}
+
+    def credited(self, effect: Effect, effects: Sequence[Effect]) -> bool:
+        """Whether ``effect`` may come into the set ``effects`` by a move: not when a dominant
+        foreign regressor explains its signature's structure in the residual of the set
+        without it (:func:`beyond_foreign_structure`). A move judged by ``H`` alone may
+        otherwise bring in a signature that shows little structure at low power (a load
+        index over a few force levels)."""
+        without = self.pool.fitted_set([e for e in effects if e is not effect], exact=True)
+        if without is None:
+            return False
+        eta2, foreign = beyond_foreign_structure(
+            effect, self.analyse(without), without.residuals[self.analyse.used],
+            self.analyse.regressors, self.claimed, self.settings)
+        return foreign is None or eta2 >= self.settings.signature_eta2
+
+    def returns_to_own(self, key: EffectSet, own: EffectSet, n_eff: float) -> bool:
+        """Whether a move from the set ``own`` (fitted in full) to the screened set ``key``
+        would be undone by the pruning that follows it, whatever ``key``'s full fit: ``key``
+        is ``own`` plus one effect whose held-out RMSE cannot fall by ``min_improvement``
+        against ``own``'s (it does not earn its place), while with ``own``'s single effect
+        the set beats that effect alone by ``H`` and by ``min_improvement`` for certain (it
+        earns its place), all within the screening tolerance."""
+        pool, settings = self.pool, self.settings
+        extra = key - own
+        alone = frozenset(extra)
+        if len(own) != 1 or not own < key or len(extra) != 1 or alone not in pool.fits:
+            return False
+        rmse = pool.held_out(key)
+        if may_fall_to(rmse, (1.0 - settings.min_improvement) * pool.held_out(own)):
+            return False
+        spread = SCREEN_TOLERANCE if alone in pool.screened else 0.0
+        other_low = pool.criterion(alone, n_eff) - (criterion_band(n_eff) if spread else 0.0)
+        if not pool.criterion(key, n_eff) + criterion_band(n_eff) < other_low:
+            return False
+        gain = 1.0 - rmse * (1.0 + SCREEN_TOLERANCE) / (pool.held_out(alone) * (1.0 - spread))
+        return gain >= settings.min_improvement
+
+    def revise(self, round_number: int, chosen: list[Effect], reference: ModelFit,
+               size: int) -> list[Effect]:
+        """The best set of ``size`` effects near ``chosen`` (:func:`alternative_sets`), when
+        it beats ``chosen`` by ``H``; then any effect that no longer earns its place against
+        the same set without it is dropped (:meth:`prune`). ``n_eff`` is that of the better of
+        ``reference`` and ``chosen``'s held-out residual; ``reference`` (the round's current
+        model) sets the changes shown in the candidate table."""
+        pool, data = self.pool, self.data
+        chosen = list(chosen)
+        n_eff = max(
+            effective_samples(reference.fit.residuals[data.test]),
+            effective_samples(
+                pool.fits[frozenset(e.name for e in chosen)][1].residuals[data.test]),
+        )
+        alternatives, note = alternative_sets(chosen, self.usable, size)
+        scores, fresh = self._score_sets(alternatives, n_eff)
+        own = frozenset(e.name for e in chosen)
+        own_score = held_out_criterion(pool.fits[own][1], n_eff)
+        stay = self._confirm_doubtful(scores, fresh, own, own_score, n_eff)
+        self._record_sets(round_number, scores, fresh, reference, note, n_eff)
+        if not stay:
+            chosen = self._move(round_number, chosen, scores, own, own_score)
+        return self.prune(round_number, chosen, n_eff)
+
+    def _score_sets(
+        self, alternatives: Sequence[Sequence[Effect]], n_eff: float
+    ) -> tuple[dict[EffectSet, tuple[Sequence[Effect], FitResult, float]],
+               list[tuple[EffectSet, float]]]:
+        """Every set of ``alternatives`` fitted (from the pool, else now, screened) and scored
+        by ``H`` at ``n_eff``: set -> (effects, fit, H), and the sets fitted now with the wall
+        time of their fits, s. A set whose fit fails is left out."""
+        scores = {}
+        fresh: list[tuple[EffectSet, float]] = []
+        for effects in alternatives:
+            key = frozenset(e.name for e in effects)
+            tic = time.perf_counter()
+            known = key in self.pool.fits
+            result = self.pool.fitted_set(effects)
+            if result is None:
+                continue
+            scores[key] = (effects, result, self.pool.criterion(key, n_eff))
+            if not known:
+                fresh.append((key, time.perf_counter() - tic))
+        return scores, fresh
+
+    def _confirm_doubtful(
+        self,
+        scores: dict[EffectSet, tuple[Sequence[Effect], FitResult, float]],
+        fresh: list[tuple[EffectSet, float]],
+        own: EffectSet,
+        own_score: float,
+        n_eff: float,
+    ) -> bool:
+        """Fit on every training sample each screened set of ``scores`` that may beat the
+        current set ``own`` (``H`` ``own_score``), updating ``scores`` (a failed fit leaves)
+        and the seconds of ``fresh`` in place, unless every such set is ``own`` plus an effect
+        that pruning would take out again (:meth:`returns_to_own`): then returns True, the
+        current set stays."""
+        pool = self.pool
+        band = criterion_band(n_eff)
+        doubtful = [key for key, (_, _, score) in scores.items()
+                    if key in pool.screened and score - band < own_score]
+        better = [key for key, (_, _, score) in scores.items()
+                  if key not in pool.screened and key != own and score < own_score]
+        stay = (bool(doubtful) and not better
+                and all(self.returns_to_own(key, own, n_eff) for key in doubtful))
+        for key, (effects, _result, score) in list(scores.items()):
+            if key in pool.screened and score - band < own_score and not stay:
+                tic = time.perf_counter()
+                exact = pool.confirmed(key)
+                if exact is None:
+                    del scores[key]
+                else:
+                    scores[key] = (effects, exact, held_out_criterion(exact, n_eff))
+                fresh[:] = [(k, t + time.perf_counter() - tic if k == key else t)
+                            for k, t in fresh]
+        return stay
+
+    def _record_sets(
+        self,
+        round_number: int,
+        scores: Mapping[EffectSet, tuple[Sequence[Effect], FitResult, float]],
+        fresh: Sequence[tuple[EffectSet, float]],
+        reference: ModelFit,
+        note: str,
+        n_eff: float,
+    ) -> None:
+        """A row of the candidate table for every set first fitted in this revision
+        (``fresh``, with its seconds), its changes against ``reference``."""
+        for key, seconds in fresh:
+            if key not in scores:
+                continue
+            effects, _result, score = scores[key]
+            rmse = self.pool.held_out(key)
+            self.say(f"round {round_number}: {' + '.join(sorted(key))}: held-out RMSE "
+                     f"{format_error(rmse, self.unit)}"
+                     f"{' (screened)' if key in self.pool.screened else ''}")
+            self.candidates.append(
+                Candidate(round_number, " + ".join(e.name for e in effects), rmse,
+                          1.0 - rmse / reference.test_rmse,
+                          score - held_out_criterion(reference.fit, n_eff),
+                          sum(len(e.parameters) for e in effects), 0.0, False,
+                          note, seconds, screened=key in self.pool.screened)
+            )
+
+    def _move(
+        self,
+        round_number: int,
+        chosen: list[Effect],
+        scores: Mapping[EffectSet, tuple[Sequence[Effect], FitResult, float]],
+        own: EffectSet,
+        own_score: float,
+    ) -> list[Effect]:
+        """The set of ``scores`` of lowest ``H`` below ``own_score`` whose every new effect is
+        :meth:`credited` (``chosen`` when there is none)."""
+        for key in sorted(scores, key=lambda k: scores[k][2]):
+            if key == own or scores[key][2] >= own_score:
+                break
+            effects = scores[key][0]
+            uncredited = [e.name for e in effects
+                          if e not in chosen and not self.credited(e, effects)]
+            if uncredited:
+                self.say(f"round {round_number}: not moved to {' + '.join(sorted(key))}: the "
+                         f"structure against the signature of {', '.join(uncredited)} is a "
+                         "foreign regressor's")
+                continue
+            chosen = list(effects)
+            self.say(f"round {round_number}: moved to {' + '.join(e.name for e in chosen)}")
+            break
+        return chosen
+
+    def prune(self, round_number: int, chosen: list[Effect], n_eff: float) -> list[Effect]:
+        """``chosen`` without the effects that do not earn their place (:func:`earns_place`
+        at ``n_eff``), taken out one at a time, the one whose removal leaves the lowest ``H``
+        first."""
+        pool = self.pool
+        while chosen:
+            whole = pool.confirmed(frozenset(e.name for e in chosen))
+            assert whole is not None  # the set moved to, or a subset that earned its place
+            reasons = {}
+            for effect in chosen:
+                without = pool.fitted_set([e for e in chosen if e is not effect], exact=True)
+                if without is not None:
+                    why = earns_place(whole, without, n_eff, self.settings.min_improvement)
+                    if why:
+                        reasons[effect.name] = (why, held_out_criterion(without, n_eff))
+            if not reasons:
+                break
+            weakest = min(reasons, key=lambda name: reasons[name][1])
+            chosen = [e for e in chosen if e.name != weakest]
+            self.say(f"round {round_number}: removed {weakest}: {reasons[weakest][0]}")
+        return chosen
+
+    def _key_with(self, name: str) -> EffectSet:
+        """The effect set of the current model plus the effect ``name``."""
+        return frozenset([*(e.name for e in self.added), name])
+
+    def try_candidates(self, round_number: int, remaining: Sequence[Effect], n_eff: float,
+                       current_score: float) -> list[tuple[Candidate, FitResult | None]]:
+        """Each effect of ``remaining`` added to the current model and fitted (screened where
+        it may be), with its row of the candidate table: held-out RMSE (N for a lateral
+        force), its relative fall, the change of ``H`` at ``n_eff`` against
+        ``current_score``, and the current residual's structure against its signature
+        (:func:`beyond_foreign_structure`); a failed fit gives a row without figures."""
+        current, pool = self.current, self.pool
+        tried: list[tuple[Candidate, FitResult | None]] = []
+        for effect in remaining:
+            eta2, _ = beyond_foreign_structure(effect, current.analysis,
+                                                current.fit.residuals[self.analyse.used],
+                                                self.analyse.regressors, self.claimed,
+                                                self.settings)
+            tic = time.perf_counter()
+            key = self._key_with(effect.name)
+            try:
+                result = pool.fits[key][1] if key in pool.fits \
+                    else pool.screen_with(self.added, effect, current.fit)
+            except PredictorError as exc:
+                tried.append((Candidate(round_number, effect.name, None, None, None,
+                                        len(effect.parameters), eta2, False,
+                                        f"fit failed: {exc}", time.perf_counter() - tic),
+                              None))
+                self.say(f"round {round_number}: {effect.name}: fit failed ({exc})")
+                continue
+            rmse = pool.held_out(key)
+            gain = 1.0 - rmse / current.test_rmse
+            change = pool.criterion(key, n_eff) - current_score
+            tried.append((Candidate(round_number, effect.name, rmse, gain, change,
+                                    len(effect.parameters), eta2, False, "",
+                                    time.perf_counter() - tic),
+                          result))
+            self.say(
+                f"round {round_number}: {effect.name}: held-out RMSE "
+                f"{format_error(rmse, self.unit)} ({-100 * gain:+.1f} %)"
+                f"{', screened' if key in pool.screened else ''}"
+            )
+        return tried
+
+    def settle_near_target(self, tried: list[tuple[Candidate, FitResult | None]],
+                           round_number: int, n_eff: float, current_score: float) -> None:
+        """Fit on every training sample, in place, each screened candidate of ``tried``
+        whose held-out RMSE may fall by ``min_improvement`` once so fitted. The round's
+        ``n_eff`` comes from the best-fitting candidate's residual: when some candidate may
+        pass, that one is then a full fit too, for every candidate left screened lies above
+        the target by more than the tolerance."""
+        target = (1.0 - self.settings.min_improvement) * self.current.test_rmse
+        for index, (cand, result) in enumerate(tried):
+            screened = result is not None and self._key_with(cand.effect) in self.pool.screened
+            if screened and may_fall_to(float(_known(cand.test_rmse)), target):
+                self._settle(tried, index, round_number, n_eff, current_score)
+
+    def _settle(self, tried: list[tuple[Candidate, FitResult | None]], index: int,
+                round_number: int, n_eff: float, current_score: float) -> None:
+        """Fit the screened candidate ``tried[index]`` of the current round on every training
+        sample; its row takes the full fit's figures (or says the fit failed)."""
+        cand = tried[index][0]
+        key = self._key_with(cand.effect)
+        tic = time.perf_counter()
+        exact = self.pool.confirmed(key)
+        seconds = cand.seconds + time.perf_counter() - tic
+        if exact is None:
+            tried[index] = (replace(cand, test_rmse=None, improvement=None, score_change=None,
+                                    seconds=seconds,
+                                    note=f"fit failed: {self.pool.failures.get(key, '')}"),
+                            None)
+            return
+        rmse = float(exact.test_rmse or math.nan)
+        gain = 1.0 - rmse / self.current.test_rmse
+        tried[index] = (replace(cand, test_rmse=rmse, improvement=gain,
+                                score_change=held_out_criterion(exact, n_eff) - current_score,
+                                seconds=seconds), exact)
+        self.say(f"round {round_number}: {cand.effect}: held-out RMSE "
+                 f"{format_error(rmse, self.unit)} ({-100 * gain:+.1f} %) on every training "
+                 "sample")
+
+    def rescored(self, tried: list[tuple[Candidate, FitResult | None]], n_eff: float
+                 ) -> tuple[list[tuple[Candidate, FitResult | None]], float]:
+        """The round's candidates and effective sample count, from the best-fitting of the
+        current model and the candidates. The current residual of a model that lacks a strong
+        effect is correlated over whole strokes (``n_eff`` ~ 1), and ``H`` then weighs only
+        the parameter count; the candidates are scored again at the better residual's
+        ``n_eff``."""
+        fitted = [item for item in tried if item[1] is not None]
+        best_mse = min(fitted, key=lambda item: item[0].test_rmse or math.inf, default=None)
+        if best_mse is None or best_mse[1] is None:
+            return tried, n_eff
+        wider = effective_samples(best_mse[1].residuals[best_mse[1].test])
+        if wider <= n_eff:
+            return tried, n_eff
+        current_score = held_out_criterion(self.current.fit, wider)
+        return [
+            (replace(cand, score_change=None if result is None
+                     else self.pool.criterion(self._key_with(cand.effect), wider)
+                     - current_score), result)
+            for cand, result in tried
+        ], wider
+
+    def accept(self, effects: Sequence[Effect], result: FitResult, n_eff: float) -> None:
+        """Make the model with ``effects`` (fitted as ``result``) the current one, and an
+        accepted step."""
+        self.added[:] = effects
+        self.current = ModelFit(tuple(e.name for e in self.added), result,
+                                self.analyse(result), held_out_criterion(result, n_eff))
+        self.steps.append(self.current)
+
+    def run_round(self, round_number: int) -> bool:
+        """One round: try every remaining effect, add the one that passes the criterion
+        (:func:`judge_round`) and revise the set (:meth:`revise`), or, with none passing,
+        try the pairs; False when the loop stops."""
+        remaining = [e for e in self.usable if e not in self.added]
+        if not remaining:
+            return False
+        current, settings = self.current, self.settings
+        n_eff = effective_samples(current.fit.residuals[current.fit.test])
+        current_score = held_out_criterion(current.fit, n_eff)
+        tried = self.try_candidates(round_number, remaining, n_eff, current_score)
+        self.settle_near_target(tried, round_number, n_eff, current_score)
+        tried, n_eff = self.rescored(tried, n_eff)
+        accepted_name, rows = judge_round([(c, r is not None) for c, r in tried], settings)
+        self.candidates += [replace(row, screened=self._key_with(row.effect) in
+                                    self.pool.screened) for row in rows]
+        if accepted_name is None:
+            return self._try_pairs(round_number, n_eff)
+        effect = next(e for e in remaining if e.name == accepted_name)
+        result = next(r for c, r in tried if c.effect == accepted_name)
+        # a candidate that passes was fitted on every training sample (may_fall_to)
+        assert result is not None and self._key_with(effect.name) not in self.pool.screened
+        self.added.append(effect)
+        self.say(f"round {round_number}: added {effect.name}")
+        revised = self.revise(round_number, self.added, current, len(self.added))
+        key = frozenset(e.name for e in revised)
+        if revised != self.added:
+            result = self.pool.confirmed(key)
+            assert result is not None  # revise moves only to sets fitted on every sample
+        self.accept(revised, result, n_eff)
+        if key in self.visited:
+            return False  # the revision went back to a model already accepted: nothing new
+        self.visited.add(key)
+        return True
+
+    def _try_pairs(self, round_number: int, n_eff: float) -> bool:
+        """No single addition pays. Two effects whose errors cancel in part can each fail
+        alone and still explain the data together: with structure left and fewer than two
+        effects in the model, every pair is scored and the best taken (:meth:`revise`);
+        False when the loop stops."""
+        settings, data = self.settings, self.data
+        if len(self.added) >= 2 or len(self.usable) < 2 or not residual_structure(
+            self.current.analysis, settings, data.time_ordered, data.noise
+        ).any:
+            return False
+        revised = self.revise(round_number, list(self.added), self.current, 2)
+        key = frozenset(e.name for e in revised)
+        if len(revised) <= len(self.added) or key in self.visited:
+            return False
+        result = self.pool.confirmed(key)
+        assert result is not None  # revise moves only to sets fitted on every sample
+        self.accept(revised, result, n_eff)
+        self.visited.add(key)
+        self.say(f"round {round_number}: added the pair {' + '.join(self.current.effects)}")
+        return True
 
 
 def calibrate(
@@ -570,635 +1120,30 @@ def calibrate(
             or a base fit that fails.
     """
     settings = settings or LoopSettings()
-    if observation not in OBSERVATIONS:
-        raise PredictorError(
-            f"observation must be one of {', '.join(OBSERVATIONS)}, got {observation!r}"
-        )
+    started = time.perf_counter()
+    base_free = check_arguments(data, base, free, observation)
     say = progress or (lambda _text: None)
     unit = "N" if observation == "lateral_force" else base.output.unit
-    started = time.perf_counter()
-    if not data.test.any():
-        raise PredictorError("the data have no held-out samples; the loop needs a split")
-    base_free = tuple(free) if free is not None else default_free(base)
-    unknown = sorted(set(base_free) - {p.name for p in base.parameters})
-    if unknown:
-        raise PredictorError(
-            f"{base.name}: unknown parameter(s) {', '.join(unknown)} to fit; parameters: "
-            f"{', '.join(p.name for p in base.parameters)}"
-        )
-
-    given = data.inputs_for(base)
-    missing = sorted(v.name for v in base.inputs if v.default is None and v.name not in given)
-    if missing:
-        raise PredictorError(
-            f"model {base.name} needs input(s) {', '.join(missing)}, which these recordings "
-            f"do not provide (they give {', '.join(sorted(data.inputs))})"
-        )
-
-    def fit(effects: Sequence[Effect], start: Mapping[str, float],
-            budget: int | None = None, train: np.ndarray | None = None) -> FitResult:
-        model = _model(base, effects, start, observation)
-        wanted = {v.name for v in model.inputs}
-        inputs = data.inputs_for(model)
-        return fit_predictor(
-            model,
-            inputs,
-            data.observed,
-            free=_free(model, base_free, effects),
-            train=data.train if train is None else train,
-            test=data.test,
-            dynamic="time" in wanted,
-            max_evaluations=budget,
-        )
-
-    def analyse(result: FitResult) -> ResidualReport:
-        return analyse_residuals(
-            result.residuals[used],
-            used_regressors,
-            sample_rate_hz=data.sample_rate_hz,
-            bins=settings.bins,
-            # in time: the residual on the recording's own sample grid, 0 where not fitted
-            series=np.where(used, result.residuals, 0.0),
-            time_ordered=data.time_ordered,
-        )
-
-    used = data.used
-    used_regressors = {name: values[used] for name, values in data.regressors.items()}
-    skipped: dict[str, str] = {}
-    usable: list[Effect] = []
-    for effect in library:
-        why = effect.applies_to(base)
-        if why is None and not any(name in data.regressors for name in effect.signature):
-            why = (
-                f"its signature ({', '.join(effect.signature)}) does not vary in these data, "
-                "so it cannot be identified"
-            )
-        if why:
-            skipped[effect.name] = why
-        else:
-            usable.append(effect)
-
-    # what the models can act on: the base's inputs, and every usable effect's inputs and
-    # signature; structure against anything else (direction, position, recording) is foreign
-    claimed = frozenset(
-        {v.name for v in base.inputs}
-        | {name for effect in usable for name in effect.signature}
-        | {v.name for effect in usable for v in effect.inputs}
-    )
+    usable, skipped = usable_effects(library, base, data.regressors)
+    pool = ModelPool(data, base, base_free, observation,
+                     screening_mask(data.train, settings.screen_samples), say)
     say(f"fitting {base.name} on {int(data.train.sum())} training samples")
-    first = fit([], {})
-    n_eff = effective_samples(first.residuals[first.test])
-    current = ModelFit((), first, analyse(first), _score(first, n_eff))
+    search = EffectSearch(data, pool, usable, claimed_regressors(base, usable), settings,
+                     ResidualAnalyser(data, settings.bins), say, unit)
     say(
-        f"base: held-out RMSE {format_error(current.test_rmse, unit)}, training RMSE "
-        f"{format_error(current.train_rmse, unit)}"
+        f"base: held-out RMSE {format_error(search.current.test_rmse, unit)}, training RMSE "
+        f"{format_error(search.current.train_rmse, unit)}"
     )
-    steps = [current]
-    added: list[Effect] = []
-    candidates: list[Candidate] = []
-    # every model fitted, by its set of effect names: (effects in order, fit)
-    pool: dict[frozenset[str], tuple[tuple[Effect, ...], FitResult]] = {frozenset(): ((), first)}
-    visited: set[frozenset[str]] = {frozenset()}
-
-    # Screening (hcard.calibration.screening): a candidate is first fitted on every k-th
-    # training sample; the pool marks such a fit with how to fit it on every training sample
-    # (the start of the round that tried it, or None: from its best fitted subset, as
-    # fitted_set does), which `confirmed` does before any decision its figures could not make.
-    # A screened fit's figures are read through its start model's: `scale[key]` is the
-    # start's held-out RMSE fitted in full over the same model refitted on the screening
-    # samples (a fit on fewer samples generalises a little worse, 4 % on a high-pass with
-    # 7.7 ms against samples 8 ms apart; the candidate's share of that is the start's).
-    screen = screening_mask(data.train, settings.screen_samples)
-    screened: dict[frozenset[str], tuple[tuple[Effect, ...], Effect, FitResult] | None] = {}
-    scale: dict[frozenset[str], float] = {}
-    references: dict[int, tuple[FitResult, float]] = {}  # by id of the start fit (kept)
-
-    dynamic_sets: dict[frozenset[str], bool] = {}
-
-    def evaluates_every_sample(effects: Sequence[Effect]) -> bool:
-        """Whether the model with ``effects`` has memory (a ``time`` input): its fit evaluates
-        it on every sample whatever the training split (``fit_predictor``'s ``dynamic``), so a
-        screened fit saves only the optimiser's algebra, not worth its full refits near
-        decisions; such candidates are fitted on every training sample at once."""
-        key = frozenset(e.name for e in effects)
-        if key not in dynamic_sets:
-            model = _model(base, effects, {}, observation)
-            dynamic_sets[key] = "time" in {v.name for v in model.inputs}
-        return dynamic_sets[key]
-
-    def reference_scale(start: FitResult) -> float | None:
-        """Full over screened held-out RMSE of the model fitted in full as ``start``:
-        ``start``'s RMSE over that of the same model (``start.predictor``: its effects in the
-        order it was fitted with) refitted on the screening samples from ``start``'s
-        parameters, once per fit; None when that refit fails."""
-        if id(start) not in references:
-            model = start.predictor
-            try:
-                again = fit_predictor(
-                    model, data.inputs_for(model), data.observed, free=start.free,
-                    train=screen, test=data.test,
-                    dynamic="time" in {v.name for v in model.inputs},
-                    max_evaluations=CANDIDATE_EVALUATIONS)
-                ratio = float(start.test_rmse or math.nan) / float(again.test_rmse or math.nan)
-            except PredictorError:
-                ratio = math.nan
-            references[id(start)] = (start, ratio)
-        ratio = references[id(start)][1]
-        return ratio if math.isfinite(ratio) and ratio > 0 else None
-
-    def held_out(key: frozenset[str]) -> float:
-        """The pool's held-out RMSE of ``key``: a screened one scaled (``scale``)."""
-        return float(pool[key][1].test_rmse or math.nan) * scale.get(key, 1.0)
-
-    def criterion(key: frozenset[str], n_eff: float) -> float:
-        """``H`` of the pool's model ``key`` at ``n_eff``, from :func:`held_out`'s RMSE."""
-        return _score(pool[key][1], n_eff) + 2.0 * n_eff * math.log(scale.get(key, 1.0))
-
-    def fit_with(effects: Sequence[Effect], new: Effect, start: FitResult,
-                 train: np.ndarray | None = None) -> FitResult:
-        """``effects`` plus ``new``, from ``start``'s parameters and ``new``'s defaults; when
-        that ends worse on the training data than ``start`` (a local minimum), fitted again
-        from ``new``'s neutral values (which start at ``start``'s model) and the better of the
-        two by training error is kept. The held-out split never chooses. ``train``: the
-        training samples (default: all of them; the screening samples when screening)."""
-        mask = data.train if train is None else train
-        chosen = fit([*effects, new], start.params, CANDIDATE_EVALUATIONS, train)
-        if _rss(chosen, mask) > _rss(start, mask) * (1.0 + 1e-9) and new.neutral:
-            neutral = {f"{new.name}.{k}": v for k, v in new.neutral.items()}
-            second = fit([*effects, new], {**start.params, **neutral}, train=train)
-            if _rss(second, mask) < _rss(chosen, mask):
-                chosen = second
-        return chosen
-
-    def screen_with(effects: Sequence[Effect], new: Effect, start: FitResult) -> FitResult:
-        """The round's candidate ``effects`` plus ``new`` from ``start``, fitted on the
-        screening samples and pooled as screened (on every training sample, and pooled as
-        such, without screening or when the screened fit fails)."""
-        key = frozenset([*(e.name for e in effects), new.name])
-        worth = screen is not None and not evaluates_every_sample([*effects, new])
-        ratio = reference_scale(start) if worth else None
-        if ratio is not None:
-            try:
-                result = fit_with(effects, new, start, screen)
-            except PredictorError:
-                pass
-            else:
-                pool[key] = ((*effects, new), result)
-                screened[key] = (tuple(effects), new, start)
-                scale[key] = ratio
-                return result
-        result = fit_with(effects, new, start)
-        pool[key] = ((*effects, new), result)
-        return result
-
-    failures: dict[frozenset[str], str] = {}
-
-    def confirmed(key: frozenset[str]) -> FitResult | None:
-        """The pool's model ``key`` fitted on every training sample, as it is fitted without
-        screening: fitted now when the pool holds a screened fit of it (its place in the pool
-        kept). None when that fit fails (the reason in ``failures``; the model leaves the
-        pool) or the model was never fitted."""
-        if key not in screened:
-            entry = pool.get(key)
-            return entry[1] if entry is not None else None
-        recipe = screened.pop(key)
-        scale.pop(key, None)
-        effects = pool[key][0]
-        say(f"{' + '.join(e.name for e in effects)}: fitting on every training sample (its "
-            "screened figures are near a decision)")
-        if recipe is None:
-            result = from_subsets(effects, exact=True)
-        else:
-            others, new, start = recipe
-            try:
-                result = fit_with(others, new, start)
-            except PredictorError as exc:
-                failures[key] = str(exc)
-                say(f"{' + '.join(e.name for e in effects)}: fit failed ({exc})")
-                result = None
-        if result is None:
-            pool.pop(key, None)
-            return None
-        pool[key] = (effects, result)
-        return result
-
-    def fitted_set(effects: Sequence[Effect], exact: bool = False) -> FitResult | None:
-        """The fit of the model with ``effects`` (from the pool, else fitted now from the best
-        fitted model that lacks one of them); None when its fit fails. ``exact``: on every
-        training sample (a screened fit in the pool is fitted again), else the pool's fit
-        as it is, and a new fit screened."""
-        key = frozenset(e.name for e in effects)
-        if key in pool:
-            return confirmed(key) if exact else pool[key][1]
-        return from_subsets(effects, exact)
-
-    def from_subsets(effects: Sequence[Effect], exact: bool) -> FitResult | None:
-        """``effects`` fitted from the best fitted model that lacks one of them (by training
-        error over the whole training split), pooled; screened unless ``exact``. None when the
-        fit fails."""
-        key = frozenset(e.name for e in effects)
-        best: tuple[Effect, FitResult] | None = None
-        for effect in effects:
-            others = [e for e in effects if e is not effect]
-            smaller = fitted_set(others, exact)
-            if smaller is not None and (
-                best is None or _rss(smaller, data.train) < _rss(best[1], data.train)
-            ):
-                best = (effect, smaller)
-        if best is None:
-            return None
-        new, start = best
-        rest = [e for e in effects if e is not new]
-        start_key = frozenset(e.name for e in rest)
-        if not exact and screen is not None and not evaluates_every_sample(effects):
-            ratio = (scale.get(start_key) if start_key in screened
-                     else reference_scale(start))
-            if ratio is None:  # fitted in full from full subsets, as without screening
-                return from_subsets(effects, exact=True)
-            try:
-                result = fit_with(rest, new, start, screen)
-            except PredictorError:
-                return from_subsets(effects, exact=True)
-            pool[key] = (tuple(effects), result)
-            screened[key] = None
-            scale[key] = ratio
-            return result
-        try:
-            result = fit_with(rest, new, start)
-        except PredictorError as exc:
-            failures[key] = str(exc)
-            say(f"{' + '.join(e.name for e in effects)}: fit failed ({exc})")
-            return None
-        pool[key] = (tuple(effects), result)
-        return result
-
-    def earns_place(with_it: FitResult, without: FitResult, n_eff: float) -> str:
-        """Why the effect that makes ``without`` into ``with_it`` does not earn its place
-        (empty: it does): it must lower ``H`` and cut the held-out RMSE by
-        ``min_improvement``."""
-        if _score(with_it, n_eff) >= _score(without, n_eff):
-            return "does not lower the held-out criterion"
-        gain = 1.0 - float(with_it.test_rmse or math.nan) / float(without.test_rmse or math.nan)
-        if not gain >= settings.min_improvement:
-            return f"cuts the held-out RMSE by {gain:.1%}, less than {settings.min_improvement:.0%}"
-        return ""
-
-    def credited(effect: Effect, effects: Sequence[Effect]) -> bool:
-        """Whether ``effect`` may come into the set ``effects`` by a move: not when a dominant
-        foreign regressor explains its signature's structure in the residual of the set
-        without it (:func:`_beyond_foreign_structure`). A move judged by ``H`` alone may
-        otherwise bring in a signature that shows little structure at low power (a load
-        index over a few force levels)."""
-        without = fitted_set([e for e in effects if e is not effect], exact=True)
-        if without is None:
-            return False
-        eta2, foreign = _beyond_foreign_structure(effect, analyse(without),
-                                                  without.residuals[used], used_regressors,
-                                                  claimed, settings)
-        return foreign is None or eta2 >= settings.signature_eta2
-
-    def returns_to_own(key: frozenset[str], own: frozenset[str], n_eff: float) -> bool:
-        """Whether a move from the set ``own`` (fitted in full) to the screened set ``key``
-        would be undone by the pruning that follows it, whatever ``key``'s full fit: ``key``
-        is ``own`` plus one effect whose held-out RMSE cannot fall by ``min_improvement``
-        against ``own``'s (it does not earn its place), while with ``own``'s single effect
-        the set beats that effect alone by ``H`` and by ``min_improvement`` for certain (it
-        earns its place), all within the screening tolerance."""
-        extra = key - own
-        alone = frozenset(extra)
-        if len(own) != 1 or not own < key or len(extra) != 1 or alone not in pool:
-            return False
-        rmse = held_out(key)
-        if may_fall_to(rmse, (1.0 - settings.min_improvement) * held_out(own)):
-            return False
-        spread = SCREEN_TOLERANCE if alone in screened else 0.0
-        other_low = criterion(alone, n_eff) - (criterion_band(n_eff) if spread else 0.0)
-        if not criterion(key, n_eff) + criterion_band(n_eff) < other_low:
-            return False
-        gain = 1.0 - rmse * (1.0 + SCREEN_TOLERANCE) / (held_out(alone) * (1.0 - spread))
-        return gain >= settings.min_improvement
-
-    def revise(round_number: int, chosen: list[Effect], reference: ModelFit,
-               size: int) -> list[Effect]:
-        """The best set of ``size`` effects near ``chosen`` (every single effect or every pair
-        of the usable effects for a size of one or two, else every swap of one accepted effect
-        for an unused one), when it beats ``chosen`` by ``H``; then any effect that no longer
-        earns its place against the same set without it is dropped. ``n_eff`` is that of the
-        better of ``reference`` and ``chosen``'s held-out residual; ``reference`` (the round's
-        current model) sets the changes shown in the candidate table."""
-        chosen = list(chosen)
-        n_eff = max(
-            effective_samples(reference.fit.residuals[data.test]),
-            effective_samples(pool[frozenset(e.name for e in chosen)][1].residuals[data.test]),
-        )
-        if size <= 2:
-            alternatives = [list(group) for group in itertools.combinations(usable, size)]
-            note = f"{'pair' if size == 2 else 'swap'}, every one of the library scored"
-        else:
-            alternatives = [
-                [*(e for e in chosen if e is not out), swap]
-                for out in chosen
-                for swap in usable
-                if swap not in chosen
-            ]
-            note = "swap of one accepted effect for an unused one"
-        scores = {}
-        fresh: list[tuple[frozenset[str], float]] = []
-        for effects in alternatives:
-            key = frozenset(e.name for e in effects)
-            tic = time.perf_counter()
-            known = key in pool
-            result = fitted_set(effects)
-            if result is None:
-                continue
-            scores[key] = (effects, result, criterion(key, n_eff))
-            if not known:
-                fresh.append((key, time.perf_counter() - tic))
-        own = frozenset(e.name for e in chosen)
-        own_score = _score(pool[own][1], n_eff)
-        # a screened set that may beat the current one is fitted on every training sample
-        # before the move is judged, unless every such set is the current one plus an
-        # effect that pruning would take out again (`returns_to_own`): the current set stays
-        band = criterion_band(n_eff)
-        doubtful = [key for key, (_, _, score) in scores.items()
-                    if key in screened and score - band < own_score]
-        better = [key for key, (_, _, score) in scores.items()
-                  if key not in screened and key != own and score < own_score]
-        stay = (bool(doubtful) and not better
-                and all(returns_to_own(key, own, n_eff) for key in doubtful))
-        for key, (effects, _result, score) in list(scores.items()):
-            if key in screened and score - band < own_score and not stay:
-                tic = time.perf_counter()
-                exact = confirmed(key)
-                if exact is None:
-                    del scores[key]
-                else:
-                    scores[key] = (effects, exact, _score(exact, n_eff))
-                fresh = [(k, t + time.perf_counter() - tic if k == key else t)
-                         for k, t in fresh]
-        for key, seconds in fresh:
-            if key not in scores:
-                continue
-            effects, result, score = scores[key]
-            rmse = held_out(key)
-            say(f"round {round_number}: {' + '.join(sorted(key))}: held-out RMSE "
-                f"{format_error(rmse, unit)}{' (screened)' if key in screened else ''}")
-            candidates.append(
-                Candidate(round_number, " + ".join(e.name for e in effects), rmse,
-                          1.0 - rmse / reference.test_rmse,
-                          score - _score(reference.fit, n_eff),
-                          sum(len(e.parameters) for e in effects), 0.0, False,
-                          note, seconds, screened=key in screened)
-            )
-        for key in sorted(scores, key=lambda k: scores[k][2]):
-            if stay or key == own or scores[key][2] >= own_score:
-                break
-            effects = scores[key][0]
-            uncredited = [e.name for e in effects if e not in chosen and not credited(e, effects)]
-            if uncredited:
-                say(f"round {round_number}: not moved to {' + '.join(sorted(key))}: the "
-                    f"structure against the signature of {', '.join(uncredited)} is a foreign "
-                    "regressor's")
-                continue
-            chosen = list(effects)
-            say(f"round {round_number}: moved to {' + '.join(e.name for e in chosen)}")
-            break
-        while chosen:
-            whole = confirmed(frozenset(e.name for e in chosen))
-            assert whole is not None  # the set moved to, or a subset that earned its place
-            reasons = {}
-            for effect in chosen:
-                without = fitted_set([e for e in chosen if e is not effect], exact=True)
-                if without is not None:
-                    why = earns_place(whole, without, n_eff)
-                    if why:
-                        reasons[effect.name] = (why, _score(without, n_eff))
-            if not reasons:
-                break
-            weakest = min(reasons, key=lambda name: reasons[name][1])
-            chosen = [e for e in chosen if e.name != weakest]
-            say(f"round {round_number}: removed {weakest}: {reasons[weakest][0]}")
-        return chosen
-
-    def is_screened(item: tuple[Candidate, FitResult | None]) -> bool:
-        """Whether a candidate of the current round holds a screened fit."""
-        cand, result = item
-        return result is not None and frozenset(
-            [*(e.name for e in added), cand.effect]) in screened
-
-    def settle(tried: list[tuple[Candidate, FitResult | None]], index: int,
-               round_number: int, n_eff: float, current_score: float) -> None:
-        """Fit the screened candidate ``tried[index]`` of the current round on every training
-        sample; its row takes the full fit's figures (or says the fit failed)."""
-        cand = tried[index][0]
-        key = frozenset([*(e.name for e in added), cand.effect])
-        tic = time.perf_counter()
-        exact = confirmed(key)
-        seconds = cand.seconds + time.perf_counter() - tic
-        if exact is None:
-            tried[index] = (replace(cand, test_rmse=None, improvement=None, score_change=None,
-                                    seconds=seconds,
-                                    note=f"fit failed: {failures.get(key, '')}"), None)
-            return
-        rmse = float(exact.test_rmse or math.nan)
-        gain = 1.0 - rmse / current.test_rmse
-        tried[index] = (replace(cand, test_rmse=rmse, improvement=gain,
-                                score_change=_score(exact, n_eff) - current_score,
-                                seconds=seconds), exact)
-        say(f"round {round_number}: {cand.effect}: held-out RMSE {format_error(rmse, unit)} "
-            f"({-100 * gain:+.1f} %) on every training sample")
-
     for round_number in range(1, settings.max_effects + 1):
-        remaining = [e for e in usable if e not in added]
-        if not remaining:
+        if not search.run_round(round_number):
             break
-        n_eff = effective_samples(current.fit.residuals[current.fit.test])
-        current_score = _score(current.fit, n_eff)
-        tried: list[tuple[Candidate, FitResult | None]] = []
-        for effect in remaining:
-            eta2, _ = _beyond_foreign_structure(effect, current.analysis,
-                                                current.fit.residuals[used], used_regressors,
-                                                claimed, settings)
-            tic = time.perf_counter()
-            key = frozenset([*(e.name for e in added), effect.name])
-            try:
-                result: FitResult | None = (pool[key][1] if key in pool
-                                            else screen_with(added, effect, current.fit))
-            except PredictorError as exc:
-                tried.append(
-                    (
-                        Candidate(
-                            round_number,
-                            effect.name,
-                            None,
-                            None,
-                            None,
-                            len(effect.parameters),
-                            eta2,
-                            False,
-                            f"fit failed: {exc}",
-                            time.perf_counter() - tic,
-                        ),
-                        None,
-                    )
-                )
-                say(f"round {round_number}: {effect.name}: fit failed ({exc})")
-                continue
-            rmse = held_out(key)
-            gain = 1.0 - rmse / current.test_rmse
-            change = criterion(key, n_eff) - current_score
-            tried.append(
-                (
-                    Candidate(
-                        round_number,
-                        effect.name,
-                        rmse,
-                        gain,
-                        change,
-                        len(effect.parameters),
-                        eta2,
-                        False,
-                        "",
-                        time.perf_counter() - tic,
-                    ),
-                    result,
-                )
-            )
-            say(
-                f"round {round_number}: {effect.name}: held-out RMSE {format_error(rmse, unit)} "
-                f"({-100 * gain:+.1f} %){', screened' if key in screened else ''}"
-            )
-        # A screened candidate whose held-out RMSE may fall by min_improvement once fitted on
-        # every training sample is fitted so before the round decides. The round's n_eff
-        # (below) comes from the best-fitting candidate's residual: when some candidate may
-        # pass, that one is then a full fit too, for every candidate left screened lies above
-        # `target` by more than the tolerance.
-        target = (1.0 - settings.min_improvement) * current.test_rmse
-        for index, (cand, _) in enumerate(tried):
-            if is_screened(tried[index]) and may_fall_to(float(_known(cand.test_rmse)), target):
-                settle(tried, index, round_number, n_eff, current_score)
-        fitted = [item for item in tried if item[1] is not None]
-        # The round's effective sample count: from the best-fitting of the current model and
-        # the candidates. The current residual of a model that lacks a strong effect is
-        # correlated over whole strokes (n_eff ~ 1), and H then weighs only the parameter
-        # count; the candidates are scored again at the better residual's n_eff.
-        best_mse = min(fitted, key=lambda item: item[0].test_rmse or math.inf, default=None)
-        if best_mse is not None and best_mse[1] is not None:
-            wider = effective_samples(best_mse[1].residuals[best_mse[1].test])
-            if wider > n_eff:
-                n_eff = wider
-                current_score = _score(current.fit, n_eff)
-                tried = [
-                    (replace(cand, score_change=None if result is None
-                             else criterion(frozenset([*(e.name for e in added), cand.effect]),
-                                            n_eff) - current_score), result)
-                    for cand, result in tried
-                ]
-                fitted = [item for item in tried if item[1] is not None]
 
-        def failure(cand: Candidate) -> str:
-            """Why ``cand`` cannot be added (empty: it passes every check of the criterion)."""
-            if _known(cand.score_change) >= 0:
-                return "does not lower the held-out criterion"
-            if _known(cand.improvement) < settings.min_improvement:
-                return (
-                    f"cuts the held-out RMSE by {cand.improvement:.1%}, less than "
-                    f"{settings.min_improvement:.0%}"
-                )
-            if cand.signature_eta2 < settings.signature_eta2:
-                return "the residual shows no structure against its signature"
-            return ""
-
-        passing = [item for item in fitted if not failure(item[0])]
-        best = min(fitted, key=lambda item: _known(item[0].score_change), default=None)
-        chosen = min(passing, key=lambda item: _known(item[0].score_change), default=None)
-        accepted_name = chosen[0].effect if chosen is not None else None
-        reason = failure(best[0]) if best is not None else ""
-        for cand, _fit in tried:
-            if cand.effect == accepted_name:
-                note = (
-                    "added: best held-out criterion"
-                    if best is not None and cand is best[0]
-                    else "added: best held-out criterion of the candidates that pass every check"
-                )
-            elif cand.test_rmse is None:
-                note = cand.note
-            elif accepted_name is None and best is not None and cand is best[0]:
-                note = f"best of the round, not added: {reason}"
-            elif failure(cand):
-                note = f"not added: {failure(cand)}"
-            else:
-                note = "a better candidate in this round"
-            candidates.append(
-                Candidate(
-                    cand.round,
-                    cand.effect,
-                    cand.test_rmse,
-                    cand.improvement,
-                    cand.score_change,
-                    cand.added_parameters,
-                    cand.signature_eta2,
-                    cand.effect == accepted_name,
-                    note,
-                    cand.seconds,
-                    frozenset([*(e.name for e in added), cand.effect]) in screened,
-                )
-            )
-        if accepted_name is None:
-            # No single addition pays. Two effects whose errors cancel in part can each fail
-            # alone and still explain the data together: with structure left and fewer than
-            # two effects in the model, every pair is scored.
-            if len(added) >= 2 or len(usable) < 2 or not _structure(
-                current.analysis, settings, data.time_ordered, data.noise
-            ).any:
-                break
-            revised = revise(round_number, list(added), current, 2)
-            key = frozenset(e.name for e in revised)
-            if len(revised) <= len(added) or key in visited:
-                break
-            added[:] = revised
-            result = confirmed(key)
-            assert result is not None  # revise moves only to sets fitted on every sample
-            current = ModelFit(
-                tuple(e.name for e in added), result, analyse(result), _score(result, n_eff)
-            )
-            steps.append(current)
-            visited.add(key)
-            say(f"round {round_number}: added the pair {' + '.join(current.effects)}")
-            continue
-        effect = next(e for e in remaining if e.name == accepted_name)
-        result = next(r for c, r in tried if c.effect == accepted_name)
-        # a candidate that passes was fitted on every training sample (may_fall_to)
-        assert result is not None and frozenset(e.name for e in (*added, effect)) not in screened
-        added.append(effect)
-        say(f"round {round_number}: added {effect.name}")
-        revised = revise(round_number, added, current, len(added))
-        key = frozenset(e.name for e in revised)
-        if revised != added:
-            added[:] = revised
-            result = confirmed(key)
-            assert result is not None  # revise moves only to sets fitted on every sample
-        current = ModelFit(
-            tuple(e.name for e in added), result, analyse(result), _score(result, n_eff)
-        )
-        steps.append(current)
-        if key in visited:
-            break  # the revision went back to a model already accepted: nothing new to try
-        visited.add(key)
-
-    structure = _structure(current.analysis, settings, data.time_ordered, data.noise)
-    before = steps[0]
-    names = tuple(e.name for e in added)
-    comparison = _runner_up(current, pool, data, used, settings, screened, confirmed, scale)
-    if structure.any:
-        verdict = NOT_EXPLAINED
-    elif added and comparison is not None and comparison.ambiguous:
-        verdict = AMBIGUOUS
-    elif added:
-        verdict = EXPLAINED
-    else:
-        verdict = NO_EFFECT
-    summary = _summary(base.name, verdict, before, current, names, structure, unit)
+    current = search.current
+    structure = residual_structure(current.analysis, settings, data.time_ordered, data.noise)
+    names = tuple(e.name for e in search.added)
+    comparison = runner_up(current, pool, data, settings)
+    verdict = verdict_of(structure, names, comparison)
+    summary = summarise(base.name, verdict, search.steps[0], current, names, structure, unit)
     if comparison is not None:
         summary += f" {comparison.describe()[0].upper()}{comparison.describe()[1:]}."
     if not usable:
@@ -1211,10 +1156,10 @@ def calibrate(
         model=base.name,
         verdict=verdict,
         summary=summary,
-        before=before,
+        before=search.steps[0],
         after=current,
-        steps=tuple(steps),
-        candidates=tuple(candidates),
+        steps=tuple(search.steps),
+        candidates=tuple(search.candidates),
         structure=structure,
         library=tuple(e.name for e in library),
         skipped=skipped,
@@ -1242,121 +1187,121 @@ def with_bootstrap(
     return replace(result, bootstrap=boot)
 
 
-def _runner_up(
-    final: ModelFit,
-    pool: Mapping[frozenset[str], tuple[tuple[Effect, ...], FitResult]],
-    data: CalibrationData,
-    used: np.ndarray,
-    settings: LoopSettings,
-    screened: Container[frozenset[str]] = frozenset(),
-    confirmed: Callable[[frozenset[str]], FitResult | None] | None = None,
-    scale: Mapping[frozenset[str], float] | None = None,
-) -> Comparison | None:
+class RivalFigures:
+    """The criterion and held-out RMSE of the pooled models of one size, read as bounds of their
+    full fits (a screened model's lie within the screening tolerance of its scaled figures),
+    against the final model, at the final model's effective held-out sample count."""
+
+    def __init__(self, final: ModelFit, pool: ModelPool, settings: LoopSettings) -> None:
+        """``final``: the loop's final model; ``pool``: every model fitted; ``settings``: the
+        thresholds of earning a place and of separation."""
+        self.final = final
+        self.pool = pool
+        self.settings = settings
+        self.size = max(len(final.effects), 1)
+        self.own = frozenset(final.effects)
+        self.n_eff = effective_samples(final.fit.residuals[final.fit.test])
+        self.band = criterion_band(self.n_eff)
+        self.final_score = held_out_criterion(final.fit, self.n_eff)
+
+    def score(self, key: EffectSet) -> tuple[float, float, float]:
+        """``H`` of the pooled model ``key``, and the bounds within which its full fit's
+        lies."""
+        screened = key in self.pool.screened
+        factor = self.pool.scale.get(key, 1.0) if screened else 1.0
+        value = held_out_criterion(self.pool.fits[key][1], self.n_eff) \
+            + 2.0 * self.n_eff * math.log(factor)
+        spread = self.band if screened else 0.0
+        return value, value - spread, value + spread
+
+    def rmse(self, key: EffectSet) -> tuple[float, float]:
+        """Bounds of the held-out RMSE of the pooled model ``key`` fitted in full (output
+        unit)."""
+        screened = key in self.pool.screened
+        factor = self.pool.scale.get(key, 1.0) if screened else 1.0
+        value = float(self.pool.fits[key][1].test_rmse or math.nan) * factor
+        spread = SCREEN_TOLERANCE if screened else 0.0
+        return value * (1.0 - spread), value * (1.0 + spread)
+
+    def settle(self, keys: Sequence[EffectSet]) -> None:
+        """Fit the screened ones of ``keys`` on every training sample (failures leave the
+        pool)."""
+        for key in keys:
+            if key in self.pool.screened and key in self.pool.fits:
+                self.pool.confirmed(key)
+
+    def earns(self, key: EffectSet) -> bool | None:
+        """Whether every effect of ``key`` earns its place against the pooled model without
+        it (lower ``H``, held-out RMSE ``min_improvement`` lower; no verdict where the model
+        without it was not fitted); None when a full fit could decide otherwise."""
+        _, low, high = self.score(key)
+        fall, rise = self.rmse(key)
+        verdict: bool | None = True
+        for name in key:
+            smaller = key - {name}
+            if smaller not in self.pool.fits:
+                continue
+            _, small_low, small_high = self.score(smaller)
+            small_fall, small_rise = self.rmse(smaller)
+            floor = self.settings.min_improvement
+            if low >= small_high or not (1.0 - fall / small_rise >= floor):
+                return False
+            if high >= small_low or not (1.0 - rise / small_fall >= floor):
+                verdict = None
+        return verdict
+
+    def rivals(self) -> list[EffectSet]:
+        """The pooled models with as many effects as the final one (one for the base), other
+        than it."""
+        return [key for key in self.pool.fits if len(key) == self.size and key != self.own]
+
+    def may_be_close(self, key: EffectSet) -> bool:
+        """Whether the full fit of ``key`` may lie within the separation thresholds."""
+        settings = self.settings
+        return (self.score(key)[1] - self.final_score < settings.separation_criterion
+                or self.rmse(key)[0] / self.final.test_rmse - 1.0 < settings.separation_rmse)
+
+
+def runner_up(final: ModelFit, pool: ModelPool, data: CalibrationData,
+              settings: LoopSettings) -> Comparison | None:
     """The final model against its runner-up: the best other fitted model with as many effects
     (one effect when the final model has none) in which every effect earns its place (lowers
     ``H`` and cuts the held-out RMSE by ``min_improvement`` against the same model without it,
     where that was fitted; a pair of a real effect and one left at its neutral values is the
     single effect again, not a rival), else the best of them all; both scored at the final
-    model's effective held-out sample count (:mod:`hcard.calibration.selection`).
+    model's effective held-out sample count (:mod:`hcard.calibration.selection`). None when
+    ``pool`` holds no rival.
 
-    ``screened``: the pool's models fitted on the screening samples only, which
-    ``confirmed(key)`` fits on every training sample (returning None when that fails), their
-    held-out RMSE read multiplied by ``scale[key]`` (their start's full over screened). Every
-    decision a screened figure could get wrong by :data:`SCREEN_TOLERANCE` is made on full
-    fits: whether a rival earns its place, and, when some rival may come within the
-    separation thresholds of the final model, which rival is best. When none can (or the
-    final model is the base model, whose comparison decides nothing), the comparison is not
-    ambiguous whichever rival it is: the runner-up is the rival of lowest ``H`` taking
-    screened figures as they are, fitted in full, and fitted again while another screened
-    rival looks better than its full fit. It is the runner-up without screening, or a rival
-    whose ``H`` lies within the tolerance band (:func:`~hcard.calibration.screening.
-    criterion_band`) of it."""
-    size = max(len(final.effects), 1)
-    own = frozenset(final.effects)
-    n_eff = effective_samples(final.fit.residuals[final.fit.test])
-    band = criterion_band(n_eff)
-    final_score = _score(final.fit, n_eff)
-
-    def score(key: frozenset[str]) -> tuple[float, float, float]:
-        """``H`` of the pool's model ``key``, and the bounds within which its full fit's
-        lies."""
-        factor = (scale or {}).get(key, 1.0) if key in screened else 1.0
-        value = _score(pool[key][1], n_eff) + 2.0 * n_eff * math.log(factor)
-        spread = band if key in screened else 0.0
-        return value, value - spread, value + spread
-
-    def rmse(key: frozenset[str]) -> tuple[float, float]:
-        """Bounds of the held-out RMSE of the pool's model ``key`` fitted in full."""
-        factor = (scale or {}).get(key, 1.0) if key in screened else 1.0
-        value = float(pool[key][1].test_rmse or math.nan) * factor
-        spread = SCREEN_TOLERANCE if key in screened else 0.0
-        return value * (1.0 - spread), value * (1.0 + spread)
-
-    def settle(keys: Sequence[frozenset[str]]) -> None:
-        """Fit the screened ones of ``keys`` on every training sample (failures leave the
-        pool)."""
-        for key in keys:
-            if key in screened and key in pool and confirmed is not None:
-                confirmed(key)
-
-    def earns(key: frozenset[str]) -> bool | None:
-        """Whether every effect of ``key`` earns its place against the pool's model without
-        it; None when a full fit could decide otherwise."""
-        _, low, high = score(key)
-        fall, rise = rmse(key)
-        verdict: bool | None = True
-        for name in key:
-            smaller = key - {name}
-            if smaller not in pool:
-                continue
-            _, small_low, small_high = score(smaller)
-            small_fall, small_rise = rmse(smaller)
-            if low >= small_high or not (1.0 - fall / small_rise >= settings.min_improvement):
-                return False
-            if high >= small_low or not (1.0 - rise / small_fall >= settings.min_improvement):
-                verdict = None
-        return verdict
-
-    def rivals() -> list[frozenset[str]]:
-        return [key for key in pool if len(key) == size and key != own]
-
-    for key in rivals():
-        if key in pool and earns(key) is None:
-            settle([key, *(key - {name} for name in key)])
-    if not rivals():
+    Models of ``pool`` fitted on the screening samples only are fitted on every training
+    sample (:meth:`~hcard.calibration.model_pool.ModelPool.confirmed`) before any decision a
+    screened figure could get wrong by :data:`SCREEN_TOLERANCE` (:class:`RivalFigures`):
+    whether a rival earns its place, and, when some rival may come within the separation
+    thresholds of the final model, which rival is best. When none can (or the final model is
+    the base model, whose comparison decides nothing), the comparison is not ambiguous
+    whichever rival it is: the runner-up is the rival of lowest ``H`` taking screened figures
+    as they are, fitted in full, and fitted again while another screened rival looks better
+    than its full fit. It is the runner-up without screening, or a rival whose ``H`` lies
+    within the tolerance band (:func:`~hcard.calibration.screening.criterion_band`) of it."""
+    figures = RivalFigures(final, pool, settings)
+    for key in figures.rivals():
+        if key in pool.fits and figures.earns(key) is None:
+            figures.settle([key, *(key - {name} for name in key)])
+    if not figures.rivals():
         return None
-    admissible = [key for key in rivals() if earns(key)]
-    candidates = admissible or rivals()
-
-    def may_be_close(key: frozenset[str]) -> bool:
-        """Whether the full fit of ``key`` may lie within the separation thresholds."""
-        return (score(key)[1] - final_score < settings.separation_criterion
-                or rmse(key)[0] / final.test_rmse - 1.0 < settings.separation_rmse)
-
-    # When a rival may make the comparison ambiguous, the best rival by full fits: every
-    # screened one whose full fit may beat the best is fitted on every training sample. Else
-    # the comparison is not ambiguous whichever rival it is: the best taking screened figures
-    # as they are, fitted in full, again while another screened one looks better.
-    exact = bool(final.effects) and any(may_be_close(key) for key in candidates)
-    while True:
-        candidates = [key for key in candidates if key in pool]
-        if not candidates:
-            return None
-        best = min(candidates, key=lambda k: score(k)[0])
-        doubtful = [key for key in candidates if key in screened and (
-            score(key)[1] < score(best)[2] if exact else key == best)]
-        if not doubtful or confirmed is None:
-            break
-        settle(doubtful)
-    effects, rival = pool[best]
+    admissible = [key for key in figures.rivals() if figures.earns(key)]
+    best = _best_rival(figures, admissible or figures.rivals())
+    if best is None:
+        return None
+    effects, rival = pool.fits[best]
+    used = data.used
     observed = data.observed[used]
     return compare(
         final.effects,
-        final_score,
+        figures.final_score,
         final.test_rmse,
         observed - final.fit.residuals[used],
         tuple(e.name for e in effects),
-        _score(rival, n_eff),
+        held_out_criterion(rival, figures.n_eff),
         float(rival.test_rmse or math.nan),
         observed - rival.residuals[used],
         {name: values[used] for name, values in data.regressors.items()},
@@ -1366,7 +1311,27 @@ def _runner_up(
     )
 
 
-def _summary(
+def _best_rival(figures: RivalFigures, candidates: list[EffectSet]) -> EffectSet | None:
+    """The rival of ``candidates`` of lowest ``H``. When a rival may make the comparison
+    ambiguous, by full fits: every screened one whose full fit may beat the best is fitted on
+    every training sample. Else the best taking screened figures as they are, fitted in full,
+    again while another screened one looks better. None when every fit failed."""
+    pool = figures.pool
+    exact = bool(figures.final.effects) and any(figures.may_be_close(key)
+                                                for key in candidates)
+    while True:
+        candidates = [key for key in candidates if key in pool.fits]
+        if not candidates:
+            return None
+        best = min(candidates, key=lambda k: figures.score(k)[0])
+        doubtful = [key for key in candidates if key in pool.screened and (
+            figures.score(key)[1] < figures.score(best)[2] if exact else key == best)]
+        if not doubtful:
+            return best
+        figures.settle(doubtful)
+
+
+def summarise(
     model: str,
     verdict: str,
     before: ModelFit,
@@ -1375,6 +1340,9 @@ def _summary(
     structure: Structure,
     unit: str,
 ) -> str:
+    """The result in one paragraph: the held-out RMSE ``before`` and ``after`` (in mN for a
+    force ``unit`` of N), the effects ``added`` to ``model``, and what the ``verdict`` says is
+    left in the residual (``structure``, small structure included)."""
     change = 1.0 - after.test_rmse / before.test_rmse
     text = (
         f"held-out RMSE {format_error(before.test_rmse, unit)} before, "

@@ -12,17 +12,49 @@ import pytest
 from scipy import stats
 from test_selection_recordings import Hidden, ar1, uv_recording
 
-from hcard.calibration.dataset import prepare
-from hcard.calibration.loop import NO_EFFECT, NOT_EXPLAINED, calibrate
+from hcard.calibration.dataset import CalibrationData, prepare
+from hcard.calibration.loop import (
+    NO_EFFECT,
+    NOT_EXPLAINED,
+    LoopSettings,
+    ModelFit,
+    ResidualAnalyser,
+    Structure,
+    calibrate,
+    default_free,
+    residual_structure,
+    summarise,
+    verdict_of,
+)
+from hcard.calibration.model_pool import ModelPool
 from hcard.calibration.noise import detectable_eta2, measure_noise
 from hcard.plugins.registry import get_registry
+
+BASE = "dimensionless-group"
 
 
 def run(m):
     registry = get_registry()
     data = prepare([m])
-    return data, calibrate(data, registry.get("predictor", "dimensionless-group"),
+    return data, calibrate(data, registry.get("predictor", BASE),
                            list(registry.calibration_effects.values()))
+
+
+def base_model_left(m) -> tuple[CalibrationData, Structure, str]:
+    """The structure left by the base model alone and the loop's summary when it adds no
+    effect (the steps of :func:`~hcard.calibration.loop.calibrate` after its base fit). On
+    these clean recordings the whole loop adds none: that is shown end to end in
+    test_independent_recordings.py (clean white and coloured noise) and test_loop.py."""
+    data = prepare([m])
+    base = get_registry().get("predictor", BASE)
+    settings = LoopSettings()
+    pool = ModelPool(data, base, default_free(base), "lateral_force", None, lambda _text: None)
+    fit = pool.fit([], {})
+    analysis = ResidualAnalyser(data, settings.bins)(fit)
+    structure = residual_structure(analysis, settings, data.time_ordered, data.noise)
+    verdict = verdict_of(structure, (), None)
+    model = ModelFit((), fit, analysis, 0.0)
+    return data, structure, summarise(BASE, verdict, model, model, (), structure, "N")
 
 
 @pytest.mark.parametrize(("seed", "noise"), [(1, 1.5e-3), (2, 3e-3)])
@@ -43,32 +75,34 @@ def test_a_direction_dependent_friction_is_reported_against_direction(
 def test_coloured_noise_on_clean_data_is_not_structure(
     seed: int, noise: float, lag1: float
 ) -> None:
-    data, result = run(uv_recording(Hidden(), seed=seed, noise_n=noise, noise_lag1=lag1))
+    data, structure, summary = base_model_left(
+        uv_recording(Hidden(), seed=seed, noise_n=noise, noise_lag1=lag1))
     # the noise model, measured out of contact, finds the AR(1) the recording was made with
     assert data.noise is not None
     assert data.noise.lag1 == pytest.approx(lag1, abs=0.04)
     assert data.noise.sigma == pytest.approx(noise, rel=0.15)
     # a fixed lag-1 threshold of 0.5 would call this residual structured in time; against
     # the noise's own autocorrelation it is not
-    assert result.structure.autocorrelation > 0.5
-    assert not result.structure.in_time
-    assert result.verdict == NO_EFFECT, result.summary
-    assert result.structure.time_threshold == pytest.approx(lag1 + (1 - lag1) / 2, abs=0.03)
+    assert structure.autocorrelation > 0.5
+    assert not structure.in_time
+    assert verdict_of(structure, (), None) == NO_EFFECT, summary
+    assert structure.time_threshold == pytest.approx(lag1 + (1 - lag1) / 2, abs=0.03)
 
 
 @pytest.mark.parametrize("seed", [1, 2])
 def test_small_but_significant_structure_is_reported_as_such(seed: int) -> None:
     # 0.1 % direction dependence: significant with ~10,000 samples, far below eta2 0.10
-    _data, result = run(uv_recording(Hidden(direction=0.001), seed=seed, noise_n=1e-3))
-    small = {name: (eta2, p) for name, eta2, p in result.structure.small}
-    assert "direction" in small, result.summary
+    _data, structure, summary = base_model_left(
+        uv_recording(Hidden(direction=0.001), seed=seed, noise_n=1e-3))
+    small = {name: (eta2, p) for name, eta2, p in structure.small}
+    assert "direction" in small, summary
     eta2, p = small["direction"]
-    assert 0.0 < eta2 < result.settings.min_eta2 and p < result.settings.alpha
-    assert "direction" not in {name for name, _, _ in result.structure.regressors}
-    assert "small structure against" in result.summary and "direction: eta2" in result.summary
-    assert "below the practical threshold" in result.summary
+    assert 0.0 < eta2 < LoopSettings().min_eta2 and p < LoopSettings().alpha
+    assert "direction" not in {name for name, _, _ in structure.regressors}
+    assert "small structure against" in summary and "direction: eta2" in summary
+    assert "below the practical threshold" in summary
     # the power is stated per regressor and is what lets such a structure be seen
-    detectable = dict(result.structure.detectable)
+    detectable = dict(structure.detectable)
     assert detectable["direction"] < eta2
 
 

@@ -367,6 +367,212 @@ def _apply_output(
     return output
 
 
+@dataclass(frozen=True)
+class _Plan:
+    """What one synthesis simulates: the device's models and the hidden effects, sorted by the
+    component they act on.
+
+    Attributes:
+        device: the device name (:data:`DEVICES`).
+        chosen: effect name -> true parameter values (:func:`resolve_effects`).
+        config: the device's configuration.
+        uv_model: the UV factor's model, or None (plate off).
+        ev_model: the EV force's model, or None (no electrodes driven).
+        generic: the effects applied with the effect plugin's own transforms, name ->
+            (effect, parameters).
+        on_uv, on_ev, on_total: those acting on ``mu'``, on ``F_e`` and on the total lateral
+            force.
+        finger: the bare finger's friction model, or None (Coulomb, ``mu_f = mu0``).
+    """
+
+    device: str
+    chosen: Mapping[str, Mapping[str, float]]
+    config: DeviceConfig
+    uv_model: DimensionlessGroup | None
+    ev_model: Kaczmarek | None
+    generic: dict[str, tuple[Any, dict[str, float]]]
+    on_uv: list[tuple[Any, dict[str, float]]]
+    on_ev: list[tuple[Any, dict[str, float]]]
+    on_total: list[tuple[Any, dict[str, float]]]
+    finger: FingerFriction | None
+
+
+def _check_noise(lateral_noise_n: float, normal_noise_n: float, drift_n: float) -> None:
+    """Refuse a noise level (N) that is not a finite number >= 0 (ValueError naming it)."""
+    for name, value in (
+        ("lateral_noise_n", lateral_noise_n),
+        ("normal_noise_n", normal_noise_n),
+        ("drift_n", drift_n),
+    ):
+        if not (math.isfinite(value) and value >= 0):
+            raise ValueError(f"{name} must be a finite number >= 0, got {value}")
+
+
+def _plan(device: str, effects: Mapping[str, Mapping[str, float]] | None) -> _Plan:
+    """The :class:`_Plan` of ``effects`` on ``device`` (ValueError: unknown device, effect or
+    parameter, or an effect on an output the simulation does not model)."""
+    if device not in DEVICES:
+        raise ValueError(f"unknown device {device!r}; devices: {', '.join(DEVICES)}")
+    chosen = resolve_effects(effects)
+    config, uv_model, ev_model = _models(device)
+    library = _library()
+    generic = {
+        name: (library[name], params)
+        for name, params in chosen.items()
+        if name not in PHYSICAL_EFFECTS and name != SURFACE_PATCH
+    }
+    on_other = sorted(
+        name
+        for name, (effect, _) in generic.items()
+        if effect.outputs and not {"relative_friction", "electrostatic_force"} & set(effect.outputs)
+    )
+    if on_other:
+        raise ValueError(
+            f"effect(s) {', '.join(on_other)} apply to outputs the tribometer simulation does "
+            "not model"
+        )
+    return _Plan(
+        device=device,
+        chosen=chosen,
+        config=config,
+        uv_model=uv_model,
+        ev_model=ev_model,
+        generic=generic,
+        on_uv=[e for e in generic.values() if "relative_friction" in e[0].outputs],
+        on_ev=[e for e in generic.values() if "electrostatic_force" in e[0].outputs],
+        on_total=[e for e in generic.values() if not e[0].outputs],
+        finger=_finger(config.mu0, chosen),
+    )
+
+
+def _acting_drive(plan: _Plan, s: _Schedule, sample_rate_hz: float
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The plate amplitude (m) and voltage (V) acting on the finger: the commanded ones of
+    ``s`` (0 where the device lacks the actuator), the amplitude through the actuator's
+    first-order envelope (``actuator-bandwidth``, exact discrete step response at
+    ``sample_rate_hz``), the voltage through the skin's high pass (``charge-leakage``)."""
+    n = s.t.size
+    chosen, ev_model = plan.chosen, plan.ev_model
+    uv_ok = plan.uv_model is not None
+    amplitude = s.amplitude if uv_ok else np.zeros(n)
+    if uv_ok and "actuator-bandwidth" in chosen:
+        tau = chosen["actuator-bandwidth"]["time_constant"]
+        a = math.exp(-1.0 / (sample_rate_hz * tau))
+        from scipy.signal import lfilter  # here: scipy.signal costs ~0.6 s to import
+        amplitude = lfilter([0.0, 1.0 - a], [1.0, -a], s.amplitude)
+    voltage = s.voltage if ev_model is not None else np.zeros(n)
+    if ev_model is not None and "charge-leakage" in chosen:
+        leakage = ChargeLeakage(  # a constant tau_d: Eq. 3.22 as the pure high pass
+            tau_d_curve=None,
+            tau_d=chosen["charge-leakage"]["time_constant"], tau_d_exponent=0.0,
+            **{p.name: ev_model[p.name] for p in Kaczmarek.parameters},
+        )
+        voltage = leakage.simulate(s.t, s.voltage).effective_voltage
+    return amplitude, voltage
+
+
+def _effect_inputs(plan: _Plan, s: _Schedule, pressure: float, amplitude: np.ndarray,
+                   voltage: np.ndarray) -> dict[str, np.ndarray]:
+    """The inputs every effect sees (module docstring), SI units, after the effects on the
+    total force transformed them: time (s), stroke (strokes since rest), |speed| (m/s), the
+    true normal force (N; 1 N at rest), pressure (Pa), the acting amplitude (m) and voltage
+    (V), and each other effect input at its default."""
+    n = s.t.size
+    session_stroke = np.where(s.stroke >= 0, s.stroke, 0).astype(np.float64)
+    base = {
+        "time": s.t,
+        "stroke": session_stroke,
+        "speed": np.abs(s.speed),
+        # physics on contact samples; 1 N at rest
+        "normal_force": np.where(s.contact, s.normal_force, 1.0),
+        "pressure": np.full(n, float(pressure)),
+        "amplitude": amplitude,
+        "voltage": voltage,
+    }
+    for effect, _ in plan.generic.values():
+        for variable in effect.inputs:
+            if variable.name not in base and variable.default is not None:
+                base[variable.name] = np.full(n, float(variable.default))
+    return _apply_inputs(plan.on_total, base)
+
+
+def _relative_friction(plan: _Plan, total_in: dict[str, np.ndarray]) -> np.ndarray:
+    """The UV factor ``mu'`` (Eqs. 2.30-2.33, dimensionless) with its effects; 1 with the
+    plate off."""
+    if plan.uv_model is None:
+        return np.ones(total_in["time"].size)
+    uv_in = _apply_inputs(plan.on_uv, total_in)
+    mu_uv = plan.uv_model.forward(
+        amplitude=uv_in["amplitude"],
+        frequency=plan.config.limits.plate_frequency,
+        speed=np.abs(uv_in["speed"]),
+        normal_force=uv_in["normal_force"],
+    )
+    return _apply_output(plan.on_uv, mu_uv, uv_in)
+
+
+def _electrostatic_force(plan: _Plan, total_in: dict[str, np.ndarray]) -> np.ndarray:
+    """The EV force ``F_e`` (Eq. 3.12, or Eq. 3.17 with an ``air-layer``), N, with its
+    effects; 0 without electrodes driven."""
+    ev_model = plan.ev_model
+    if ev_model is None:
+        return np.zeros(total_in["time"].size)
+    ev_in = _apply_inputs(plan.on_ev, total_in)
+    if "air-layer" in plan.chosen:
+        air = AirLayer(**{p.name: ev_model[p.name] for p in Kaczmarek.parameters})
+        gap = plan.chosen["air-layer"]["air_gap"] / ev_in["normal_force"]
+        force_e = air.forward(voltage=ev_in["voltage"], air_gap=gap)
+    else:
+        force_e = ev_model.forward(voltage=ev_in["voltage"])
+    return _apply_output(plan.on_ev, force_e, ev_in)
+
+
+def _lateral_force(plan: _Plan, s: _Schedule, total_in: dict[str, np.ndarray],
+                   mu_uv: np.ndarray, force_e: np.ndarray) -> np.ndarray:
+    """The true friction force, N: ``mu_f mu' (Fn + F_e)`` (Eq. 4.1 with Eq. 3.1) with the
+    finger's friction, the effects on the total force and a ``surface-patch``; 0 at rest."""
+    n = s.t.size
+    fn_phys = total_in["normal_force"]
+    reaction = fn_phys + force_e  # Eq. 3.1: the attraction presses the skin as well
+    if plan.finger is None:
+        mu_f = np.full(n, plan.config.mu0)
+    else:
+        # Eq. 2.35 on the reaction force; occlusion over the time in contact (Fig. 1.11b)
+        occlusion_time = np.cumsum(np.diff(s.t, prepend=s.t[:1]) * s.contact)
+        mu_f = plan.finger.friction_coefficient(
+            normal_force=np.maximum(reaction, 1e-9),
+            speed=np.abs(total_in["speed"]),
+            contact_time=occlusion_time,
+        )
+    lateral = mu_f * mu_uv * reaction
+    lateral = _apply_output(plan.on_total, lateral, total_in)
+    if SURFACE_PATCH in plan.chosen:
+        patch = plan.chosen[SURFACE_PATCH]
+        lateral = lateral * (1.0 + patch["depth"] * _patch(s.x, patch["x0"], patch["width"]))
+    return np.where(s.contact, lateral, 0.0)
+
+
+def _recorded_forces(s: _Schedule, lateral: np.ndarray, sample_rate_hz: float,
+                     lateral_noise_n: float, normal_noise_n: float, drift_n: float,
+                     noise: np.random.Generator, drift: np.random.Generator
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """The recorded ``(lateral, normal)`` forces, N: the lateral force signed with the
+    direction of motion (rule MF3) plus the sensor's drifting zero (from ``drift``) and white
+    noise; the normal force plus white noise, at least 11 mN in contact, clipped to +-9 mN at
+    rest (both noises from ``noise``, lateral first)."""
+    n = s.t.size
+    direction = np.where(s.speed < 0, -1.0, 1.0)
+    fl = direction * lateral + _drift(n, sample_rate_hz, drift_n, drift)
+    fl = fl + lateral_noise_n * noise.normal(size=n)
+    fn_noise = normal_noise_n * noise.normal(size=n)
+    fn_rec = np.where(
+        s.contact,
+        np.maximum(s.normal_force + fn_noise, MIN_CONTACT_FORCE_N),
+        np.clip(fn_noise, -REST_NOISE_LIMIT_N, REST_NOISE_LIMIT_N),
+    )
+    return fl, fn_rec
+
+
 def synthesize(
     device: str,
     effects: Mapping[str, Mapping[str, float]] | None = None,
@@ -400,142 +606,33 @@ def synthesize(
     """
     if device not in DEVICES:
         raise ValueError(f"unknown device {device!r}; devices: {', '.join(DEVICES)}")
-    for name, value in (
-        ("lateral_noise_n", lateral_noise_n),
-        ("normal_noise_n", normal_noise_n),
-        ("drift_n", drift_n),
-    ):
-        if not (math.isfinite(value) and value >= 0):
-            raise ValueError(f"{name} must be a finite number >= 0, got {value}")
-    chosen = resolve_effects(effects)
-    config, uv_model, ev_model = _models(device)
-    library = _library()
-    generic = {
-        name: (library[name], params)
-        for name, params in chosen.items()
-        if name not in PHYSICAL_EFFECTS and name != SURFACE_PATCH
-    }
-    on_uv = [e for e in generic.values() if "relative_friction" in e[0].outputs]
-    on_ev = [e for e in generic.values() if "electrostatic_force" in e[0].outputs]
-    on_total = [e for e in generic.values() if not e[0].outputs]
-    on_other = sorted(
-        name
-        for name, (effect, _) in generic.items()
-        if effect.outputs and not {"relative_friction", "electrostatic_force"} & set(effect.outputs)
-    )
-    if on_other:
-        raise ValueError(
-            f"effect(s) {', '.join(on_other)} apply to outputs the tribometer simulation does "
-            "not model"
-        )
-    finger = _finger(config.mu0, chosen)
-    uv_ok = uv_model is not None
-
+    _check_noise(lateral_noise_n, normal_noise_n, drift_n)
+    plan = _plan(device, effects)
+    uv_ok = plan.uv_model is not None
     recordings = []
     for index, pressure in enumerate(protocol.pressures_pa):
         streams = [np.random.default_rng([seed, index, k]) for k in range(3)]
         s = _schedule(protocol, streams[0])
         n = s.t.size
-        fn = np.where(s.contact, s.normal_force, 1.0)  # physics on contact samples; 1 N at rest
-        speed = np.abs(s.speed)
-
-        amplitude = s.amplitude if uv_ok else np.zeros(n)
-        if uv_ok and "actuator-bandwidth" in chosen:
-            tau = chosen["actuator-bandwidth"]["time_constant"]
-            a = math.exp(-1.0 / (protocol.sample_rate_hz * tau))
-            from scipy.signal import lfilter  # here: scipy.signal costs ~0.6 s to import
-            amplitude = lfilter([0.0, 1.0 - a], [1.0, -a], s.amplitude)
-        voltage = s.voltage if ev_model is not None else np.zeros(n)
-        if ev_model is not None and "charge-leakage" in chosen:
-            leakage = ChargeLeakage(  # a constant tau_d: Eq. 3.22 as the pure high pass
-                tau_d_curve=None,
-                tau_d=chosen["charge-leakage"]["time_constant"], tau_d_exponent=0.0,
-                **{p.name: ev_model[p.name] for p in Kaczmarek.parameters},
-            )
-            voltage = leakage.simulate(s.t, s.voltage).effective_voltage
-
-        session_stroke = np.where(s.stroke >= 0, s.stroke, 0).astype(np.float64)
-        base = {
-            "time": s.t,
-            "stroke": session_stroke,
-            "speed": speed,
-            "normal_force": fn,
-            "pressure": np.full(n, float(pressure)),
-            "amplitude": amplitude,
-            "voltage": voltage,
-        }
-        for effect, _ in generic.values():
-            for variable in effect.inputs:
-                if variable.name not in base and variable.default is not None:
-                    base[variable.name] = np.full(n, float(variable.default))
-        total_in = _apply_inputs(on_total, base)
-
-        if uv_model is not None:  # uv_ok
-            uv_in = _apply_inputs(on_uv, total_in)
-            mu_uv = uv_model.forward(
-                amplitude=uv_in["amplitude"],
-                frequency=config.limits.plate_frequency,
-                speed=np.abs(uv_in["speed"]),
-                normal_force=uv_in["normal_force"],
-            )
-            mu_uv = _apply_output(on_uv, mu_uv, uv_in)
-        else:
-            mu_uv = np.ones(n)
-        if ev_model is not None:
-            ev_in = _apply_inputs(on_ev, total_in)
-            if "air-layer" in chosen:
-                air = AirLayer(**{p.name: ev_model[p.name] for p in Kaczmarek.parameters})
-                gap = chosen["air-layer"]["air_gap"] / ev_in["normal_force"]
-                force_e = air.forward(voltage=ev_in["voltage"], air_gap=gap)
-            else:
-                force_e = ev_model.forward(voltage=ev_in["voltage"])
-            force_e = _apply_output(on_ev, force_e, ev_in)
-        else:
-            force_e = np.zeros(n)
-
-        fn_phys = total_in["normal_force"]
-        reaction = fn_phys + force_e  # Eq. 3.1: the attraction presses the skin as well
-        if finger is None:
-            mu_f = np.full(n, config.mu0)
-        else:
-            # Eq. 2.35 on the reaction force; occlusion over the time in contact (Fig. 1.11b)
-            occlusion_time = np.cumsum(np.diff(s.t, prepend=s.t[:1]) * s.contact)
-            mu_f = finger.friction_coefficient(
-                normal_force=np.maximum(reaction, 1e-9),
-                speed=np.abs(total_in["speed"]),
-                contact_time=occlusion_time,
-            )
-        lateral = mu_f * mu_uv * reaction
-        lateral = _apply_output(on_total, lateral, total_in)
-        if SURFACE_PATCH in chosen:
-            patch = chosen[SURFACE_PATCH]
-            lateral = lateral * (1.0 + patch["depth"] * _patch(s.x, patch["x0"], patch["width"]))
-        lateral = np.where(s.contact, lateral, 0.0)
-
-        noise = streams[1]
-        # Signed with the direction of motion (rule MF3), the sensor's drifting zero added.
-        direction = np.where(s.speed < 0, -1.0, 1.0)
-        fl = direction * lateral + _drift(n, protocol.sample_rate_hz, drift_n, streams[2])
-        fl = fl + lateral_noise_n * noise.normal(size=n)
-        fn_noise = normal_noise_n * noise.normal(size=n)
-        fn_rec = np.where(
-            s.contact,
-            np.maximum(s.normal_force + fn_noise, MIN_CONTACT_FORCE_N),
-            np.clip(fn_noise, -REST_NOISE_LIMIT_N, REST_NOISE_LIMIT_N),
-        )
+        amplitude, voltage = _acting_drive(plan, s, protocol.sample_rate_hz)
+        total_in = _effect_inputs(plan, s, pressure, amplitude, voltage)
+        lateral = _lateral_force(plan, s, total_in, _relative_friction(plan, total_in),
+                                 _electrostatic_force(plan, total_in))
+        fl, fn_rec = _recorded_forces(s, lateral, protocol.sample_rate_hz, lateral_noise_n,
+                                      normal_noise_n, drift_n, streams[1], streams[2])
         recordings.append(
             Measurement(
                 t=s.t,
                 normal_force=fn_rec,
                 lateral_force=fl,
                 amplitude=s.amplitude.copy() if uv_ok else None,
-                voltage=s.voltage.copy() if ev_model is not None else None,
+                voltage=s.voltage.copy() if plan.ev_model is not None else None,
                 x=s.x,
                 y=np.full(n, Y_M),
                 speed=s.speed,
                 conditions={
                     "device": f"hcard reference {device}",
-                    "plate_frequency_hz": config.limits.plate_frequency if uv_ok else None,
+                    "plate_frequency_hz": plan.config.limits.plate_frequency if uv_ok else None,
                     "ambient_pressure_pa": float(pressure),
                     "probe": "simulated finger",
                     "surface": "glass",
