@@ -56,7 +56,7 @@ def test_the_recorded_forces_carry_the_direction_the_zero_and_the_noise() -> Non
     lateral = np.where(s.contact, 0.2, 0.0)
     fl, fn = _recorded_forces(s, lateral, RATE_HZ, 0.0, 0.0, 0.0,
                               np.random.default_rng(1), np.random.default_rng(2))
-    assert fl == pytest.approx(np.where(s.speed < 0, -1.0, 1.0) * lateral)  # rule M3
+    assert fl == pytest.approx(np.where(s.speed < 0, -1.0, 1.0) * lateral)  # rule MF3
     assert np.array_equal(fn, np.where(s.contact, 0.5, 0.0))
     # noise of 0.6 N: at least 11 mN in contact, within +-9 mN at rest
     fl, fn = _recorded_forces(s, lateral, RATE_HZ, 1e-3, 0.6, 0.0,
