@@ -5,9 +5,12 @@ Plugins are found through the entry-point group ``hcard.plugins``, the built-ins
 raises because of a third-party package: a plugin that fails to import, to register, whose hook
 raises, or whose hook returns unusable objects is skipped with an :class:`HcardPluginWarning`
 naming the entry point, its distribution and the reason, and is listed in
-:attr:`PluginRegistry.broken`. Every hook implementation is called on its own, so one broken
-plugin never hides the others, and only when its kind is first asked for: looking up the image
-encoder imports no predictor, effect or conformance check.
+:attr:`PluginRegistry.broken`. What discovery found (each entry point and the hooks its plugin
+implements) is remembered between runs (:mod:`hcard.plugins.command_cache`); with it, a plugin
+module is imported only when a hook it implements is first called, and the entry points are
+not listed again (no :mod:`importlib.metadata`). Every hook implementation is called on its
+own, so one broken plugin never hides the others, and only when its kind is first asked for:
+looking up the image encoder imports no predictor, effect or conformance check.
 
 >>> from hcard.plugins import get_registry
 >>> encoder = get_registry().get("encoder", "image")      # doctest: +SKIP
@@ -15,21 +18,28 @@ encoder imports no predictor, effect or conformance check.
 
 from __future__ import annotations
 
-import importlib.metadata as metadata
+import bisect
+import importlib
+import itertools
 import os
+import sys
 import threading
 import traceback
 import types
 import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import pluggy
 
 from hcard.errors import PluginError
-from hcard.plugins import hookspecs
+from hcard.plugins import command_cache, hookspecs
+from hcard.plugins.command_cache import CachedEntryPoint
 from hcard.plugins.kinds import KINDS, CommandPlugin
+
+if TYPE_CHECKING:
+    from importlib import metadata
 
 HOOK_KINDS: dict[str, str] = {
     "hcard_encoders": "encoder",
@@ -112,7 +122,19 @@ class _Registered:
 
     plugin: Any
     source: _Source
+    order: int
+    """Position in registration order: discovered entry points in discovery order, even when
+    imported late (:class:`_Pending`), then plugins registered in code."""
     collected: set[str] = field(default_factory=set)
+
+
+@dataclass(frozen=True)
+class _Pending:
+    """A remembered entry point whose plugin is imported when a hook it implements is called."""
+
+    group: str
+    entry_point: CachedEntryPoint
+    order: int
 
 
 def _describe(exc: BaseException) -> str:
@@ -128,6 +150,8 @@ def _describe(exc: BaseException) -> str:
 
 def _distribution_of(obj: Any) -> tuple[str, str]:
     """(distribution name, version) providing the module of ``obj``, best effort."""
+    from importlib import metadata
+
     module = obj.__name__ if isinstance(obj, types.ModuleType) else type(obj).__module__
     top = (module or "").partition(".")[0]
     try:
@@ -161,6 +185,10 @@ class PluginRegistry:
         self._commands: dict[str, tuple[CommandPlugin, _Source]] = {}
         self._broken: list[BrokenPlugin] = []
         self._registered: list[_Registered] = []
+        """Registered plugins, sorted by :attr:`_Registered.order`."""
+        self._pending: list[_Pending] = []
+        """Remembered entry points not imported yet, in discovery order."""
+        self._orders = itertools.count()
         self._collected: set[str] = set()
         """Hooks every registered plugin has answered (the rest are called when first asked)."""
         self._collecting = threading.RLock()
@@ -189,16 +217,43 @@ class PluginRegistry:
         Entry points of the ``hcard`` distribution come first, then the others sorted by
         distribution and entry-point name, so the outcome does not depend on ``sys.path`` order.
         Problems are warned (:class:`HcardPluginWarning`) and recorded in :attr:`broken`.
+
+        When an earlier run's discovery of ``group`` is remembered and still valid
+        (:func:`hcard.plugins.command_cache.load_entry_points`), the entry points are taken
+        from it and each plugin module is imported when a hook it implements is first called.
+        Otherwise they are listed and imported now, and remembered when none had a problem.
         """
+        remembered = command_cache.load_entry_points(group)
+        if remembered is not None:
+            with self._collecting:
+                self._pending += [_Pending(group, entry, next(self._orders))
+                                  for entry in remembered]
+                if self._collected:  # hooks already called are called on these plugins now
+                    self._load_pending(None)
+            return
+        from importlib import metadata
+
         try:
             found = list(metadata.entry_points(group=group))
         except Exception as exc:  # a malformed entry_points.txt somewhere on sys.path
             self._problem("entry points", f"cannot list entry points of '{group}': {exc}")
             return
+        problems = len(self._broken)
+        discovered: list[CachedEntryPoint] = []
+        modules: list[str] = []
         for entry_point in sorted(found, key=_entry_point_order):
-            self._load_entry_point(entry_point)
+            cached = self._load_entry_point(entry_point)
+            path = getattr(sys.modules.get(entry_point.module), "__file__", None)
+            if cached is not None and isinstance(path, str):
+                discovered.append(cached)
+                modules.append(path)
+        # A problem, or a module without a file (that cannot be checked): nothing remembered.
+        if len(self._broken) == problems and len(discovered) == len(found):
+            command_cache.store_entry_points(group, discovered, modules)
 
-    def _load_entry_point(self, entry_point: metadata.EntryPoint) -> None:
+    def _load_entry_point(self, entry_point: metadata.EntryPoint) -> CachedEntryPoint | None:
+        """Import and register ``entry_point``'s plugin; what to remember of it (None when it
+        cannot be imported)."""
         dist = entry_point.dist
         source = _Source(
             entry_point=entry_point.name,
@@ -212,8 +267,34 @@ class PluginRegistry:
                 source.entry_point,
                 f"{source.label()} failed to import '{entry_point.value}': {_describe(exc)}",
             )
+            return None
+        self._add(plugin, source, strict=False, order=next(self._orders))
+        hooks = self.plugin_manager.get_hookcallers(plugin) or []
+        return CachedEntryPoint(source.entry_point, entry_point.value, source.package,
+                                source.version, tuple(sorted(c.name for c in hooks)))
+
+    def _load_pending(self, hook_name: str | None) -> None:
+        """Import and register the remembered entry points whose plugins implement
+        ``hook_name`` (all of them when None), in discovery order. Call with
+        :attr:`_collecting` held."""
+        due = [p for p in self._pending if hook_name is None or hook_name in p.entry_point.hooks]
+        if not due:
             return
-        self._add(plugin, source, strict=False)
+        self._pending = [p for p in self._pending if p not in due]
+        for pending in due:
+            entry = pending.entry_point
+            source = _Source(entry.name, entry.package, entry.version)
+            try:
+                plugin = _import_target(entry.value)
+            except (Exception, SystemExit) as exc:
+                # Remembered but no longer importable (a dependency changed): discover again.
+                command_cache.forget(command_cache.entry_point_cache_name(pending.group))
+                self._problem(
+                    source.entry_point,
+                    f"{source.label()} failed to import '{entry.value}': {_describe(exc)}",
+                )
+                continue
+            self._add(plugin, source, strict=False, order=pending.order)
 
     # ---------------------------------------------------------------------- registration
 
@@ -243,11 +324,16 @@ class PluginRegistry:
         )
         return self._add(plugin, source, strict=True)
 
-    def _add(self, plugin: Any, source: _Source, *, strict: bool) -> list[PluginInfo]:
+    def _add(self, plugin: Any, source: _Source, *, strict: bool,
+             order: int | None = None) -> list[PluginInfo]:
         with self._collecting:
-            return self._add_unlocked(plugin, source, strict=strict)
+            if order is None:
+                order = next(self._orders)
+            return self._add_unlocked(plugin, source, strict=strict, order=order)
 
-    def _add_unlocked(self, plugin: Any, source: _Source, *, strict: bool) -> list[PluginInfo]:
+    def _add_unlocked(
+        self, plugin: Any, source: _Source, *, strict: bool, order: int
+    ) -> list[PluginInfo]:
         """Register ``plugin`` with pluggy; collect its objects now (strict) or when first asked.
 
         Not strict (discovery): problems are warned and the usable objects kept; each hook is
@@ -271,7 +357,7 @@ class PluginRegistry:
             problems.append(f"{source.label()} could not be registered: {_describe(exc)}")
         if registered is not None:
             self._check_hooks(plugin, source, problems)
-        entry = _Registered(plugin, source)
+        entry = _Registered(plugin, source, order)
         infos: list[PluginInfo] = []
         commands: dict[str, CommandPlugin] = {}
         if registered is not None:
@@ -290,7 +376,7 @@ class PluginRegistry:
             self._problem(source.entry_point, reason)
         self._keep(infos, commands, source)
         if registered is not None:
-            self._registered.append(entry)
+            bisect.insort(self._registered, entry, key=lambda known: known.order)
         return infos
 
     def _keep(
@@ -307,6 +393,7 @@ class PluginRegistry:
         if hook_name in self._collected:
             return
         with self._collecting:
+            self._load_pending(hook_name)
             for entry in self._registered:
                 if hook_name in entry.collected:
                     continue
@@ -326,6 +413,8 @@ class PluginRegistry:
     def collect(self) -> None:
         """Call every hook not called yet (warning about problems): after it, :attr:`broken`
         holds every problem of the registered plugins."""
+        with self._collecting:
+            self._load_pending(None)
         for hook_name in (*HOOK_KINDS, COMMAND_HOOK):
             self._ensure(hook_name)
 
@@ -523,6 +612,16 @@ class PluginRegistry:
     def get(self, kind: str, name: str) -> Any:
         """The plugin object ``name`` of ``kind`` (raises :class:`PluginError` listing names)."""
         return self.info(kind, name).obj
+
+
+def _import_target(value: str) -> Any:
+    """The object an entry point's ``value`` names (``module`` or ``module:attribute``,
+    optionally followed by ``[extras]``), importing its module."""
+    module_name, _, attribute = value.partition("[")[0].partition(":")
+    target: Any = importlib.import_module(module_name.strip())
+    for name in filter(None, attribute.strip().split(".")):
+        target = getattr(target, name)
+    return target
 
 
 def _entry_point_order(entry_point: metadata.EntryPoint) -> tuple[bool, str, str]:
