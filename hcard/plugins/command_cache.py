@@ -30,9 +30,8 @@ import contextlib
 import json
 import os
 import sys
-from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 from hcard.plugins.lazy_command import LazyCommand
 
@@ -49,8 +48,7 @@ COMMANDS = "commands"
 """The name of the commands' cache file (without ``.json``)."""
 
 
-@dataclass(frozen=True)
-class CachedEntryPoint:
+class CachedEntryPoint(NamedTuple):
     """An entry point as discovery found it, and the hooks its plugin implements.
 
     Attributes:
