@@ -1,13 +1,22 @@
-"""``hcard --help`` reuses the contributed commands an earlier run found, until a distribution
-is installed or removed; a plugin with a problem is warned about on every run."""
+"""``hcard --help`` reuses the contributed commands an earlier run found, and the plugin
+registry the entry points, until a distribution is installed or removed or a plugin module
+changes; a plugin with a problem is warned about on every run."""
 
 from __future__ import annotations
 
+import importlib
 import json
 import os
 import subprocess
 import sys
+import warnings
+from collections.abc import Iterator
 from pathlib import Path
+
+import pytest
+
+from hcard.plugins import HcardPluginWarning
+from hcard.plugins.registry import PluginRegistry
 
 LIST_COMMANDS = (
     "import sys\nfrom hcard.cli.main import cli\n"
@@ -90,3 +99,142 @@ def test_a_remembered_command_that_no_longer_loads_is_warned_and_forgotten(
             "'hcardtest_greet_cmd'") in gone.stderr
     assert "Traceback" not in gone.stderr
     assert not (cache / "hcard" / "commands.json").exists()
+
+
+FIND_ENCODERS = (
+    "import sys\nfrom hcard.plugins.registry import get_registry\n"
+    "print(sorted(get_registry().encoders))\n"
+    "print(sorted(m for m in ('importlib.metadata', 'hcard_conformance.registry', "
+    "'hcard_device.driver_plugins', 'hcard_builtins.predictors') if m in sys.modules))\n"
+)
+"""Prints the encoders of the registry, then which modules that only discovery needs (the
+entry-point scan, the plugin modules of other kinds) it imported."""
+
+VENDOR_ENCODER = '''
+from hcard.plugins import Encoder, hookimpl
+
+
+class VendorEncoder(Encoder):
+    name = "{name}"
+    description = "a vendor's encoder"
+
+    def encode(self, source, **options):
+        raise NotImplementedError
+
+
+@hookimpl
+def hcard_encoders():
+    return [VendorEncoder()]
+'''
+
+ENTRY_POINT_CACHE = Path("hcard", "entry-points-hcard.plugins.json")
+
+
+def test_the_registry_reuses_the_entry_points_until_a_plugin_module_changes(
+    tmp_path: Path,
+) -> None:
+    cache, site = tmp_path / "cache", tmp_path / "site"
+    site.mkdir()
+    _install(site, "vendor", "[hcard.plugins]\nvendor = hcardtest_vendor_encoder\n",
+             {"hcardtest_vendor_encoder": VENDOR_ENCODER.format(name="vendor-bumps")})
+    first = _run(["-c", FIND_ENCODERS], cache, site)
+    assert first.stdout.splitlines() == [
+        "['image', 'vendor-bumps']",
+        "['hcard_builtins.predictors', 'hcard_conformance.registry', "
+        "'hcard_device.driver_plugins', 'importlib.metadata']",  # discovered: all imported
+    ], first.stderr
+    assert (cache / ENTRY_POINT_CACHE).exists()
+
+    second = _run(["-c", FIND_ENCODERS], cache, site)
+    assert second.stdout.splitlines() == ["['image', 'vendor-bumps']", "[]"], second.stderr
+
+    module = site / "hcardtest_vendor_encoder.py"
+    module.write_text(VENDOR_ENCODER.format(name="vendor-ridges"), encoding="utf-8")
+    os.utime(module, ns=(module.stat().st_atime_ns, module.stat().st_mtime_ns + 10**9))
+    third = _run(["-c", FIND_ENCODERS], cache, site)
+    assert third.stdout.splitlines()[0] == "['image', 'vendor-ridges']", third.stderr
+    assert "importlib.metadata" in third.stdout.splitlines()[1]  # found again
+
+
+def test_a_remembered_plugin_that_no_longer_imports_is_warned_on_every_run(
+    tmp_path: Path,
+) -> None:
+    cache, site = tmp_path / "cache", tmp_path / "site"
+    site.mkdir()
+    _install(site, "vendor", "[hcard.plugins]\nvendor = hcardtest_vendor_encoder\n",
+             {"hcardtest_vendor_encoder": VENDOR_ENCODER.format(name="vendor-bumps")})
+    assert _run(["-c", FIND_ENCODERS], cache, site).returncode == 0
+    assert (cache / ENTRY_POINT_CACHE).exists()
+    # What the module imports breaks while the module itself keeps its modification time.
+    module = site / "hcardtest_vendor_encoder.py"
+    mtime = module.stat().st_mtime_ns
+    module.write_text('raise ImportError("vendor toolkit missing")\n', encoding="utf-8")
+    os.utime(module, ns=(mtime, mtime))
+    warning = ("plugin 'vendor' from package 'vendor' (version 1.0) failed to import "
+               "'hcardtest_vendor_encoder': ImportError: vendor toolkit missing")
+    for _ in range(2):  # the first run reads the cache, the second discovers
+        run = _run(["-c", FIND_ENCODERS], cache, site)
+        assert run.stdout.splitlines()[0] == "['image']", run.stderr
+        assert warning in run.stderr
+        assert not (cache / ENTRY_POINT_CACHE).exists()  # a plugin with a problem: nothing kept
+
+
+CLASHING_ENCODER = '''
+from hcard.plugins import Encoder, LazyCommand, hookimpl
+
+
+class ClashingEncoder(Encoder):
+    name = "clash"
+    description = "{description}"
+
+    def encode(self, source, **options):
+        raise NotImplementedError
+
+
+@hookimpl
+def hcard_encoders():
+    return [ClashingEncoder()]
+'''
+
+COMMAND_HOOK = '''
+
+@hookimpl
+def hcard_commands():
+    return [LazyCommand("clash-cmd", "hcardtest_nowhere:command", "Clash.")]
+'''
+
+
+@pytest.fixture
+def own_site(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Path]:
+    """A directory on ``sys.path`` for distributions, and a cache directory of this test."""
+    site = tmp_path / "site"
+    site.mkdir()
+    monkeypatch.syspath_prepend(str(site))
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    importlib.invalidate_caches()
+    yield site
+    for module in [m for m in sys.modules if m.startswith("hcardtest_clash")]:
+        del sys.modules[module]
+
+
+def test_remembered_plugins_imported_late_keep_the_discovery_order(own_site: Path) -> None:
+    """'a-vendor' is discovered before 'b-vendor', so its encoder keeps the name both give,
+    even when b's module is imported first (for the command hook, which a's lacks)."""
+    _install(own_site, "a-vendor", "[hcard.plugins]\na = hcardtest_clash_a\n",
+             {"hcardtest_clash_a": CLASHING_ENCODER.format(description="from a")})
+    _install(own_site, "b-vendor", "[hcard.plugins]\nb = hcardtest_clash_b\n",
+             {"hcardtest_clash_b": CLASHING_ENCODER.format(description="from b") + COMMAND_HOOK})
+    for remembered in (False, True):  # discovered, then from the cache
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            registry = PluginRegistry.discover()
+            assert "clash-cmd" in registry.commands
+            assert ("hcardtest_clash_a" in sys.modules) is not remembered
+            assert registry.get("encoder", "clash").description == "from a"
+        assert [str(w.message) for w in caught if w.category is HcardPluginWarning] == [
+            "plugin 'b' from package 'b-vendor' (version 1.0): hcard_encoders() returned "
+            "encoder 'clash', a name already taken by plugin 'a' from package 'a-vendor'; "
+            "it is ignored"
+        ]
+        for module in ("hcardtest_clash_a", "hcardtest_clash_b"):
+            sys.modules.pop(module, None)
