@@ -24,9 +24,9 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 
 @pytest.fixture(scope="session", autouse=True)
 def _own_cache_directory(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
-    """``hcard --help`` remembers the contributed commands in the user's cache directory
-    (:mod:`hcard.plugins.command_cache`): the test run, and the commands it starts, keep theirs in
-    a directory of their own instead of the user's."""
+    """Plugin discovery remembers the entry points and contributed commands it found in the
+    user's cache directory (:mod:`hcard.plugins.command_cache`): the test run, and the commands it
+    starts, keep theirs in a directory of their own instead of the user's."""
     previous = os.environ.get("XDG_CACHE_HOME")
     os.environ["XDG_CACHE_HOME"] = str(tmp_path_factory.mktemp("xdg-cache"))
     yield
