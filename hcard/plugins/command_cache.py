@@ -101,8 +101,17 @@ def _distributions(directory: str) -> list[list[Any]] | None:
 
 def _environment() -> list[Any]:
     """What the discovered plugins depend on besides their modules (JSON-ready)."""
-    paths = [os.path.abspath(entry or ".") for entry in sys.path]
+    paths = [_absolute(entry) for entry in sys.path]
     return [sys.executable, sys.version, [[path, _distributions(path)] for path in paths]]
+
+
+def _absolute(entry: str) -> str:
+    """The ``sys.path`` entry as an absolute path; as it is when the current directory no
+    longer exists (a relative entry then names nothing, and listing it finds nothing)."""
+    try:
+        return os.path.abspath(entry or ".")
+    except OSError:
+        return entry
 
 
 def _read(name: str, cache_format: str) -> dict[str, Any] | None:

@@ -238,3 +238,26 @@ def test_remembered_plugins_imported_late_keep_the_discovery_order(own_site: Pat
         ]
         for module in ("hcardtest_clash_a", "hcardtest_clash_b"):
             sys.modules.pop(module, None)
+
+
+def test_a_current_directory_that_no_longer_exists_is_no_internal_error(tmp_path) -> None:
+    # a relative sys.path entry ('' for `python -c`) cannot be made absolute once the current
+    # directory is gone: the cache's validity check must not fail the command for that
+    script = "\n".join([
+        "import os, sys, tempfile",
+        "gone = tempfile.mkdtemp()",
+        "os.chdir(gone)",
+        "os.rmdir(gone)",
+        "sys.path.insert(0, '')",
+        "from hcard.cli.main import cli",
+        "try:",
+        "    cli(['--help'], standalone_mode=False)",
+        "except SystemExit as exc:",
+        "    sys.exit(exc.code)",
+    ])
+    env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "cache")}
+    for _run in range(2):  # the first run writes the cache, the second reads it
+        done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                              env=env, timeout=60, check=False)
+        assert done.returncode == 0, done.stderr
+        assert "conformance" in done.stdout and "encode" in done.stdout
