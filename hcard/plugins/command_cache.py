@@ -19,9 +19,15 @@ Each is kept with what it depends on:
   upgrading or removing a distribution changes them);
 - the modification time of every module that contributed.
 
-If any of these differ, discovery runs again. Nothing is remembered when a plugin had a problem,
-so its warning is given on every run. A cache that cannot be read or written is ignored: it
-only saves time.
+If any of these differ, discovery runs again. They are checked without statting every
+installed distribution on each run: a directory whose own modification time is unchanged has
+had no entry added, removed or renamed, so it holds the same metadata directories, and only
+those declaring ``hcard`` entry points are looked at again (a file added to or replaced in
+them). A directory that changed (anything installed or removed, or a file written to the
+current directory) is listed again and compared distribution by distribution.
+
+Nothing is remembered when a plugin had a problem, so its warning is given on every run. A
+cache that cannot be read or written is ignored: it only saves time.
 """
 
 from __future__ import annotations
@@ -30,6 +36,7 @@ import contextlib
 import json
 import os
 import sys
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
 
@@ -38,11 +45,16 @@ from hcard.plugins.lazy_command import LazyCommand
 if TYPE_CHECKING:
     from hcard.plugins.kinds import CommandPlugin
 
-CACHE_FORMAT = "hcard-command-cache/1"
+CACHE_FORMAT = "hcard-command-cache/2"
 """The ``format`` of the commands' cache file; another value is ignored."""
 
-ENTRY_POINT_CACHE_FORMAT = "hcard-entry-point-cache/1"
+ENTRY_POINT_CACHE_FORMAT = "hcard-entry-point-cache/2"
 """The ``format`` of an entry-point group's cache file; another value is ignored."""
+
+RACY_NS = 2 * 10**9
+"""A directory modified less than this before the cache is written (ns) is not trusted by its
+modification time, which the file system keeps with a coarse clock: a distribution installed
+in the same tick would leave it unchanged."""
 
 COMMANDS = "commands"
 """The name of the commands' cache file (without ``.json``)."""
@@ -99,10 +111,52 @@ def _distributions(directory: str) -> list[list[Any]] | None:
     )
 
 
+def _declares_hcard_entry_points(metadata_directory: str) -> bool:
+    """Whether the distribution metadata directory declares an entry-point group of hcard
+    (a section ``[hcard...]`` in its ``entry_points.txt``)."""
+    try:
+        with open(os.path.join(metadata_directory, "entry_points.txt"), encoding="utf-8") as file:
+            lines = file.read().splitlines()
+    except (OSError, ValueError):
+        return False
+    return any(line.strip().startswith("[hcard") for line in lines)
+
+
 def _environment() -> list[Any]:
-    """What the discovered plugins depend on besides their modules (JSON-ready)."""
-    paths = [_absolute(entry) for entry in sys.path]
-    return [sys.executable, sys.version, [[path, _distributions(path)] for path in paths]]
+    """What the discovered plugins depend on besides their modules (JSON-ready): interpreter,
+    and for each ``sys.path`` directory ``[path, modification time, distributions, names of the
+    distributions declaring hcard entry points]``."""
+    now = time.time_ns()
+    directories = []
+    for path in (_absolute(entry) for entry in sys.path):
+        mtime = _mtime(path)  # before listing: a change made while listing shows in it
+        distributions = _distributions(path)
+        declaring = [name for name, _ in distributions or ()
+                     if _declares_hcard_entry_points(os.path.join(path, name))]
+        if mtime is not None and mtime > now - RACY_NS:
+            mtime = None  # may change again within the clock's resolution: list it every time
+        directories.append([path, mtime, distributions, declaring])
+    return [sys.executable, sys.version, directories]
+
+
+def _environment_unchanged(recorded: list[Any]) -> bool:
+    """Whether the environment is still the ``recorded`` one (:func:`_environment`), without
+    listing a directory that has not changed (see the module's description)."""
+    executable, version, directories = recorded
+    if executable != sys.executable or version != sys.version or len(directories) != len(sys.path):
+        return False
+    for entry, (path, mtime, distributions, declaring) in zip(sys.path, directories, strict=True):
+        if _absolute(entry) != path:
+            return False
+        if mtime is not None and _mtime(path) == mtime:
+            # No entry added, removed or renamed: the same metadata directories are there.
+            recorded_mtimes = dict(distributions or ())
+            if any(_mtime(os.path.join(path, name)) != recorded_mtimes.get(name)
+                   for name in declaring):
+                return False
+        elif _distributions(path) != distributions:
+            return False
+    return True
 
 
 def _absolute(entry: str) -> str:
@@ -119,7 +173,8 @@ def _read(name: str, cache_format: str) -> dict[str, Any] | None:
     (same environment, every module unchanged), else None."""
     try:
         document = json.loads(cache_path(name).read_text(encoding="utf-8"))
-        if document.get("format") != cache_format or document["environment"] != _environment():
+        if document.get("format") != cache_format or not _environment_unchanged(
+                document["environment"]):
             return None
         if any(_mtime(path) != mtime for path, mtime in document["modules"]):
             return None

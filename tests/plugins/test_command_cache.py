@@ -7,15 +7,17 @@ from __future__ import annotations
 import importlib
 import json
 import os
+import shutil
 import subprocess
 import sys
+import time
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
-from hcard.plugins import HcardPluginWarning
+from hcard.plugins import HcardPluginWarning, command_cache
 from hcard.plugins.registry import PluginRegistry
 
 LIST_COMMANDS = (
@@ -261,3 +263,55 @@ def test_a_current_directory_that_no_longer_exists_is_no_internal_error(tmp_path
                               env=env, timeout=60, check=False)
         assert done.returncode == 0, done.stderr
         assert "conformance" in done.stdout and "encode" in done.stdout
+
+
+def _remember_vendor_encoder(site: Path) -> list[Path]:
+    """Install a vendor encoder in ``site`` and a distribution without hcard entry points, age
+    ``site`` beyond the clock's resolution, and remember the discovered entry points; the
+    metadata directories (vendor's, other's)."""
+    _install(site, "vendor", "[hcard.plugins]\nvendor = hcardtest_clash_vendor\n",
+             {"hcardtest_clash_vendor": VENDOR_ENCODER.format(name="vendor-bumps")})
+    _install(site, "other", "[console_scripts]\nother = other:main\n", {})
+    hour_ago = time.time_ns() - 3600 * 10**9
+    os.utime(site, ns=(hour_ago, hour_ago))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HcardPluginWarning)
+        PluginRegistry.discover()
+    assert command_cache.load_entry_points("hcard.plugins") is not None  # remembered
+    return [site / "vendor-1.0.dist-info", site / "other-1.0.dist-info"]
+
+
+def test_a_distribution_changed_in_place_invalidates_the_remembered_entry_points(
+    own_site: Path,
+) -> None:
+    vendor, _ = _remember_vendor_encoder(own_site)
+    mtime = own_site.stat().st_mtime_ns
+    (vendor / "direct_url.json").write_text("{}", encoding="utf-8")  # its directory changes
+    assert own_site.stat().st_mtime_ns == mtime  # not the directory holding it
+    assert command_cache.load_entry_points("hcard.plugins") is None
+
+
+def test_files_that_are_no_distribution_keep_the_remembered_entry_points(
+    own_site: Path,
+) -> None:
+    _remember_vendor_encoder(own_site)
+    (own_site / "encoded.card").write_bytes(b"")  # e.g. output written to the current directory
+    assert own_site.stat().st_mtime_ns > time.time_ns() - 3600 * 10**9  # the directory changed
+    assert command_cache.load_entry_points("hcard.plugins") is not None
+
+
+@pytest.mark.parametrize("change", ["install", "remove", "reinstall"])
+def test_installing_or_removing_a_distribution_invalidates_the_remembered_entry_points(
+    own_site: Path, change: str,
+) -> None:
+    vendor, other = _remember_vendor_encoder(own_site)
+    if change == "install":
+        _install(own_site, "third", "[console_scripts]\nthird = third:main\n", {})
+    elif change == "remove":
+        shutil.rmtree(other)
+    else:  # the same version again, as `pip install -e .` does: a new metadata directory
+        shutil.rmtree(vendor)
+        _install(own_site, "vendor", "[hcard.plugins]\nvendor = hcardtest_clash_vendor\n", {})
+        later = vendor.stat().st_mtime_ns + 10**9  # whatever the file system clock's resolution
+        os.utime(vendor, ns=(later, later))
+    assert command_cache.load_entry_points("hcard.plugins") is None
