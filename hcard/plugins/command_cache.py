@@ -38,7 +38,7 @@ import os
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Any
 
 from hcard.plugins.lazy_command import LazyCommand
 
@@ -60,8 +60,9 @@ COMMANDS = "commands"
 """The name of the commands' cache file (without ``.json``)."""
 
 
-class CachedEntryPoint(NamedTuple):
-    """An entry point as discovery found it, and the hooks its plugin implements.
+class CachedEntryPoint:
+    """An entry point as discovery found it, and the hooks its plugin implements. (A slotted
+    class, not a named tuple: ~0.01 ms to define instead of ~0.1 ms, on every ``hcard encode``.)
 
     Attributes:
         name: the entry-point name, e.g. ``"builtin-encoders"``.
@@ -71,11 +72,15 @@ class CachedEntryPoint(NamedTuple):
         hooks: names of the hooks its plugin implements (all with a hook specification).
     """
 
-    name: str
-    value: str
-    package: str
-    version: str
-    hooks: tuple[str, ...]
+    __slots__ = ("hooks", "name", "package", "value", "version")
+
+    def __init__(self, name: str, value: str, package: str, version: str,
+                 hooks: tuple[str, ...]) -> None:
+        self.name = name
+        self.value = value
+        self.package = package
+        self.version = version
+        self.hooks = hooks
 
 
 def cache_path(name: str = COMMANDS) -> Path:
