@@ -113,21 +113,30 @@ FIND_ENCODERS = (
 entry-point scan, the plugin modules of other kinds) it imported."""
 
 VENDOR_ENCODER = '''
-from hcard.plugins import Encoder, hookimpl
+from hcard import build
+from hcard.plugins import EncodeResult, Encoder, LazyCommand, hookimpl
 
 
 class VendorEncoder(Encoder):
     name = "{name}"
-    description = "a vendor's encoder"
+    description = "{description}"
 
     def encode(self, source, **options):
-        raise NotImplementedError
+        # every source: a 10 mm square card of one flat texture (2 x 2 taxtels)
+        textures = [build.texture(1.0)]
+        return EncodeResult(build.card(10.0, 10.0, taxtel_mm=5.0, textures=textures))
 
 
 @hookimpl
 def hcard_encoders():
     return [VendorEncoder()]
 '''
+"""A vendor's plugin module: ``name`` and ``description`` of its encoder to format in."""
+
+
+def vendor_encoder(name: str, description: str = "a vendor's encoder") -> str:
+    return VENDOR_ENCODER.format(name=name, description=description)
+
 
 ENTRY_POINT_CACHE = Path("hcard", "entry-points-hcard.plugins.json")
 
@@ -138,7 +147,7 @@ def test_the_registry_reuses_the_entry_points_until_a_plugin_module_changes(
     cache, site = tmp_path / "cache", tmp_path / "site"
     site.mkdir()
     _install(site, "vendor", "[hcard.plugins]\nvendor = hcardtest_vendor_encoder\n",
-             {"hcardtest_vendor_encoder": VENDOR_ENCODER.format(name="vendor-bumps")})
+             {"hcardtest_vendor_encoder": vendor_encoder("vendor-bumps")})
     first = _run(["-c", FIND_ENCODERS], cache, site)
     assert first.stdout.splitlines() == [
         "['image', 'vendor-bumps']",
@@ -151,7 +160,7 @@ def test_the_registry_reuses_the_entry_points_until_a_plugin_module_changes(
     assert second.stdout.splitlines() == ["['image', 'vendor-bumps']", "[]"], second.stderr
 
     module = site / "hcardtest_vendor_encoder.py"
-    module.write_text(VENDOR_ENCODER.format(name="vendor-ridges"), encoding="utf-8")
+    module.write_text(vendor_encoder("vendor-ridges"), encoding="utf-8")
     os.utime(module, ns=(module.stat().st_atime_ns, module.stat().st_mtime_ns + 10**9))
     third = _run(["-c", FIND_ENCODERS], cache, site)
     assert third.stdout.splitlines()[0] == "['image', 'vendor-ridges']", third.stderr
@@ -164,7 +173,7 @@ def test_a_remembered_plugin_that_no_longer_imports_is_warned_on_every_run(
     cache, site = tmp_path / "cache", tmp_path / "site"
     site.mkdir()
     _install(site, "vendor", "[hcard.plugins]\nvendor = hcardtest_vendor_encoder\n",
-             {"hcardtest_vendor_encoder": VENDOR_ENCODER.format(name="vendor-bumps")})
+             {"hcardtest_vendor_encoder": vendor_encoder("vendor-bumps")})
     assert _run(["-c", FIND_ENCODERS], cache, site).returncode == 0
     assert (cache / ENTRY_POINT_CACHE).exists()
     # What the module imports breaks while the module itself keeps its modification time.
@@ -180,23 +189,6 @@ def test_a_remembered_plugin_that_no_longer_imports_is_warned_on_every_run(
         assert warning in run.stderr
         assert not (cache / ENTRY_POINT_CACHE).exists()  # a plugin with a problem: nothing kept
 
-
-CLASHING_ENCODER = '''
-from hcard.plugins import Encoder, LazyCommand, hookimpl
-
-
-class ClashingEncoder(Encoder):
-    name = "clash"
-    description = "{description}"
-
-    def encode(self, source, **options):
-        raise NotImplementedError
-
-
-@hookimpl
-def hcard_encoders():
-    return [ClashingEncoder()]
-'''
 
 COMMAND_HOOK = '''
 
@@ -223,16 +215,19 @@ def test_remembered_plugins_imported_late_keep_the_discovery_order(own_site: Pat
     """'a-vendor' is discovered before 'b-vendor', so its encoder keeps the name both give,
     even when b's module is imported first (for the command hook, which a's lacks)."""
     _install(own_site, "a-vendor", "[hcard.plugins]\na = hcardtest_clash_a\n",
-             {"hcardtest_clash_a": CLASHING_ENCODER.format(description="from a")})
+             {"hcardtest_clash_a": vendor_encoder("clash", "from a")})
     _install(own_site, "b-vendor", "[hcard.plugins]\nb = hcardtest_clash_b\n",
-             {"hcardtest_clash_b": CLASHING_ENCODER.format(description="from b") + COMMAND_HOOK})
+             {"hcardtest_clash_b": vendor_encoder("clash", "from b") + COMMAND_HOOK})
     for remembered in (False, True):  # discovered, then from the cache
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             registry = PluginRegistry.discover()
             assert "clash-cmd" in registry.commands
             assert ("hcardtest_clash_a" in sys.modules) is not remembered
-            assert registry.get("encoder", "clash").description == "from a"
+            encoder = registry.get("encoder", "clash")
+            assert encoder.description == "from a"
+            card = encoder.encode(own_site / "any.png").card  # the remembered module runs
+            assert len(card.grid.texture_index) == 4  # 10 mm square in 5 mm taxtels
         assert [str(w.message) for w in caught if w.category is HcardPluginWarning] == [
             "plugin 'b' from package 'b-vendor' (version 1.0): hcard_encoders() returned "
             "encoder 'clash', a name already taken by plugin 'a' from package 'a-vendor'; "
@@ -270,7 +265,7 @@ def _remember_vendor_encoder(site: Path) -> list[Path]:
     ``site`` beyond the clock's resolution, and remember the discovered entry points; the
     metadata directories (vendor's, other's)."""
     _install(site, "vendor", "[hcard.plugins]\nvendor = hcardtest_clash_vendor\n",
-             {"hcardtest_clash_vendor": VENDOR_ENCODER.format(name="vendor-bumps")})
+             {"hcardtest_clash_vendor": vendor_encoder("vendor-bumps")})
     _install(site, "other", "[console_scripts]\nother = other:main\n", {})
     hour_ago = time.time_ns() - 3600 * 10**9
     os.utime(site, ns=(hour_ago, hour_ago))
