@@ -138,6 +138,13 @@ def vendor_encoder(name: str, description: str = "a vendor's encoder") -> str:
     return VENDOR_ENCODER.format(name=name, description=description)
 
 
+def _install_vendor(site: Path, module: str = "hcardtest_vendor_encoder") -> None:
+    """Install distribution ``vendor`` in ``site``: entry point ``vendor`` naming ``module``,
+    whose encoder is ``vendor-bumps``."""
+    _install(site, "vendor", f"[hcard.plugins]\nvendor = {module}\n",
+             {module: vendor_encoder("vendor-bumps")})
+
+
 ENTRY_POINT_CACHE = Path("hcard", "entry-points-hcard.plugins.json")
 
 
@@ -146,8 +153,7 @@ def test_the_registry_reuses_the_entry_points_until_a_plugin_module_changes(
 ) -> None:
     cache, site = tmp_path / "cache", tmp_path / "site"
     site.mkdir()
-    _install(site, "vendor", "[hcard.plugins]\nvendor = hcardtest_vendor_encoder\n",
-             {"hcardtest_vendor_encoder": vendor_encoder("vendor-bumps")})
+    _install_vendor(site)
     first = _run(["-c", FIND_ENCODERS], cache, site)
     assert first.stdout.splitlines() == [
         "['image', 'vendor-bumps']",
@@ -172,8 +178,7 @@ def test_a_remembered_plugin_that_no_longer_imports_is_warned_on_every_run(
 ) -> None:
     cache, site = tmp_path / "cache", tmp_path / "site"
     site.mkdir()
-    _install(site, "vendor", "[hcard.plugins]\nvendor = hcardtest_vendor_encoder\n",
-             {"hcardtest_vendor_encoder": vendor_encoder("vendor-bumps")})
+    _install_vendor(site)
     assert _run(["-c", FIND_ENCODERS], cache, site).returncode == 0
     assert (cache / ENTRY_POINT_CACHE).exists()
     # What the module imports breaks while the module itself keeps its modification time.
@@ -264,8 +269,7 @@ def _remember_vendor_encoder(site: Path) -> list[Path]:
     """Install a vendor encoder in ``site`` and a distribution without hcard entry points, age
     ``site`` beyond the clock's resolution, and remember the discovered entry points; the
     metadata directories (vendor's, other's)."""
-    _install(site, "vendor", "[hcard.plugins]\nvendor = hcardtest_clash_vendor\n",
-             {"hcardtest_clash_vendor": vendor_encoder("vendor-bumps")})
+    _install_vendor(site, "hcardtest_clash_vendor")
     _install(site, "other", "[console_scripts]\nother = other:main\n", {})
     hour_ago = time.time_ns() - 3600 * 10**9
     os.utime(site, ns=(hour_ago, hour_ago))
