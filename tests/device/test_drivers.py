@@ -440,3 +440,35 @@ def test_drivers_register_as_a_plugin():
     assert schemes == {"sim", "usbip", "pyusb", "hid"}
     with registry.get("driver", "sim").open("sim://coupled") as driver:
         assert driver.info().device_kind == DeviceKind.COUPLED
+
+
+def test_tier2_touch_source_switch_and_counter_clear_twice_on_one_server():
+    """Over usbip:// against one server in another process, in real time, twice: a host finger
+    hands over to the internal sensor (the switch starts a new render time line instead of
+    stopping the served device on out-of-order samples), and CLEAR_COUNTERS zeroes the one set
+    of counters, the simulation's included."""
+    with served_device() as served:
+        for _connection in range(2):
+            with open_device(served.uri, timeout_s=TIMEOUT_S) as driver:
+                started(driver)
+                host = stroke(driver, 2.0, 8.0, 0.3)
+                assert host and all(s.flags & StateFlags.HOST_FINGER for s in host[-10:])
+                assert any(s.flags & StateFlags.CONTACT for s in host)
+                driver.set_touch_source(host=False)  # nobody touches the internal sensor
+                internal = driver.collect_until(driver.clock() + 0.3)
+                assert len(internal) >= 10, "the device stopped reporting after the switch"
+                last = internal[-10:]
+                assert all(s.flags & StateFlags.RUNNING for s in last)
+                assert not any(s.flags & (StateFlags.HOST_FINGER | StateFlags.CONTACT)
+                               for s in last)
+                driver._write_output(bytes([0x7F, 1, 2, 3]))  # unknown output: counted
+                driver.collect_until(driver.clock() + 0.05)
+                assert driver.counters().rejected_requests >= 1
+                driver.clear_counters()
+                driver.collect_until(driver.clock() + 0.05)
+                cleared = driver.counters()
+                assert (cleared.rejected_requests, cleared.stream_frames_dropped,
+                        cleared.latched_faults) == (0, 0, 0)
+                assert cleared.input_reports < 100  # counted again from the clear (~1 kHz)
+                driver.stop()
+        assert served.process.poll() is None, "the server died"
