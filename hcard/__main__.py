@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from hcard.cli.main import cli
+from hcard.cli.main import main
 
 if __name__ == "__main__":
-    cli(prog_name="hcard")
+    main()
