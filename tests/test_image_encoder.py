@@ -898,11 +898,37 @@ def test_largest_values_give_an_exact_order_statistic_of_chunked_data():
     rng = np.random.default_rng(5)
     values = np.round(np.abs(rng.standard_normal(10_007)), 2).astype(np.float32)  # many ties
     keep = values.size - percentile_rank(values.size) + 1
-    for chunk in (1, 37, 500, 20_000):
-        largest = Largest(keep)
-        for start in range(0, values.size, chunk):
-            largest.add(values[start:start + chunk])
-        assert largest.smallest == np.percentile(values, 95, method="inverted_cdf")
+    expected = np.percentile(values, 95, method="inverted_cdf")
+    for chunk in (1, 37, 500, 3_000, 20_000):
+        for reorder in (False, True):  # chunks of >= 4 keep values are partitioned in place
+            largest, scratch = Largest(keep), values.copy()
+            for start in range(0, values.size, chunk):
+                largest.add(scratch[start:start + chunk], reorder=reorder)
+            assert largest.smallest == expected
+
+
+@pytest.mark.parametrize(("width", "height", "taxtel_mm"), [
+    (1024, 1024, 5.0),  # the last tile clamped: two runs of rows and of columns
+    (1000, 700, 5.0),  # whole tiles: one run, a view
+    (333, 517, 2.2),
+    (30, 45, 5.0),  # smaller than a tile: mirrored pixels, gathered by take
+])
+def test_tiles_are_the_pixels_the_tile_indices_name(width: int, height: int, taxtel_mm: float):
+    """``Geometry.gather`` (slices copied block by block, or ``take``) against numpy's fancy
+    indexing of the same rows and columns, for every chunk of taxtel rows."""
+    from hcard_builtins.image.geometry import resolve_geometry
+
+    pixels = np.random.default_rng(width).integers(0, 256, (height, width), dtype=np.uint8)
+    geometry = resolve_geometry(width, height, taxtel_mm=taxtel_mm, width_mm=None,
+                                height_mm=None, dpi=None, embedded_dpi=None, source=Path("x"))
+    columns = geometry.tile_columns()
+    for first, stop in [(0, geometry.rows), (0, 1), (geometry.rows // 2, geometry.rows)]:
+        if stop <= first:
+            continue
+        expected = pixels[np.ix_(geometry.tile_rows(first, stop), columns)]
+        got = geometry.gather(pixels, first, stop, columns)
+        assert got.shape == (stop - first, geometry.tile_h, geometry.cols, geometry.tile_w)
+        np.testing.assert_array_equal(got.reshape(expected.shape), expected)
 
 
 @pytest.mark.parametrize("n", [50, 33, 7])

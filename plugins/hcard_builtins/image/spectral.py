@@ -287,6 +287,18 @@ def _groups(valid: np.ndarray) -> Iterator[tuple[np.ndarray, int, np.ndarray]]:
             break
 
 
+_LOOKS = ((0, 0), (0, -1), (0, 1), (-1, 0), (1, 0))
+"""Bins :func:`_refine_frequencies` looks at, ``(dy, dx)`` from a component's peak bin."""
+_LOOK_Y = np.array([dy for dy, _ in _LOOKS])[:, None, None]
+_LOOK_X = np.array([dx for _, dx in _LOOKS])[:, None, None]
+
+
+def _stack_shifts(kernels: dict[int, np.ndarray], looks: np.ndarray) -> np.ndarray:
+    """``kernels[-o]`` for each offset ``o`` of ``looks`` (the bin shifted by ``o`` sees the
+    kernel shifted by ``-o``), stacked on a new first axis."""
+    return np.stack([kernels[-int(o)] for o in looks.ravel()])
+
+
 def _refine_frequencies(
     spectra: TileSpectra, spectrum: np.ndarray, peak_x: np.ndarray, peak_y: np.ndarray, nw: int
 ) -> None:
@@ -312,19 +324,18 @@ def _refine_frequencies(
              (-fx[:, None, :] - px[:, :, None], nw), (-fy[:, None, :] - py[:, :, None], nh)],
             shifts,
         )
-        source, image = coef[:, None, :], np.conj(coef)[:, None, :]
-        cleaned = {}
-        for oy, ox in ((0, 0), (0, -1), (0, 1), (-1, 0), (1, 0)):
-            measured = _bin(spectrum, t, py + oy, px + ox, nw)
-            direct = source * x_direct[-ox] * y_direct[-oy]
-            mirror = image * x_mirror[-ox] * y_mirror[-oy]
-            others = np.where(own, 0.0, direct).sum(axis=2) + mirror.sum(axis=2)
-            cleaned[oy, ox] = measured - others
-        cleaned_centre = cleaned[0, 0]
-        cleaned = {key: np.abs(value) for key, value in cleaned.items()}
-        centre = np.maximum(cleaned[0, 0], 1e-30)
-        dx = _offset(cleaned[0, -1], centre, cleaned[0, 1], nw, _NEWTON_STEPS)
-        dy = _offset(cleaned[-1, 0], centre, cleaned[1, 0], nh, _NEWTON_STEPS)
+        source, image = coef[None, :, None, :], np.conj(coef)[None, :, None, :]
+        # The five bins at once, axis 0 in the order of _LOOKS: (t, j) per bin.
+        measured = _bin(spectrum, t, py + _LOOK_Y, px + _LOOK_X, nw)
+        direct = source * _stack_shifts(x_direct, _LOOK_X) * _stack_shifts(y_direct, _LOOK_Y)
+        mirror = image * _stack_shifts(x_mirror, _LOOK_X) * _stack_shifts(y_mirror, _LOOK_Y)
+        others = np.where(own, 0.0, direct).sum(axis=3) + mirror.sum(axis=3)
+        cleaned = measured - others
+        cleaned_centre = cleaned[0]
+        magnitude = np.abs(cleaned)
+        centre = np.maximum(magnitude[0], 1e-30)
+        dx = _offset(magnitude[1], centre, magnitude[2], nw, _NEWTON_STEPS)
+        dy = _offset(magnitude[3], centre, magnitude[4], nh, _NEWTON_STEPS)
         fx = np.where(mask, np.clip(px + dx, -0.5, nw / 2.0), 0.0)
         fy = np.where(mask, np.clip(py + dy, -nh / 2.0, nh / 2.0), 0.0)
         spectra.fx[tiles, :m], spectra.fy[tiles, :m] = fx, fy
@@ -416,9 +427,11 @@ def _offset(
     delta = np.clip((2.0 * ratio - 1.0) / (ratio + 1.0), 0.0, 0.5)
     step = 1e-4
     for _ in range(newton_steps):
-        residual = hann_gain(delta - 1.0, n) - ratio * hann_gain(delta, n)
-        shifted = delta + step
-        slope = (hann_gain(shifted - 1.0, n) - ratio * hann_gain(shifted, n) - residual) / step
+        # |H(d - 1)| - ratio |H(d)| at d = delta and delta + step: one kernel evaluation.
+        kernels = hann_kernels(np.stack([delta, delta + step]), n, (-1, 0))
+        gap = np.abs(kernels[-1]) - ratio * np.abs(kernels[0])
+        residual = gap[0]
+        slope = (gap[1] - residual) / step
         safe = np.where(np.abs(slope) > 1e-12, slope, 1.0)
         delta = np.clip(delta - residual / safe, 0.0, 0.5)
     return np.where(right, delta, -delta)
