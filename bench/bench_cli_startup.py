@@ -51,8 +51,8 @@ def wall_time(argv: list[str], repeat: int) -> float:
 def exit_time(code: str, args: list[str], repeat: int) -> float:
     """Median seconds from the end of ``code`` (run as ``python -c code args...``) to the end of
     its process, over ``repeat`` fresh processes (bytecode caching allowed, as installed)."""
-    probe = ("import sys, time\ntry:\n" + "".join(f"    {line}\n" for line in code.split("; "))
-             + f"finally:\n    sys.stderr.write({RETURNED!r} + repr(time.time()))\n")
+    probe = (f"import sys, time\ntry:\n    {code}\n"  # simple statements: one line
+             f"finally:\n    sys.stderr.write({RETURNED!r} + repr(time.time()))\n")
     env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
     times = []
     for _ in range(repeat + 1):  # the first run writes the bytecode
