@@ -185,9 +185,8 @@ def main(args: list[str] | None = None) -> None:
     Exit handlers, the flush of the standard streams and module teardown still run; what is no
     longer done is finalizing objects caught in reference cycles, which Python never promises
     at exit: commands close their files and devices themselves (``with`` blocks) before they
-    return. Not for a process that goes on
-    after the command (tests use :func:`cli` through click's runner): frozen objects are never
-    collected.
+    return. Not for a process that goes on after the command (tests use :func:`cli` through
+    click's runner): frozen objects are never collected.
     """
     try:
         cli(args, prog_name="hcard")
