@@ -15,8 +15,9 @@ the same load:
   reconstruction error, card message; writing the file is not included);
 - as whole commands, ``--commands`` times each: a fresh ``python -c "from PIL import Image;
   Image.open(p).load()"`` (the floor) against a fresh ``hcard -q encode p -o card.hcard``
-  (the console script's own code, not a shell shim), which includes the interpreter's start-up,
-  the imports, writing the card and printing the summary. Both run with bytecode caching
+  (the console script's own code, ``console_script.ENTRY``, not a shell shim), which includes
+  the interpreter's start-up, the imports, writing the card, printing the summary and the
+  process's exit. Both run with bytecode caching
   allowed (``PYTHONDONTWRITEBYTECODE`` removed from their environment, one untimed run first),
   as an installed package runs: otherwise every run would recompile hcard's modules.
 
