@@ -58,6 +58,8 @@ def exit_time(code: str, args: list[str], repeat: int) -> float:
     for _ in range(repeat + 1):  # the first run writes the bytecode
         done = subprocess.run([sys.executable, "-c", probe, *args], env=env, check=False,
                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        if done.returncode != 0:
+            raise SystemExit(f"python -c {code!r} failed:\n{done.stderr}")
         ended = time.time()
         times.append(ended - float(done.stderr.rsplit(RETURNED, 1)[1]))
     return statistics.median(times[1:])

@@ -907,28 +907,37 @@ def test_largest_values_give_an_exact_order_statistic_of_chunked_data():
             assert largest.smallest == expected
 
 
-@pytest.mark.parametrize(("width", "height", "taxtel_mm"), [
-    (1024, 1024, 5.0),  # the last tile clamped: two runs of rows and of columns
-    (1000, 700, 5.0),  # whole tiles: one run, a view
-    (333, 517, 2.2),
-    (30, 45, 5.0),  # smaller than a tile: mirrored pixels, gathered by take
+@pytest.mark.parametrize(("width", "height", "taxtel_mm", "paths"), [
+    (1024, 1024, 5.0, {"blocks"}),  # the last tile moved back inside: two runs per axis
+    (1000, 700, 5.0, {"view"}),  # whole tiles: one run per axis, a view of the image
+    (333, 517, 2.25, {"take"}),  # 23-pixel tiles of 22.5-pixel taxtels overlap: many runs
+    (30, 45, 5.0, {"view"}),  # smaller than a taxtel: one tile of the whole image
 ])
-def test_tiles_are_the_pixels_the_tile_indices_name(width: int, height: int, taxtel_mm: float):
-    """``Geometry.gather`` (slices copied block by block, or ``take``) against numpy's fancy
-    indexing of the same rows and columns, for every chunk of taxtel rows."""
-    from hcard_builtins.image.geometry import resolve_geometry
+def test_tiles_are_the_pixels_the_tile_indices_name(
+    width: int, height: int, taxtel_mm: float, paths: set[str]
+):
+    """``Geometry.gather`` (a view, slices copied block by block, or ``take``) against numpy's
+    fancy indexing of the same rows and columns, for whole and partial chunks of taxtel rows;
+    ``paths``: the ways the geometry's chunks are gathered."""
+    from hcard_builtins.image.geometry import _runs, resolve_geometry
 
     pixels = np.random.default_rng(width).integers(0, 256, (height, width), dtype=np.uint8)
     geometry = resolve_geometry(width, height, taxtel_mm=taxtel_mm, width_mm=None,
                                 height_mm=None, dpi=None, embedded_dpi=None, source=Path("x"))
     columns = geometry.tile_columns()
-    for first, stop in [(0, geometry.rows), (0, 1), (geometry.rows // 2, geometry.rows)]:
-        if stop <= first:
-            continue
+    chunks = {(0, geometry.rows), (0, 1), (geometry.rows // 2, geometry.rows)}
+    seen = set()
+    for first, stop in sorted(chunks):
         expected = pixels[np.ix_(geometry.tile_rows(first, stop), columns)]
         got = geometry.gather(pixels, first, stop, columns)
         assert got.shape == (stop - first, geometry.tile_h, geometry.cols, geometry.tile_w)
         np.testing.assert_array_equal(got.reshape(expected.shape), expected)
+        runs = [_runs(geometry.tile_rows(first, stop)), _runs(columns)]
+        path = ("take" if None in runs else "view" if all(len(r) == 1 for r in runs)
+                else "blocks")
+        assert np.shares_memory(got, pixels) == (path == "view")
+        seen.add(path)
+    assert paths <= seen
 
 
 @pytest.mark.parametrize("n", [50, 33, 7])

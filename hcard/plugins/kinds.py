@@ -225,7 +225,11 @@ class CommandPlugin(Protocol):
     """A subcommand of ``hcard`` (hook ``hcard_commands``), loaded only when it runs.
 
     :class:`LazyCommand` is the usual implementation: ``hcard --help`` lists ``name`` and
-    ``summary`` without importing the command's module.
+    ``summary`` without importing the command's module. The command closes what it opens
+    (files, devices, sockets; ``with`` blocks) before it returns: the console script exits
+    without the interpreter's final garbage collection (:func:`hcard.cli.main.main`), so an
+    object left in a reference cycle is not finalized and a file left open in one is not
+    flushed.
     """
 
     @property

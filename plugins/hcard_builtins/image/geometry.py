@@ -9,8 +9,8 @@ For the analysis every taxtel gets a tile of a uniform size in pixels, ``ceil(T 
 at the first pixel the taxtel owns; a tile may reach one pixel into the next taxtel when ``T * pp``
 is not a whole number. The last column or row of taxtels may overhang the surface: its tile is
 moved back inside the image (ending at the image edge) so that it is analysed on real pixels
-rather than on a mirrored copy, which would show the taxtel's gratings reflected. Only an image
-smaller than one tile is completed by reflection at its edges.
+rather than on a mirrored copy, which would show the taxtel's gratings reflected; a tile is at
+most the image's size. Every tile pixel is therefore a pixel of the image.
 """
 
 from __future__ import annotations
@@ -87,14 +87,12 @@ class Geometry:
         return 1.0 / self.ppx, 1.0 / self.ppy
 
     def tile_columns(self) -> np.ndarray:
-        """Image column of every pixel of every tile column, ``(cols * tile_w,)``, reflected."""
-        index = self.col_tile[:, None] + np.arange(self.tile_w)[None, :]
-        return reflect_index(index.ravel(), self.width_px)
+        """Image column of every pixel of every tile column, ``(cols * tile_w,)``."""
+        return (self.col_tile[:, None] + np.arange(self.tile_w)[None, :]).ravel()
 
     def tile_rows(self, first: int = 0, stop: int | None = None) -> np.ndarray:
-        """Image row of every pixel of tile rows ``first:stop``, ``(n * tile_h,)``, reflected."""
-        index = self.row_tile[first:stop, None] + np.arange(self.tile_h)[None, :]
-        return reflect_index(index.ravel(), self.height_px)
+        """Image row of every pixel of tile rows ``first:stop``, ``(n * tile_h,)``."""
+        return (self.row_tile[first:stop, None] + np.arange(self.tile_h)[None, :]).ravel()
 
     def owned_mask(self, axis: str, first: int = 0, stop: int | None = None) -> np.ndarray:
         """``(n, tile)`` booleans: which pixels of each tile (``axis`` ``"x"``: columns,
@@ -113,14 +111,16 @@ class Geometry:
         """Tiles of taxtel rows ``first:stop``: array ``(stop-first, tile_h, cols, tile_w)``.
 
         ``columns`` is :meth:`tile_columns` (pass it to avoid recomputing it per chunk). Runs
-        of consecutive pixels are copied as slices (a tiling of whole pixels is then a reshaped
-        view of the image), anything else is gathered with ``take``.
+        of consecutive pixels are copied as slices, in one copy (a tiling of whole pixels is a
+        reshaped view of the image); an axis of many runs (overlapping tiles of a pixel pitch
+        that does not divide the taxtel) is gathered with ``take``.
         """
         cols_index = self.tile_columns() if columns is None else columns
         rows_index = self.tile_rows(first, stop)
         row_runs, col_runs = _runs(rows_index), _runs(cols_index)
         if row_runs is None or col_runs is None:
-            block = pixels.take(rows_index, axis=0).take(cols_index, axis=1)
+            block = _along(pixels, rows_index, row_runs, axis=0)
+            block = _along(block, cols_index, col_runs, axis=1)
         elif len(row_runs) == 1 and len(col_runs) == 1:
             (top, bottom), (left, right) = row_runs[0], col_runs[0]
             block = pixels[top:bottom, left:right]
@@ -137,6 +137,16 @@ class Geometry:
         return block.reshape(stop - first, self.tile_h, self.cols, self.tile_w)
 
 
+def _along(
+    array: np.ndarray, index: np.ndarray, runs: list[tuple[int, int]] | None, axis: int
+) -> np.ndarray:
+    """``array.take(index, axis)``; a view when ``index`` is one run (see :func:`_runs`)."""
+    if runs is not None and len(runs) == 1:
+        start, stop = runs[0]
+        return array[start:stop] if axis == 0 else array[:, start:stop]
+    return array.take(index, axis=axis)
+
+
 def _runs(index: np.ndarray) -> list[tuple[int, int]] | None:
     """``index`` as ``(start, stop)`` runs of consecutive integers, or None when it has more
     than five (copying a few slices is several times faster than ``take``)."""
@@ -145,20 +155,6 @@ def _runs(index: np.ndarray) -> list[tuple[int, int]] | None:
         return None
     bounds = [0, *breaks.tolist(), index.size]
     return [(int(index[a]), int(index[b - 1]) + 1) for a, b in pairwise(bounds)]
-
-
-def reflect_index(index: np.ndarray, size: int) -> np.ndarray:
-    """Map any integer pixel index onto ``0..size-1`` by mirror reflection at the edges.
-
-    Reflection excludes the edge pixel (``-1 -> 1``, ``size -> size-2``), like ``numpy.pad``'s
-    ``"reflect"`` mode, and repeats for indices beyond one image width.
-    """
-    index = np.asarray(index, dtype=np.int64)
-    if size == 1:
-        return np.zeros_like(index)
-    period = 2 * size - 2
-    folded = np.mod(index, period)
-    return np.where(folded >= size, period - folded, folded)
 
 
 def resolve_geometry(

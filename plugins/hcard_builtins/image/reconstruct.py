@@ -204,6 +204,8 @@ class Largest:
         """Take ``values`` (1-D) into account; ``floor``: a level that at least ``keep`` of the
         values seen so far (these included) reach, below which none can be kept.
 
+        ``values`` must not be NaN (a NaN would sort above every number).
+
         With ``reorder``, ``values`` may be reordered in place. A chunk of at least 4 ``keep``
         values is then partitioned without a copy: selecting the values above ``floor`` by a
         mask costs more on such a chunk (the 95th percentile of a 1024^2 image's errors:
