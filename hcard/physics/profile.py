@@ -847,17 +847,24 @@ def _owned(values: Any, shape: tuple[int, ...]) -> bool:
 def read_json(file: Path) -> Any:
     """The JSON content of ``file``; :class:`ProfileError` naming the file otherwise."""
     try:
-        return parse_json(read_bounded(file, MAX_JSON_FILE_BYTES).decode("utf-8"))
+        return parse_json(read_profile_bytes(file).decode("utf-8"))
+    except UnicodeDecodeError:
+        raise ProfileError(f"{file}: not a text (UTF-8) file") from None
+    except JsonInputError as exc:
+        raise ProfileError(f"{file}: not valid JSON ({exc})") from None
+
+
+def read_profile_bytes(file: Path) -> bytes:
+    """The bytes of a profile file (at most :data:`MAX_JSON_FILE_BYTES`); a missing, too large
+    or unreadable file is a :class:`ProfileError` naming it."""
+    try:
+        return read_bounded(file, MAX_JSON_FILE_BYTES)
     except FileNotFoundError:
         raise ProfileError(f"{file}: no such file") from None
     except InputTooLarge as exc:
         raise ProfileError(f"{file}: {exc} (a device profile)") from None
     except IsADirectoryError:
         raise ProfileError(f"{file}: is a directory, not a profile") from None
-    except UnicodeDecodeError:
-        raise ProfileError(f"{file}: not a text (UTF-8) file") from None
-    except JsonInputError as exc:
-        raise ProfileError(f"{file}: not valid JSON ({exc})") from None
     except OSError as exc:
         raise ProfileError(f"{file}: cannot read ({exc.strerror or exc})") from None
 

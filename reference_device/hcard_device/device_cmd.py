@@ -258,7 +258,7 @@ def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Pat
       hcard play card.hcard --device sim://evita --track stroke.csv -o rec.csv
       hcard play card.hcard --device usbip://127.0.0.1:3240/1-1 --track stroke.csv -o rec.csv
     """
-    from hcard.physics.profile import DeviceProfile
+    from hcard.physics.profile import DeviceProfile, read_profile_bytes
     from hcard_device.drivers import PlayTooLong, open_device
     from hcard_device.drivers.play import check_play_length, summary
     from hcard_device.drivers.play import play as play_track
@@ -290,21 +290,6 @@ def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Pat
     click.echo(f"{output}: {len(result.states)} reports from {uri}")
     for line in summary(result):
         click.echo(printable(f"  {line}"))
-
-
-def read_profile_bytes(path: Path) -> bytes:
-    """The bytes of a profile file; a missing or unreadable file is a one-line error."""
-    from hcard.bounded_read import MAX_JSON_FILE_BYTES, InputTooLarge, read_bounded
-    from hcard.physics.profile import ProfileError
-
-    try:
-        return read_bounded(path, MAX_JSON_FILE_BYTES)
-    except FileNotFoundError:
-        raise ProfileError(f"{path}: no such file") from None
-    except InputTooLarge as exc:
-        raise ProfileError(f"{path}: {exc} (a device profile)") from None
-    except OSError as exc:
-        raise ProfileError(f"{path}: cannot read ({exc.strerror or exc})") from None
 
 
 COMMANDS = [device, play]

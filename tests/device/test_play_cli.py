@@ -149,6 +149,14 @@ def test_play_checks_its_arguments_before_the_device(files):
     assert "cannot connect" not in result.output
 
 
+def test_play_refuses_a_missing_profile_before_the_device(files):
+    """The profile is read with the profile reader's own errors (one line naming the file)
+    before a device is opened: the unreachable URI is never tried."""
+    result = play(files, "usbip://127.0.0.1:1/1-1", "--profile", str(files / "missing.json"))
+    assert result.exit_code == 1 and "missing.json: no such file" in result.output
+    assert len(result.output.strip().splitlines()) == 1 and "cannot connect" not in result.output
+
+
 def test_device_list_without_servers_lists_the_simulations():
     result = CliRunner().invoke(cli, ["device", "list", "--host", "127.0.0.1:1"])
     assert result.exit_code == 0, result.output
