@@ -53,10 +53,14 @@ MN_PER_N = 1e3
 """Millinewtons in a newton."""
 UA_PER_A = 1e6
 """Microamperes in an ampere."""
-HZ_PER_KHZ = 1e3
-"""Hertz in a kilohertz."""
-KHZ_PER_HZ = 1e-3
-"""Kilohertz in a hertz."""
+ATMOSPHERE_PA = 101_325.0
+"""One standard atmosphere, Pa (exact by definition)."""
+EPSILON_0 = 8.8541878188e-12
+"""Vacuum permittivity, F/m (CODATA 2022; Table 3.2 of the thesis lists 8.8542e-12). SciPy 1.15
+and later give the same in ``scipy.constants.epsilon_0`` (1.10-1.14: CODATA 2018, 6.8e-10
+lower); tests/test_quantities.py compares. The physical constants are written out here because
+``import scipy.constants`` takes ~0.1 s, and the hosts that only run predictors (the QEMU
+guest, a conformance run) import the models that use them."""
 
 SI_UNITS: dict[str, str] = {
     "time": "s",
@@ -111,6 +115,7 @@ _BASE = {
     "": "1",
 }
 _SPECIAL = {
+    "atm": (ATMOSPHERE_PA, "Pa"),
     "mm/s": (1e-3, "m/s"),
     "m/s": (1.0, "m/s"),
     "um/s": (1e-6, "m/s"),
@@ -156,10 +161,6 @@ def column_units(*suffixes: str) -> dict[str, float]:
 def parse_unit(unit: str) -> tuple[float, str]:
     """Scale to SI and the SI unit of ``unit`` (``"um"`` -> ``(1e-6, "m")``)."""
     unit = unit.strip()
-    if unit == "atm":  # imported here: scipy.constants takes 0.3 s, the device's hosts load this
-        from scipy.constants import atm
-
-        return atm, "Pa"
     if unit in _SPECIAL:
         return _SPECIAL[unit]
     if unit in _BASE:

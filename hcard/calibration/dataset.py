@@ -19,7 +19,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.constants
 
 from hcard.calibration.contact import (
     check_threshold,
@@ -37,10 +36,7 @@ from hcard.calibration.splits import (
     stroke_ids,
 )
 from hcard.physics import Predictor
-from hcard.quantities import MN_PER_N
-
-ATMOSPHERE_PA = scipy.constants.atm
-"""Ambient pressure assumed for a recording whose sidecar gives none, Pa."""
+from hcard.quantities import ATMOSPHERE_PA, MN_PER_N
 
 REST_S = 0.5
 """A pause out of contact (or a time gap) longer than this rests the finger, s: the stroke

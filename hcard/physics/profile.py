@@ -45,7 +45,7 @@ from hcard.physics.profile_effects import (
     solve_decreasing,
     with_effects,
 )
-from hcard.quantities import UnitError, parse_quantity, parse_unit
+from hcard.quantities import EPSILON_0, UnitError, parse_quantity, parse_unit
 
 if TYPE_CHECKING:
     from hcard.physics.actuation import ActuatorCommands
@@ -464,11 +464,7 @@ class DeviceProfile:
             p["sc_thickness"] / p["sc_permittivity"]
             + p["insulator_thickness"] / p["insulator_permittivity"]
         )
-        # scipy.constants imported here: it takes 0.2 s, and hosts that only read a device's
-        # configuration load this module
-        from scipy.constants import epsilon_0
-
-        return epsilon_0 * p["area"] / electrical_thickness
+        return EPSILON_0 * p["area"] / electrical_thickness
 
     # -- forward and rendering -------------------------------------------------------------
     def forward(

@@ -15,7 +15,6 @@ from functools import lru_cache
 from typing import ClassVar
 
 import numpy as np
-import scipy.constants
 from scipy.interpolate import PchipInterpolator
 
 from hcard.calibration.effects import (
@@ -26,9 +25,10 @@ from hcard.calibration.effects import (
     touchdowns,
 )
 from hcard.physics import Parameter, Variable
+from hcard.quantities import ATMOSPHERE_PA
 from hcard_builtins.physics.electrovibration import geometry as pad_geometry
 
-ATMOSPHERE = scipy.constants.atm
+ATMOSPHERE = ATMOSPHERE_PA
 """Reference ambient pressure p0 of Eq. 2.10, Pa."""
 
 REFERENCE_FORCE = 1.0

@@ -63,10 +63,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import scipy.constants
 
 from hcard.calibration.measurement import Measurement
 from hcard.physics import Parameter, PredictorError
+from hcard.quantities import ATMOSPHERE_PA
 from hcard_builtins.physics.electrovibration import AirLayer, ChargeLeakage, Kaczmarek
 from hcard_builtins.physics.finger import FingerFriction
 from hcard_builtins.physics.ultrasonic import DimensionlessGroup
@@ -150,7 +150,7 @@ class Protocol:
     amplitude_segment_s: float = 0.03
     voltage_segment_s: float = 0.04
     voltage_range_v: tuple[float, float] = VOLTAGE_RANGE_V
-    pressures_pa: tuple[float, ...] = (scipy.constants.atm,)
+    pressures_pa: tuple[float, ...] = (ATMOSPHERE_PA,)
 
     def __post_init__(self) -> None:
         positive = (

@@ -7,12 +7,9 @@ SI units throughout: m, m^2, V, N, F, s.
 from __future__ import annotations
 
 import numpy as np
-import scipy.constants
 
 from hcard.physics import Parameter, PredictorError
-
-EPSILON_0 = scipy.constants.epsilon_0
-"""Vacuum permittivity in F/m (CODATA, through scipy.constants; Table 3.2 lists 8.8542e-12)."""
+from hcard.quantities import EPSILON_0
 
 THICKNESS_BOUNDS = (1e-9, 1e-2)
 """Allowed layer thicknesses in m (1 nm to 10 mm)."""

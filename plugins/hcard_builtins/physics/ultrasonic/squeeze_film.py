@@ -42,13 +42,10 @@ import math
 from typing import Any, ClassVar
 
 import numpy as np
-import scipy.constants
 
 from hcard.physics import Parameter, Predictor, PredictorError, Variable
+from hcard.quantities import ATMOSPHERE_PA as ATMOSPHERE
 from hcard_builtins.physics.ultrasonic._checks import check_inputs
-
-ATMOSPHERE = scipy.constants.atm
-"""Default ambient pressure (Pa)."""
 
 GAUSS_NODES_PER_HALF_PERIOD = 48
 CHUNK_ELEMENTS = 1 << 21
