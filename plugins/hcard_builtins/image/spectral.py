@@ -168,11 +168,6 @@ def hann_kernels_of(
     return out
 
 
-def hann_gain(u: np.ndarray, n: int) -> np.ndarray:
-    """``|hann_kernel(u, n)|``."""
-    return np.abs(hann_kernel(u, n))
-
-
 def analyse_tiles(tiles: np.ndarray, *, n_peaks: int, min_amplitude: float) -> TileSpectra:
     """Spectral analysis of tiles ``(rows, tile_h, cols, tile_w)`` (any real dtype).
 
