@@ -102,12 +102,6 @@ def same_answers(screened: CalibrationResult, baseline: CalibrationResult) -> st
     return "yes" if not found else "NO: " + ", ".join(found)
 
 
-def png_bytes(fig: Figure) -> bytes:
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=report.DPI)
-    return buffer.getvalue()
-
-
 def report_before() -> ModuleType | None:
     """:mod:`hcard.calibration.report` as it was before its figures were made faster (commit
     :data:`BEFORE`, read from the repository's history), or None without git or history."""
@@ -125,10 +119,11 @@ def report_before() -> ModuleType | None:
 
 
 def blank_png(size_inches: tuple[float, float]) -> bytes:
-    """An empty figure of this size, encoded: what any figure costs at least."""
+    """An empty figure of this size, encoded as the report encodes its figures: what any figure
+    costs at least."""
     fig = Figure(figsize=size_inches, dpi=report.DPI)
     FigureCanvasAgg(fig)
-    return png_bytes(fig)
+    return report._png(fig)
 
 
 def main() -> None:

@@ -40,12 +40,13 @@ from hcard.card_io import save
 from hcard.preview import preview_figure, render_preview
 from hcard.v1 import card_pb2 as pb
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from console_script import ENTRY
+
 GOAL_S = 1.0
 """Goal: in-process preview of a 256-texture card (figure and PNG), seconds."""
 DPI = 120
 """The command's default resolution."""
-ENTRY = "import sys; from hcard.cli.main import cli; sys.exit(cli())"
-"""What the ``hcard`` console script runs (without a shell shim in front)."""
 FLOOR_COMMAND = (
     "import sys; from matplotlib.figure import Figure; "
     "from matplotlib.backends.backend_agg import FigureCanvasAgg; "
