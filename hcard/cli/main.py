@@ -134,7 +134,7 @@ def _load(command: CommandPlugin) -> click.Command | None:
     except Exception as exc:  # a broken plugin must not crash the tool
         from hcard.plugins import command_cache
 
-        command_cache.forget()  # perhaps remembered from before the package changed
+        command_cache.forget_commands()  # perhaps remembered from before the package changed
         _show_warning(f"command '{command.name}' cannot be loaded: {type(exc).__name__}: {exc}",
                       UserWarning)
         return None

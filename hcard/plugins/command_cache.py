@@ -197,15 +197,12 @@ def _write(name: str, cache_format: str, modules: list[str], **contents: Any) ->
         "modules": [[path, _mtime(path)] for path in sorted(modules)],
         **contents,
     }
+    from hcard.atomic import write_atomically
+
     path = cache_path(name)
-    temporary = path.with_name(f".{path.name}.{os.getpid()}")
-    try:
+    with contextlib.suppress(OSError):  # readers see the old file or the new one, never half
         path.parent.mkdir(parents=True, exist_ok=True)
-        temporary.write_text(json.dumps(document), encoding="utf-8")
-        os.replace(temporary, path)  # readers see the old file or the new one, never half
-    except OSError:
-        with contextlib.suppress(OSError):
-            temporary.unlink(missing_ok=True)
+        write_atomically(path, json.dumps(document).encode("utf-8"))
 
 
 def load() -> dict[str, CommandPlugin] | None:
@@ -225,12 +222,13 @@ def load() -> dict[str, CommandPlugin] | None:
 def store(commands: dict[str, CommandPlugin], modules: list[str]) -> None:
     """Remember ``commands`` (all :class:`LazyCommand`, else nothing is kept), found in the
     plugin modules whose files are ``modules``."""
-    if not all(isinstance(command, LazyCommand) for command in commands.values()):
+    lazy = {name: command for name, command in commands.items()
+            if isinstance(command, LazyCommand)}
+    if len(lazy) != len(commands):
         return
     _write(COMMANDS, CACHE_FORMAT, modules, commands=[
         {"name": name, "target": command.target, "summary": command.summary}
-        for name, command in sorted(commands.items())
-        if isinstance(command, LazyCommand)
+        for name, command in sorted(lazy.items())
     ])
 
 
@@ -239,6 +237,15 @@ def forget(name: str = COMMANDS) -> None:
     again)."""
     with contextlib.suppress(OSError):
         cache_path(name).unlink(missing_ok=True)
+
+
+def forget_commands() -> None:
+    """Drop both findings the commands are taken from: the commands and the entry points of
+    their group (either alone would bring the other's stale command back on the next run)."""
+    from hcard.plugins.hookspecs import COMMAND_ENTRY_POINT_GROUP
+
+    forget(COMMANDS)
+    forget(entry_point_cache_name(COMMAND_ENTRY_POINT_GROUP))
 
 
 def load_entry_points(group: str) -> list[CachedEntryPoint] | None:

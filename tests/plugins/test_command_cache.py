@@ -100,7 +100,10 @@ def test_a_remembered_command_that_no_longer_loads_is_warned_and_forgotten(
     assert ("warning: command 'greet' cannot be loaded: ModuleNotFoundError: No module named "
             "'hcardtest_greet_cmd'") in gone.stderr
     assert "Traceback" not in gone.stderr
+    # both findings the commands come from are dropped: the commands and their group's entry
+    # points (either one left would bring the stale command back without a warning)
     assert not (cache / "hcard" / "commands.json").exists()
+    assert not (cache / "hcard" / "entry-points-hcard.commands.json").exists()
 
 
 FIND_ENCODERS = (
