@@ -82,9 +82,7 @@ def _enum_label(enum: object, value: int, prefix: str) -> str:
 
 def channel_label(value: int) -> str:
     """Channel name without prefix: ``"UV"``, ``"EV"``, ``"BIPOLAR"``."""
-    if value in LABEL_OF_VALUE:
-        return LABEL_OF_VALUE[value]
-    return _enum_label(pb.Channel, value, "CHANNEL_")
+    return LABEL_OF_VALUE.get(value) or _enum_label(pb.Channel, value, "CHANNEL_")
 
 
 def locking_label(value: int) -> str:

@@ -21,7 +21,6 @@ from hcard.channels import VALUES
 from hcard.errors import Problem
 from hcard.v1 import card_pb2 as pb
 
-_CHANNELS = VALUES
 _LOCKINGS = {pb.LOCKING_POSITION, pb.LOCKING_VELOCITY, pb.LOCKING_AUTO}
 _DOMAINS = {pb.DOMAIN_SPATIAL, pb.DOMAIN_TEMPORAL}
 
@@ -248,7 +247,7 @@ def _check_texture(texture: pb.Texture, path: str, out: Findings) -> None:
     baseline_ok = _check_amplitude_like(
         texture.baseline, f"{path}.baseline", "baseline relative friction", "T3", out
     )
-    if texture.channel not in _CHANNELS:
+    if texture.channel not in VALUES:
         out.add(
             f"{path}.channel",
             "must be CHANNEL_UV, CHANNEL_EV or CHANNEL_BIPOLAR"
@@ -324,6 +323,6 @@ def _check_component(component: pb.Component, path: str, out: Findings) -> bool:
         value = getattr(component, name)
         if not _finite(value):
             out.add(f"{path}.{name}", f"must be finite, got {value}", "C4")
-    if component.channel != pb.CHANNEL_UNSPECIFIED and component.channel not in _CHANNELS:
+    if component.channel != pb.CHANNEL_UNSPECIFIED and component.channel not in VALUES:
         out.add(f"{path}.channel", f"unknown channel {component.channel}", "C5")
     return amplitude_ok

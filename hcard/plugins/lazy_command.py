@@ -6,7 +6,6 @@ Its own small module: ``hcard --help`` reads remembered commands
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING, NamedTuple
 
 if TYPE_CHECKING:
@@ -28,5 +27,6 @@ class LazyCommand(NamedTuple):  # not a dataclass: 0.06 ms to define instead of 
 
     def load(self) -> click.Command:
         """Import ``target`` and return the command it names."""
-        module_name, _, attribute = self.target.partition(":")
-        return getattr(importlib.import_module(module_name), attribute)
+        import pkgutil
+
+        return pkgutil.resolve_name(self.target)

@@ -19,7 +19,6 @@ looking up the image encoder imports no predictor, effect or conformance check.
 from __future__ import annotations
 
 import bisect
-import importlib
 import itertools
 import os
 import sys
@@ -626,11 +625,9 @@ class PluginRegistry:
 def _import_target(value: str) -> Any:
     """The object an entry point's ``value`` names (``module`` or ``module:attribute``,
     optionally followed by ``[extras]``), importing its module."""
-    module_name, _, attribute = value.partition("[")[0].partition(":")
-    target: Any = importlib.import_module(module_name.strip())
-    for name in filter(None, attribute.strip().split(".")):
-        target = getattr(target, name)
-    return target
+    import pkgutil
+
+    return pkgutil.resolve_name(value.partition("[")[0].strip())
 
 
 def _entry_point_order(entry_point: metadata.EntryPoint) -> tuple[bool, str, str]:
