@@ -53,6 +53,8 @@ _HOOK_OF_KIND = {kind: hook_name for hook_name, kind in HOOK_KINDS.items()}
 COMMAND_HOOK = "hcard_commands"
 """The hook contributing subcommands (:class:`~hcard.plugins.kinds.CommandPlugin`), which are
 kept apart from the plugin kinds: ``hcard --help`` lists them, ``hcard plugins`` does not."""
+ALL_HOOKS = (*HOOK_KINDS, COMMAND_HOOK)
+"""Every hook a plugin may implement."""
 
 _PLUGGY_DIR = os.path.dirname(pluggy.__file__)
 
@@ -190,7 +192,7 @@ class PluginRegistry:
         self.plugin_manager = pluggy.PluginManager(hookspecs.PROJECT)
         self.plugin_manager.add_hookspecs(hookspecs)
         self._by_kind: dict[str, dict[str, PluginInfo]] = {kind: {} for kind in KINDS}
-        self._commands: dict[str, tuple[CommandPlugin, _Source]] = {}
+        self._commands: dict[str, CommandPlugin] = {}
         self._broken: list[BrokenPlugin] = []
         self._registered: list[_Registered] = []
         """Registered plugins, sorted by :attr:`_Registered.order`."""
@@ -369,31 +371,35 @@ class PluginRegistry:
         infos: list[PluginInfo] = []
         commands: dict[str, CommandPlugin] = {}
         if registered is not None:
-            for hook_name in (*HOOK_KINDS, COMMAND_HOOK):
+            for hook_name in ALL_HOOKS:
                 if strict or hook_name in self._collected:
-                    entry.collected.add(hook_name)
-                    if hook_name == COMMAND_HOOK:
-                        commands = self._collect_commands(plugin, source, problems)
-                    else:
-                        infos += self._collect(plugin, source, hook_name, problems)
+                    answered, contributed = self._answer(entry, hook_name, problems)
+                    infos += answered
+                    commands.update(contributed)
         if strict and problems:
             if registered is not None:
                 pm.unregister(plugin)
             raise PluginError("; ".join(problems))
         for reason in problems:
             self._problem(source.entry_point, reason)
-        self._keep(infos, commands, source)
+        self._keep(infos, commands)
         if registered is not None:
             bisect.insort(self._registered, entry, key=lambda known: known.order)
         return infos
 
-    def _keep(
-        self, infos: list[PluginInfo], commands: dict[str, CommandPlugin], source: _Source
-    ) -> None:
+    def _keep(self, infos: list[PluginInfo], commands: dict[str, CommandPlugin]) -> None:
         for info in infos:
             self._by_kind[info.kind][info.name] = info
-        for name, command in commands.items():
-            self._commands[name] = (command, source)
+        self._commands.update(commands)
+
+    def _answer(self, entry: _Registered, hook_name: str, problems: list[str]
+                ) -> tuple[list[PluginInfo], dict[str, CommandPlugin]]:
+        """Call ``hook_name`` of ``entry``'s plugin (marked answered): the plugins it gives, or
+        the commands for :data:`COMMAND_HOOK`; problems appended to ``problems``."""
+        entry.collected.add(hook_name)
+        if hook_name == COMMAND_HOOK:
+            return [], self._collect_commands(entry.plugin, entry.source, problems)
+        return self._collect(entry.plugin, entry.source, hook_name, problems), {}
 
     def _ensure(self, hook_name: str) -> None:
         """Call ``hook_name`` of every registered plugin that has not answered it yet, in
@@ -405,17 +411,11 @@ class PluginRegistry:
             for entry in self._registered:
                 if hook_name in entry.collected:
                     continue
-                entry.collected.add(hook_name)
                 problems: list[str] = []
-                if hook_name == COMMAND_HOOK:
-                    commands = self._collect_commands(entry.plugin, entry.source, problems)
-                    infos: list[PluginInfo] = []
-                else:
-                    commands = {}
-                    infos = self._collect(entry.plugin, entry.source, hook_name, problems)
+                infos, commands = self._answer(entry, hook_name, problems)
                 for reason in problems:
                     self._problem(entry.source.entry_point, reason)
-                self._keep(infos, commands, entry.source)
+                self._keep(infos, commands)
             self._collected.add(hook_name)
 
     def collect(self) -> None:
@@ -423,7 +423,7 @@ class PluginRegistry:
         holds every problem of the registered plugins."""
         with self._collecting:
             self._load_pending(None)
-        for hook_name in (*HOOK_KINDS, COMMAND_HOOK):
+        for hook_name in ALL_HOOKS:
             self._ensure(hook_name)
 
     def _check_hooks(self, plugin: Any, source: _Source, problems: list[str]) -> None:
@@ -434,7 +434,7 @@ class PluginRegistry:
         if unknown:
             problems.append(
                 f"{source.label()} implements unknown hook(s) {', '.join(unknown)} "
-                f"(known: {', '.join((*HOOK_KINDS, COMMAND_HOOK))}); they are ignored"
+                f"(known: {', '.join(ALL_HOOKS)}); they are ignored"
             )
         if not callers:
             problems.append(
@@ -593,7 +593,7 @@ class PluginRegistry:
     def commands(self) -> dict[str, CommandPlugin]:
         """Subcommands contributed through the ``hcard_commands`` hook, by name (a copy)."""
         self._ensure(COMMAND_HOOK)
-        return {name: command for name, (command, _) in self._commands.items()}
+        return dict(self._commands)
 
     def infos(self, kind: str) -> list[PluginInfo]:
         """The :class:`PluginInfo` of every plugin of ``kind``, sorted by name."""
