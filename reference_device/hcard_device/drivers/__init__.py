@@ -44,10 +44,10 @@ __all__ = [
 ]
 
 
-def driver_classes(*, plugins: bool = True) -> dict[str, DriverPlugin]:
+def driver_classes() -> dict[str, DriverPlugin]:
     """Driver plugins of the plugin registry by URI scheme: the built-ins (package ``hcard``:
-    ``sim``, ``usbip``, ``pyusb``, ``hid``), then (``plugins``) the other installed or
-    registered drivers for other schemes."""
+    ``sim``, ``usbip``, ``pyusb``, ``hid``), which keep their schemes, then the other installed
+    or registered drivers for other schemes."""
     from hcard.plugins.registry import CORE_DISTRIBUTION, get_registry
 
     with warnings.catch_warnings():
@@ -55,8 +55,6 @@ def driver_classes(*, plugins: bool = True) -> dict[str, DriverPlugin]:
         infos = get_registry().infos("driver")
     by_scheme: dict[str, DriverPlugin] = {}
     for info in sorted(infos, key=lambda info: info.package != CORE_DISTRIBUTION):
-        if info.package != CORE_DISTRIBUTION and not plugins:
-            continue
         for scheme in getattr(info.obj, "schemes", ()):
             by_scheme.setdefault(str(scheme), info.obj)
     return by_scheme
@@ -69,8 +67,7 @@ def open_device(uri: str | DeviceUri, *, timeout_s: float = DEFAULT_TIMEOUT_S) -
         UriError: malformed URI or unknown scheme.
         DeviceError: the device is missing, unreachable or not an hcard device.
     """
-    scheme = (uri.split("://", 1)[0].lower() if isinstance(uri, str) else uri.scheme)
-    drivers = driver_classes(plugins=scheme not in SCHEMES)  # a built-in scheme: a built-in
+    drivers = driver_classes()
     if isinstance(uri, str):
         uri = parse_uri(uri, schemes=tuple(dict.fromkeys((*SCHEMES, *drivers))))
     driver = drivers.get(uri.scheme)
