@@ -44,6 +44,9 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from calibration_answers import differences
+
 from hcard.calibration import report
 from hcard.calibration.dataset import prepare
 from hcard.calibration.loop import CalibrationResult, LoopSettings, calibrate
@@ -87,18 +90,8 @@ def one_time(work: Callable[[], object]) -> float:
 
 
 def same_answers(screened: CalibrationResult, baseline: CalibrationResult) -> str:
-    """``"yes"``, or what differs."""
-    found = []
-    if screened.effects_added != baseline.effects_added:
-        found.append("effects")
-    if screened.verdict != baseline.verdict:
-        found.append("verdict")
-    if screened.after.fit.params != baseline.after.fit.params:
-        found.append("accepted fit")
-    pair = [(r.comparison.runner_up, r.comparison.criterion_margin)
-            if r.comparison is not None else None for r in (screened, baseline)]
-    if pair[0] != pair[1]:
-        found.append(f"runner-up {pair[1]} -> {pair[0]}")
+    """``"yes"``, or what differs (:func:`calibration_answers.differences`)."""
+    found = differences(baseline, screened)
     return "yes" if not found else "NO: " + ", ".join(found)
 
 

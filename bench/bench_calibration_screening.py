@@ -47,6 +47,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "calibration"))
 
 import independent_recordings as ir
+from calibration_answers import differences, runner_up
 
 from hcard.calibration.loop import CalibrationResult, LoopSettings, calibrate
 from hcard.calibration.screening import SCREEN_SAMPLES, SCREEN_TOLERANCE
@@ -89,35 +90,6 @@ def screened_deviation(baseline: CalibrationResult,
             if deviation > worst:
                 worst, which = deviation, f"{c.round}: {c.effect}"
     return worst, which
-
-
-def differences(baseline: CalibrationResult, screened: CalibrationResult) -> list[str]:
-    """What differs between the two answers (empty: nothing): the effects, the verdict, the
-    accepted fit, and the runner-up where it may decide the verdict (it or its screened
-    counterpart within twice the separation thresholds of the final model)."""
-    found = []
-    if screened.effects_added != baseline.effects_added:
-        found.append(f"effects {baseline.effects_added} / {screened.effects_added}")
-    if screened.verdict != baseline.verdict:
-        found.append(f"verdict {baseline.verdict!r} / {screened.verdict!r}")
-    if screened.after.fit.params != baseline.after.fit.params:
-        found.append("accepted fit's parameters")
-    if screened.after.test_rmse != baseline.after.test_rmse:
-        found.append("accepted fit's held-out RMSE")
-    near = [r.comparison is not None and r.after.effects != () and (
-        r.comparison.criterion_margin < 2 * r.settings.separation_criterion
-        or r.comparison.rmse_margin < 2 * r.settings.separation_rmse)
-        for r in (baseline, screened)]
-    if any(near) and runner_up(baseline) != runner_up(screened):
-        found.append(f"runner-up {runner_up(baseline)} / {runner_up(screened)}")
-    return found
-
-
-def runner_up(result: CalibrationResult) -> tuple[tuple[str, ...], float] | None:
-    """The runner-up's effects and its criterion margin to the final model."""
-    if result.comparison is None:
-        return None
-    return result.comparison.runner_up, result.comparison.criterion_margin
 
 
 def main() -> None:
