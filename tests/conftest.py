@@ -1,10 +1,11 @@
-"""Shared fixtures, import path for the test helpers, and the order of the test files."""
+"""The run's own cache directory, import path for the test helpers, and the order of the test
+files."""
 
 from __future__ import annotations
 
-import os
+import shutil
 import sys
-from collections.abc import Iterator
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -22,15 +23,26 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     items.sort(key=lambda item: item.path.name not in FIRST)
 
 
-@pytest.fixture(scope="session", autouse=True)
-def _own_cache_directory(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
-    """Plugin discovery remembers the entry points and contributed commands it found in the
+_CACHE_DIRECTORY = pytest.StashKey[tuple[pytest.MonkeyPatch, Path]]()
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Point ``XDG_CACHE_HOME`` at a fresh directory of the run's own.
+
+    Plugin discovery remembers the entry points and contributed commands it found in the
     user's cache directory (:mod:`hcard.plugins.command_cache`): the test run, and the commands it
-    starts, keep theirs in a directory of their own instead of the user's."""
-    previous = os.environ.get("XDG_CACHE_HOME")
-    os.environ["XDG_CACHE_HOME"] = str(tmp_path_factory.mktemp("xdg-cache"))
-    yield
-    if previous is None:
-        os.environ.pop("XDG_CACHE_HOME", None)
-    else:
-        os.environ["XDG_CACHE_HOME"] = previous
+    starts, keep theirs in a directory of their own instead of the user's. This must precede
+    collection, since test modules call ``get_registry()`` at import (a session fixture would
+    come too late). Each pytest-xdist worker runs this hook as well and gets a directory of its
+    own."""
+    patch = pytest.MonkeyPatch()
+    directory = Path(tempfile.mkdtemp(prefix="hcard-xdg-"))
+    patch.setenv("XDG_CACHE_HOME", str(directory))
+    config.stash[_CACHE_DIRECTORY] = (patch, directory)
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    """Restore ``XDG_CACHE_HOME`` and remove the run's cache directory."""
+    patch, directory = config.stash[_CACHE_DIRECTORY]
+    patch.undo()
+    shutil.rmtree(directory, ignore_errors=True)
