@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import subprocess
 import sys
 
@@ -23,14 +24,11 @@ from hcard.calibration.measurement import SI_SUFFIX, read_measurement
     ],
 )
 def test_named_conversions_are_the_si_prefixes(name: str, expected: float) -> None:
-    assert getattr(units, name) == pytest.approx(expected, rel=1e-15)
-
-
-def test_a_conversion_and_its_inverse_multiply_to_one() -> None:
-    pairs = [("M_PER_MM", "MM_PER_M"), ("S_PER_MS", "MS_PER_S"), ("S_PER_US", "US_PER_S"),
-             ("N_PER_MN", "MN_PER_N")]
-    for there, back in pairs:
-        assert getattr(units, there) * getattr(units, back) == pytest.approx(1.0, rel=1e-15)
+    """Each factor is its SI prefix, and exactly the double nearest that power of ten (so a
+    factor times its inverse, ``M_PER_MM * MM_PER_M``, is exactly 1)."""
+    value = getattr(units, name)
+    assert value == pytest.approx(expected, rel=1e-15)
+    assert value == float(f"1e{round(math.log10(value))}")
 
 
 def test_an_atmosphere_is_101325_pa() -> None:
@@ -56,11 +54,24 @@ def test_column_units_scale_to_si(quantity: str, suffix: str, scale: float) -> N
     assert units.COLUMN_UNITS[quantity][suffix] == scale
 
 
+SPEC_SI_SUFFIX = {
+    # spec/measurement-format.md rule MF3's table (the SI unit of each quantity; MF11 writes it)
+    "t": "s", "fn": "n", "fl": "n", "amplitude": "m", "voltage": "v", "x": "m", "y": "m",
+    "speed": "m_s", "frequency": "hz",
+    # and rule MF12's device columns with a unit
+    "f_tl": "n", "f_tr": "n", "f_bl": "n", "f_br": "n", "current": "a", "echo": "s",
+}
+"""The SI unit suffix of every column quantity with a unit, as spec/measurement-format.md
+names them (``stroke`` and MF12's integer columns have none)."""
+
+
 def test_every_column_quantity_is_written_in_its_si_unit() -> None:
-    """Rule MF4: each quantity has exactly one suffix of scale 1, the one the writer uses."""
+    """Rules MF3, MF12: the quantities and their SI units are the spec's, and each quantity has
+    exactly one suffix of scale 1, its SI unit, which the writer uses (MF11)."""
+    assert SI_SUFFIX == SPEC_SI_SUFFIX
     for quantity, accepted in units.COLUMN_UNITS.items():
         si = [suffix for suffix, scale in accepted.items() if scale == 1.0]
-        assert si == [SI_SUFFIX[quantity]], quantity
+        assert si == [SPEC_SI_SUFFIX[quantity]], quantity
 
 
 def test_the_reader_applies_the_column_units(tmp_path) -> None:
