@@ -3,11 +3,14 @@ from the code it describes without a test failing."""
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 import re
+from collections.abc import Sequence
 from pathlib import Path
 
 import pytest
+from test_spec_rule_ids import SKIPPED_DIRS
 
 ROOT = Path(__file__).resolve().parent.parent
 DOC = ROOT / "ARCHITECTURE.md"
@@ -25,13 +28,21 @@ def _names(text: str) -> list[str]:
     return [n for n in re.findall(r"`([^`\n]+)`", prose) if n not in groups]
 
 
-def _repository_files() -> list[str]:
-    skip = {".git", "build", "__pycache__"}
-    return [p.relative_to(ROOT).as_posix() for p in ROOT.rglob("*")
-            if not skip.intersection(p.relative_to(ROOT).parts)]
+@functools.cache
+def _repository_files() -> tuple[str, ...]:
+    """Every file and folder of the repository (POSIX paths from its root), less the tools'
+    caches and build output (:data:`test_spec_rule_ids.SKIPPED_DIRS`, ``*.egg-info``); walked
+    once per run."""
+    found = []
+    for path in ROOT.rglob("*"):
+        parts = path.relative_to(ROOT).parts
+        if SKIPPED_DIRS.intersection(parts) or any(p.endswith(".egg-info") for p in parts):
+            continue
+        found.append(path.relative_to(ROOT).as_posix())
+    return tuple(found)
 
 
-def missing_paths(names: list[str], files: list[str]) -> list[str]:
+def missing_paths(names: list[str], files: Sequence[str]) -> list[str]:
     """Path-like names that no file or folder of the repository ends with."""
     candidates = [n for n in names if PATH_LIKE.match(n)]
     return [n for n in candidates
@@ -74,7 +85,7 @@ def test_every_named_hook_is_a_hookspec() -> None:
 
     names = _names(DOC.read_text(encoding="utf-8"))
     hooks = {n for n in names if HOOK_LIKE.match(n) and not _is_module(n)}
-    assert len(hooks) >= 5
+    assert len(hooks) >= 5  # ... and its hooks
     assert sorted(h for h in hooks if not hasattr(hookspecs, h)) == []
 
 
