@@ -94,8 +94,6 @@ def test_one_copy_of_pocketfft_per_process(scipy_first: bool) -> None:
             "import numpy as np",
             first,
             second,
-            "from hcard_builtins.image import fft",
-            "import scipy.fft",
             "tiles = np.arange(2 * 6 * 8, dtype=np.float64).reshape(2, 6, 8)",
             "ours, theirs = fft.rfft2(tiles), scipy.fft.rfft2(tiles)",
             "assert np.allclose(ours, theirs), 'transforms differ'",
