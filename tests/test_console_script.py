@@ -14,6 +14,7 @@ import sys
 from importlib.metadata import entry_points
 from pathlib import Path
 
+import pytest
 from click.testing import CliRunner
 
 import hcard
@@ -21,8 +22,9 @@ from hcard.card_io import parse_card
 from hcard.cli.main import cli, main
 
 BUTTON = Path(__file__).parents[1] / "examples" / "button.png"
-CONSOLE_SCRIPT = "from hcard.cli.main import main; main()"
-"""What the installed ``hcard`` script runs."""
+_HCARD = next(e for e in entry_points(group="console_scripts") if e.name == "hcard")
+CONSOLE_SCRIPT = f"from {_HCARD.module} import {_HCARD.attr}; {_HCARD.attr}()"
+"""What the installed ``hcard`` script runs: its entry point's function, called."""
 
 
 def fresh(code: str, *args: str) -> subprocess.CompletedProcess[bytes]:
@@ -46,25 +48,32 @@ def test_the_installed_console_script_is_main() -> None:
     assert script.load() is main
 
 
-def test_an_encode_through_the_console_script_writes_the_card_and_the_whole_summary(tmp_path):
-    card, reference = tmp_path / "button.hcard", tmp_path / "reference.hcard"
+@pytest.fixture(scope="module")
+def reference_card(tmp_path_factory: pytest.TempPathFactory) -> bytes:
+    """The card of ``hcard -q encode button.png``, run in this process through click's runner
+    (no fast exit), once for the module."""
+    reference = tmp_path_factory.mktemp("reference") / "button.hcard"
+    in_process = CliRunner().invoke(cli, ["-q", "encode", str(BUTTON), "-o", str(reference)])
+    assert in_process.exit_code == 0, in_process.output
+    return reference.read_bytes()
+
+
+def test_an_encode_through_the_console_script_writes_the_card_and_the_whole_summary(
+    tmp_path: Path, reference_card: bytes
+) -> None:
+    card = tmp_path / "button.hcard"
     done = fresh(CONSOLE_SCRIPT, "-q", "encode", str(BUTTON), "-o", str(card), "--json")
     assert done.returncode == 0, done.stderr.decode()
     summary = json.loads(done.stdout)  # all of it: the piped stdout was flushed at exit
     assert summary["output_bytes"] == card.stat().st_size
-    in_process = CliRunner().invoke(cli, ["-q", "encode", str(BUTTON), "-o", str(reference)])
-    assert in_process.exit_code == 0, in_process.output
-    assert card.read_bytes() == reference.read_bytes()
+    assert card.read_bytes() == reference_card
     assert hcard.load(card).metadata.title == "button"
 
 
-def test_a_card_written_to_standard_output_arrives_whole(tmp_path):
-    reference = tmp_path / "reference.hcard"
+def test_a_card_written_to_standard_output_arrives_whole(reference_card: bytes) -> None:
     done = fresh(CONSOLE_SCRIPT, "-q", "encode", str(BUTTON), "-o", "-")
     assert done.returncode == 0, done.stderr.decode()
-    assert CliRunner().invoke(cli, ["-q", "encode", str(BUTTON), "-o", str(reference)]
-                              ).exit_code == 0
-    assert done.stdout == reference.read_bytes()
+    assert done.stdout == reference_card
     assert parse_card(done.stdout, source="<stdout>").grid.cols > 0
     assert b"wrote" not in done.stdout and b"card size" in done.stderr  # summary on stderr
 
