@@ -7,7 +7,7 @@ and a non-zero exit; anything else escaping is a bug. The one hierarchy, by kind
 - :class:`InputError`: a file or value given is malformed: :class:`CardError` (and
   :class:`CardValidationError`), :class:`TrackError`, :class:`ImageError`,
   ``json_text.JsonInputError``, ``bounded_read.InputTooLarge``,
-  ``calibration.measurement.MeasurementError``, ``physics.units.UnitError``,
+  ``calibration.measurement.MeasurementError``, ``quantities.UnitError``,
   ``physics.sweep.SweepError`` and the device's ``HiddenEffectError``. Those that were
   ``ValueError`` before still are.
 - :class:`UsageError`: a request that cannot be carried out as asked: the commands'
