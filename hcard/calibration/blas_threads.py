@@ -24,10 +24,9 @@ its values by up to 9.3e-7 of their uncertainty (tests/calibration/test_blas_thr
 that at 1e-3).
 
 The BLAS libraries are found and set by :mod:`threadpoolctl` (every BLAS the process has
-loaded: NumPy's and SciPy's wheels each bring their own OpenBLAS). Blocks nest; with several
-Python threads, threadpoolctl lets one thread at a time set OpenBLAS's process-wide pool (the
-others' blocks change nothing) and restores the counts it found when that thread's outermost
-block ends.
+loaded: NumPy's and SciPy's wheels each bring their own OpenBLAS). Blocks nest, and the counts
+found are restored when the outermost block ends. OpenBLAS's pool is process-wide: a block in
+one Python thread sets it for all threads.
 """
 
 from __future__ import annotations

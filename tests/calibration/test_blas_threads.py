@@ -7,9 +7,11 @@ library (independent_recordings.py)."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 import sys
 import threading
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -137,9 +139,18 @@ def test_a_fit_on_the_pool_ends_within_its_tolerance_of_the_fit_on_one_thread(
 
     single = fit()
     assert counts() == [2, 2]
-    monkeypatch.setattr(blas_threads, "threadpool_limits",  # the pool stays on
-                        lambda **_: threadpool_limits(limits=None))
+    seen: list[list[int]] = []  # counts() on entering and leaving each block the fit opened
+
+    @contextlib.contextmanager
+    def the_pool_stays_on(**_: object) -> Iterator[None]:
+        with threadpool_limits(limits=None):
+            seen.append(counts())
+            yield
+            seen.append(counts())
+
+    monkeypatch.setattr(blas_threads, "threadpool_limits", the_pool_stays_on)
     pooled = fit()
+    assert seen and all(c == [2, 2] for c in seen), seen  # else both fits ran on one thread
     assert single.n_train > 10_000  # long enough for OpenBLAS to split its sums
     for name in free:
         sigma = pooled.uncertainties[name]
