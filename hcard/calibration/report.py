@@ -30,7 +30,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from matplotlib import rc_context
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
@@ -61,8 +60,6 @@ DPI = 100
 """Resolution of the figures, dots per inch."""
 PANEL_INCHES = (3.2, 2.5)
 """Size of one regressor panel of ``residuals.png`` (width, height), inches."""
-PANEL_STYLE = {"xtick.labelsize": 7, "ytick.labelsize": 7}
-"""Matplotlib settings of the residual panels (set while they are made)."""
 PANEL_COLUMNS = 3
 """Regressor panels per row."""
 FIT_INCHES = (12.0, 4.0)
@@ -682,13 +679,6 @@ def residuals_figure(result: CalibrationResult) -> Figure:
     """``residuals.png`` as a figure (Agg canvas attached)."""
     names = list(result.data.regressors)
     rows, columns = residuals_grid(len(names))
-    # ticks are made with these sizes, not restyled after (the stubs type rc keys as literals)
-    with rc_context(PANEL_STYLE):  # type: ignore[arg-type]
-        return _residuals_figure(result, names, rows, columns)
-
-
-def _residuals_figure(result: CalibrationResult, names: list[str], rows: int,
-                      columns: int) -> Figure:
     fig = Figure(figsize=(PANEL_INCHES[0] * columns, PANEL_INCHES[1] * rows), dpi=DPI)
     FigureCanvasAgg(fig)
     before = result.before.fit.residuals
