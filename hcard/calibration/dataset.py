@@ -362,12 +362,7 @@ def check_recordings(measurements: Sequence[Measurement], split: str,
 def contact_time(t: np.ndarray, contact: np.ndarray) -> np.ndarray:
     """Per sample, the time since the current contact began, s (``t`` in s; the sample where
     ``contact`` turns True counts 0); 0 out of contact."""
-    n = len(t)
-    starts = np.flatnonzero(np.diff(contact.astype(np.int8), prepend=0) == 1)
-    began = np.zeros(n, dtype=np.int64)
-    began[starts] = starts
-    began = np.maximum.accumulate(began)
-    return np.where(contact, t - t[began], 0.0)
+    return np.where(contact, time_since_change(contact, t), 0.0)
 
 
 def split_masks(m: Measurement, label: str, split: str, test_fraction: float, seed: int,
@@ -391,20 +386,20 @@ def split_masks(m: Measurement, label: str, split: str, test_fraction: float, se
     return train & keep, test & keep
 
 
-def recording_columns(m: Measurement, index: int, ids: np.ndarray, threshold: float,
+def recording_columns(m: Measurement, index: int, ids: np.ndarray, contact: np.ndarray,
                       force: np.ndarray, rest_s: float) -> dict[str, np.ndarray | None]:
     """Every column of the recording ``m`` (the ``index``-th) the loop may use, SI units,
     None where ``m`` lacks it: the model inputs (:data:`INPUT_NAMES`), the regressors
     (:data:`REGRESSOR_NAMES`), the ``observed`` friction ``force`` (N) and the ``recording``
-    index. ``ids``: stroke ids (-1 out of contact); ``threshold``: contact threshold, N;
-    ``rest_s``: pause that rests the finger, s."""
+    index. ``ids``: stroke ids (-1 out of contact); ``contact``: per sample, a finger touches
+    (:func:`~hcard.calibration.contact.in_contact`); ``rest_s``: pause that rests the finger,
+    s."""
     n = len(m)
     speed = m.speed
     pressure = m.conditions.get("ambient_pressure_pa") or ATMOSPHERE_PA
     frequency = m.plate_frequency
     if frequency is None and m.conditions.get("plate_frequency_hz"):
         frequency = np.full(n, float(m.conditions["plate_frequency_hz"]))
-    contact = in_contact(m, threshold)
     return {
         # Out of contact the recorded force is sensor noise around 0, which some models
         # refuse (Eq. 4.1 divides by Fn): those samples, never fitted, take the threshold.
@@ -488,9 +483,10 @@ class _Parts:
             lateral = lateral - zero
             self.zeroing.append((lifts, float(np.ptp(zero))))
         force = friction_force(lateral, m.speed, keep)
-        self.lifted.append(~in_contact(m, threshold))
+        contact = in_contact(m, threshold)
+        self.lifted.append(~contact)
         self.lifted_force.append(lateral)
-        columns = recording_columns(m, index, ids, threshold, force, rest_s)
+        columns = recording_columns(m, index, ids, contact, force, rest_s)
         for name, values in columns.items():
             if values is not None:
                 self.columns.setdefault(name, []).append(np.asarray(values, dtype=np.float64))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hcard.calibration.contact import in_contact
 from hcard.calibration.dataset import (
     ATMOSPHERE_PA,
     check_recordings,
@@ -47,7 +48,7 @@ def test_a_recording_becomes_inputs_regressors_and_the_observed_force() -> None:
     m = strokes()
     ids = np.where(m.normal_force > 0.01, np.arange(40) // 10, -1)
     force = np.abs(m.lateral_force)
-    columns = recording_columns(m, 2, ids, 0.01, force, rest_s=0.5)
+    columns = recording_columns(m, 2, ids, in_contact(m, 0.01), force, rest_s=0.5)
     contact = m.normal_force > 0.01
     assert columns["time"] == pytest.approx(m.t - m.t[0])
     assert columns["contact_time"][contact] == pytest.approx(np.tile(np.arange(8) * 0.01, 4))
