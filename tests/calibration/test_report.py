@@ -6,6 +6,7 @@ import json
 import math
 from dataclasses import replace
 
+import matplotlib
 import numpy as np
 import pytest
 from matplotlib.image import imread
@@ -19,6 +20,8 @@ from hcard.calibration.report import (
     FIT_INCHES,
     FORMAT,
     PANEL_INCHES,
+    TICK_GAP_PT,
+    TICK_LABEL_PT,
     fit_figure,
     residuals_figure,
     residuals_grid,
@@ -187,6 +190,15 @@ def test_residual_panels_draw_their_tick_labels(result):
     columns = residuals_grid(len(result.data.regressors))[1]
     limits = {ax.get_ylim() for ax in fig.axes}
     assert len(limits) == 1
+    # where the labels are looked for, in pixels (a point is DPI / 72 of them): beyond the
+    # tick marks (matplotlib's 3.5 pt, 4.9 px) and from before the labels' near edge,
+    # TICK_GAP_PT (9.7 px) out; 8-30 px left of the axes for the residual axis (two font sizes
+    # of TICK_LABEL_PT, 9.7 px, past the gap: the first digits of its labels), 6-18 px below
+    # them for the regressor's (a label's height, about 0.7 of a font size, past the gap)
+    tick_px = max(matplotlib.rcParams[f"{axis}tick.major.size"] for axis in "xy") * DPI / 72.0
+    gap_px, font_px = TICK_GAP_PT * DPI / 72.0, TICK_LABEL_PT * DPI / 72.0
+    assert tick_px < 6 < 8 < gap_px < gap_px + 0.7 * font_px < 18
+    assert gap_px + 2.0 * font_px < 30
     for k, ax in enumerate(fig.axes):
         box = ax.get_window_extent()
         ticks = [t for t in ax.get_yticks() if ax.get_ylim()[0] < t < ax.get_ylim()[1]]

@@ -97,6 +97,9 @@ def test_the_loop_gives_the_same_answers_with_and_without_screening(
     # from the final model, one whose criterion lies within the tolerance band of the best
     chosen, best = screened.comparison, full.comparison
     assert chosen is not None and best is not None
+    # below separation_criterion in H a rival can make the verdict ambiguous, and the loop
+    # picks it on full fits (_best_rival); asked here up to twice that, a margin beyond what
+    # the loop guarantees (these cases' margins: 8.2 in the last, 179 and more in the others)
     if best.criterion_margin < 2 * LoopSettings().separation_criterion:
         assert chosen.runner_up == best.runner_up
     fit = full.after.fit
