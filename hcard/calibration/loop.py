@@ -836,16 +836,19 @@ class EffectSearch:
                   if key not in pool.screened and key != own and score < own_score]
         stay = (bool(doubtful) and not better
                 and all(self.returns_to_own(key, own, n_eff) for key in doubtful))
-        for key, (effects, _result, score) in list(scores.items()):
-            if key in pool.screened and score - band < own_score and not stay:
-                tic = time.perf_counter()
-                exact = pool.confirmed(key)
-                if exact is None:
-                    del scores[key]
-                else:
-                    scores[key] = (effects, exact, held_out_criterion(exact, n_eff))
-                fresh[:] = [(k, t + time.perf_counter() - tic if k == key else t)
-                            for k, t in fresh]
+        if stay:
+            return stay
+        # confirming one set refits only it and its subsets, never another set of scores
+        for key in doubtful:
+            effects = scores[key][0]
+            tic = time.perf_counter()
+            exact = pool.confirmed(key)
+            if exact is None:
+                del scores[key]
+            else:
+                scores[key] = (effects, exact, held_out_criterion(exact, n_eff))
+            fresh[:] = [(k, t + time.perf_counter() - tic if k == key else t)
+                        for k, t in fresh]
         return stay
 
     def _record_sets(
@@ -1207,20 +1210,15 @@ class RivalFigures:
     def score(self, key: EffectSet) -> tuple[float, float, float]:
         """``H`` of the pooled model ``key``, and the bounds within which its full fit's
         lies."""
-        screened = key in self.pool.screened
-        factor = self.pool.scale.get(key, 1.0) if screened else 1.0
-        value = held_out_criterion(self.pool.fits[key][1], self.n_eff) \
-            + 2.0 * self.n_eff * math.log(factor)
-        spread = self.band if screened else 0.0
+        value = self.pool.criterion(key, self.n_eff)
+        spread = self.band if key in self.pool.screened else 0.0
         return value, value - spread, value + spread
 
     def rmse(self, key: EffectSet) -> tuple[float, float]:
         """Bounds of the held-out RMSE of the pooled model ``key`` fitted in full (output
         unit)."""
-        screened = key in self.pool.screened
-        factor = self.pool.scale.get(key, 1.0) if screened else 1.0
-        value = float(self.pool.fits[key][1].test_rmse or math.nan) * factor
-        spread = SCREEN_TOLERANCE if screened else 0.0
+        value = self.pool.held_out(key)
+        spread = SCREEN_TOLERANCE if key in self.pool.screened else 0.0
         return value * (1.0 - spread), value * (1.0 + spread)
 
     def settle(self, keys: Sequence[EffectSet]) -> None:
