@@ -27,6 +27,7 @@ import numpy as np
 from hcard.calibration.measurement import DEVICE_COLUMNS, Measurement, write_measurement_blocks
 from hcard.calibration.splits import stroke_numbers
 from hcard.quantities import M_PER_MM, S_PER_US
+from hcard.render.touch import speed_estimate
 from hcard.track import FingerTrack
 from hcard_device.drivers.state_log import state_field
 from hcard_device.protocol import Capability, DeviceInfo, DeviceKind, State
@@ -43,7 +44,6 @@ from hcard_device.protocol.constants import (
 if TYPE_CHECKING:
     from hcard_device.drivers.play import PlayResult
 
-"""Metres per millimetre."""
 HOST_TIME_MODULO = 1 << 32
 """FINGER.host_time_us wraps at 2**32 us."""
 
@@ -66,15 +66,9 @@ def unwrapped_times(states: Sequence[State]) -> np.ndarray:
 def track_speeds(track: FingerTrack) -> np.ndarray:
     """Speed of each track sample over the interval that ends at it, m/s, signed by the
     direction along x (along y for a purely vertical move); 0 unless both samples touch."""
-    speed = np.zeros(len(track))
-    if len(track) < 2:
-        return speed
-    dx, dy, dt = np.diff(track.x), np.diff(track.y), np.diff(track.t)
-    moving = track.contact[1:] & track.contact[:-1] & (dt > 0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        magnitude = np.where(moving, np.hypot(dx, dy) / dt * M_PER_MM, 0.0)
-    sign = np.where(dx != 0, np.sign(dx), np.where(dy < 0, -1.0, 1.0))
-    speed[1:] = magnitude * sign
+    speed = speed_estimate(track.t, track.x, track.y, np.asarray(track.contact, dtype=bool))
+    dx, dy = np.diff(track.x), np.diff(track.y)
+    speed[1:] *= M_PER_MM * np.where(dx != 0, np.sign(dx), np.where(dy < 0, -1.0, 1.0))
     return speed
 
 
