@@ -50,9 +50,9 @@ import numpy as np
 
 from hcard import build
 from hcard.physics.profile import DeviceProfile
-from hcard.quantities import MS_PER_S, NM_PER_M, S_PER_MS, S_PER_US, UA_PER_A, US_PER_S
+from hcard.quantities import M_PER_MM, MS_PER_S, NM_PER_M, S_PER_MS, S_PER_US, UA_PER_A, US_PER_S
 from hcard.render import render
-from hcard.render.touch import speed_estimate
+from hcard.render.touch import segment_speeds
 from hcard.track import FingerTrack, straight_stroke
 from hcard.v1 import card_pb2 as pb
 from hcard_conformance.context import Context, session_times
@@ -246,8 +246,7 @@ def track_speed(track: FingerTrack, t: np.ndarray) -> np.ndarray:
     straight between samples (as the simulated finger does), so it is the speed of the segment
     a time falls in: rule R4's estimate at the segment's end sample (the first or last segment
     outside the track)."""
-    every = np.ones(len(track), dtype=bool)
-    segment = speed_estimate(track.t, track.x, track.y, every) * 1e-3
+    segment = segment_speeds(track.t, track.x, track.y) * M_PER_MM
     if len(track) < 2:
         return np.zeros(t.shape[0])
     return segment[np.clip(track.t.searchsorted(t, side="right"), 1, len(track) - 1)]

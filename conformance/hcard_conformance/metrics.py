@@ -19,7 +19,7 @@ import numpy as np
 from hcard.quantities import MS_PER_S
 from hcard.render import RenderOptions
 from hcard.render.compiled import velocity_locked
-from hcard.render.touch import speed_estimate
+from hcard.render.touch import segment_speeds
 from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb
 
@@ -311,7 +311,7 @@ def sample_speeds(track: FingerTrack) -> np.ndarray:
     contact or not (the first takes the second's)."""
     if len(track) < 2:
         return np.zeros(len(track))
-    v = speed_estimate(track.t, track.x, track.y, np.ones(len(track), dtype=bool))
+    v = segment_speeds(track.t, track.x, track.y)
     v[0] = v[1]
     return v
 

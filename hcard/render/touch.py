@@ -7,7 +7,7 @@ previous sample carried in, so batch and streaming rendering share this code.
 R4's velocity estimate is defined here once for every user: :func:`has_velocity` (which samples
 have one), :func:`velocity_estimate` (the renderer's vector), :func:`speed_estimate` and
 :func:`step_speed` (its magnitude, for the device's velocity compensation, the simulated finger
-and the conformance suite).
+and the conformance suite) and :func:`segment_speeds` (the magnitude whatever the contact).
 """
 
 from __future__ import annotations
@@ -100,6 +100,15 @@ def speed_estimate(t: np.ndarray, x: np.ndarray, y: np.ndarray, contact: np.ndar
     distance = np.hypot(x[1:] - x[:-1], y[1:] - y[:-1])
     np.divide(distance, dt, out=speed[1:], where=moving)
     return speed
+
+
+def segment_speeds(t: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Rule R4's ``|v_i|`` (:func:`speed_estimate`) of each of M samples (times ``t`` s,
+    position ``x, y`` mm) whatever the contact, mm/s: the speed of the straight segment from
+    the previous sample to it, for a finger that moves between samples in contact or not (the
+    simulated finger, the conformance suite's ground truth); 0 for the first sample and where
+    the interval is not positive."""
+    return speed_estimate(t, x, y, np.ones(t.shape[0], dtype=bool))
 
 
 def step_speed(dx_mm: float, dy_mm: float, dt_s: float, moving: bool) -> float:

@@ -30,7 +30,7 @@ import numpy as np
 
 from hcard.physics.profile import DeviceProfile
 from hcard.quantities import M_PER_MM, S_PER_US
-from hcard.render.touch import speed_estimate, step_speed
+from hcard.render.touch import segment_speeds, step_speed
 from hcard.track import FingerTrack
 from hcard_builtins.physics.finger import FingerFriction
 from hcard_device.sim.hidden import HiddenPhysics
@@ -131,9 +131,8 @@ class TrackFinger:
         np.maximum.accumulate(self.touchdown_t, out=self.touchdown_t)
         # the finger moves straight between samples: each segment's speed is rule R4's estimate
         # at its end sample, in contact or not (the contact of the segment is applied below)
-        moving = np.ones(len(track), dtype=bool)
         self.speed = np.zeros(len(track))
-        self.speed[:-1] = speed_estimate(self.t, self.x, self.y, moving)[1:] * M_PER_MM
+        self.speed[:-1] = segment_speeds(self.t, self.x, self.y)[1:] * M_PER_MM
 
     @property
     def end_s(self) -> float:
