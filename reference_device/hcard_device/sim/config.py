@@ -24,19 +24,10 @@ from typing import Any
 from hcard.physics.profile import COUPLED_STIMULATOR_LIMITS, DeviceLimits
 from hcard.rates import DEFAULT_FRAME_RATE_HZ, TOUCH_RATE_HZ
 
-EVITA_LIMITS = DeviceLimits(
-    max_amplitude=COUPLED_STIMULATOR_LIMITS.max_amplitude,
-    max_voltage=0.0,
-    max_current=COUPLED_STIMULATOR_LIMITS.max_current,
-    carrier_frequency=COUPLED_STIMULATOR_LIMITS.carrier_frequency,
-    plate_frequency=60_750.0,
-)
+EVITA_LIMITS = replace(COUPLED_STIMULATOR_LIMITS, max_voltage=0.0, plate_frequency=60_750.0)
 """The E-ViTa of chapter 5: a glass plate resonating at 60,750 Hz (section 5.1.1), no EV
 amplifier (0 V, section 5.1), and the coupled stimulator's 2.5 um peak-to-peak amplitude range
 (section 2.4); its current limit and carrier are the coupled stimulator's (unused without EV)."""
-
-COUPLED_LIMITS = COUPLED_STIMULATOR_LIMITS
-"""The coupled UV+EV stimulator of chapter 4 (section 4.2.1), as the physics core defines it."""
 
 EVITA_PLATE_QUALITY_FACTOR = 300.0
 """Unloaded quality factor of the E-ViTa plate. The envelope of a resonator is first order with
@@ -65,9 +56,9 @@ class DeviceConfig:
         surface_mm: (width, height) of the touch surface, mm; the corner force sensors sit at
             its corners and the card's coordinates are those of this surface.
         limits: the hardware limits, plate resonance and EV carrier (:data:`EVITA_LIMITS`,
-            :data:`COUPLED_LIMITS`), SI units; the firmware's model renders with them and the
-            simulated hardware enforces them. ``limits.load_capacitance`` is the model's
-            (None: Eq. 3.8's 33 pF).
+            :data:`~hcard.physics.profile.COUPLED_STIMULATOR_LIMITS`), SI units; the
+            firmware's model renders with them and the simulated hardware enforces them.
+            ``limits.load_capacitance`` is the model's (None: Eq. 3.8's 33 pF).
         plate_quality_factor: unloaded quality factor ``Q0`` of the plate.
         finger_damping_per_n: relative increase of the plate's damping ``1/Q`` per newton of
             finger force: ``1/Q(Fn) = (1 + d Fn) / Q0``.
@@ -197,11 +188,11 @@ class DeviceConfig:
     def coupled(cls, **changes: Any) -> DeviceConfig:
         """The coupled UV+EV stimulator of thesis section 4.2.1; ``changes`` replace fields."""
         tau = COUPLED_PLATE_RESPONSE_S / math.log(9.0)
-        frequency = COUPLED_LIMITS.plate_frequency
+        frequency = COUPLED_STIMULATOR_LIMITS.plate_frequency
         config = cls(
             name="coupled-stimulator",
             surface_mm=(80.0, 50.0),
-            limits=COUPLED_LIMITS,
+            limits=COUPLED_STIMULATOR_LIMITS,
             plate_quality_factor=math.pi * frequency * tau,
             sources={**EVITA_SOURCES, **COUPLED_SOURCES},
         )
