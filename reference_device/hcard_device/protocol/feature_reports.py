@@ -290,6 +290,7 @@ class UploadStatus(Report):
 
     @classmethod
     def _from_values(cls, values: tuple[Any, ...]) -> UploadStatus:
+        # one starred tuple: mypy reads cls(*values[:7], text) as too many arguments
         return cls(*(*values[:7], text_from_wire(values[7])))
 
 
@@ -369,6 +370,7 @@ class ClipReport(Report):
 
     @classmethod
     def _from_values(cls, values: tuple[Any, ...]) -> ClipReport:
+        # one starred tuple: mypy reads cls(*values[:12], text) as too many arguments
         return cls(*(*values[:12], text_from_wire(values[12])))
 
     @property
