@@ -409,10 +409,9 @@ def _check_noise(lateral_noise_n: float, normal_noise_n: float, drift_n: float) 
 
 
 def _plan(device: str, effects: Mapping[str, Mapping[str, float]] | None) -> _Plan:
-    """The :class:`_Plan` of ``effects`` on ``device`` (ValueError: unknown device, effect or
-    parameter, or an effect on an output the simulation does not model)."""
-    if device not in DEVICES:
-        raise ValueError(f"unknown device {device!r}; devices: {', '.join(DEVICES)}")
+    """The :class:`_Plan` of ``effects`` on ``device``, one of :data:`DEVICES` (the caller
+    checks it, before the noise levels), ValueError: unknown effect or parameter, or an effect
+    on an output the simulation does not model."""
     chosen = resolve_effects(effects)
     config, uv_model, ev_model = _models(device)
     library = _library()
