@@ -58,6 +58,8 @@ def test_the_device_reports_and_its_model_take_the_limits_from_the_config() -> N
         info = Firmware(sim).device_info()
         assert info.plate_frequency_hz == round(config.limits.plate_frequency)
         assert info.ev_carrier_hz == (440 if config.has_ev else 0)
+        # 2.5 um peak-to-peak (section 2.4) in nm; the I_s = 250 uA current limit of section
+        # 3.6.3 in units of 10 nA; the 2000 V EV amplifier (UVA2kV, section 4.2.1) in 0.1 V
         assert info.max_amplitude_nm == 2500 and info.max_current_10na == 25_000
         assert info.max_voltage_dv == (20_000 if config.has_ev else 0)
 
