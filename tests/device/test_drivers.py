@@ -446,7 +446,8 @@ def test_tier2_touch_source_switch_and_counter_clear_twice_on_one_server():
     """Over usbip:// against one server in another process, in real time, twice: a host finger
     hands over to the internal sensor (the switch starts a new render time line instead of
     stopping the served device on out-of-order samples), and CLEAR_COUNTERS zeroes the one set
-    of counters, the simulation's included."""
+    of counters, the simulation's included: a rejected output, frames dropped from an overrun
+    stream queue and the latched faults, each non-zero before the clear."""
     with served_device() as served:
         for _connection in range(2):
             with open_device(served.uri, timeout_s=TIMEOUT_S) as driver:
@@ -462,8 +463,17 @@ def test_tier2_touch_source_switch_and_counter_clear_twice_on_one_server():
                 assert not any(s.flags & (StateFlags.HOST_FINGER | StateFlags.CONTACT)
                                for s in last)
                 driver._write_output(bytes([0x7F, 1, 2, 3]))  # unknown output: counted
-                driver.collect_until(driver.clock() + 0.05)
-                assert driver.counters().rejected_requests >= 1
+                # Overrun the stream queue (capacity 0.2 s of frames at 10 kHz): the device
+                # plays 10 frames a millisecond while they arrive, so 4x its capacity overflows
+                # unless the writes average under 10 * 4 / 3 frames/ms, over 1.1 ms per 15-frame
+                # report (~0.2 ms on loopback, where 2x dropped 1477 of 4000 and 4x 5052).
+                frames = 4 * driver.info().stream_capacity_frames
+                driver.stream_frames(np.full(frames, 0.5), np.full(frames, 1.0))
+                driver.collect_until(driver.clock() + 0.05)  # 0.05 s: ~50 STATE reports
+                before = driver.counters()
+                assert before.rejected_requests >= 1
+                assert before.stream_frames_dropped > 0
+                assert before.latched_faults & FaultBits.STREAM_OVERRUN
                 driver.clear_counters()
                 driver.collect_until(driver.clock() + 0.05)
                 cleared = driver.counters()
