@@ -32,6 +32,7 @@ from hcard_device.drivers.sim import SimDriver
 from hcard_device.drivers.usbip_link import UNLINK_GRACE_S
 from hcard_device.protocol import (
     Capability,
+    ClipReason,
     DeviceInfo,
     DeviceKind,
     FaultBits,
@@ -480,5 +481,64 @@ def test_tier2_touch_source_switch_and_counter_clear_twice_on_one_server():
                 assert (cleared.rejected_requests, cleared.stream_frames_dropped,
                         cleared.latched_faults) == (0, 0, 0)
                 assert cleared.input_reports < 100  # counted again from the clear (~1 kHz)
+                driver.stop()
+        assert served.process.poll() is None, "the server died"
+
+
+def one_texture_card(level: float, channel: str, name: str):
+    """10 x 10 mm, one 10 mm taxtel of one constant texture: relative friction ``level`` on
+    ``channel``."""
+    return build.card(10.0, 10.0, taxtel_mm=10.0,
+                      textures=[build.texture(level, channel=channel, name=name)],
+                      texture_index=[0])
+
+
+def test_tier2_clipped_cards_are_reported_twice_on_one_server():
+    """Over usbip:// against one server in another process (the E-ViTa, UV only), in real time,
+    twice: a card asking for more than the device can do commits, CLIP_REPORT names the texture
+    and why, and the STATE reports carry CARD_CLIPPED while it plays; a UV target the plate
+    cannot reach under a sliding finger also drives the amplitude to its limit
+    (AMPLITUDE_LIMIT)."""
+    # EV friction 2 on a device without EV (as test_play_cli's "sticky" card)
+    sticky = one_texture_card(2.0, "ev", "sticky")
+    # UV friction 0 (full reduction): Eq. 2.33 reaches mu' = 0 only as the amplitude goes to
+    # infinity for a sliding finger, so no amplitude limit renders it
+    ice = one_texture_card(0.0, "uv", "ice")
+    with served_device() as served:
+        for _connection in range(2):
+            with open_device(served.uri, timeout_s=TIMEOUT_S) as driver:
+                info = driver.info()
+                assert info.max_voltage_dv == 0  # no EV: the sticky card cannot play as written
+
+                outcome = driver.upload_card(sticky)
+                assert outcome.status.state == UploadState.COMMITTED  # clipped, not refused
+                clip = outcome.clip
+                assert (clip.item_count, clip.texture, clip.texture_name) == (1, 0, "sticky")
+                assert clip.reason == ClipReason.NO_EV
+                driver.set_touch_source(host=True)
+                driver.start()
+                # 6 mm in 0.1 s (60 mm/s) over the card's one taxtel: ~100 reports at 1 kHz,
+                # the last 10 well after the first finger report reached the device
+                states = stroke(driver, 2.0, 8.0, 0.1)
+                assert len(states) >= 10
+                assert all(s.faults & FaultBits.CARD_CLIPPED for s in states[-10:])
+                # neutral UV: the plate rests, so the clip is the card's, not the amplitude's
+                assert not any(s.faults & FaultBits.AMPLITUDE_LIMIT for s in states[-10:])
+                driver.stop()
+
+                outcome = driver.upload_card(ice)
+                assert outcome.status.state == UploadState.COMMITTED
+                clip = outcome.clip
+                assert (clip.item_count, clip.texture, clip.texture_name) == (1, 0, "ice")
+                assert clip.reason == ClipReason.AMPLITUDE
+                assert clip.target_x1e4 == 0 < clip.achievable_x1e4  # asks 0, gets above it
+                driver.start()
+                states = stroke(driver, 2.0, 8.0, 0.1)
+                assert len(states) >= 10
+                last = states[-10:]
+                assert all(s.faults & FaultBits.CARD_CLIPPED for s in last)
+                assert all(s.faults & FaultBits.AMPLITUDE_LIMIT for s in last)
+                # held at the limit (1 nm: the report's resolution)
+                assert all(s.amplitude_nm <= info.max_amplitude_nm + 1 for s in last)
                 driver.stop()
         assert served.process.poll() is None, "the server died"
