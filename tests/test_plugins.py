@@ -12,7 +12,6 @@ import json
 import os
 import subprocess
 import sys
-import textwrap
 import types
 import warnings
 from collections.abc import Iterator
@@ -20,6 +19,7 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
+from distributions import install_distribution
 
 import hcard
 from hcard.errors import PluginError
@@ -109,15 +109,8 @@ def make_distribution(
 ) -> None:
     """Write an installed distribution ``name`` whose ``hcard.plugins`` entry point
     ``entry_point`` names the module ``module`` with the given ``source``."""
-    dist_info = root / f"{name.replace('-', '_')}-{version}.dist-info"
-    dist_info.mkdir(parents=True)
-    (dist_info / "METADATA").write_text(
-        f"Metadata-Version: 2.1\nName: {name}\nVersion: {version}\n", encoding="utf-8"
-    )
-    (dist_info / "entry_points.txt").write_text(
-        f"[hcard.plugins]\n{entry_point} = {module}\n", encoding="utf-8"
-    )
-    (root / f"{module}.py").write_text(textwrap.dedent(source), encoding="utf-8")
+    install_distribution(root, name, f"[hcard.plugins]\n{entry_point} = {module}\n",
+                         {module: source}, version)
 
 
 def _forget_test_modules() -> None:

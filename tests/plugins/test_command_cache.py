@@ -16,6 +16,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from distributions import install_distribution
 
 from hcard.plugins import HcardPluginWarning, command_cache
 from hcard.plugins.registry import PluginRegistry
@@ -54,16 +55,6 @@ def _run(args: list[str], cache: Path, site: Path) -> subprocess.CompletedProces
                           cwd=site, timeout=120, check=False)
 
 
-def _install(site: Path, name: str, entry_points: str, modules: dict[str, str]) -> None:
-    dist_info = site / f"{name.replace('-', '_')}-1.0.dist-info"
-    dist_info.mkdir()
-    (dist_info / "METADATA").write_text(
-        f"Metadata-Version: 2.1\nName: {name}\nVersion: 1.0\n", encoding="utf-8")
-    (dist_info / "entry_points.txt").write_text(entry_points, encoding="utf-8")
-    for module, source in modules.items():
-        (site / f"{module}.py").write_text(source, encoding="utf-8")
-
-
 def test_help_reuses_the_commands_until_a_distribution_is_installed(tmp_path: Path) -> None:
     cache, site = tmp_path / "cache", tmp_path / "site"
     site.mkdir()
@@ -77,7 +68,7 @@ def test_help_reuses_the_commands_until_a_distribution_is_installed(tmp_path: Pa
     assert second.stdout.splitlines()[-1] == "[]"  # no entry-point scan, no pluggy
     assert second.stdout.splitlines()[:-1] == first.stdout.splitlines()[:-1]  # same listing
 
-    _install(site, "greeter", "[hcard.commands]\ngreet = hcardtest_greeter\n",
+    install_distribution(site, "greeter", "[hcard.commands]\ngreet = hcardtest_greeter\n",
              {"hcardtest_greeter": GREETER, "hcardtest_greet_cmd": GREET_COMMAND})
     third = _run(["-c", LIST_COMMANDS], cache, site)
     assert third.stdout.splitlines()[-1] == "['importlib.metadata', 'pluggy']"  # found again
@@ -91,7 +82,7 @@ def test_a_remembered_command_that_no_longer_loads_is_warned_and_forgotten(
 ) -> None:
     cache, site = tmp_path / "cache", tmp_path / "site"
     site.mkdir()
-    _install(site, "greeter", "[hcard.commands]\ngreet = hcardtest_greeter\n",
+    install_distribution(site, "greeter", "[hcard.commands]\ngreet = hcardtest_greeter\n",
              {"hcardtest_greeter": GREETER, "hcardtest_greet_cmd": GREET_COMMAND})
     assert _run(["-m", "hcard", "greet"], cache, site).stdout == "hello\n"
     (site / "hcardtest_greet_cmd.py").unlink()  # the command's module is gone, the plugin not
@@ -144,7 +135,7 @@ def vendor_encoder(name: str, description: str = "a vendor's encoder") -> str:
 def _install_vendor(site: Path, module: str = "hcardtest_vendor_encoder") -> None:
     """Install distribution ``vendor`` in ``site``: entry point ``vendor`` naming ``module``,
     whose encoder is ``vendor-bumps``."""
-    _install(site, "vendor", f"[hcard.plugins]\nvendor = {module}\n",
+    install_distribution(site, "vendor", f"[hcard.plugins]\nvendor = {module}\n",
              {module: vendor_encoder("vendor-bumps")})
 
 
@@ -222,9 +213,9 @@ def own_site(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Path]:
 def test_remembered_plugins_imported_late_keep_the_discovery_order(own_site: Path) -> None:
     """'a-vendor' is discovered before 'b-vendor', so its encoder keeps the name both give,
     even when b's module is imported first (for the command hook, which a's lacks)."""
-    _install(own_site, "a-vendor", "[hcard.plugins]\na = hcardtest_clash_a\n",
+    install_distribution(own_site, "a-vendor", "[hcard.plugins]\na = hcardtest_clash_a\n",
              {"hcardtest_clash_a": vendor_encoder("clash", "from a")})
-    _install(own_site, "b-vendor", "[hcard.plugins]\nb = hcardtest_clash_b\n",
+    install_distribution(own_site, "b-vendor", "[hcard.plugins]\nb = hcardtest_clash_b\n",
              {"hcardtest_clash_b": vendor_encoder("clash", "from b") + COMMAND_HOOK})
     for remembered in (False, True):  # discovered, then from the cache
         with warnings.catch_warnings(record=True) as caught:
@@ -273,7 +264,7 @@ def _remember_vendor_encoder(site: Path) -> list[Path]:
     ``site`` beyond the clock's resolution, and remember the discovered entry points; the
     metadata directories (vendor's, other's)."""
     _install_vendor(site, "hcardtest_clash_vendor")
-    _install(site, "other", "[console_scripts]\nother = other:main\n", {})
+    install_distribution(site, "other", "[console_scripts]\nother = other:main\n", {})
     hour_ago = time.time_ns() - 3600 * 10**9
     os.utime(site, ns=(hour_ago, hour_ago))
     with warnings.catch_warnings():
@@ -308,12 +299,13 @@ def test_installing_or_removing_a_distribution_invalidates_the_remembered_entry_
 ) -> None:
     vendor, other = _remember_vendor_encoder(own_site)
     if change == "install":
-        _install(own_site, "third", "[console_scripts]\nthird = third:main\n", {})
+        install_distribution(own_site, "third", "[console_scripts]\nthird = third:main\n", {})
     elif change == "remove":
         shutil.rmtree(other)
     else:  # the same version again, as `pip install -e .` does: a new metadata directory
         shutil.rmtree(vendor)
-        _install(own_site, "vendor", "[hcard.plugins]\nvendor = hcardtest_clash_vendor\n", {})
+        install_distribution(own_site, "vendor",
+                             "[hcard.plugins]\nvendor = hcardtest_clash_vendor\n", {})
         later = vendor.stat().st_mtime_ns + 10**9  # whatever the file system clock's resolution
         os.utime(vendor, ns=(later, later))
     assert command_cache.load_entry_points("hcard.plugins") is None

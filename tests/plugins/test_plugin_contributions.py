@@ -9,7 +9,6 @@ import math
 import os
 import subprocess
 import sys
-import textwrap
 import types
 import warnings
 from collections.abc import Iterator
@@ -20,6 +19,7 @@ import click
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from distributions import install_distribution
 
 from hcard.cli.main import cli
 from hcard.physics import Parameter, Predictor, Variable
@@ -120,15 +120,9 @@ raise ImportError("acme CLI toolkit missing")
 
 
 def test_a_broken_command_plugin_is_named_and_hcard_keeps_working(tmp_path: Path) -> None:
-    dist_info = tmp_path / "broken_cli-0.4.dist-info"
-    dist_info.mkdir()
-    (dist_info / "METADATA").write_text("Metadata-Version: 2.1\nName: broken-cli\nVersion: 0.4\n",
-                                        encoding="utf-8")
-    (dist_info / "entry_points.txt").write_text(
-        "[hcard.commands]\nbroken = hcardtest_broken_cli\n", encoding="utf-8"
-    )
-    (tmp_path / "hcardtest_broken_cli.py").write_text(textwrap.dedent(BROKEN_COMMANDS),
-                                                     encoding="utf-8")
+    install_distribution(tmp_path, "broken-cli",
+                         "[hcard.commands]\nbroken = hcardtest_broken_cli\n",
+                         {"hcardtest_broken_cli": BROKEN_COMMANDS}, version="0.4")
     env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path / "cache"))
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(tmp_path), env.get("PYTHONPATH")) if p)
     done = subprocess.run([sys.executable, "-m", "hcard", "--help"], capture_output=True,
