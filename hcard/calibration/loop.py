@@ -725,8 +725,7 @@ class EffectSearch:
         self.analyse = analyse
         self.say = say
         self.unit = unit
-        first = pool.fit([], {})
-        pool.fits[frozenset()] = ((), first)
+        first = pool.fit_base()
         n_eff = effective_samples(first.residuals[first.test])
         self.current = ModelFit((), first, analyse(first), held_out_criterion(first, n_eff))
         self.steps = [self.current]

@@ -145,6 +145,13 @@ class ModelPool:
             max_evaluations=budget,
         )
 
+    def fit_base(self) -> FitResult:
+        """The base model without effects, fitted on the training split and pooled (every set
+        of effects starts from it)."""
+        base = self.fit([], {})
+        self.fits[frozenset()] = ((), base)
+        return base
+
     def evaluates_every_sample(self, effects: Sequence[Effect]) -> bool:
         """Whether the model with ``effects`` has memory (a ``time`` input): its fit evaluates
         it on every sample whatever the training split (``fit_predictor``'s ``dynamic``), so a

@@ -259,7 +259,7 @@ def assert_recovered(fit: FitResult, name: str, truth: float) -> None:
 def test_a_set_is_fitted_once_from_its_best_fitted_subset() -> None:
     data = coulomb_data(LOAD_INDEX)
     pool = pool_on(data)
-    pool.fits[frozenset()] = ((), pool.fit([], {}))
+    pool.fit_base()
     index = library()["load-index"]
     first = pool.fitted_set([index], exact=True)
     assert first is not None and pool.fitted_set([index]) is first
@@ -273,8 +273,7 @@ def test_a_screened_fit_is_read_through_its_scale_and_confirmed_on_every_sample(
     data = coulomb_data(LOAD_INDEX)
     screen = data.train & (np.arange(len(data)) % 4 == 0)
     pool = pool_on(data, screen)
-    base_fit = pool.fit([], {})
-    pool.fits[frozenset()] = ((), base_fit)
+    base_fit = pool.fit_base()
     key = frozenset({"load-index"})
     screened = pool.screen_with([], library()["load-index"], base_fit)
     assert np.array_equal(screened.train, screen)
