@@ -281,13 +281,15 @@ def case_second_host_refused(hosts: Hosts) -> CheckResult:
                 intrusions.append("the second host's START began a new session (PN3)")
             try:
                 second.upload_card(stroke_card(info, 0.2))
+                tripped = second.counters().watchdog_trips != trips_before[0]
                 # the reports of the SETTLE_S after the COMMIT: a session PN7 ended before it
                 # shows not live there (collecting until clock() read none: a host slower than
-                # real time then saw an intrusion where its own silence had ended the session)
+                # real time then saw an intrusion where its own silence had ended the session);
+                # a device without sessions has none to end (its intrusion is PN2's, above)
                 during = second.collect_until(second.clock() + SETTLE_S)
-                tripped = second.counters().watchdog_trips != trips_before[0]
-                if tripped or any(not s.session_live or s.faults & FaultBits.WATCHDOG
-                                  for s in during):
+                ended = owner.session_live and any(
+                    not s.session_live or s.faults & FaultBits.WATCHDOG for s in during)
+                if tripped or ended:
                     starved.append(
                         "the first host went silent for watchdog_ms while the second uploaded "
                         "(WATCHDOG flagged, its session ended by PN7 before the COMMIT): this "
