@@ -5,6 +5,7 @@ lowest versions (so each minimum is a tested one)."""
 from __future__ import annotations
 
 import re
+import warnings
 from pathlib import Path
 
 import pytest
@@ -50,3 +51,22 @@ def test_the_lowest_versions_run_installs_every_declared_minimum() -> None:
         assert name in lowest, f"{name} is missing from .ci/lowest.txt"
         assert Version(lowest[name]) == Version(minimum[1]), (name, spec, lowest[name])
     assert set(lowest) <= set(declared)
+
+
+@pytest.mark.parametrize("category", [DeprecationWarning, PendingDeprecationWarning,
+                                      FutureWarning])
+@pytest.mark.parametrize("module", ["hcard.cli.encode_cmd", "hcard_builtins.image.loading",
+                                    "hcard_device.firmware", "hcard_conformance.runner"])
+def test_a_deprecation_met_in_hcard_code_fails_the_test(category: type[Warning],
+                                                        module: str) -> None:
+    """pyproject.toml's ``filterwarnings``: a deprecation whose warning is attributed to a
+    module of the four packages (a dependency's ``stacklevel=2`` names its caller) is an
+    error, so a dependency's next deprecation shows in CI while it is still a warning."""
+    with pytest.raises(category, match="moved"):
+        warnings.warn_explicit("the API moved", category, "caller.py", 1, module=module)
+
+
+def test_a_deprecation_inside_a_dependency_stays_a_warning() -> None:
+    with pytest.warns(DeprecationWarning, match="moved"):
+        warnings.warn_explicit("the API moved", DeprecationWarning, "x.py", 1,
+                               module="click.utils")

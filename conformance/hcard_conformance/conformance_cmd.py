@@ -7,6 +7,7 @@ driver, device unreachable, vectors missing) (spec/conformance.md Q7).
 
 from __future__ import annotations
 
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -117,7 +118,6 @@ def conformance(driver_name: str, levels: tuple[str, ...], select: tuple[str, ..
         except (HcardError, OSError, ValueError) as exc:
             raise click.UsageError(f"cannot open driver {driver_name!r}: {exc}") from None
 
-    stderr = click.get_text_stream("stderr")
     started = time.perf_counter()
 
     def check_done(chk: Any, results: list[Any], seconds: float) -> None:
@@ -126,7 +126,7 @@ def conformance(driver_name: str, levels: tuple[str, ...], select: tuple[str, ..
         failed = sum(not r.passed for r in results)
         state = "ok" if not failed else f"{failed} FAILED"
         click.echo(f"[{time.perf_counter() - started:7.2f} s] {chk.name}: {len(results)} "
-                   f"case(s), {state} ({seconds:.2f} s)", file=stderr)
+                   f"case(s), {state} ({seconds:.2f} s)", file=sys.stderr)
 
     report = run_suite(ctx, levels or LEVEL_NAMES, select=select, check_done=check_done)
     if not report.results:
@@ -146,7 +146,7 @@ def conformance(driver_name: str, levels: tuple[str, ...], select: tuple[str, ..
             except OSError as exc:
                 raise HcardError(f"{path}: cannot write ({exc.strerror or exc})") from None
             if not quiet:
-                click.echo(f"wrote {path}", file=stderr)
+                click.echo(f"wrote {path}", file=sys.stderr)
     if not report.passed:
         raise SystemExit(1)
 

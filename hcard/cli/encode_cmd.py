@@ -224,7 +224,8 @@ def encode(
         if to_stdout:
             card_bytes = to_bytes(result.card)
             parse_card(card_bytes, source="<stdout>")  # validated, as save() does
-            click.get_binary_stream("stdout").write(card_bytes)
+            sys.stdout.flush()  # text already printed goes first
+            sys.stdout.buffer.write(card_bytes)
         else:
             save(result.card, output)
             card_bytes = b""

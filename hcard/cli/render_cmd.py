@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -165,8 +166,7 @@ def _progress(total: int) -> Iterator[Callable[[int], None]]:
     if total <= PROGRESS_FRAMES or quiet():
         yield lambda _frames: None
         return
-    stderr = click.get_text_stream("stderr")
-    with click.progressbar(length=total, label="rendering", file=stderr) as bar:
+    with click.progressbar(length=total, label="rendering", file=sys.stderr) as bar:
         yield bar.update
 
 

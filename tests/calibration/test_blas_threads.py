@@ -35,6 +35,11 @@ pool and on one thread that these tests allow (measured: 9.3e-7; a fit's converg
 a cost that falls by less than 1e-8 of itself per iteration, leaves ~1e-2 on 12,000 samples)."""
 
 
+SVD_MAX_ULP = 2
+"""Largest difference, in units in the last place, between an SVD on one BLAS thread and on two
+(seen: 1, at one element of 180,081, with NumPy 2.4.6 and SciPy 1.17.1)."""
+
+
 def counts() -> list[int]:
     """Threads of each loaded BLAS, NumPy's and SciPy's (in threadpoolctl's order)."""
     return [int(info["num_threads"]) for info in threadpool_info()
@@ -102,7 +107,9 @@ def test_the_decorator_runs_each_call_on_one_thread(two_threads) -> None:
 def test_the_thread_count_changes_no_svd_of_a_jacobian(two_threads) -> None:
     """The SVDs of a fit's Jacobian, 20,000 samples x 9 parameters: SciPy's of the augmented
     Jacobian (C order, as least_squares builds it) in its trust-region step and NumPy's in the
-    covariance, bit for bit with two threads and with one."""
+    covariance, equal with two threads and with one to :data:`SVD_MAX_ULP` units in the last
+    place (OpenBLAS promises no bit-identity across thread counts: on NumPy 2.4.6's build one
+    element in 180,081 differs by one unit, at the row where the two threads' halves meet)."""
     rng = np.random.default_rng(3)
     jac = rng.normal(size=(20_009, 9)) * np.logspace(0, -6, 9)
 
@@ -114,7 +121,7 @@ def test_the_thread_count_changes_no_svd_of_a_jacobian(two_threads) -> None:
     with one_blas_thread():
         single = numbers()
     for a, b in zip(pooled, single, strict=True):
-        np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_max_ulp(a, b, maxulp=SVD_MAX_ULP)
 
 
 def test_a_fit_on_the_pool_ends_within_its_tolerance_of_the_fit_on_one_thread(
