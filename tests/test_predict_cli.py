@@ -33,8 +33,10 @@ def run(*args):
     return CliRunner().invoke(cli, ["predict", *(str(a) for a in args)])
 
 
-def one_line_error(result, *fragments):
-    assert result.exit_code != 0
+def one_line_error(result, *fragments, status=1):
+    """One ``Error:`` line holding each fragment, no traceback, exit ``status`` (1: a file
+    given is wrong; 2: the command line is)."""
+    assert result.exit_code == status, (result.exit_code, result.output)
     assert "Traceback" not in result.output
     lines = [line for line in result.output.splitlines() if line.strip()]
     assert len(lines) == 1 and lines[0].startswith("Error: "), result.output
@@ -237,12 +239,18 @@ def test_every_option_has_help():
          ("--plot needs --sweep",)),
         ((DIMENSIONLESS, "--sweep", "amplitude=0:5um:5", "--plot", "x.gif"),
          ("must end in .png",)),
-        ((DIMENSIONLESS, "--profile", "missing.json"), ("missing.json: no such file",)),
     ],
 )
-def test_bad_input_is_a_one_line_error(tmp_path, monkeypatch, args, fragments):
+def test_a_bad_option_value_is_a_one_line_usage_error(tmp_path, monkeypatch, args, fragments):
+    """Every value given on the command line that cannot be used exits 2 (README: usage)."""
     monkeypatch.chdir(tmp_path)
-    one_line_error(run(*args), *fragments)
+    one_line_error(run(*args), *fragments, status=2)
+
+
+def test_a_missing_profile_file_is_invalid_input(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    one_line_error(run(DIMENSIONLESS, "--profile", "missing.json"),
+                   "missing.json: no such file", status=1)
 
 
 def test_profile_errors_are_one_line(tmp_path):

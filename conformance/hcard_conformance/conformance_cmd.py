@@ -15,7 +15,7 @@ from typing import Any
 import click
 
 from hcard.bounded_read import STDIN
-from hcard.cli.verbosity import QUIET, VERBOSE, verbosity
+from hcard.cli.verbosity import QUIET, VERBOSE, verbosity, verbosity_options
 from hcard.errors import HcardError
 
 LEVEL_NAMES = ("format", "renderer", "device")
@@ -53,6 +53,7 @@ def _parse_options(pairs: tuple[str, ...]) -> dict[str, Any]:
 
 
 @click.command()
+@verbosity_options
 @click.option("--driver", "driver_name", required=True, metavar="NAME",
               help="Implementation under test: 'reference' (hcard.render), a device URI "
                    "(sim://, usbip://HOST:PORT/BUSID, hid://PATH, ...) or a negative control "
@@ -78,12 +79,9 @@ def _parse_options(pairs: tuple[str, ...]) -> dict[str, Any]:
                    "(a bench PC; default) or 'software-emulation' (an emulated guest: "
                    "looser latency and report-loss bounds; rendered friction and dynamics "
                    "not applicable).")
-@click.option("-v", "--verbose", is_flag=True, help="List every case, not only failures.")
-@click.option("-q", "--quiet", is_flag=True, help="No progress lines on stderr.")
 def conformance(driver_name: str, levels: tuple[str, ...], select: tuple[str, ...],
                 junit_path: Path | None, json_path: Path | None, vectors_dir: Path | None,
-                option_pairs: tuple[str, ...], timing: str | None, verbose: bool,
-                quiet: bool) -> None:
+                option_pairs: tuple[str, ...], timing: str | None) -> None:
     """Run the conformance suite against an implementation.
 
     Exits 0 when every case passes, 1 when one fails, 2 when the driver or vectors cannot be
@@ -99,8 +97,7 @@ def conformance(driver_name: str, levels: tuple[str, ...], select: tuple[str, ..
     from hcard_conformance.report import json_bytes, junit_xml, table, write_json, write_junit
     from hcard_conformance.runner import run_suite
 
-    quiet = quiet or verbosity() == QUIET
-    verbose = verbose or verbosity() == VERBOSE
+    quiet, verbose = verbosity() == QUIET, verbosity() == VERBOSE
     options = _parse_options(option_pairs)
     if timing is not None:
         options["timing"] = timing

@@ -37,7 +37,6 @@ from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar, TypeAlias
 
 import numpy as np
-from scipy.signal import lfilter
 
 from hcard.physics import Parameter, Predictor, PredictorError, Variable
 
@@ -567,6 +566,9 @@ def _high_pass(
     change = np.flatnonzero(np.abs(np.diff(dt)) > 1e-9 * dt[1:]) + 1
     starts = [0, *change.tolist()]
     ends = [*change.tolist(), dt.size]
+    from scipy.signal import lfilter  # here: scipy.signal costs ~0.6 s to import, and listing
+    # the effects (`hcard plugins`) must not pay it
+
     previous = out[0]
     for a, b in zip(starts, ends, strict=True):
         factor = decay[a]

@@ -33,12 +33,13 @@ from hcard.calibration.plan import (
     verification,
 )
 from hcard.calibration.splits import SPLITS
-from hcard.cli.errors import EXIT_FAILED, UserErrorGroup
-from hcard.cli.verbosity import quiet as global_quiet
+from hcard.cli.errors import EXIT_FAILED, UserErrorGroup, option_values
+from hcard.cli.options import plugin_option, quantity_option
+from hcard.cli.verbosity import quiet, verbosity_options
 from hcard.errors import HcardError, UsageError
-from hcard.physics import Predictor
+from hcard.physics import Predictor, PredictorError
 from hcard.physics.profile import DeviceProfile
-from hcard.physics.sweep import quantity, split_assignment
+from hcard.physics.sweep import split_assignment
 from hcard.plugins.registry import get_registry
 
 
@@ -80,7 +81,7 @@ def _contact_threshold(text: str | None) -> float | None:
     default; checked before any recording is read."""
     if text is None:
         return None
-    value = quantity(text, "N", "--contact-threshold")
+    value = quantity_option(text, "N", "--contact-threshold")
     if not math.isfinite(value) or value <= 0.0:
         raise CalibrateUsageError(f"--contact-threshold {text!r}: must be a positive force")
     return value
@@ -99,6 +100,7 @@ class DefaultCommandGroup(UserErrorGroup):
 
 
 @click.group("calibrate", cls=DefaultCommandGroup)
+@verbosity_options
 def calibrate_group() -> None:
     """Fit a model to recordings, find what it lacks, verify it.
 
@@ -107,6 +109,12 @@ def calibrate_group() -> None:
                                                            held-out verification textures
     hcard calibrate [run] RECORDINGS... [-o DIR] [--verify URI]
                                                            the loop; `run` may be left out
+
+    \b
+    Examples:
+      hcard calibrate plan --device ev -o plan/
+      hcard calibrate rec.csv -o calib/
+      hcard calibrate rec.csv -o calib/ --verify usbip://127.0.0.1:3240/1-1
     """
 
 
@@ -151,6 +159,7 @@ def write_plan(directory: Path, device: str, plan: Plan, check: Plan) -> list[Pa
 
 
 @calibrate_group.command("plan")
+@verbosity_options
 @click.option("--device", "device", type=click.Choice(DEVICE_CLASSES), required=True,
               help="What the device renders: uv (E-ViTa), ev (the coupled stimulator with its "
                    "plate off) or coupled (both).")
@@ -172,9 +181,14 @@ def plan_command(device: str, output: Path, duration: str, verify_duration: str,
     thesis's protocols, chapters 2-4). Play it with `hcard play`, calibrate the recording, and
     verify the profile on the held-out textures (other levels, forces and speeds) with
     `hcard calibrate ... --verify URI` (spec/calibration.md section 6).
+
+    \b
+    Examples:
+      hcard calibrate plan --device uv -o plan/
+      hcard calibrate plan --device coupled -o plan/ --duration 2min --seed 3
     """
-    seconds = quantity(duration, "s", "--duration")
-    verify_seconds = quantity(verify_duration, "s", "--verify-duration")
+    seconds = quantity_option(duration, "s", "--duration")
+    verify_seconds = quantity_option(verify_duration, "s", "--verify-duration")
     plan = protocol(device, duration_s=seconds, seed=seed)
     check = verification(device, duration_s=verify_seconds, seed=seed + 1)
     for path in write_plan(output, device, plan, check):
@@ -204,7 +218,7 @@ def _base_of(measurements: list[Measurement], model_name: str | None,
     if model_name is not None and profile_path is not None:
         raise CalibrateUsageError("give --model or --profile, not both")
     if model_name is not None:
-        return get_registry().get("predictor", model_name), None, form
+        return plugin_option("predictor", model_name, "--model"), None, form
     if profile_path is not None:
         profile = DeviceProfile.load(profile_path)
     else:
@@ -220,7 +234,8 @@ def _base_of(measurements: list[Measurement], model_name: str | None,
                 "apart, or give --profile")
         source = measurements[0].conditions.get("_source", "recording")
         profile = DeviceProfile.from_dict(named[0], source=f"{source}.json: profile.content")
-    finger = None if finger_name == "none" else get_registry().get("predictor", finger_name)
+    finger = None if finger_name == "none" else plugin_option("predictor", finger_name,
+                                                              "--finger")
     return profile_model(profile, envelope=form == "envelope", finger=finger), profile, form
 
 
@@ -243,6 +258,7 @@ def _verification_files(measurements: list[Measurement], card: Path | None,
 
 
 @calibrate_group.command("run")
+@verbosity_options
 @click.argument("data", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("--model", "-m", "model_name",
               help="Calibrate this bare predictor (see `hcard predict --list`) instead of the "
@@ -298,7 +314,6 @@ def _verification_files(measurements: list[Measurement], card: Path | None,
 @click.option("--strict", is_flag=True,
               help="Exit with status 1 (a failed check) when structure is left that no effect "
                    "explains.")
-@click.option("--quiet", "-q", is_flag=True, help="No progress lines, only the summary.")
 def calibrate_command(
     data: tuple[Path, ...],
     model_name: str | None,
@@ -323,7 +338,6 @@ def calibrate_command(
     contact_threshold: str | None,
     bootstrap: int,
     strict: bool,
-    quiet: bool,
 ) -> None:
     """Fit the device's model to the recordings DATA, add the effects it lacks, report.
 
@@ -333,6 +347,12 @@ def calibrate_command(
     when that is the answer. The report leads with the held-out model error before and after;
     with --verify it also gives the friction the device rendered on held-out textures without
     and with the fitted profile, measured by its force sensor.
+
+    \b
+    Examples:
+      hcard calibrate run rec.csv -o calib/
+      hcard calibrate run recordings/ --model ev-kaczmarek --effect air-layer -o calib/
+      hcard calibrate run rec.csv --profile profile.json --test-fraction 30% --strict
     """
     # imported here: the loop, its filters (scipy.signal, scipy.stats) and the report
     # (matplotlib) cost about a second, which every other hcard command need not pay
@@ -359,9 +379,9 @@ def calibrate_command(
             f"unknown effect(s) {', '.join(unknown)}; installed: {', '.join(library) or 'none'}"
         )
     if model_name is not None:
-        registry.get("predictor", model_name)  # the error lists the installed models
+        plugin_option("predictor", model_name, "--model")  # the error lists the models
     if finger_name != "none":
-        registry.get("predictor", finger_name)
+        plugin_option("predictor", finger_name, "--finger")
     if profile_path is not None and model_name is not None:
         raise CalibrateUsageError("give --model or --profile, not both")
     if verify_uri is not None and model_name is not None:
@@ -369,10 +389,8 @@ def calibrate_command(
                                   "profile or --profile, not --model")
     candidates = [library[name] for name in names if name not in set(excluded)]
 
-    quiet = quiet or global_quiet()
-
     def say(text: str) -> None:
-        if not quiet:
+        if not quiet():
             click.echo(f"[{time.perf_counter() - started:6.1f} s] {text}", err=True)
 
     paths = recording_paths(data)
@@ -443,14 +461,16 @@ def _with_start(base: Predictor, params: tuple[str, ...]) -> Predictor:
     known = {p.name: p for p in base.parameters}
     start: dict[str, float] = {}
     for text in params:
-        name, value = split_assignment(text, "--param")
+        with option_values():
+            name, value = split_assignment(text, "--param")
         if name not in known:
             raise CalibrateUsageError(
                 f"--param {text!r}: {base.name} has no parameter {name!r}; parameters: "
                 f"{', '.join(known)}"
             )
-        start[name] = quantity(value, known[name].unit, f"--param {name}")
-    return base.with_params(**start)
+        start[name] = quantity_option(value, known[name].unit, f"--param {name}")
+    with option_values(PredictorError):  # a start value outside the parameter's bounds
+        return base.with_params(**start)
 
 
 def _free_parameters(base: Predictor, free_text: str | None) -> list[str] | None:

@@ -16,6 +16,7 @@ from hcard.card_io import (
     read_card_file,
 )
 from hcard.cli.errors import EXIT_FAILED
+from hcard.cli.verbosity import verbosity_options
 from hcard.describe import card_summary, describe_card
 from hcard.errors import CardError, Problem
 from hcard.terminal_text import printable
@@ -26,6 +27,7 @@ CARD = click.Path(dir_okay=False, allow_dash=True, path_type=Path)
 
 
 @click.command()
+@verbosity_options
 @click.argument("cards", nargs=-1, required=True, type=CARD)
 @click.option("--json", "as_json", is_flag=True,
               help="Print the summary as JSON on stdout: one object for one card, an array of "
@@ -97,6 +99,7 @@ def check_card_file(card: Path) -> tuple[pb.Card | None, bytes, list[Problem]]:
 
 
 @click.command(name="validate")
+@verbosity_options
 @click.argument("cards", nargs=-1, required=True, type=CARD)
 @click.option("--json", "as_json", is_flag=True,
               help="Print the findings as JSON on stdout: one object for one card, an array of "

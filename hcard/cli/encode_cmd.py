@@ -15,7 +15,7 @@ from hcard import channels, limits
 from hcard.atomic import write_atomically
 from hcard.bounded_read import DEFAULT_MAX_PIXELS, STDIN
 from hcard.card_io import format_for_path, parse_card, save, to_bytes
-from hcard.cli.verbosity import quiet
+from hcard.cli.verbosity import quiet, verbosity_options
 from hcard.errors import CardError, HcardError
 
 if TYPE_CHECKING:
@@ -24,6 +24,7 @@ if TYPE_CHECKING:
 
 
 @click.command()
+@verbosity_options
 @click.argument("image", type=click.Path(path_type=Path))
 @click.option(
     "-o",

@@ -13,7 +13,7 @@ import click
 
 from hcard import __version__
 from hcard.cli.errors import UserErrorGroup
-from hcard.cli.verbosity import set_verbosity
+from hcard.cli.verbosity import verbosity_options
 from hcard.limits import FORMAT_MAJOR, FORMAT_MINOR
 
 if TYPE_CHECKING:
@@ -150,12 +150,8 @@ def _load(command: CommandPlugin) -> click.Command | None:
     __version__, prog_name="hcard",
     message=f"%(prog)s %(version)s (card format {FORMAT_MAJOR}.{FORMAT_MINOR})",
 )
-@click.option("-q", "--quiet", is_flag=True,
-              help="No progress lines on standard error (results and errors still print).")
-@click.option("-v", "--verbose", is_flag=True,
-              help="Every detail a command can list (e.g. every conformance case).")
-@click.pass_context
-def cli(context: click.Context, quiet: bool, verbose: bool) -> None:
+@verbosity_options
+def cli() -> None:
     """hcard: the haptic-card toolkit for friction-modulation (UV/EV) touchscreens.
 
     A card (.hcard binary, or .json) describes a surface as a grid of taxtels, each playing a
@@ -163,9 +159,15 @@ def cli(context: click.Context, quiet: bool, verbose: bool) -> None:
     (encode), check them (info, validate, preview), render them (render), evaluate the physics
     (predict), drive devices (device, play), prove an implementation (conformance) and fit the
     physics to tribometer recordings (calibrate).
+
+    \b
+    Examples:
+      hcard encode examples/gratings.png -o gratings.hcard --preview gratings.png
+      hcard validate gratings.hcard
+      hcard -q render gratings.hcard --track stroke.csv -o frames.npz
+      hcard encode --help
     """
     warnings.showwarning = _show_warning
-    set_verbosity(context, quiet, verbose)
 
 
 def _show_warning(message: Warning | str, category: type[Warning], *_args: Any, **_kw: Any) -> None:

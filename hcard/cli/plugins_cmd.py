@@ -7,6 +7,7 @@ import warnings
 
 import click
 
+from hcard.cli.verbosity import verbosity_options
 from hcard.plugins.registry import HcardPluginWarning, PluginInfo, get_registry
 
 COLUMNS = ("NAME", "KIND", "VERSION", "PACKAGE", "DESCRIPTION")
@@ -28,12 +29,18 @@ def format_table(infos: list[PluginInfo]) -> str:
 
 
 @click.command("plugins")
+@verbosity_options
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
 def plugins(as_json: bool) -> None:
     """List installed encoders, predictors, drivers, effects, checks.
 
     Plugins come from the ``hcard.plugins`` entry-point group (the built-ins too). A plugin that
     cannot be loaded is reported as a warning on stderr and skipped; the command still exits 0.
+
+    \b
+    Examples:
+      hcard plugins
+      hcard plugins --json | jq '.plugins[] | select(.kind == "predictor") | .name'
     """
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", HcardPluginWarning)

@@ -22,6 +22,9 @@ import click
 import numpy as np
 
 from hcard.atomic import write_atomically
+from hcard.cli.errors import option_values
+from hcard.cli.options import plugin_option
+from hcard.cli.verbosity import verbosity_options
 from hcard.errors import HcardError, UsageError
 from hcard.physics.predictor import Parameter, Predictor, PredictorError, Variable
 from hcard.physics.profile import DeviceProfile, ProfileError
@@ -350,6 +353,7 @@ def predictor_of_profile(path: Path, model: str | None) -> Predictor:
 
 # -- the command -------------------------------------------------------------------------------
 @click.command("predict")
+@verbosity_options
 @click.argument("model", required=False)
 @click.option(
     "--param",
@@ -421,7 +425,7 @@ def predict(
       hcard predict squeeze-film --sweep amplitude=0:5um:51 -o sweep.csv --plot sweep.png
     """
     registry = get_registry()
-    chosen = None if model is None else registry.get("predictor", model)  # error lists names
+    chosen = None if model is None else plugin_option("predictor", model, "MODEL")
     if list_only or (model is None and profile_path is None):
         click.echo(describe_model(chosen) if chosen else list_models(registry.predictors))
         return
@@ -435,9 +439,9 @@ def predict(
     if predictor is None:  # unreachable: without MODEL or --profile the models were listed
         raise PredictUsageError("give a MODEL or --profile")
 
-    prediction = evaluate(
-        predictor, _assignments(params, "--param"), _assignments(inputs, "--input"), sweep_text
-    )
+    with option_values(PredictorError):  # the values given, the names, the bounds
+        prediction = evaluate(predictor, _assignments(params, "--param"),
+                              _assignments(inputs, "--input"), sweep_text)
     if output is not None:
         headers, rows = prediction.columns(all_inputs=True)
         _write(output, to_csv(headers, rows))

@@ -7,9 +7,11 @@ from pathlib import Path
 import click
 
 import hcard
+from hcard.cli.verbosity import verbosity_options
 
 
 @click.command("preview")
+@verbosity_options
 @click.argument("card", type=click.Path(dir_okay=False, path_type=Path))
 @click.option(
     "-o",
@@ -33,6 +35,11 @@ def preview(card: Path, output: Path | None, dpi: int) -> None:
 
     The PNG is written atomically: an existing file is replaced only once the picture is
     complete.
+
+    \b
+    Examples:
+      hcard preview card.hcard
+      hcard preview card.json -o card.png --dpi 200
     """
     from hcard.preview import render_preview  # matplotlib loads only for this command
 

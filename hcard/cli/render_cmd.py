@@ -14,7 +14,7 @@ import click
 import numpy as np
 
 from hcard.card_io import load
-from hcard.cli.verbosity import quiet
+from hcard.cli.verbosity import quiet, verbosity_options
 from hcard.csv_rows import format_rows
 from hcard.errors import HcardError
 from hcard.physics.actuation import (
@@ -75,6 +75,7 @@ def frames_to_csv(frames: Frames, commands: ActuatorCommands | None = None) -> b
 
 
 @click.command()
+@verbosity_options
 @click.argument("card", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--track", "track_path", required=True,
               type=click.Path(dir_okay=False, path_type=Path),

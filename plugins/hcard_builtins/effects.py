@@ -12,10 +12,9 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from functools import lru_cache
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
 
 from hcard.calibration.effects import (
     Effect,
@@ -27,6 +26,9 @@ from hcard.calibration.effects import (
 from hcard.physics import Parameter, Variable
 from hcard.quantities import ATMOSPHERE_PA
 from hcard_builtins.physics.electrovibration import geometry as pad_geometry
+
+if TYPE_CHECKING:
+    from scipy.interpolate import PchipInterpolator
 
 ATMOSPHERE = ATMOSPHERE_PA
 """Reference ambient pressure p0 of Eq. 2.10, Pa."""
@@ -615,6 +617,9 @@ def _flattened_pad() -> tuple[float, PchipInterpolator]:
             for h in depths
         ]
     )
+    from scipy.interpolate import PchipInterpolator  # here: ~0.4 s to import, which listing
+    # the effects (`hcard plugins`) must not pay
+
     return h_max, PchipInterpolator(depths, values, extrapolate=False)
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 import click
 
 from hcard.card_io import load
+from hcard.cli.verbosity import verbosity_options
 from hcard.errors import HcardError, UsageError
 from hcard.terminal_text import printable
 from hcard.track import read_track_csv
@@ -64,18 +65,23 @@ def echo_hidden_effects() -> None:
         click.echo(f"{effect.name} ({'/'.join(effect.devices)}; {params}): {effect.description}")
 
 
-def hidden_effects(names: tuple[str, ...], assignments: tuple[str, ...]
-                   ) -> dict[str, dict[str, float]]:
-    """The effects of ``--effect`` and ``--effect-param``; a one-line error when malformed."""
-    from hcard_device.sim.hidden import HiddenEffectError, parse_assignments
+def hidden_effects(names: tuple[str, ...], assignments: tuple[str, ...],
+                   variant: str | None = None) -> dict[str, dict[str, float]]:
+    """The effects of ``--effect`` and ``--effect-param`` (checked for device ``variant``
+    when given); a one-line usage error (exit status 2) when malformed or unknown."""
+    from hcard_device.sim.hidden import HiddenEffectError, parse_assignments, resolve
 
     try:
-        return parse_assignments(names, assignments)
+        effects = parse_assignments(names, assignments)
+        if variant is not None:
+            resolve(variant, effects)
     except HiddenEffectError as exc:
-        raise HcardError(f"--effect: {exc}") from None
+        raise UsageError(f"--effect: {exc}") from None
+    return effects
 
 
 @click.group("device")
+@verbosity_options
 def device() -> None:
     """Serve the reference device over USB/IP, or list devices.
 
@@ -88,6 +94,7 @@ def device() -> None:
 
 
 @device.command("serve")
+@verbosity_options
 @click.option("--host", default="127.0.0.1", show_default=True,
               help="Address to listen on (loopback keeps the device off the network).")
 @click.option("--port", default=3240, show_default=True, type=click.IntRange(0, 65535),
@@ -104,13 +111,19 @@ def serve(host: str, port: int, variant: str, seed: int, effect_names: tuple[str
     On any Linux host, `usbip attach -r HOST -b 1-1` turns it into a /dev/hidraw device.
     With --effect the hardware hides a physical effect from its own profile, for a calibration
     to find from recordings alone (sim://...?effect=NAME does the same in process).
+
+    \b
+    Examples:
+      hcard device serve
+      hcard device serve --device coupled --port 0
+      hcard device serve --device coupled --effect air-layer --effect-param air-layer.air_gap=8um
     """
     from hcard_device.usb.server import serve as serve_device
 
     if list_effects:
         echo_hidden_effects()
         return
-    effects = hidden_effects(effect_names, assignments)
+    effects = hidden_effects(effect_names, assignments, variant)
     status = serve_device(variant, host, port, seed, effects=effects,
                           echo=lambda message, error: click.echo(message, err=error))
     if status:
@@ -118,13 +131,20 @@ def serve(host: str, port: int, variant: str, seed: int, effect_names: tuple[str
 
 
 @device.command("list")
+@verbosity_options
 @click.option("--host", "hosts", multiple=True, metavar="HOST[:PORT]",
               help=f"USB/IP server to ask (repeatable; default {DEFAULT_LIST_HOST}).")
 @click.option("--timeout", default=1.0, show_default=True, type=click.FloatRange(min=0.01),
               help="Longest wait for each server, s.")
 def list_devices(hosts: tuple[str, ...], timeout: float) -> None:
     """List reachable devices: hidapi devices with the hcard VID:PID, hcard devices exported
-    by USB/IP servers, and the in-process sim:// devices."""
+    by USB/IP servers, and the in-process sim:// devices.
+
+    \b
+    Examples:
+      hcard device list
+      hcard device list --host 192.168.1.20 --host lab-pc:3241 --timeout 3
+    """
     from hcard_device.drivers import list_devices as find_devices
 
     servers = [_host_port(text) for text in (hosts or (DEFAULT_LIST_HOST,))]
@@ -135,7 +155,7 @@ def list_devices(hosts: tuple[str, ...], timeout: float) -> None:
 
 
 class SynthesizeUsageError(UsageError):
-    """A bad option of ``hcard device synthesize`` (one line, exit status 1)."""
+    """A bad option of ``hcard device synthesize`` (one line, exit status 2)."""
 
 
 VARIANT_OF_CLASS = {"uv": "evita", "ev": "coupled", "coupled": "coupled"}
@@ -145,6 +165,7 @@ RECORDING = "recording.csv"
 
 
 @device.command("synthesize")
+@verbosity_options
 @click.option("--device", "device_class", type=click.Choice(["uv", "ev", "coupled"]),
               default="uv", show_default=True,
               help="uv: E-ViTa (amplitude); ev: coupled stimulator, plate off (voltage); "
@@ -169,13 +190,19 @@ def synthesize(device_class: str, uri: str | None, effect_names: tuple[str, ...]
     Writes the plan of `hcard calibrate plan` (protocol and verification cards and tracks)
     and OUTPUT/recording.csv with its sidecar, in the measurement format. Nothing in them
     names the hidden effects.
+
+    \b
+    Examples:
+      hcard device synthesize --device uv -o synth/
+      hcard device synthesize --device ev --effect air-layer --duration 30s -o synth/
+      hcard device synthesize --device coupled --uri usbip://127.0.0.1:3240/1-1 -o synth/
     """
     from urllib.parse import urlencode
 
     from hcard.calibration.measurement import write_measurement
     from hcard.calibration.plan import protocol, verification
     from hcard.cli.calibrate_cmd import write_plan
-    from hcard.quantities import UnitError, parse_quantity
+    from hcard.cli.options import quantity_option
     from hcard_device.drivers import open_device
     from hcard_device.drivers.play import play as play_track
     from hcard_device.drivers.play import summary
@@ -200,10 +227,7 @@ def synthesize(device_class: str, uri: str | None, effect_names: tuple[str, ...]
                           for key, value in values.items()})
         uri = f"sim://{VARIANT_OF_CLASS[device_class]}?{urlencode(query)}"
     parse_uri(uri)  # a bad URI or an effect the device cannot have: before anything is written
-    try:
-        seconds = parse_quantity(duration, "s")
-    except UnitError as exc:
-        raise SynthesizeUsageError(f"--duration: {exc}") from None
+    seconds = quantity_option(duration, "s", "--duration")
     plan = protocol(device_class, duration_s=seconds, seed=seed)
     check = verification(device_class, seed=seed + 1)
     write_plan(output, device_class, plan, check)
@@ -223,6 +247,7 @@ def synthesize(device_class: str, uri: str | None, effect_names: tuple[str, ...]
 
 
 @click.command("play")
+@verbosity_options
 @click.argument("card", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--device", "uri", required=True, metavar="URI",
               help="Device URI: sim://, usbip://HOST:PORT/BUSID, pyusb://..., hid://VID:PID "

@@ -151,11 +151,11 @@ def test_calibrate_strict_exits_1_when_structure_is_left(recorded: Path, tmp_pat
          "--contact-threshold '-5mN': must be a positive force"),
     ],
 )
-def test_calibrate_user_errors_are_one_line(
+def test_calibrate_option_errors_are_one_line_usage_errors(
     recorded: Path, tmp_path: Path, args: list[str], message: str
 ) -> None:
     result = CliRunner().invoke(cli, ["calibrate", str(recorded), *args, "-o", str(tmp_path)])
-    assert result.exit_code == 1
+    assert result.exit_code == 2  # a bad option value (README: exit status)
     assert message in result.output
     assert "Traceback" not in result.output
     assert len(result.output.strip().splitlines()) == 1

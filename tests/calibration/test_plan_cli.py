@@ -97,7 +97,7 @@ def test_calibrate_plan_writes_cards_tracks_and_the_plan(tmp_path):
     assert hcard.load(tmp_path / "protocol.hcard").metadata.title.startswith("hcard calibration")
     assert "next: hcard play" in result.output
     bad = run("calibrate", "plan", "--device", "uv", "--duration", "5 kHz", "-o", tmp_path)
-    assert bad.exit_code == 1 and "--duration" in bad.output
+    assert bad.exit_code == 2 and "--duration" in bad.output  # a bad option value
 
 
 def test_synthesize_plays_the_protocol_on_the_device(tmp_path):
@@ -120,9 +120,9 @@ def test_synthesize_plays_the_protocol_on_the_device(tmp_path):
     (["--effect-param", "air-layer.gap=1um"], "no parameter 'gap'"),
     (["--duration", "three"], "--duration"),
 ])
-def test_synthesize_errors_are_one_line(tmp_path, args, message):
+def test_synthesize_option_errors_are_one_line_usage_errors(tmp_path, args, message):
     result = run("device", "synthesize", *args, "-o", tmp_path / "out")
-    assert result.exit_code == 1
+    assert result.exit_code == 2
     lines = result.output.strip().splitlines()
     assert len(lines) == 1 and message in lines[0], result.output
     assert not (tmp_path / "out").exists()
@@ -188,7 +188,7 @@ def test_calibrate_refuses_what_it_cannot_take(device_recording, tmp_path):
     ]
     for args, message in cases:
         result = run("calibrate", *args, "-o", tmp_path / "out", "-q")
-        assert result.exit_code == 1, result.output
+        assert result.exit_code == 2, result.output  # what the command line must add or drop
         assert message in result.output and "Traceback" not in result.output
         assert not (tmp_path / "out").exists()
 

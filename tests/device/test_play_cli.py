@@ -119,21 +119,24 @@ def test_play_over_usbip_in_real_time(files):
     assert lost <= 2
 
 
-@pytest.mark.parametrize(("uri", "message"), [
-    ("usbip://127.0.0.1:port/1-1", "bad device URI 'usbip://127.0.0.1:port/1-1': port 'port'"),
-    ("bluetooth://device", "unknown scheme 'bluetooth'"),
-    ("sim://nano", "unknown device 'nano' (known: evita, coupled)"),
-    ("hid://1209:fffe", "no HID device 1209:fffe found"),
-    ("hid:///dev/hidraw-none", "no such device node /dev/hidraw-none"),
-    ("pyusb://127.0.0.1:{closed}/1-1", "cannot connect"),
-    ("usbip://127.0.0.1:{closed}/1-1", "cannot connect (Connection refused)"),
+@pytest.mark.parametrize(("uri", "message", "status"), [
+    ("usbip://127.0.0.1:port/1-1", "bad device URI 'usbip://127.0.0.1:port/1-1': port 'port'",
+     2),
+    ("bluetooth://device", "unknown scheme 'bluetooth'", 2),
+    ("sim://nano", "unknown device 'nano' (known: evita, coupled)", 2),
+    ("hid://1209:fffe", "no HID device 1209:fffe found", 1),
+    ("hid:///dev/hidraw-none", "no such device node /dev/hidraw-none", 1),
+    ("pyusb://127.0.0.1:{closed}/1-1", "cannot connect", 1),
+    ("usbip://127.0.0.1:{closed}/1-1", "cannot connect (Connection refused)", 1),
 ])
-def test_play_errors_are_one_line(files, uri, message):
+def test_play_errors_are_one_line(files, uri, message, status):
+    """A device URI that cannot mean anything is a bad option value (exit 2); one that names
+    a device that cannot be reached is a failure (exit 1)."""
     with socket.socket() as probe:  # a port nothing listens on
         probe.bind(("127.0.0.1", 0))
         closed = probe.getsockname()[1]
     result = play(files, uri.format(closed=closed))
-    assert result.exit_code == 1
+    assert result.exit_code == status
     lines = result.output.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("Error: ") and message in lines[0]
     assert "Traceback" not in result.output
