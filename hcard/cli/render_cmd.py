@@ -24,7 +24,7 @@ from hcard.physics.actuation import (
     combined_range,
 )
 from hcard.quantities import M_PER_MM, UM_PER_M
-from hcard.render import Frames, Renderer, RenderOptions
+from hcard.render import Frames, Renderer, RenderOptions, RenderTooLong
 from hcard.render.options import (
     DEFAULT_BAND_LIMIT_HZ,
     DEFAULT_DEAD_RECKONING_S,
@@ -122,7 +122,10 @@ def render(card: Path, track_path: Path, output: Path, frame_rate: float, band_l
     except ValueError as exc:
         raise click.UsageError(str(exc)) from None
     renderer = Renderer(loaded, options)
-    total = renderer.frame_count(track)  # the frame limit, before any work
+    try:
+        total = renderer.frame_count(track)  # the frame limit, before any work
+    except RenderTooLong as exc:  # too large an input, as play says (README: exit status 1)
+        raise HcardError(f"{track_path}: {exc}") from None
     summary = _RenderSummary()
     try:
         with frame_writer(output) as writer, _progress(total) as advance:
