@@ -49,12 +49,13 @@ from calibration_answers import differences
 
 from hcard.calibration import report
 from hcard.calibration.dataset import prepare
-from hcard.calibration.loop import CalibrationResult, LoopSettings, calibrate
+from hcard.calibration.loop import calibrate
 from hcard.calibration.measurement import (
     Measurement,
     read_measurement,
     write_measurement,
 )
+from hcard.calibration.results import CalibrationResult, LoopSettings
 from hcard.plugins.registry import get_registry
 from hcard_device.sim.tribometer import Protocol, synthesize
 

@@ -34,8 +34,9 @@ from pathlib import Path
 import numpy as np
 
 from hcard.calibration.dataset import CalibrationData
-from hcard.calibration.loop import CalibrationResult, calibrate
+from hcard.calibration.loop import calibrate
 from hcard.calibration.measurement import read_measurement
+from hcard.calibration.results import CalibrationResult
 from hcard.plugins.registry import get_registry
 
 HERE = Path(__file__).resolve().parent

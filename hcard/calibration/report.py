@@ -38,9 +38,9 @@ from matplotlib.transforms import ScaledTranslation
 
 from hcard import __version__
 from hcard.atomic import write_atomically
-from hcard.calibration.loop import CalibrationResult, ModelFit
 from hcard.calibration.profile import parameter_table, profile_of
 from hcard.calibration.residuals import ResidualReport
+from hcard.calibration.results import CalibrationResult, ModelFit
 from hcard.calibration.screening import SCREEN_TOLERANCE, describe_screening, screening_stride
 from hcard.physics import PredictorError
 from hcard.physics.profile import DeviceProfile

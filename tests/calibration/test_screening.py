@@ -18,9 +18,10 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import independent_recordings as ir
 
-from hcard.calibration.loop import LoopSettings, calibrate
+from hcard.calibration.loop import calibrate
 from hcard.calibration.report import report_dict, report_markdown
 from hcard.calibration.residuals import effective_samples
+from hcard.calibration.results import LoopSettings
 from hcard.calibration.screening import (
     SCREEN_TOLERANCE,
     criterion_band,

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 import scipy.constants
 
-from hcard.calibration.loop import NOT_EXPLAINED
+from hcard.calibration.results import NOT_EXPLAINED
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "examples" / "thesis_measurements"))
 import calibrate_table_3_3 as table
