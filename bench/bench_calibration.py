@@ -106,6 +106,9 @@ def report_before() -> ModuleType | None:
             capture_output=True, text=True, check=True).stdout
     except (OSError, subprocess.CalledProcessError):
         return None
+    # it imported the result types from the loop module, which now holds only the search
+    source = source.replace("from hcard.calibration.loop import CalibrationResult, ModelFit",
+                            "from hcard.calibration.results import CalibrationResult, ModelFit")
     module = ModuleType("report_before")
     sys.modules[module.__name__] = module  # its dataclasses look their module up
     exec(compile(source, f"{BEFORE}:hcard/calibration/report.py", "exec"), module.__dict__)
