@@ -339,7 +339,7 @@ def main() -> None:
                 )
             )
         return
-    from hcard.calibration.report import write_report
+    from hcard.calibration.report.writer import write_report
 
     for label, swap in (("as printed", False), ("voltages swapped", True)):
         result = run(swap_voltages=swap)

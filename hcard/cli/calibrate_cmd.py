@@ -359,7 +359,7 @@ def calibrate_command(
     from hcard.calibration.dataset import prepare
     from hcard.calibration.loop import calibrate, with_bootstrap
     from hcard.calibration.profile import profile_of
-    from hcard.calibration.report import write_report
+    from hcard.calibration.report.writer import write_report
     from hcard.calibration.results import NOT_EXPLAINED, LoopSettings
 
     started = time.perf_counter()

@@ -160,7 +160,7 @@ def test_within_participant_ratios_against_eq_3_17() -> None:
 
 def test_the_report_and_profile_of_a_direct_force_calibration(tmp_path) -> None:
     from hcard.calibration.profile import fitted_model
-    from hcard.calibration.report import write_report
+    from hcard.calibration.report.writer import write_report
     from hcard.physics.profile import DeviceProfile
 
     result = table.run(table.CYCLIC)
