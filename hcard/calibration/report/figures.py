@@ -24,7 +24,7 @@ from matplotlib.transforms import ScaledTranslation
 from hcard import __version__
 from hcard.calibration.report.number_text import force_in_mn
 from hcard.calibration.results import CalibrationResult
-from hcard.preview_text import PathLabels
+from hcard.preview.glyph_labels import PathLabels
 from hcard.quantities import MN_PER_N, N_PER_MN, SI_UNITS, display_unit
 
 DPI = 100
@@ -131,8 +131,8 @@ def _tick_texts(ticks: np.ndarray) -> list[str]:
 
 def _outlined_tick_labels(ax: Axes, *, left: bool) -> None:
     """Label ``ax``'s fixed ticks with glyph outlines, one collection per axis
-    (:class:`hcard.preview_text.PathLabels`), below the x axis and, if ``left``, left of the y
-    axis, and place its axis labels beyond them. matplotlib's ``Text`` costs about 1 ms per
+    (:class:`hcard.preview.glyph_labels.PathLabels`), below the x axis and, if ``left``, left of
+    the y axis, and place its axis labels beyond them. matplotlib's ``Text`` costs about 1 ms per
     label to lay out and draw: the ~100 tick labels of a figure of 11 panels took a third of
     it."""
     fig = ax.get_figure()
