@@ -48,8 +48,9 @@ from threadpoolctl import threadpool_info
 import hcard.calibration.blas_threads as blas_threads
 from hcard.calibration.bootstrap import DEFAULT_SAMPLES, BootstrapResult, stroke_bootstrap
 from hcard.calibration.dataset import prepare
-from hcard.calibration.loop import CalibrationResult, calibrate
+from hcard.calibration.loop import calibrate
 from hcard.calibration.measurement import read_measurement
+from hcard.calibration.results import CalibrationResult
 from hcard.cli.main import cli
 from hcard.physics import Predictor
 from hcard.plugins.registry import get_registry

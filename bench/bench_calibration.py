@@ -47,14 +47,15 @@ from matplotlib.figure import Figure
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from calibration_answers import differences
 
-from hcard.calibration import report
 from hcard.calibration.dataset import prepare
-from hcard.calibration.loop import CalibrationResult, LoopSettings, calibrate
+from hcard.calibration.loop import calibrate
 from hcard.calibration.measurement import (
     Measurement,
     read_measurement,
     write_measurement,
 )
+from hcard.calibration.report import figures, files
+from hcard.calibration.results import CalibrationResult, LoopSettings
 from hcard.plugins.registry import get_registry
 from hcard_device.sim.tribometer import Protocol, synthesize
 
@@ -96,7 +97,8 @@ def same_answers(screened: CalibrationResult, baseline: CalibrationResult) -> st
 
 
 def report_before() -> ModuleType | None:
-    """:mod:`hcard.calibration.report` as it was before its figures were made faster (commit
+    """The report module (then ``hcard/calibration/report.py``, now the package
+    :mod:`hcard.calibration.report`) as it was before its figures were made faster (commit
     :data:`BEFORE`, read from the repository's history), or None without git or history."""
     root = Path(__file__).resolve().parents[1]
     try:
@@ -105,6 +107,9 @@ def report_before() -> ModuleType | None:
             capture_output=True, text=True, check=True).stdout
     except (OSError, subprocess.CalledProcessError):
         return None
+    # it imported the result types from the loop module, which now holds only the search
+    source = source.replace("from hcard.calibration.loop import CalibrationResult, ModelFit",
+                            "from hcard.calibration.results import CalibrationResult, ModelFit")
     module = ModuleType("report_before")
     sys.modules[module.__name__] = module  # its dataclasses look their module up
     exec(compile(source, f"{BEFORE}:hcard/calibration/report.py", "exec"), module.__dict__)
@@ -114,9 +119,9 @@ def report_before() -> ModuleType | None:
 def blank_png(size_inches: tuple[float, float]) -> bytes:
     """An empty figure of this size, encoded as the report encodes its figures: what any figure
     costs at least."""
-    fig = Figure(figsize=size_inches, dpi=report.DPI)
+    fig = Figure(figsize=size_inches, dpi=figures.DPI)
     FigureCanvasAgg(fig)
-    return report._png(fig)
+    return figures.figure_png(fig)
 
 
 def main() -> None:
@@ -168,13 +173,13 @@ def main() -> None:
 def print_figures(result: CalibrationResult, repeat: int, before: ModuleType | None) -> None:
     """Each report figure of ``result`` (drawn and encoded as ``write_report`` does) against
     the goal, the same figure drawn by the report module ``before``, and the floor."""
-    for name in (report.RESIDUALS_PNG, report.FIT_PNG):
-        drawer = {report.RESIDUALS_PNG: "residuals_figure", report.FIT_PNG: "fit_figure"}[name]
-        now = getattr(report, drawer)
+    for name in (files.RESIDUALS_PNG, files.FIT_PNG):
+        drawer = {files.RESIDUALS_PNG: "residuals_figure", files.FIT_PNG: "fit_figure"}[name]
+        now = getattr(figures, drawer)
         size = tuple(now(result).get_size_inches())
         runs: dict[str, list[float]] = {"measured": [], "before": [], "floor": []}
         for _ in range(repeat):  # alternately
-            runs["measured"].append(one_time(lambda d=now: report._png(d(result))))
+            runs["measured"].append(one_time(lambda d=now: figures.figure_png(d(result))))
             if before is not None:
                 old = getattr(before, drawer)
                 runs["before"].append(one_time(lambda d=old: before._png(d(result))))

@@ -48,7 +48,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "calibrat
 
 import independent_recordings as ir
 
-from hcard.calibration.loop import NO_EFFECT, NOT_EXPLAINED, calibrate
+from hcard.calibration.loop import calibrate
+from hcard.calibration.results import NO_EFFECT, NOT_EXPLAINED
 from hcard.plugins.registry import get_registry
 
 HIT_TARGET = 0.90

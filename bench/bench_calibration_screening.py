@@ -49,7 +49,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "calibrat
 import independent_recordings as ir
 from calibration_answers import differences, runner_up
 
-from hcard.calibration.loop import CalibrationResult, LoopSettings, calibrate
+from hcard.calibration.loop import calibrate
+from hcard.calibration.results import CalibrationResult, LoopSettings
 from hcard.calibration.screening import SCREEN_SAMPLES, SCREEN_TOLERANCE
 from hcard.plugins.registry import get_registry
 

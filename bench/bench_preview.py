@@ -6,7 +6,7 @@ Cards of 16, 64 and 256 textures of 1 to 16 components (spatial gratings of mixe
 orientation, one in five temporal), every channel and locking, on a 128 x 96 grid of 1.25 mm
 taxtels (160 x 120 mm, every texture on at least one taxtel); the largest palette also with an
 error map of the grid. In process, warm (one untimed run first): the median of ``--repeat`` runs
-of :func:`hcard.preview.render_preview` (figure, drawing, PNG encoding and the file write)
+of :func:`hcard.preview.picture.render_preview` (figure, drawing, PNG encoding and the file write)
 against its floor, an empty matplotlib figure of the same size and resolution saved to a PNG
 file, the two run alternately so that both see the same load on a shared machine. As whole
 commands (fresh processes, also alternating): ``hcard preview CARD -o OUT.png`` against a
@@ -37,7 +37,7 @@ from matplotlib.figure import Figure
 
 from hcard import build
 from hcard.card_io import save
-from hcard.preview import preview_figure, render_preview
+from hcard.preview.picture import preview_figure, render_preview
 from hcard.v1 import card_pb2 as pb
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))

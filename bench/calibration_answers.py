@@ -4,7 +4,7 @@ benches compare a screened loop against the loop that fits every candidate on ev
 
 from __future__ import annotations
 
-from hcard.calibration.loop import CalibrationResult
+from hcard.calibration.results import CalibrationResult
 
 
 def differences(baseline: CalibrationResult, screened: CalibrationResult) -> list[str]:

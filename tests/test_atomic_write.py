@@ -110,12 +110,12 @@ def test_an_encode_whose_preview_fails_keeps_the_previous_card(tmp_path: Path,
     first = runner.invoke(cli, ["encode", str(image), "-o", str(card), "--width-mm", "40"])
     assert first.exit_code == 0, first.output
     before = card.read_bytes()
-    import hcard.preview
+    import hcard.preview.picture
 
     def broken_figure(*args, **kwargs):
         raise CardError("the preview cannot be drawn (injected)")
 
-    monkeypatch.setattr(hcard.preview, "preview_figure", broken_figure)
+    monkeypatch.setattr(hcard.preview.picture, "preview_figure", broken_figure)
     failed = runner.invoke(cli, ["encode", str(image), "-o", str(card), "--width-mm", "20",
                                  "--preview", str(tmp_path / "p.png")])
     assert failed.exit_code == 1

@@ -8,7 +8,7 @@ import pytest
 from hcard import build, channels
 from hcard.cli.encode_cmd import encode
 from hcard.describe import CHANNEL_NAMES
-from hcard.preview_profiles import channel_label
+from hcard.preview.periods import channel_label
 from hcard.render.compiled import compile_texture
 from hcard.render.options import RenderOptions
 from hcard.v1 import card_pb2 as pb

@@ -212,16 +212,16 @@ def test_preview_draws_the_error_map_the_summary_counts(
     """encode --preview hands the preview the per-taxtel error in JND: each taxtel's RMS, or
     its 95th percentile under --max-error; the taxtels it shows above 1 JND are the ones the
     summary counts, and the worst one is where the summary says."""
-    import hcard.preview
+    import hcard.preview.picture
 
     drawn: dict[str, object] = {}
-    real_preview_png = hcard.preview.preview_png
+    real_preview_png = hcard.preview.picture.preview_png
 
     def recording_preview_png(card: pb.Card, **options: object) -> bytes:
         drawn.update(options)
         return real_preview_png(card, **options)
 
-    monkeypatch.setattr(hcard.preview, "preview_png", recording_preview_png)
+    monkeypatch.setattr(hcard.preview.picture, "preview_png", recording_preview_png)
     options = [] if target is None else ["--max-error", target]
     out, preview = tmp_path / "b.hcard", tmp_path / "b-preview.png"
     button = Path(__file__).parents[1] / "examples" / "button.png"

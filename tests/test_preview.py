@@ -1,5 +1,5 @@
-"""The preview picture: profiles against the analytic cosine, the cells drawn for every texture,
-pixels of the taxtel map, CLI."""
+"""The preview picture: texture periods against the analytic cosine, the cells drawn for every
+texture, pixels of the taxtel map, CLI."""
 
 from __future__ import annotations
 
@@ -13,16 +13,7 @@ from PIL import Image
 
 import hcard
 from hcard import build
-from hcard.preview import (
-    GRID_AXES_LABEL,
-    PROFILES_AXES_LABEL,
-    preview_figure,
-    render_preview,
-    temporal_profile,
-    texture_colors,
-    texture_profile,
-)
-from hcard.preview_profiles import (
+from hcard.preview.periods import (
     BANDS,
     CELL_LABELS,
     CURVES,
@@ -31,6 +22,15 @@ from hcard.preview_profiles import (
     SWATCHES,
     UNREACHABLE,
     plot_series,
+    spatial_friction,
+    temporal_friction,
+)
+from hcard.preview.picture import (
+    GRID_AXES_LABEL,
+    PERIODS_AXES_LABEL,
+    preview_figure,
+    render_preview,
+    texture_colors,
 )
 
 TAXTEL_MM = 20.0
@@ -52,12 +52,12 @@ def three_texture_card() -> hcard.Card:
     )
 
 
-# ----------------------------------------------------------------------------- profiles
+# ------------------------------------------------------------------------------ periods
 
 
-def test_profile_of_a_grating_is_the_analytic_cosine() -> None:
+def test_spatial_friction_of_a_grating_is_the_analytic_cosine() -> None:
     grating = build.spatial(0.25, 0.2, phase=0.3, orientation=0.5)
-    s_mm, friction = texture_profile(build.texture(0.7, [grating]), n=2001)
+    s_mm, friction = spatial_friction(build.texture(0.7, [grating]), n=2001)
     assert s_mm.shape == friction.shape == (2001,)
     assert s_mm[0] == 0.0
     assert s_mm[-1] == pytest.approx(4.0)  # one period of 0.25 cycles/mm
@@ -70,10 +70,10 @@ def test_profile_of_a_grating_is_the_analytic_cosine() -> None:
     assert s_mm[np.argmax(friction)] == pytest.approx(4.0 - 0.1910, abs=0.002)
 
 
-def test_profile_follows_the_strongest_component_and_projects_the_others() -> None:
+def test_spatial_friction_follows_the_strongest_component_and_projects_the_others() -> None:
     strong = build.spatial(0.5, 0.3, orientation=math.pi / 3)
     perpendicular = build.spatial(2.0, 0.1, phase=0.4, orientation=math.pi / 3 + math.pi / 2)
-    s_mm, friction = texture_profile(build.texture(1.0, [strong, perpendicular]), n=401)
+    s_mm, friction = spatial_friction(build.texture(1.0, [strong, perpendicular]), n=401)
     # The perpendicular grating does not vary along the strongest's direction: constant
     # 0.1 cos(0.4) = 0.0921; its own period (0.5 mm) does not set the window (2 mm does).
     assert s_mm[-1] == pytest.approx(2.0)
@@ -81,27 +81,27 @@ def test_profile_follows_the_strongest_component_and_projects_the_others() -> No
     assert friction.min() == pytest.approx(0.7 + 0.1 * math.cos(0.4), abs=1e-4)
 
 
-def test_profile_window_is_capped_by_the_strongest_component_and_50_mm() -> None:
+def test_window_is_capped_by_the_strongest_component_and_50_mm() -> None:
     slow_weak = build.spatial(0.01, 0.05)  # 100 mm period
     fast_strong = build.spatial(2.0, 0.3)  # 0.5 mm period: window 4 x 0.5 = 2 mm
-    s_mm, _ = texture_profile(build.texture(1.0, [slow_weak, fast_strong]))
+    s_mm, _ = spatial_friction(build.texture(1.0, [slow_weak, fast_strong]))
     assert s_mm[-1] == pytest.approx(2.0)
-    s_mm, friction = texture_profile(build.texture(1.0, [build.spatial(0.01, 0.2)]))
+    s_mm, friction = spatial_friction(build.texture(1.0, [build.spatial(0.01, 0.2)]))
     assert s_mm[-1] == pytest.approx(50.0)
     assert friction[-1] == pytest.approx(1.0 + 0.2 * math.cos(2 * math.pi * 0.5))
 
 
-def test_flat_and_temporal_profiles() -> None:
-    s_mm, friction = texture_profile(build.texture(0.8), n=64)
+def test_flat_and_temporal_friction() -> None:
+    s_mm, friction = spatial_friction(build.texture(0.8), n=64)
     assert s_mm[-1] == pytest.approx(10.0)
     assert np.all(friction == 0.8)
-    t_ms, friction = temporal_profile(build.texture(1.1, [build.temporal(50.0, 0.1)]), n=1001)
+    t_ms, friction = temporal_friction(build.texture(1.1, [build.temporal(50.0, 0.1)]), n=1001)
     assert t_ms[-1] == pytest.approx(20.0)  # one period of 50 Hz, in milliseconds
     assert friction.max() == pytest.approx(1.2)
     assert friction.min() == pytest.approx(1.0, abs=1e-6)
     assert t_ms[np.argmin(friction)] == pytest.approx(10.0, abs=0.02)
-    # Temporal components stay out of the spatial profile.
-    _, spatial = texture_profile(build.texture(1.1, [build.temporal(50.0, 0.1)]))
+    # Temporal components stay out of the spatial friction.
+    _, spatial = spatial_friction(build.texture(1.1, [build.temporal(50.0, 0.1)]))
     assert np.all(spatial == 1.1)
 
 
@@ -143,14 +143,14 @@ def test_preview_png_shows_the_texture_of_every_taxtel(tmp_path: Path) -> None:
     assert grid_ax.transData.transform((60.0, 0.0))[0] < 0.6 * width
 
 
-def _profiles(fig) -> dict[str, object]:
-    """The profiles axes' collections by label."""
-    ax = next(ax for ax in fig.axes if ax.get_label() == PROFILES_AXES_LABEL)
+def _periods(fig) -> dict[str, object]:
+    """The periods axes' collections by label."""
+    ax = next(ax for ax in fig.axes if ax.get_label() == PERIODS_AXES_LABEL)
     return {c.get_label(): c for c in ax.collections}
 
 
 def test_every_texture_has_a_labelled_cell() -> None:
-    marks = _profiles(preview_figure(three_texture_card()))
+    marks = _periods(preview_figure(three_texture_card()))
     # windows: one period of 1 cycle/mm, of an 8 mm grating, of 50 Hz
     assert marks[CELL_LABELS].texts == [
         "texture 0 (fine)\nUV, VELOCITY, 1 component\n1 mm ∠0°",
@@ -163,14 +163,14 @@ def test_every_texture_has_a_labelled_cell() -> None:
     textures = [build.texture(1.0, [build.spatial(0.1 * (i + 1), 0.1)]) for i in range(30)]
     index = [i % 30 for i in range(36)]  # a 6 x 6 grid using all 30 textures
     card = build.card(30.0, 30.0, taxtel_mm=5.0, textures=textures, texture_index=index)
-    labels = _profiles(preview_figure(card))[CELL_LABELS].texts
+    labels = _periods(preview_figure(card))[CELL_LABELS].texts
     assert len(labels) == 30
     assert labels[0] == "0 BIP auto\n10 mm ∠0°"  # one period of 0.1 cycles/mm
     assert labels[29] == "29 BIP auto\n0.33 mm ∠0°"  # of 3 cycles/mm
 
 
-def test_cell_draws_the_analytic_profile_on_the_shared_scale() -> None:
-    marks = _profiles(preview_figure(three_texture_card()))
+def test_cell_draws_the_analytic_period_on_the_shared_scale() -> None:
+    marks = _periods(preview_figure(three_texture_card()))
     # Extremes: 0.7 +- 0.2, 1.3 +- 0.25, 1.0 +- 0.1 and natural friction 1 -> 0.5 to 1.55,
     # padded by a tenth of the span (0.105). The scale comes from the drawn samples (64 a
     # period here), whose extremes miss the true ones by up to 1 - cos(pi / 63) = 0.12 %.
@@ -200,7 +200,7 @@ def test_cell_draws_the_analytic_profile_on_the_shared_scale() -> None:
 
 
 def test_cell_shades_what_a_one_sided_channel_cannot_render() -> None:
-    marks = _profiles(preview_figure(three_texture_card()))
+    marks = _periods(preview_figure(three_texture_card()))
     strips = [path.vertices for path in marks[STRIPS].get_paths()]
     spans = [path.vertices for path in marks[UNREACHABLE].get_paths()]
     lines = [np.asarray(s)[0, 1] for s in marks[NATURAL].get_segments()]
@@ -218,7 +218,7 @@ def test_spatial_and_temporal_parts_are_stacked_in_one_cell() -> None:
                          channel="bipolar")
     card = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[both, build.texture(0.6)],
                       texture_index=[0, 1])
-    marks = _profiles(preview_figure(card))
+    marks = _periods(preview_figure(card))
     strips = [path.vertices for path in marks[STRIPS].get_paths()]
     assert len(strips) == 3  # two strips for texture 0, one for texture 1
     assert strips[0][:, 1].max() < strips[1][:, 1].min()  # spatial above temporal
@@ -240,7 +240,7 @@ def test_components_too_fine_to_draw_become_a_band() -> None:
 
     texture = build.texture(1.0, [build.spatial(50.0, 0.05), build.spatial(0.1, 0.2)])
     card = build.card(10.0, 10.0, taxtel_mm=10.0, textures=[texture])
-    band_paths = _profiles(preview_figure(card))[BANDS].get_paths()
+    band_paths = _periods(preview_figure(card))[BANDS].get_paths()
     assert len(band_paths) == 1
 
 
@@ -250,8 +250,8 @@ def test_a_full_palette_is_drawn_in_a_few_axes() -> None:
     card = build.card(80.0, 80.0, taxtel_mm=5.0, textures=textures,
                       texture_index=np.arange(256))
     fig = preview_figure(card)
-    assert len(fig.axes) == 3  # the taxtel map, its colour bar and the profiles
-    marks = _profiles(fig)
+    assert len(fig.axes) == 3  # the taxtel map, its colour bar and the periods
+    marks = _periods(fig)
     assert len(marks[CURVES].get_paths()) == 256
     labels = marks[CELL_LABELS].texts
     assert labels[255] == "255 UV pos.\n0.36 mm"  # one period of 2.75 cycles/mm

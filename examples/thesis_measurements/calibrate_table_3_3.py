@@ -34,8 +34,9 @@ from pathlib import Path
 import numpy as np
 
 from hcard.calibration.dataset import CalibrationData
-from hcard.calibration.loop import CalibrationResult, calibrate
+from hcard.calibration.loop import calibrate
 from hcard.calibration.measurement import read_measurement
+from hcard.calibration.results import CalibrationResult
 from hcard.plugins.registry import get_registry
 
 HERE = Path(__file__).resolve().parent
@@ -338,7 +339,7 @@ def main() -> None:
                 )
             )
         return
-    from hcard.calibration.report import write_report
+    from hcard.calibration.report.writer import write_report
 
     for label, swap in (("as printed", False), ("voltages swapped", True)):
         result = run(swap_voltages=swap)

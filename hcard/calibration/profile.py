@@ -2,7 +2,7 @@
 
 ``hcard calibrate`` writes one profile format, the device profile of spec/device-profile.md
 (``hcard-device-profile/2``): :func:`profile_of` turns a
-:class:`~hcard.calibration.loop.CalibrationResult` into a
+:class:`~hcard.calibration.results.CalibrationResult` into a
 :class:`~hcard.physics.profile.DeviceProfile` holding
 
 - ``predictor``: the base predictor at its fitted values (for a calibration of a device's own
@@ -33,7 +33,7 @@ from hcard.physics.profile import DeviceProfile, ProfileError, predictor_from_pr
 from hcard.physics.profile_effects import FittedEffect, with_effects
 
 if TYPE_CHECKING:
-    from hcard.calibration.loop import CalibrationResult
+    from hcard.calibration.results import CalibrationResult
 
 BASE_PROFILE = "profile"
 """``calibration.base.kind`` of a calibration of a device profile (:mod:`.device_model`)."""

@@ -357,9 +357,10 @@ def calibrate_command(
     # imported here: the loop, its filters (scipy.signal, scipy.stats) and the report
     # (matplotlib) cost about a second, which every other hcard command need not pay
     from hcard.calibration.dataset import prepare
-    from hcard.calibration.loop import NOT_EXPLAINED, LoopSettings, calibrate, with_bootstrap
+    from hcard.calibration.loop import calibrate, with_bootstrap
     from hcard.calibration.profile import profile_of
-    from hcard.calibration.report import write_report
+    from hcard.calibration.report.writer import write_report
+    from hcard.calibration.results import NOT_EXPLAINED, LoopSettings
 
     started = time.perf_counter()
     if bootstrap == 1:
@@ -451,7 +452,7 @@ def calibrate_command(
 
 
 def _error(value: float, unit: str) -> str:
-    from hcard.calibration.loop import format_error
+    from hcard.calibration.results import format_error
 
     return format_error(value, unit)
 

@@ -305,10 +305,10 @@ def _check_writable(path: Path, what: str) -> None:
 
 
 def _preview_bytes(result: EncodeResult, max_error: float | None) -> bytes:
-    """The PNG preview with the encoder's error map in JND (hcard.preview, imported only when
-    asked for: it loads matplotlib). The map shows the statistic the summary counts taxtels
+    """The PNG preview with the encoder's error map in JND (hcard.preview.picture, imported only
+    when asked for: it loads matplotlib). The map shows the statistic the summary counts taxtels
     by: each taxtel's RMS error, or its 95th percentile when ``--max-error`` set that target."""
-    from hcard.preview import preview_png
+    from hcard.preview.picture import preview_png
 
     statistic, label = ("error_p95", "95th-percentile error") if max_error is not None else (
         "error_rms", "RMS error")

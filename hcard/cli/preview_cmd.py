@@ -1,4 +1,4 @@
-"""``hcard preview``: draw a card as a PNG picture (taxtel map and texture profiles)."""
+"""``hcard preview``: draw a card as a PNG picture (taxtel map and texture periods)."""
 
 from __future__ import annotations
 
@@ -41,7 +41,7 @@ def preview(card: Path, output: Path | None, dpi: int) -> None:
       hcard preview card.hcard
       hcard preview card.json -o card.png --dpi 200
     """
-    from hcard.preview import render_preview  # matplotlib loads only for this command
+    from hcard.preview.picture import render_preview  # matplotlib loads only for this command
 
     out = output if output is not None else card.with_suffix(".preview.png")
     if out.suffix.lower() != ".png":

@@ -21,7 +21,8 @@ import scipy.constants
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import independent_recordings as ir
 
-from hcard.calibration.loop import NO_EFFECT, NOT_EXPLAINED, calibrate
+from hcard.calibration.loop import calibrate
+from hcard.calibration.results import NO_EFFECT, NOT_EXPLAINED
 from hcard.plugins.registry import get_registry
 
 SMALL = ir.Protocol(sessions=2, strokes_per_session=4, stroke_s=0.6)

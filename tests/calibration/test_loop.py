@@ -19,20 +19,13 @@ from hcard.calibration.dataset import (
     sensor_zero,
     strokes_since_rest,
 )
-from hcard.calibration.loop import (
-    EXPLAINED,
-    NO_EFFECT,
-    NOT_EXPLAINED,
-    LoopSettings,
-    ResidualAnalyser,
-    calibrate,
-    default_free,
-    residual_structure,
-)
+from hcard.calibration.judges import default_free, residual_structure
+from hcard.calibration.loop import ResidualAnalyser, calibrate
 from hcard.calibration.measurement import Measurement, MeasurementError
 from hcard.calibration.model_pool import ModelPool
 from hcard.calibration.observation import lateral_force_model
 from hcard.calibration.residuals import effective_samples
+from hcard.calibration.results import EXPLAINED, NO_EFFECT, NOT_EXPLAINED, LoopSettings
 from hcard.physics import Predictor, PredictorError, Variable
 from hcard.plugins.registry import get_registry
 from hcard_device.sim.tribometer import Protocol, synthesize

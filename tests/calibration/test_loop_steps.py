@@ -1,4 +1,5 @@
-"""The steps of the calibration loop (:mod:`hcard.calibration.loop`,
+"""The steps of the calibration loop (:mod:`hcard.calibration.loop`, the rules it decides by in
+:mod:`hcard.calibration.judges`, the runner-up of :mod:`hcard.calibration.runner_up`,
 :mod:`hcard.calibration.model_pool`), each on small inputs written here.
 
 The recordings are a Coulomb lateral force ``mu0 Fn + offset`` without plate vibration (the
@@ -16,31 +17,30 @@ import pytest
 
 from hcard.calibration.dataset import CalibrationData
 from hcard.calibration.fit import FitResult
-from hcard.calibration.loop import (
-    AMBIGUOUS,
-    EXPLAINED,
-    NO_EFFECT,
-    NOT_EXPLAINED,
-    Candidate,
-    EffectSearch,
-    LoopSettings,
-    ModelFit,
-    ResidualAnalyser,
-    RivalFigures,
-    Structure,
-    alternative_sets,
+from hcard.calibration.judges import (
     beyond_foreign_structure,
     check_arguments,
     claimed_regressors,
     criterion_failure,
     earns_place,
     judge_round,
-    runner_up,
     usable_effects,
     verdict_of,
 )
+from hcard.calibration.loop import EffectSearch, ResidualAnalyser, alternative_sets
 from hcard.calibration.model_pool import ModelPool, held_out_criterion
 from hcard.calibration.residuals import analyse_residuals
+from hcard.calibration.results import (
+    AMBIGUOUS,
+    EXPLAINED,
+    NO_EFFECT,
+    NOT_EXPLAINED,
+    Candidate,
+    LoopSettings,
+    ModelFit,
+    Structure,
+)
+from hcard.calibration.runner_up import RivalFigures, runner_up
 from hcard.calibration.selection import Comparison
 from hcard.physics import PredictorError
 from hcard.plugins.registry import get_registry

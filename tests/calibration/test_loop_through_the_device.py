@@ -19,8 +19,8 @@ import pytest
 from click.testing import CliRunner
 from served_device import served_device
 
-from hcard.calibration.loop import AMBIGUOUS
 from hcard.calibration.measurement import read_measurement
+from hcard.calibration.results import AMBIGUOUS
 from hcard.cli.main import cli
 from hcard.physics.profile import DeviceProfile
 

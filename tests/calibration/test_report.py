@@ -15,18 +15,18 @@ from hcard.calibration.dataset import prepare
 from hcard.calibration.loop import calibrate
 from hcard.calibration.measurement import Measurement
 from hcard.calibration.profile import fitted_model, profile_of
-from hcard.calibration.report import (
+from hcard.calibration.report.figures import (
     DPI,
     FIT_INCHES,
-    FORMAT,
     PANEL_INCHES,
     TICK_GAP_PT,
     TICK_LABEL_PT,
     fit_figure,
     residuals_figure,
     residuals_grid,
-    write_report,
 )
+from hcard.calibration.report.json_document import FORMAT
+from hcard.calibration.report.writer import write_report
 from hcard.physics import PredictorError
 from hcard.physics.profile import PROFILE_FORMAT, DeviceProfile
 from hcard.plugins.registry import get_registry

@@ -18,9 +18,11 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import independent_recordings as ir
 
-from hcard.calibration.loop import LoopSettings, calibrate
-from hcard.calibration.report import report_dict, report_markdown
+from hcard.calibration.loop import calibrate
+from hcard.calibration.report.json_document import report_dict
+from hcard.calibration.report.markdown_text import report_markdown
 from hcard.calibration.residuals import effective_samples
+from hcard.calibration.results import LoopSettings
 from hcard.calibration.screening import (
     SCREEN_TOLERANCE,
     criterion_band,

@@ -13,7 +13,8 @@ import pytest
 from test_selection_recordings import Hidden, uv_recording
 
 from hcard.calibration.dataset import prepare
-from hcard.calibration.loop import AMBIGUOUS, EXPLAINED, calibrate
+from hcard.calibration.loop import calibrate
+from hcard.calibration.results import AMBIGUOUS, EXPLAINED
 from hcard.calibration.selection import MEASUREMENTS, separating_regressor
 from hcard.plugins.registry import get_registry
 

@@ -13,21 +13,12 @@ from scipy import stats
 from test_selection_recordings import Hidden, ar1, uv_recording
 
 from hcard.calibration.dataset import CalibrationData, prepare
-from hcard.calibration.loop import (
-    NO_EFFECT,
-    NOT_EXPLAINED,
-    LoopSettings,
-    ModelFit,
-    ResidualAnalyser,
-    Structure,
-    calibrate,
-    default_free,
-    residual_structure,
-    summarise,
-    verdict_of,
-)
+from hcard.calibration.judges import default_free, residual_structure, verdict_of
+from hcard.calibration.loop import ResidualAnalyser, calibrate
 from hcard.calibration.model_pool import ModelPool
 from hcard.calibration.noise import detectable_eta2, measure_noise
+from hcard.calibration.results import NO_EFFECT, NOT_EXPLAINED, LoopSettings, ModelFit, Structure
+from hcard.calibration.summary import summarise
 from hcard.plugins.registry import get_registry
 
 BASE = "dimensionless-group"

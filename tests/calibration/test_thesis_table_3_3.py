@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 import scipy.constants
 
-from hcard.calibration.loop import NOT_EXPLAINED
+from hcard.calibration.results import NOT_EXPLAINED
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "examples" / "thesis_measurements"))
 import calibrate_table_3_3 as table
@@ -160,7 +160,7 @@ def test_within_participant_ratios_against_eq_3_17() -> None:
 
 def test_the_report_and_profile_of_a_direct_force_calibration(tmp_path) -> None:
     from hcard.calibration.profile import fitted_model
-    from hcard.calibration.report import write_report
+    from hcard.calibration.report.writer import write_report
     from hcard.physics.profile import DeviceProfile
 
     result = table.run(table.CYCLIC)

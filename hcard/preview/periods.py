@@ -1,12 +1,13 @@
-"""The texture half of a preview: each texture's friction profile, as small multiples.
+"""The texture half of a preview: each texture's relative friction over one period, as small
+multiples (the *texture periods*).
 
-The profile of a texture is its relative friction ``mu/mu0`` over one period: spatial
-components along the direction of the strongest one, temporal components versus time. A preview
-shows every texture of the card (up to the format's 256) as a cell of one axes: a coloured
-label, the profile (spatial above temporal), the natural-friction line, and the range a UV-only
-or EV-only texture cannot render shaded. All cells share one friction scale; each cell's
-geometry is computed in inches and every kind of mark is one collection, so drawing costs
-hardly more for 256 textures than for 16.
+A texture's period strip is its relative friction ``mu/mu0`` over one period: spatial
+components along the direction of the strongest one (:func:`main_direction`), temporal
+components versus time. A preview shows every texture of the card (up to the format's 256) as a
+cell of one axes: a coloured label, the period strips (spatial above temporal), the
+natural-friction line, and the range a UV-only or EV-only texture cannot render shaded. All
+cells share one friction scale; each cell's geometry is computed in inches and every kind of mark
+is one collection, so drawing costs hardly more for 256 textures than for 16.
 """
 
 from __future__ import annotations
@@ -22,49 +23,49 @@ from matplotlib.ticker import MaxNLocator
 from matplotlib.transforms import Transform
 
 from hcard.channels import LABEL_OF_VALUE
-from hcard.preview_text import LINE_STEP_EM, PathLabels
+from hcard.preview.glyph_labels import LINE_STEP_EM, PathLabels
 from hcard.quantities import MS_PER_S, S_PER_MS
 from hcard.v1 import card_pb2 as pb
 
 MAX_SPATIAL_WINDOW_MM = 50.0
-"""Longest spatial profile, millimetres."""
+"""Longest spatial window, millimetres."""
 MAX_TEMPORAL_WINDOW_MS = 10_000.0
-"""Longest temporal profile, milliseconds."""
+"""Longest temporal window, milliseconds."""
 WINDOW_PERIODS_OF_STRONGEST = 4.0
-"""A profile spans at most this many periods of the strongest component."""
+"""A window spans at most this many periods of the strongest component."""
 MAX_PLOT_SAMPLES = 20_000
-"""Most samples drawn per profile."""
+"""Most samples drawn per strip."""
 MIN_PLOT_SAMPLES = 64
-"""Fewest samples drawn per profile."""
+"""Fewest samples drawn per strip."""
 SAMPLES_PER_CYCLE = 12
 """Samples per cycle a component needs to be drawn as a curve rather than as a band."""
 SAMPLES_PER_PIXEL = 4
-"""Samples a profile may spend per pixel of its width: a component with more than
+"""Samples a strip may spend per pixel of its width: a component with more than
 ``SAMPLES_PER_PIXEL / SAMPLES_PER_CYCLE`` cycles per pixel is drawn as a band."""
 FLAT_WINDOW = 10.0
-"""Extent of the profile of a texture without components of a domain (mm or ms)."""
+"""Extent of the window of a texture without components of a domain (mm or ms)."""
 HEADER_IN = 0.38
 """Height of the explanation above the cells, inches."""
 GUTTER_IN = 0.3
 """Width left of the first column of cells for its friction scale, inches."""
 DOUBLED_PLOT = 1.3
-"""Plot areas are this much taller when a texture shows a spatial and a temporal profile."""
+"""Plot areas are this much taller when a texture shows a spatial and a temporal strip."""
 STRIP_GAP_IN = 0.04
-"""Gap between the spatial and the temporal profile of one texture, inches."""
+"""Gap between the spatial and the temporal strip of one texture, inches."""
 LEVEL_SPACING_IN = 0.15
 """Dotted friction levels are drawn about this far apart (at most 6 per strip), inches."""
-# ``Collection.get_label()`` of each kind of mark in the profiles axes, in texture order (one per
-# profile strip, for the strips, unreachable spans, natural-friction lines and curves).
-STRIPS = "profile-strips"
+# ``Collection.get_label()`` of each kind of mark in the periods axes, in texture order (one per
+# period strip, for the strips, unreachable spans, natural-friction lines and curves).
+STRIPS = "period-strips"
 SWATCHES = "texture-swatches"
 UNREACHABLE = "unreachable-spans"
 LEVELS = "friction-levels"
 NATURAL = "natural-friction"
 BANDS = "fine-component-bands"
-CURVES = "profile-curves"
+CURVES = "friction-curves"
 CELL_LABELS = "cell-labels"
 SCALE_LABELS = "scale-labels"
-HEADER = "profiles-header"
+HEADER = "periods-header"
 _CELL_GAP_X_IN, _CELL_GAP_Y_IN = 0.12, 0.08
 _SWATCH_IN = 0.09  # side of the texture colour's square in front of a cell's label
 _LABEL_PAD_IN = 0.03  # between a label's last line and the plot
@@ -93,7 +94,7 @@ def _of_domain(texture: pb.Texture, domain: int) -> list[pb.Component]:
 
 
 Term = tuple[float, float, float]
-"""A sinusoid along a profile: (cycles per unit of the profile axis, amplitude, phase rad)."""
+"""A sinusoid along a window: (cycles per unit of the window's axis, amplitude, phase rad)."""
 
 
 def _window(frequencies: Sequence[float], strongest: float, upper: float, scale: float) -> float:
@@ -106,7 +107,7 @@ def _window(frequencies: Sequence[float], strongest: float, upper: float, scale:
     return min(scale / slowest, WINDOW_PERIODS_OF_STRONGEST * scale / strongest, upper)
 
 
-def profile_direction(texture: pb.Texture) -> float:
+def main_direction(texture: pb.Texture) -> float:
     """Direction of the texture's strongest spatial component, radians from +x towards +y.
 
     The strongest is the one of largest amplitude (the first on ties); 0 without spatial
@@ -119,11 +120,11 @@ def profile_direction(texture: pb.Texture) -> float:
 
 
 def _spatial_terms(texture: pb.Texture) -> tuple[list[Term], float]:
-    """Spatial components projected on the profile direction (cycles/mm), and the window (mm)."""
+    """Spatial components projected on the main direction (cycles/mm), and the window (mm)."""
     spatial = _of_domain(texture, pb.DOMAIN_SPATIAL)
     if not spatial:
         return [], FLAT_WINDOW
-    theta = profile_direction(texture)
+    theta = main_direction(texture)
     strongest = max(spatial, key=lambda c: c.amplitude).frequency
     length = _window([c.frequency for c in spatial], strongest, MAX_SPATIAL_WINDOW_MM, 1.0)
     # u_c . u = cos(orientation_c - theta) for unit vectors.
@@ -151,18 +152,18 @@ def _evaluate(baseline: float, terms: Sequence[Term], x: np.ndarray) -> np.ndarr
     return friction
 
 
-def texture_profile(texture: pb.Texture, n: int = 512) -> tuple[np.ndarray, np.ndarray]:
+def spatial_friction(texture: pb.Texture, n: int = 512) -> tuple[np.ndarray, np.ndarray]:
     """Relative friction of the spatial part of ``texture`` along its main direction.
 
-    Along the unit vector ``u = (cos th, sin th)`` of :func:`profile_direction`, at distance
+    Along the unit vector ``u = (cos th, sin th)`` of :func:`main_direction`, at distance
     ``s`` (mm) from the origin::
 
         friction(s) = baseline + sum_c A_c cos(2 pi k_c (u_c . u) s + phase_c)
 
     over spatial components ``c`` (``k_c`` in cycles/mm, ``u_c`` the component's own direction).
     The window is one period of the lowest-frequency component, capped at 4 periods of the
-    strongest and at 50 mm; without spatial components the profile is the flat baseline over
-    10 mm. Temporal components are left out (see :func:`temporal_profile`).
+    strongest and at 50 mm; without spatial components the friction is the flat baseline over
+    10 mm. Temporal components are left out (see :func:`temporal_friction`).
 
     Returns:
         ``(s_mm, friction)``: ``n`` distances from 0 to the window length inclusive, in mm,
@@ -175,7 +176,7 @@ def texture_profile(texture: pb.Texture, n: int = 512) -> tuple[np.ndarray, np.n
     return s_mm, _evaluate(texture.baseline, terms, s_mm)
 
 
-def temporal_profile(texture: pb.Texture, n: int = 512) -> tuple[np.ndarray, np.ndarray]:
+def temporal_friction(texture: pb.Texture, n: int = 512) -> tuple[np.ndarray, np.ndarray]:
     """Relative friction of the baseline plus the temporal components versus time.
 
     ``friction(t) = baseline + sum_c A_c cos(2 pi f_c t + phase_c)`` over temporal components
@@ -195,17 +196,17 @@ def temporal_profile(texture: pb.Texture, n: int = 512) -> tuple[np.ndarray, np.
 
 @dataclass(frozen=True)
 class PlotSeries:
-    """One profile as drawn: samples of the drawable components and the band of the rest.
+    """One period strip as drawn: samples of the drawable components and the band of the rest.
 
     Attributes:
         x: positions along the window, from 0 to ``window`` (mm or ms).
         friction: relative friction of the baseline and the drawable components at ``x``.
         band: half-width of the band (sum of the amplitudes of the components too fine to draw
             with the samples available), relative friction.
-        window: length of the profile, mm (spatial) or ms (temporal).
+        window: length of the strip's window, mm (spatial) or ms (temporal).
         unit: ``"mm"`` or ``"ms"``.
-        direction_deg: direction of a spatial profile (degrees from +x towards +y); ``None``
-            for a temporal profile or a texture without spatial components.
+        direction_deg: direction of a spatial strip (degrees from +x towards +y); ``None``
+            for a temporal strip or a texture without spatial components.
     """
 
     x: np.ndarray
@@ -257,14 +258,14 @@ def plot_series(
 
 
 def texture_series(texture: pb.Texture, max_samples: int = MAX_PLOT_SAMPLES) -> list[PlotSeries]:
-    """The profiles a cell of ``texture`` shows: spatial (also for a texture without any
+    """The strips a cell of ``texture`` shows: spatial (also for a texture without any
     components), temporal, or spatial above temporal."""
     has_spatial = bool(_of_domain(texture, pb.DOMAIN_SPATIAL))
     has_temporal = bool(_of_domain(texture, pb.DOMAIN_TEMPORAL))
     series = []
     if has_spatial or not has_temporal:
         terms, length = _spatial_terms(texture)
-        direction = math.degrees(profile_direction(texture)) if has_spatial else None
+        direction = math.degrees(main_direction(texture)) if has_spatial else None
         series.append(PlotSeries(*plot_series(texture.baseline, terms, length, max_samples),
                                  length, "mm", direction))
     if has_temporal:
@@ -299,7 +300,7 @@ class CellStyle:
         plot_in: height of a cell's plot area, inches.
         font_pt: label size, points.
         detailed: labels with the texture's name and words (else numbers and abbreviations).
-        directions: spatial windows with the profile's direction.
+        directions: spatial windows with the strip's direction.
     """
 
     up_to: int
@@ -327,7 +328,7 @@ def cell_style(count: int) -> CellStyle:
 
 def cell_label(index: int, texture: pb.Texture, series: Sequence[PlotSeries],
                style: CellStyle) -> str:
-    """The text above a texture's cell: number, channel, locking and the profiles' windows.
+    """The text above a texture's cell: number, channel, locking and the strips' windows.
 
     Detailed: ``"texture 0 (fine)\\nUV, VELOCITY, 1 component\\n4 mm ∠60°"``; compact (large
     palettes): ``"0 UV vel.\\n4 mm | 20 ms"``.
@@ -345,7 +346,7 @@ def cell_label(index: int, texture: pb.Texture, series: Sequence[PlotSeries],
 
 @dataclass(frozen=True)
 class CellsLayout:
-    """Where the texture cells go, in inches from the top-left of the profiles panel."""
+    """Where the texture cells go, in inches from the top-left of the periods panel."""
 
     style: CellStyle
     count: int
@@ -380,7 +381,7 @@ class CellsLayout:
 
     @property
     def strip_h(self) -> float:
-        """Height of the smallest profile strip, inches."""
+        """Height of the smallest period strip, inches."""
         return (self.plot_h - STRIP_GAP_IN) / 2 if self.doubled else self.plot_h
 
     @property
@@ -422,7 +423,7 @@ def _scale_labels(levels: Sequence[float], low: float, high: float, height_in: f
 
 
 def friction_range(all_series: Sequence[Sequence[PlotSeries]]) -> tuple[float, float]:
-    """One friction scale for every cell: the extremes of every profile and of natural friction
+    """One friction scale for every cell: the extremes of every strip and of natural friction
     (1), padded by a tenth of the span (at least 0.05)."""
     low = min([1.0, *(s.low for series in all_series for s in series)])
     high = max([1.0, *(s.high for series in all_series for s in series)])
@@ -455,7 +456,7 @@ def _rectangle(left: float, top: float, right: float, bottom: float
 
 def _add_strip(marks: _Marks, s: PlotSeries, box: tuple[float, float, float, float],
                side: int | None, friction: tuple[float, float], levels: Sequence[float]) -> None:
-    """One profile in ``box`` (left, top, right, bottom; inches) on the scale ``friction``
+    """One period strip in ``box`` (left, top, right, bottom; inches) on the scale ``friction``
     (bottom, top), with the range ``side`` (UV or EV) cannot render shaded."""
     left, top, right, bottom = box
     low, high = friction

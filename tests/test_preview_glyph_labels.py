@@ -8,7 +8,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.textpath import TextPath
 
-from hcard.preview_text import LINE_STEP_EM, PathLabels, label_outline
+from hcard.preview.glyph_labels import LINE_STEP_EM, PathLabels, label_outline
 
 
 @pytest.mark.parametrize("text", ["27 UV vel.", "0.36 mm | 12 ms", "texture 4 (fine)"])

@@ -1,16 +1,18 @@
-"""A picture of a card a person can read: the taxtel map and every texture's friction profile.
+"""A picture of a card a person can read: the taxtel map and every texture's relative friction
+over one period.
 
 Left: the taxtel grid over the surface (millimetres, origin top-left, y downwards, equal aspect),
 coloured by texture index; below it, when the caller passes one, an error map of the taxtels in
-JND (:mod:`hcard.preview_error`). Right: one cell per texture, all of them (up to the format's
-256), drawn as small multiples in a single axes: the texture's relative friction ``mu/mu0`` over
-one period, spatial components along the direction of the strongest one above temporal
-components versus time, every cell on the same friction scale. The layout is fixed (computed in
+JND (:mod:`hcard.preview.error_map`). Right: one cell per texture, all of them (up to the
+format's 256), drawn as small multiples in a single axes (:mod:`hcard.preview.periods`): the
+texture's relative friction ``mu/mu0`` over one period, spatial components along the direction
+of the strongest one above temporal components versus time, every cell on the same friction
+scale. The layout is fixed (computed in
 inches, no constrained layout) and every cell is drawn with a handful of collections, so the
 cost hardly grows with the palette. Rendering uses matplotlib's Agg canvas directly (no pyplot,
 no display).
 
->>> from hcard.preview import render_preview
+>>> from hcard.preview.picture import render_preview
 >>> render_preview(card, "preview.png")          # doctest: +SKIP
 """
 
@@ -31,32 +33,19 @@ from matplotlib.figure import Figure
 from hcard import __version__
 from hcard.atomic import write_atomically
 from hcard.errors import CardValidationError
-from hcard.preview_error import ErrorPanel, draw_error_map, error_panel
-from hcard.preview_profiles import (
-    cells_layout,
-    channel_label,
-    draw_cells,
-    locking_label,
-    profile_direction,
-    temporal_profile,
-    texture_profile,
-)
-from hcard.preview_text import PathLabels
+from hcard.preview.error_map import ErrorPanel, draw_error_map, error_panel
+from hcard.preview.glyph_labels import PathLabels
+from hcard.preview.periods import cells_layout, draw_cells
 from hcard.v1 import card_pb2 as pb
 from hcard.validate import errors_of, validate
 
 __all__ = [
     "GRID_AXES_LABEL",
-    "PROFILES_AXES_LABEL",
-    "channel_label",
-    "locking_label",
+    "PERIODS_AXES_LABEL",
     "preview_figure",
     "preview_png",
-    "profile_direction",
     "render_preview",
-    "temporal_profile",
     "texture_colors",
-    "texture_profile",
 ]
 
 GRID_LINES_MAX = 100
@@ -67,8 +56,8 @@ GRID_AXES_LABEL = "taxtel-grid"
 """``Axes.get_label()`` of the taxtel map (lets tests and tools find it)."""
 GRID_BAR_LABEL = "texture-colour-bar"
 """``Axes.get_label()`` of the taxtel map's colour bar."""
-PROFILES_AXES_LABEL = "texture-profiles"
-"""``Axes.get_label()`` of the axes holding every texture's profile."""
+PERIODS_AXES_LABEL = "texture-periods"
+"""``Axes.get_label()`` of the axes holding every texture's period strips."""
 PNG_COMPRESS_LEVEL = 3
 """zlib level of the PNG: on a 256-texture preview as small as Pillow's default (6) and a third
 faster to write."""
@@ -237,9 +226,9 @@ def preview_figure(
         cax = fig.add_axes(rect(bar_left, top, _BAR_WIDTH_IN, bar_h))
         draw_error_map(fig, ax, cax, panel, card.grid)
         _frame_surface(ax, card)
-    profiles = fig.add_axes(rect(_PANEL_LEFT_IN, _TOP_IN, panel_w, layout.height),
-                            label=PROFILES_AXES_LABEL)
-    draw_cells(profiles, textures, colours, layout, dpi, fig.dpi_scale_trans)
+    periods = fig.add_axes(rect(_PANEL_LEFT_IN, _TOP_IN, panel_w, layout.height),
+                           label=PERIODS_AXES_LABEL)
+    draw_cells(periods, textures, colours, layout, dpi, fig.dpi_scale_trans)
 
     title = card.metadata.title or "(untitled card)"
     grid, surface = card.grid, card.surface

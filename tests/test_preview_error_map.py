@@ -11,14 +11,14 @@ from PIL import Image
 
 from hcard import build
 from hcard.limits import RELATIVE_FRICTION_JND
-from hcard.preview import preview_figure, render_preview
-from hcard.preview_error import (
+from hcard.preview.error_map import (
     ERROR_AXES_LABEL,
     ERROR_BAR_LABEL,
     OUTLINE_LABEL,
     error_panel,
     outline_segments,
 )
+from hcard.preview.picture import preview_figure, render_preview
 
 TAXTEL_MM = 10.0
 # 2 rows x 3 columns, JND; two taxtels above 1 JND, side by side in the top row
