@@ -46,12 +46,13 @@ def run(*args: object) -> click.testing.Result:
 
 @pytest.fixture()
 def files(tmp_path: Path) -> dict[str, Path]:
-    """A valid card and track in ``tmp_path``."""
+    """A valid card and track in ``tmp_path``, and an example image."""
     card = tmp_path / "card.hcard"
     hcard.save(two_texture_card(), card)
     track = tmp_path / "stroke.csv"
     track.write_text(track_to_csv(straight_stroke((1.0, 5.0), (40.0, 0.0), 0.2)))
-    return {"card": card, "track": track, "dir": tmp_path, "image": ROOT / "examples" / "gratings.png"}
+    return {"card": card, "track": track, "dir": tmp_path,
+            "image": ROOT / "examples" / "gratings.png"}
 
 
 BAD_OPTION_VALUES = [
