@@ -70,6 +70,21 @@ def read_bounded(path: str | os.PathLike[str], limit: int) -> bytes:
     return data
 
 
+BYTE_ORDER_MARK = "\ufeff"
+"""The byte-order mark some editors (Notepad, Excel) put at the start of a UTF-8 file."""
+
+
+def utf8_text(data: bytes) -> str:
+    """The text of a file from a stranger: UTF-8, a leading byte-order mark dropped. The one
+    place every reader decodes (cards, tracks, measurements and their sidecars, profiles),
+    so a file saved with a BOM reads the same everywhere (spec/README.md F3, TK1, MF1, MF8).
+
+    Raises:
+        UnicodeDecodeError: ``data`` is not UTF-8.
+    """
+    return data.decode("utf-8-sig")
+
+
 STDIN = "-"
 """The name that stands for standard input (and output) on the command line."""
 

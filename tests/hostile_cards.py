@@ -1,8 +1,12 @@
 """Cards built byte by byte to the 16 MiB limit (spec/README.md F6) with a structure whose
 problems multiply: millions of empty textures, of empty components, of out-of-range texture
-indices. Each is a valid protobuf encoding of ``hcard.v1.Card``; none is a valid card."""
+indices, a description of 16.7 million control characters, and the JSON form of the first two.
+Each is a valid protobuf encoding (or protobuf JSON mapping) of ``hcard.v1.Card``; none is a
+valid card."""
 
 from __future__ import annotations
+
+import json
 
 from hcard import build, card_io, limits
 
@@ -60,9 +64,47 @@ def indices_out_of_range(count: int | None = None) -> bytes:
     return head + _field(4, grid_extra)  # a second grid field merges into the first
 
 
+def control_description(count: int | None = None) -> bytes:
+    """A small valid card whose metadata description is ``count`` control characters (U+0001,
+    one byte each, shown as a 4-character escape); by default as many as fit, ~16.7 million."""
+    card = build.card(10.0, 10.0, taxtel_mm=10.0, textures=[build.texture(0.5, channel="uv")])
+    head = card_io.to_bytes(card)
+    count = _room(head) - 16 if count is None else count
+    return head + _field(2, _field(5, b"\x01" * count))  # Card.metadata.description
+
+
+def _json_with_array(path: tuple[str | int, ...], unit: str, count: int | None) -> bytes:
+    """The JSON form of a small valid card whose field at ``path`` is an array of ``count``
+    copies of ``unit``; by default as many as fit in the size limit."""
+    card = build.card(10.0, 10.0, taxtel_mm=10.0, textures=[build.texture(0.5, channel="uv")])
+    obj = json.loads(card_io.to_json(card))
+    target = obj
+    for key in path[:-1]:
+        target = target[key]
+    target[path[-1]] = "@"
+    text = json.dumps(obj, separators=(",", ":"))
+    count = (limits.MAX_CARD_BYTES - len(text)) // (len(unit) + 1) if count is None else count
+    return text.replace('"@"', "[" + ",".join([unit] * count) + "]").encode()
+
+
+def json_empty_components(count: int | None = None) -> bytes:
+    """A JSON card whose one texture holds ``count`` empty components ``{}``; by default as
+    many as fit, ~5.6 million."""
+    return _json_with_array(("textures", 0, "components"), "{}", count)
+
+
+def json_empty_textures(count: int | None = None) -> bytes:
+    """A JSON card of ``count`` empty textures ``{}``; by default as many as fit, ~5.6
+    million."""
+    return _json_with_array(("textures",), "{}", count)
+
+
 HOSTILE_CARDS = {
     "empty-textures": empty_textures,
     "empty-components": empty_components,
     "indices-out-of-range": indices_out_of_range,
+    "control-description": control_description,
+    "json-empty-components": json_empty_components,
+    "json-empty-textures": json_empty_textures,
 }
 """Name -> builder of each hostile card."""

@@ -191,15 +191,17 @@ def read_measurement(path: str | os.PathLike[str]) -> Measurement:
 def _read_sidecar(path: Path) -> dict[str, Any]:
     source = str(path)
     try:
-        text = read_bounded(path, MAX_JSON_FILE_BYTES).decode("utf-8")
+        raw = read_bounded(path, MAX_JSON_FILE_BYTES)
     except FileNotFoundError:
         raise MeasurementError(f"{source}: no such file (the conditions sidecar)") from None
     except InputTooLarge as exc:
         raise MeasurementError(f"{source}: {exc} (the conditions sidecar)") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise MeasurementError(f"{source}: cannot read ({exc})") from None
+    except IsADirectoryError:
+        raise MeasurementError(f"{source}: is a directory, not a conditions sidecar") from None
+    except OSError as exc:
+        raise MeasurementError(f"{source}: cannot read ({exc.strerror or exc})") from None
     try:
-        data = parse_json(text)
+        data = parse_json(raw)
     except JsonInputError as exc:
         where = source if exc.line is None else f"{source}:{exc.line}:{exc.column}"
         raise MeasurementError(f"{where}: bad sidecar JSON ({exc.reason})") from None

@@ -33,7 +33,7 @@ from hcard.calibration.plan import (
     verification,
 )
 from hcard.calibration.splits import SPLITS
-from hcard.cli.errors import EXIT_FAILED, UserErrorGroup
+from hcard.cli.errors import EXIT_FAILED, INPUT_FILE, UserErrorGroup
 from hcard.cli.verbosity import quiet as global_quiet
 from hcard.errors import HcardError, UsageError
 from hcard.physics import Predictor
@@ -247,7 +247,7 @@ def _verification_files(measurements: list[Measurement], card: Path | None,
 @click.option("--model", "-m", "model_name",
               help="Calibrate this bare predictor (see `hcard predict --list`) instead of the "
                    "recordings' device profile.")
-@click.option("--profile", "profile_path", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--profile", "profile_path", type=INPUT_FILE,
               help="Calibrate this device profile (default: the one the recordings' sidecars "
                    "name).")
 @click.option("--finger", "finger_name", default="finger-friction", show_default=True,
@@ -277,9 +277,9 @@ def _verification_files(measurements: list[Measurement], card: Path | None,
 @click.option("--verify", "verify_uri", metavar="URI",
               help="Play the held-out textures on this device without and with the fitted "
                    "profile and report the rendered friction error of each.")
-@click.option("--verify-card", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--verify-card", type=INPUT_FILE,
               help="Held-out card for --verify (default: verify.hcard next to the played card).")
-@click.option("--verify-track", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--verify-track", type=INPUT_FILE,
               help="Its finger track (default: verify.csv next to it).")
 @click.option("--timeout", default=1.0, show_default=True, type=click.FloatRange(min=0.001),
               help="--verify: longest wait for any answer from the device, s.")

@@ -22,6 +22,7 @@ import click
 import numpy as np
 
 from hcard.atomic import write_atomically
+from hcard.cli.errors import INPUT_FILE
 from hcard.errors import HcardError, UsageError
 from hcard.physics.predictor import Parameter, Predictor, PredictorError, Variable
 from hcard.physics.profile import DeviceProfile, ProfileError
@@ -387,7 +388,7 @@ def predictor_of_profile(path: Path, model: str | None) -> Predictor:
 @click.option(
     "--profile",
     "profile_path",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=INPUT_FILE,
     help="Take the parameters from a device profile (hcard-device-profile/2, e.g. the "
     "profile.json of hcard calibrate); --param overrides them. Without MODEL, use the "
     "profile's fitted model (a calibrated profile) or its predictor.",

@@ -7,10 +7,11 @@ from pathlib import Path
 import click
 
 import hcard
+from hcard.cli.errors import INPUT_FILE
 
 
 @click.command("preview")
-@click.argument("card", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("card", type=INPUT_FILE)
 @click.option(
     "-o",
     "--output",
