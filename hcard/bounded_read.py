@@ -25,6 +25,10 @@ accepts, bytes (16 MiB, the card file limit)."""
 DEFAULT_MAX_PIXELS = 64_000_000
 """Largest image an encoder decodes by default: 64 megapixels (a guard against decompression
 bombs; ``hcard encode --max-pixels`` raises it)."""
+DECODE_BYTES_PER_ALLOWED_PIXEL = 4
+"""Memory an encoder may spend decoding an image, bytes per pixel of its pixel limit (256 MB
+at the default): checked from the header before decoding, with the bytes a pixel of the file's
+mode takes (``hcard_builtins.image.loading.decode_bytes``)."""
 
 
 class InputTooLarge(InputError, ValueError):

@@ -7,6 +7,8 @@ valid card."""
 from __future__ import annotations
 
 import json
+import struct
+import zlib
 
 from hcard import build, card_io, limits
 
@@ -108,3 +110,24 @@ HOSTILE_CARDS = {
     "json-empty-textures": json_empty_textures,
 }
 """Name -> builder of each hostile card."""
+
+
+# -- images that declare more than they hold -----------------------------------------------------
+def _chunk(kind: bytes, payload: bytes) -> bytes:
+    return (struct.pack(">I", len(payload)) + kind + payload
+            + struct.pack(">I", zlib.crc32(kind + payload)))
+
+
+def png_declaring(width: int, height: int, *, bit_depth: int = 8, colour_type: int = 0,
+                  rows: int = 0) -> bytes:
+    """A PNG whose header declares ``width`` x ``height`` pixels (``colour_type`` 0 gray, 2 RGB,
+    6 RGBA, at ``bit_depth`` bits a sample) and whose data holds the first ``rows`` rows, zero
+    (a file of a few hundred bytes: decoding it past those rows fails as truncated; with
+    ``rows=height`` it is a whole image, all black, which zlib compresses ~1000-fold)."""
+    channels = {0: 1, 2: 3, 4: 2, 6: 4}[colour_type]
+    row = b"\x00" * (1 + width * channels * bit_depth // 8)
+    packer = zlib.compressobj(9)
+    data = b"".join(packer.compress(row) for _ in range(rows)) + packer.flush()
+    header = struct.pack(">IIBBBBB", width, height, bit_depth, colour_type, 0, 0, 0)
+    return (b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", header) + _chunk(b"IDAT", data)
+            + _chunk(b"IEND", b""))

@@ -9,6 +9,7 @@ allocate, and its exit status is then not 1. bench/bench_hostile_inputs.py print
 
 from __future__ import annotations
 
+import json
 import os
 import resource
 import subprocess
@@ -31,6 +32,29 @@ MEMORY_CONSTANT_MB = 250
 MB = 1024 * 1024
 
 _RUN = "import sys; from hcard.cli.main import main; main(sys.argv[1:])"
+_MEASURED = (
+    "import json, resource, sys, time\n"
+    "from hcard.cli.main import cli\n"
+    "start = time.perf_counter()\n"
+    "try:\n"
+    "    cli.main(args=sys.argv[1:], prog_name='hcard')\n"
+    "except SystemExit as exc:\n"
+    "    code = exc.code if isinstance(exc.code, int) else 1\n"
+    "else:\n"
+    "    code = 0\n"
+    "sys.stderr.flush()\n"
+    "print(json.dumps({'code': code, 'seconds': time.perf_counter() - start,\n"
+    "                  'peak_kb': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss}),\n"
+    "      file=sys.__stdout__)\n"
+)
+
+
+def run_measured(*args: str) -> tuple[dict, str]:
+    """Run ``hcard ARGS`` in a fresh interpreter; its exit code, time and peak memory (KiB),
+    and what it wrote to stderr (for tests that compare two runs' memory)."""
+    done = subprocess.run([sys.executable, "-c", _MEASURED, *args], capture_output=True,
+                          text=True, timeout=4 * TIME_BOUND_S, check=False)
+    return json.loads(done.stdout.strip().splitlines()[-1]), done.stderr
 
 
 def run_bounded(args: list[str], input_bytes: int) -> subprocess.CompletedProcess[str]:
