@@ -159,6 +159,21 @@ def dumps(card: pb.Card, fmt: CardFormat = "binary") -> bytes:
     return to_json(card).encode("utf-8") if fmt == "json" else to_bytes(card)
 
 
+def checked_bytes(card: pb.Card, path: str | os.PathLike[str], *, fmt: CardFormat | None = None,
+                  check: bool = True) -> bytes:
+    """The bytes :func:`save` writes to ``path`` (the format from its name unless given),
+    the card validated first when ``check``: for a caller that writes them with other files.
+
+    Raises:
+        CardValidationError: ``check`` and the card is invalid.
+    """
+    if check:
+        problems = errors_of(validate(card))
+        if problems:
+            raise CardValidationError(problems, source=path)
+    return dumps(card, fmt or format_for_path(path))
+
+
 def save(
     card: pb.Card,
     path: str | os.PathLike[str],
@@ -171,11 +186,7 @@ def save(
     With ``check`` the card is validated first and an invalid card is not written. On any
     failure the previous file at ``path`` is left intact.
     """
-    if check:
-        problems = errors_of(validate(card))
-        if problems:
-            raise CardValidationError(problems, source=path)
-    data = dumps(card, fmt or format_for_path(path))
+    data = checked_bytes(card, path, fmt=fmt, check=check)
     try:
         write_atomically(path, data)
     except OSError as exc:

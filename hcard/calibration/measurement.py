@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from hcard.atomic import atomic_output, write_atomically
+from hcard.atomic import atomic_outputs, write_atomically_together
 from hcard.bounded_read import MAX_JSON_FILE_BYTES, InputTooLarge, read_bounded
 from hcard.csv_rows import format_rows, numeric_table, read_csv_text
 from hcard.errors import InputError
@@ -358,7 +358,8 @@ def _sidecar_text(conditions: dict[str, Any]) -> str:
 
 
 def write_measurement(m: Measurement, path: str | os.PathLike[str]) -> None:
-    """Write ``m`` as a CSV and its sidecar, each atomically; reading it back gives equal arrays.
+    """Write ``m`` as a CSV and its sidecar, together atomically; reading it back gives equal
+    arrays.
 
     Raises ``ValueError`` (before writing anything) when the conditions hold NaN or infinity,
     and ``TypeError`` when they are not JSON-serialisable. Columns are written in SI units
@@ -366,17 +367,17 @@ def write_measurement(m: Measurement, path: str | os.PathLike[str]) -> None:
     """
     csv_bytes = measurement_to_csv(m).encode("utf-8")
     sidecar = _sidecar_text(m.conditions)
-    # Both texts are built before either file is touched: a bad sidecar leaves both files as
-    # they were.
-    write_atomically(path, csv_bytes)
-    write_atomically(sidecar_path(path), sidecar.encode("utf-8"))
+    # Both texts are built before either file is touched, and the files replace the old ones
+    # together: a bad sidecar or a failed write leaves both files as they were.
+    write_atomically_together([(path, csv_bytes), (sidecar_path(path), sidecar.encode("utf-8"))])
 
 
 def write_measurement_blocks(blocks: Iterable[Measurement], conditions: dict[str, Any],
                              path: str | os.PathLike[str]) -> int:
     """Write a recording given as consecutive blocks of samples (each a :class:`Measurement`
     with the same columns; their own conditions are ignored) and its sidecar ``conditions``,
-    each file atomically, holding one block in memory at a time; returns the rows written.
+    the two files together atomically, holding one block in memory at a time; returns the rows
+    written.
 
     The file is the one :func:`write_measurement` writes for the blocks joined. Raises
     ``ValueError`` (before writing anything) when the conditions hold NaN or infinity, or when
@@ -386,7 +387,9 @@ def write_measurement_blocks(blocks: Iterable[Measurement], conditions: dict[str
     sidecar = _sidecar_text(conditions)
     rows = 0
     header: str | None = None
-    with atomic_output(path) as out:
+    # the CSV and the sidecar replace the old pair together (hcard.atomic.atomic_outputs): a
+    # sidecar that cannot be written no longer leaves a new CSV beside the old sidecar
+    with atomic_outputs([path, sidecar_path(path)]) as (out, side):
         for block in blocks:
             block_header = _csv_header(block)
             if header is None:
@@ -399,5 +402,5 @@ def write_measurement_blocks(blocks: Iterable[Measurement], conditions: dict[str
             rows += len(block)
         if header is None:
             raise ValueError("no samples to write")
-    write_atomically(sidecar_path(path), sidecar.encode("utf-8"))
+        side.write(sidecar.encode("utf-8"))
     return rows
