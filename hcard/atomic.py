@@ -189,7 +189,7 @@ def remove_stale_temporaries(target: Path, *, now: float | None = None) -> list[
         return removed
     for name in names:
         match = pattern.fullmatch(name)
-        if match is None or _process_runs(int(match[1])):
+        if match is None or process_runs(int(match[1])):
             continue
         leftover = directory / name
         with contextlib.suppress(OSError):
@@ -199,7 +199,7 @@ def remove_stale_temporaries(target: Path, *, now: float | None = None) -> list[
     return removed
 
 
-def _process_runs(pid: int) -> bool:
+def process_runs(pid: int) -> bool:
     """Whether a process ``pid`` exists on this machine (always assumed on Windows, where
     ``os.kill`` would end the process instead of probing it)."""
     if pid == os.getpid() or os.name == "nt":
