@@ -227,12 +227,13 @@ def _base_of(measurements: list[Measurement], model_name: str | None,
 def _verification_files(measurements: list[Measurement], card: Path | None,
                         track: Path | None) -> tuple[Path, Path]:
     """The held-out card and track: as given, else ``verify.hcard``/``verify.csv`` next to the
-    card the recordings played (sidecar ``card.path``)."""
+    card the recordings played (sidecar ``card.path``, resolved against the sidecar's folder
+    and inside it: spec/measurement-format.md MF13)."""
     if card is not None and track is not None:
         return card, track
-    played = (measurements[0].conditions.get("card") or {}).get("path")
-    if played:
-        folder = Path(played).parent
+    played = measurements[0].files.get("card.path")
+    if played is not None:
+        folder = played.parent
         card = card or folder / VERIFY_CARD
         track = track or folder / VERIFY_TRACK
         if card.exists() and track.exists():
