@@ -67,12 +67,13 @@ def indices_out_of_range(count: int | None = None) -> bytes:
 
 
 def control_description(count: int | None = None) -> bytes:
-    """A small valid card whose metadata description is ``count`` control characters (U+0001,
-    one byte each, shown as a 4-character escape); by default as many as fit, ~16.7 million."""
+    """A small card whose metadata description is control characters (U+0001, one byte each,
+    shown as a 4-character escape), ``count`` more than rule M1 allows; by default as many as
+    fit, ~16.7 million in all."""
     card = build.card(10.0, 10.0, taxtel_mm=10.0, textures=[build.texture(0.5, channel="uv")])
     head = card_io.to_bytes(card)
-    count = _room(head) - 16 if count is None else count
-    return head + _field(2, _field(5, b"\x01" * count))  # Card.metadata.description
+    length = _room(head) - 16 if count is None else limits.MAX_TEXT_LENGTH + count
+    return head + _field(2, _field(5, b"\x01" * length))  # Card.metadata.description
 
 
 def _json_with_array(path: tuple[str | int, ...], unit: str, count: int | None) -> bytes:
