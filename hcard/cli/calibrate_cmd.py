@@ -33,7 +33,8 @@ from hcard.calibration.plan import (
     verification,
 )
 from hcard.calibration.splits import SPLITS
-from hcard.cli.errors import EXIT_FAILED, INPUT_FILE, UserErrorGroup
+from hcard.cli.errors import EXIT_FAILED, UserErrorGroup
+from hcard.cli.input_files import INPUT_FILE
 from hcard.cli.verbosity import quiet as global_quiet
 from hcard.errors import HcardError, UsageError
 from hcard.physics import Predictor

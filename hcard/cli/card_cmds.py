@@ -15,7 +15,8 @@ from hcard.card_io import (
     looks_like_json,
     read_card_file,
 )
-from hcard.cli.errors import EXIT_FAILED, INPUT_FILE_OR_STDIN
+from hcard.cli.errors import EXIT_FAILED
+from hcard.cli.input_files import INPUT_FILE_OR_STDIN
 from hcard.describe import card_summary, describe_card
 from hcard.errors import CardError, Problem, problem_count
 from hcard.terminal_text import printable

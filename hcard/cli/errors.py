@@ -4,7 +4,6 @@ without a traceback; internal errors get theirs and status 3."""
 from __future__ import annotations
 
 import traceback
-from pathlib import Path
 from typing import Any
 
 import click
@@ -20,15 +19,6 @@ EXIT_USAGE = 2
 """Exit status: the command line itself is wrong (unknown option, bad value); click's own."""
 EXIT_INTERNAL = 3
 """Exit status: an internal error, a bug in hcard or a plugin (the traceback follows)."""
-
-
-INPUT_FILE = click.Path(path_type=Path)
-"""The type of a file argument that a command reads. A directory passes it and is refused by
-the reader, one line naming it, with :data:`EXIT_FAILED` like every input file that cannot be
-read; click's own ``dir_okay=False`` made it a usage error (exit 2) in every command but
-``encode``."""
-INPUT_FILE_OR_STDIN = click.Path(allow_dash=True, path_type=Path)
-""":data:`INPUT_FILE`, or ``-`` for standard input."""
 
 
 class UserErrorGroup(click.Group):

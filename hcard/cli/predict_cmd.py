@@ -22,7 +22,7 @@ import click
 import numpy as np
 
 from hcard.atomic import write_atomically
-from hcard.cli.errors import INPUT_FILE
+from hcard.cli.input_files import INPUT_FILE
 from hcard.errors import HcardError, UsageError
 from hcard.physics.predictor import Parameter, Predictor, PredictorError, Variable
 from hcard.physics.profile import DeviceProfile, ProfileError

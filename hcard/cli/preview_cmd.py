@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 import hcard
-from hcard.cli.errors import INPUT_FILE
+from hcard.cli.input_files import INPUT_FILE
 
 
 @click.command("preview")

@@ -14,7 +14,7 @@ import click
 import numpy as np
 
 from hcard.card_io import load
-from hcard.cli.errors import INPUT_FILE
+from hcard.cli.input_files import INPUT_FILE
 from hcard.cli.verbosity import quiet
 from hcard.csv_rows import format_rows
 from hcard.errors import HcardError

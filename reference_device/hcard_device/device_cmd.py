@@ -14,7 +14,7 @@ from pathlib import Path
 import click
 
 from hcard.card_io import load
-from hcard.cli.errors import INPUT_FILE
+from hcard.cli.input_files import INPUT_FILE
 from hcard.errors import HcardError, UsageError
 from hcard.terminal_text import printable
 from hcard.track import read_track_csv
