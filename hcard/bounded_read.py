@@ -25,6 +25,10 @@ accepts, bytes (16 MiB, the card file limit)."""
 DEFAULT_MAX_PIXELS = 64_000_000
 """Largest image an encoder decodes by default: 64 megapixels (a guard against decompression
 bombs; ``hcard encode --max-pixels`` raises it)."""
+DECODE_BYTES_PER_ALLOWED_PIXEL = 4
+"""Memory an encoder may spend decoding an image, bytes per pixel of its pixel limit (256 MB
+at the default): checked from the header before decoding, with the bytes a pixel of the file's
+mode takes (``hcard_builtins.image.loading.decode_bytes``)."""
 
 
 class InputTooLarge(InputError, ValueError):
@@ -68,6 +72,21 @@ def read_bounded(path: str | os.PathLike[str], limit: int) -> bytes:
     if len(data) > limit:
         raise InputTooLarge(limit, None if not regular else len(data))
     return data
+
+
+BYTE_ORDER_MARK = "\ufeff"
+"""The byte-order mark some editors (Notepad, Excel) put at the start of a UTF-8 file."""
+
+
+def utf8_text(data: bytes) -> str:
+    """The text of a file from a stranger: UTF-8, a leading byte-order mark dropped. The one
+    place every reader decodes (cards, tracks, measurements and their sidecars, profiles),
+    so a file saved with a BOM reads the same everywhere (spec/README.md F3, TK1, MF1, MF8).
+
+    Raises:
+        UnicodeDecodeError: ``data`` is not UTF-8.
+    """
+    return data.decode("utf-8-sig")
 
 
 STDIN = "-"

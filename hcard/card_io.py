@@ -17,7 +17,8 @@ from hcard import limits
 from hcard.atomic import write_atomically
 from hcard.bounded_read import STDIN, InputTooLarge, read_bounded, read_bounded_stream
 from hcard.errors import CardError, CardValidationError
-from hcard.json_text import JsonInputError, check_message_json, parse_json
+from hcard.json_card import card_from_json_value
+from hcard.json_text import JsonInputError, parse_json
 from hcard.v1 import card_pb2 as pb
 from hcard.validate import errors_of, validate
 
@@ -60,28 +61,15 @@ def card_from_bytes(data: bytes, *, source: str | os.PathLike[str] | None = None
 
 
 def _card_from_json_bytes(data: bytes, source: str | os.PathLike[str] | None) -> pb.Card:
+    """A JSON card, read in time and memory bounded by the limits (:mod:`hcard.json_card`)."""
     try:
-        obj = parse_json(data.decode("utf-8-sig"))
-    except UnicodeDecodeError as exc:
-        raise CardError(f"not valid UTF-8 ({exc.reason} at byte {exc.start})",
-                        source=source) from None
+        value = parse_json(data, share_empty=True)
     except JsonInputError as exc:
         raise CardError(f"not valid JSON ({exc})", source=source) from None
-    if not isinstance(obj, dict):
-        raise CardError("JSON card must be an object", source=source)
     try:
-        check_message_json(obj, pb.Card.DESCRIPTOR)
+        return card_from_json_value(value)
     except JsonInputError as exc:
         raise CardError(f"JSON does not match the card schema ({exc})", source=source) from None
-    from google.protobuf import json_format  # 30-60 ms to import; binary cards never need it
-
-    card = pb.Card()
-    try:
-        # Unknown fields are those of a newer minor version: ignored, per the versioning rules.
-        json_format.ParseDict(obj, card, ignore_unknown_fields=True)
-    except Exception as exc:
-        raise CardError(f"JSON does not match the card schema ({exc})", source=source) from None
-    return card
 
 
 def check_version(card: pb.Card, *, source: str | os.PathLike[str] | None = None) -> None:
@@ -171,6 +159,21 @@ def dumps(card: pb.Card, fmt: CardFormat = "binary") -> bytes:
     return to_json(card).encode("utf-8") if fmt == "json" else to_bytes(card)
 
 
+def checked_bytes(card: pb.Card, path: str | os.PathLike[str], *, fmt: CardFormat | None = None,
+                  check: bool = True) -> bytes:
+    """The bytes :func:`save` writes to ``path`` (the format from its name unless given),
+    the card validated first when ``check``: for a caller that writes them with other files.
+
+    Raises:
+        CardValidationError: ``check`` and the card is invalid.
+    """
+    if check:
+        problems = errors_of(validate(card))
+        if problems:
+            raise CardValidationError(problems, source=path)
+    return dumps(card, fmt or format_for_path(path))
+
+
 def save(
     card: pb.Card,
     path: str | os.PathLike[str],
@@ -183,11 +186,7 @@ def save(
     With ``check`` the card is validated first and an invalid card is not written. On any
     failure the previous file at ``path`` is left intact.
     """
-    if check:
-        problems = errors_of(validate(card))
-        if problems:
-            raise CardValidationError(problems, source=path)
-    data = dumps(card, fmt or format_for_path(path))
+    data = checked_bytes(card, path, fmt=fmt, check=check)
     try:
         write_atomically(path, data)
     except OSError as exc:

@@ -10,6 +10,7 @@ if TYPE_CHECKING:
 
 from hcard import limits
 from hcard.channels import LABEL_OF_VALUE
+from hcard.terminal_text import clipped
 from hcard.v1 import card_pb2 as pb
 
 CHANNEL_NAMES: dict[int, str] = {pb.CHANNEL_UNSPECIFIED: "texture", **LABEL_OF_VALUE}
@@ -62,7 +63,8 @@ def taxtel_counts(card: pb.Card, shown: int) -> np.ndarray:
 def describe_card(card: pb.Card) -> list[str]:
     """Lines of a readable summary of ``card``. Bounded for an invalid card too: at most
     :data:`~hcard.limits.MAX_TEXTURES` textures and :data:`~hcard.limits.MAX_COMPONENTS_PER_TEXTURE`
-    components each are listed, the rest counted."""
+    components each are listed, the rest counted, and at most
+    :data:`~hcard.terminal_text.MAX_SHOWN_CHARS` characters of each text are shown."""
     meta, surface, grid = card.metadata, card.surface, card.grid
     lines = [f"format version {card.version.major}.{card.version.minor}"]
     for label, value in (
@@ -73,7 +75,7 @@ def describe_card(card: pb.Card) -> list[str]:
         ("description", meta.description),
     ):
         if value:
-            lines.append(f"{label}: {value}")
+            lines.append(f"{label}: {clipped(value)}")
     lines.append(f"surface: {surface.width_mm:g} x {surface.height_mm:g} mm")
     lines.append(
         f"grid: {grid.cols} x {grid.rows} taxtels of {grid.taxtel_width_mm:g} x "
@@ -87,7 +89,7 @@ def describe_card(card: pb.Card) -> list[str]:
                  + (f" ({n_components} components in all)" if n_components is not None else ""))
     for i in range(shown):
         texture = textures[i]
-        name = f" '{texture.name}'" if texture.name else ""
+        name = f" '{clipped(texture.name)}'" if texture.name else ""
         n = len(texture.components)
         lines.append(
             f"  [{i}]{name}: baseline {texture.baseline:.4g}, "
@@ -106,7 +108,8 @@ def describe_card(card: pb.Card) -> list[str]:
 
 def card_summary(card: pb.Card) -> dict[str, Any]:
     """The content of ``card`` as plain data for ``hcard info --json``: the same bounds as
-    :func:`describe_card` (textures and components past the limits are counted, not listed)."""
+    :func:`describe_card` (textures and components past the limits are counted, not listed,
+    texts clipped)."""
     meta, surface, grid = card.metadata, card.surface, card.grid
     textures = card.textures
     shown = min(len(textures), limits.MAX_TEXTURES)
@@ -116,7 +119,7 @@ def card_summary(card: pb.Card) -> dict[str, Any]:
         texture = textures[i]
         listed.append({
             "index": i,
-            "name": texture.name,
+            "name": clipped(texture.name),
             "baseline": texture.baseline,
             "channel": enum_name(CHANNEL_NAMES, texture.channel),
             "locking": enum_name(LOCKING_NAMES, texture.locking),
@@ -125,7 +128,7 @@ def card_summary(card: pb.Card) -> dict[str, Any]:
         })
     return {
         "format_version": f"{card.version.major}.{card.version.minor}",
-        "metadata": {name: getattr(meta, name)
+        "metadata": {name: clipped(getattr(meta, name))
                      for name in ("title", "author", "licence", "generator", "description")},
         "surface_mm": [surface.width_mm, surface.height_mm],
         "grid": {"cols": grid.cols, "rows": grid.rows,

@@ -51,15 +51,25 @@ class Problem:
         severity: ``"error"`` (the card must be rejected) or ``"warning"`` (it renders, but not
             as written, for example a UV texture whose swing is clipped at 1).
         rule: the rule of spec/README.md broken (``"T4"``), empty when none applies.
+        count: how many problems this one stands for: 1, or for the summary of the problems
+            of one rule that a bounded report does not list, their number
+            (:class:`hcard.validate.Findings`).
     """
 
     path: str
     reason: str
     severity: str = "error"
     rule: str = ""
+    count: int = 1
 
     def __str__(self) -> str:
         return f"{self.path}: {self.reason}" if self.path else self.reason
+
+
+def problem_count(problems: list[Problem]) -> int:
+    """How many problems ``problems`` stands for: the listed ones and those the summaries
+    count (:attr:`Problem.count`)."""
+    return sum(problem.count for problem in problems)
 
 
 class CardError(InputError):
@@ -85,7 +95,7 @@ class CardValidationError(CardError):
                  source: str | os.PathLike[str] | None = None) -> None:
         self.problems = [p for p in problems if p.severity == "error"]
         first = self.problems[0] if self.problems else Problem("", "invalid card")
-        more = len(self.problems) - 1
+        more = problem_count(self.problems) - 1
         reason = first.reason + (f" (and {more} more problem{'s' * (more > 1)})" if more else "")
         super().__init__(reason, source=source, path=first.path)
 

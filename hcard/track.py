@@ -18,6 +18,11 @@ from hcard.csv_rows import numeric_table, read_csv_text
 from hcard.errors import TrackError
 from hcard.rates import TOUCH_RATE_HZ
 
+MAX_TRACK_SAMPLES = 1 << 22
+"""Most samples a track file may hold (spec/track-format.md TK8): 4,194,304, 70 minutes at
+1 kHz, 23 hours at a 50 Hz touch screen. ``hcard render`` holds about 270 bytes a sample
+(the track, and the renderer's touch table and its temporaries: 2.67 GB for 10^7 samples),
+so the limit bounds it near 1.1 GB (bench/bench_hostile_inputs.py)."""
 DEFAULT_NORMAL_FORCE_N = 0.5
 REQUIRED_COLUMNS = ("t_s", "x_mm", "y_mm")
 OPTIONAL_COLUMNS = ("fn_n", "contact")
@@ -116,7 +121,9 @@ def parse_track_csv(text: str, *, source: str = "track") -> FingerTrack:
                 f"(found {', '.join(names) or 'nothing'})"
             )
 
-    _, names, values, _ = numeric_table(text, source, TrackError, check_header)
+    _, names, values, _ = numeric_table(
+        text, source, TrackError, check_header,
+        max_rows=(MAX_TRACK_SAMPLES, "the most a track may hold, spec/track-format.md TK8"))
     wanted = [name for name in (*REQUIRED_COLUMNS, *OPTIONAL_COLUMNS) if name in names]
     data = {name: values[:, names.index(name)] for name in wanted}
     if not data["t_s"].size:

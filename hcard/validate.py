@@ -19,6 +19,7 @@ from collections import Counter
 from hcard import limits
 from hcard.channels import VALUES
 from hcard.errors import Problem
+from hcard.terminal_text import clipped
 from hcard.v1 import card_pb2 as pb
 
 _LOCKINGS = {pb.LOCKING_POSITION, pb.LOCKING_VELOCITY, pb.LOCKING_AUTO}
@@ -53,7 +54,7 @@ class Findings:
         """The listed problems, then one summary per rule of those left unlisted."""
         summaries = [
             Problem("", f"{n} more problem{'s' * (n > 1)} of rule {rule} not listed", severity,
-                    rule)
+                    rule, n)
             for (rule, severity), n in sorted(self.unlisted.items())
         ]
         return self.listed + summaries
@@ -222,7 +223,8 @@ def _check_textures(card: pb.Card, out: Findings) -> None:
             if texture.name in names:
                 out.add(
                     f"{path}.name",
-                    f"duplicate name {texture.name!r} (also textures[{names[texture.name]}])",
+                    f"duplicate name {clipped(texture.name)!r} (also "
+                    f"textures[{names[texture.name]}])",
                     "T2",
                 )
             names.setdefault(texture.name, t)

@@ -1,8 +1,14 @@
 """Cards built byte by byte to the 16 MiB limit (spec/README.md F6) with a structure whose
 problems multiply: millions of empty textures, of empty components, of out-of-range texture
-indices. Each is a valid protobuf encoding of ``hcard.v1.Card``; none is a valid card."""
+indices, a description of 16.7 million control characters, and the JSON form of the first two.
+Each is a valid protobuf encoding (or protobuf JSON mapping) of ``hcard.v1.Card``; none is a
+valid card."""
 
 from __future__ import annotations
+
+import json
+import struct
+import zlib
 
 from hcard import build, card_io, limits
 
@@ -60,9 +66,69 @@ def indices_out_of_range(count: int | None = None) -> bytes:
     return head + _field(4, grid_extra)  # a second grid field merges into the first
 
 
+def control_description(count: int | None = None) -> bytes:
+    """A small card whose metadata description is control characters (U+0001, one byte each,
+    shown as a 4-character escape), ``count`` more than rule M1 allows; by default as many as
+    fit, ~16.7 million in all."""
+    card = build.card(10.0, 10.0, taxtel_mm=10.0, textures=[build.texture(0.5, channel="uv")])
+    head = card_io.to_bytes(card)
+    length = _room(head) - 16 if count is None else limits.MAX_TEXT_LENGTH + count
+    return head + _field(2, _field(5, b"\x01" * length))  # Card.metadata.description
+
+
+def _json_with_array(path: tuple[str | int, ...], unit: str, count: int | None) -> bytes:
+    """The JSON form of a small valid card whose field at ``path`` is an array of ``count``
+    copies of ``unit``; by default as many as fit in the size limit."""
+    card = build.card(10.0, 10.0, taxtel_mm=10.0, textures=[build.texture(0.5, channel="uv")])
+    obj = json.loads(card_io.to_json(card))
+    target = obj
+    for key in path[:-1]:
+        target = target[key]
+    target[path[-1]] = "@"
+    text = json.dumps(obj, separators=(",", ":"))
+    count = (limits.MAX_CARD_BYTES - len(text)) // (len(unit) + 1) if count is None else count
+    return text.replace('"@"', "[" + ",".join([unit] * count) + "]").encode()
+
+
+def json_empty_components(count: int | None = None) -> bytes:
+    """A JSON card whose one texture holds ``count`` empty components ``{}``; by default as
+    many as fit, ~5.6 million."""
+    return _json_with_array(("textures", 0, "components"), "{}", count)
+
+
+def json_empty_textures(count: int | None = None) -> bytes:
+    """A JSON card of ``count`` empty textures ``{}``; by default as many as fit, ~5.6
+    million."""
+    return _json_with_array(("textures",), "{}", count)
+
+
 HOSTILE_CARDS = {
     "empty-textures": empty_textures,
     "empty-components": empty_components,
     "indices-out-of-range": indices_out_of_range,
+    "control-description": control_description,
+    "json-empty-components": json_empty_components,
+    "json-empty-textures": json_empty_textures,
 }
 """Name -> builder of each hostile card."""
+
+
+# -- images that declare more than they hold -----------------------------------------------------
+def _chunk(kind: bytes, payload: bytes) -> bytes:
+    return (struct.pack(">I", len(payload)) + kind + payload
+            + struct.pack(">I", zlib.crc32(kind + payload)))
+
+
+def png_declaring(width: int, height: int, *, bit_depth: int = 8, colour_type: int = 0,
+                  rows: int = 0) -> bytes:
+    """A PNG whose header declares ``width`` x ``height`` pixels (``colour_type`` 0 gray, 2 RGB,
+    6 RGBA, at ``bit_depth`` bits a sample) and whose data holds the first ``rows`` rows, zero
+    (a file of a few hundred bytes: decoding it past those rows fails as truncated; with
+    ``rows=height`` it is a whole image, all black, which zlib compresses ~1000-fold)."""
+    channels = {0: 1, 2: 3, 4: 2, 6: 4}[colour_type]
+    row = b"\x00" * (1 + width * channels * bit_depth // 8)
+    packer = zlib.compressobj(9)
+    data = b"".join(packer.compress(row) for _ in range(rows)) + packer.flush()
+    header = struct.pack(">IIBBBBB", width, height, bit_depth, colour_type, 0, 0, 0)
+    return (b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", header) + _chunk(b"IDAT", data)
+            + _chunk(b"IEND", b""))

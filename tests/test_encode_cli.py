@@ -248,13 +248,13 @@ def test_preview_draws_the_error_map_the_summary_counts(
 def test_preview_that_cannot_be_written_is_a_one_line_error(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ):
-    def refuse(path: Path, data: bytes) -> None:
+    def refuse(contents: list[tuple[Path, bytes]]) -> None:
         raise PermissionError(13, "Permission denied")
 
-    monkeypatch.setattr(encode_cmd, "write_atomically", refuse)
+    monkeypatch.setattr(encode_cmd, "write_atomically_together", refuse)
     image = grating_png(tmp_path / "g.png")
     result = run(image, "-o", tmp_path / "g.hcard", "--preview", tmp_path / "p.png")
-    assert_one_line_error(result, "cannot write the preview", "Permission denied")
+    assert_one_line_error(result, "cannot write the card and its preview", "Permission denied")
 
 
 def test_every_option_has_help_text():

@@ -688,10 +688,14 @@ def test_decompression_bomb_is_refused_from_its_header(tmp_path: Path):
     path.write_bytes(png_bytes(100_000, 100_000))  # 10 gigapixels declared, 60 bytes on disk
     with pytest.raises(ImageError, match="10000000000 pixels exceed the limit of 64000000"):
         encode_image(path)
-    # Raising the limit above the declared size lets the header through; the (absent) pixel
-    # data then fails as corrupt, without any large allocation.
-    with pytest.raises(ImageError, match="corrupt or truncated"):
+    # Raising the limit above the declared size lets the pixel count through; the surface and
+    # grid are then checked from the header too (5 mm taxtels: a 2000 x 2000 grid), and with
+    # 40 mm taxtels (a 250 x 250 grid) the (absent) pixel data fails as corrupt, without any
+    # large allocation.
+    with pytest.raises(ImageError, match="needs a 2000 x 2000 grid, over the card limits"):
         encode_image(path, max_pixels=20_000_000_000)
+    with pytest.raises(ImageError, match="corrupt or truncated"):
+        encode_image(path, max_pixels=20_000_000_000, taxtel_mm=40.0)
 
 
 def test_pixel_limit_is_an_option(tmp_path: Path):

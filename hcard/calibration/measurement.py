@@ -13,17 +13,18 @@ import math
 import os
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from pathlib import Path
+from pathlib import Path, PureWindowsPath
 from typing import Any
 
 import numpy as np
 
-from hcard.atomic import atomic_output, write_atomically
+from hcard.atomic import atomic_outputs, write_atomically_together
 from hcard.bounded_read import MAX_JSON_FILE_BYTES, InputTooLarge, read_bounded
 from hcard.csv_rows import format_rows, numeric_table, read_csv_text
 from hcard.errors import InputError
 from hcard.json_text import JsonInputError, parse_json
 from hcard.quantities import COLUMN_UNITS
+from hcard.terminal_text import clipped
 
 #: The SI unit suffix each quantity is written in by :func:`write_measurement`.
 SI_SUFFIX = {quantity: next(s for s, scale in units.items() if scale == 1.0)
@@ -59,6 +60,9 @@ SIDECAR_STRINGS = ("device", "surface", "participant", "probe", "notes", "voltag
 SIDECAR_NUMBERS = ("plate_frequency_hz", "ambient_pressure_pa", "temperature_c",
                    "relative_humidity", "carrier_frequency_hz")
 SIDECAR_OBJECTS = ("limits", "card", "profile", "session", "firmware")
+FILE_REFERENCES = (("card", "path"), ("session", "track"))
+"""Sidecar keys that name a file (rule MF13): the card played and its finger track, each
+relative to the sidecar's folder and inside it."""
 VOLTAGE_FORMS = ("instantaneous", "envelope")
 """Values of the sidecar key ``voltage_form``: the voltage column is the instantaneous voltage
 (the default) or the peak envelope of a sinusoidal carrier at ``carrier_frequency_hz``."""
@@ -87,6 +91,8 @@ class Measurement:
         device: the device columns of rule MF12 by quantity name (``sequence``, ``faults``,
             ``target_uv``, ``current``, ``f_tl``, ``echo``, ...), SI units, each shape (M,).
         conditions: the JSON sidecar (device, plate frequency, surface, ...).
+        files: the files the sidecar names (rule MF13) by key (``"card.path"``,
+            ``"session.track"``), resolved against the sidecar's folder; only those it names.
     """
 
     t: np.ndarray
@@ -102,6 +108,7 @@ class Measurement:
     contact: np.ndarray | None = None
     device: dict[str, np.ndarray] = field(default_factory=dict)
     conditions: dict[str, Any] = field(default_factory=dict)
+    files: dict[str, Path] = field(default_factory=dict, init=False)
 
     def __len__(self) -> int:
         return int(self.t.shape[0])
@@ -184,22 +191,74 @@ def read_measurement(path: str | os.PathLike[str]) -> Measurement:
     """
     file = Path(path)
     text = read_csv_text(file, MeasurementError)
-    conditions = _read_sidecar(sidecar_path(file))
-    return _parse(text, str(file), conditions)
+    side = sidecar_path(file)
+    conditions = _read_sidecar(side)
+    files = referenced_files(conditions, side)
+    measurement = _parse(text, str(file), conditions)
+    measurement.files = files
+    return measurement
+
+
+def referenced_files(conditions: dict[str, Any], sidecar: Path) -> dict[str, Path]:
+    """The files the sidecar ``conditions`` name (:data:`FILE_REFERENCES`, rule MF13),
+    resolved against the folder of the ``sidecar`` file.
+
+    Raises:
+        MeasurementError: a reference is not a string, is an absolute path, or leads out of
+            the sidecar's folder (``../../etc``, or through a symbolic link), naming the key.
+    """
+    folder = sidecar.parent if str(sidecar.parent) else Path(".")
+    home = folder.resolve()
+    files: dict[str, Path] = {}
+    for section, key in FILE_REFERENCES:
+        holder = conditions.get(section)
+        value = holder.get(key) if isinstance(holder, dict) else None
+        if value is None:
+            continue
+        where = f"{sidecar}: {section}.{key}"
+        if not isinstance(value, str) or not value:
+            raise MeasurementError(f"{where}: must be a file name or null")
+        if Path(value).is_absolute() or PureWindowsPath(value).is_absolute():
+            raise MeasurementError(f"{where}: {clipped(value)!r} is an absolute path; a sidecar "
+                                   "names its files relative to its own folder (rule MF13)")
+        resolved = (folder / value).resolve()
+        if not resolved.is_relative_to(home):
+            raise MeasurementError(f"{where}: {clipped(value)!r} lies outside the sidecar's "
+                                   f"folder {folder} (rule MF13)")
+        files[f"{section}.{key}"] = resolved
+    return files
+
+
+def _relative_references(conditions: dict[str, Any], sidecar: Path) -> dict[str, Any]:
+    """``conditions`` with each file reference (:data:`FILE_REFERENCES`), given as a path from
+    the working directory, rewritten relative to the ``sidecar``'s folder; a file outside it
+    becomes null (rule MF13: a reader refuses references outside the folder)."""
+    folder = (sidecar.parent if str(sidecar.parent) else Path(".")).resolve()
+    written = dict(conditions)
+    for section, key in FILE_REFERENCES:
+        holder = written.get(section)
+        if not isinstance(holder, dict) or not isinstance(holder.get(key), str):
+            continue
+        target = Path(holder[key]).resolve()
+        relative = target.relative_to(folder).as_posix() if target.is_relative_to(folder) else None
+        written[section] = {**holder, key: relative}
+    return written
 
 
 def _read_sidecar(path: Path) -> dict[str, Any]:
     source = str(path)
     try:
-        text = read_bounded(path, MAX_JSON_FILE_BYTES).decode("utf-8")
+        raw = read_bounded(path, MAX_JSON_FILE_BYTES)
     except FileNotFoundError:
         raise MeasurementError(f"{source}: no such file (the conditions sidecar)") from None
     except InputTooLarge as exc:
         raise MeasurementError(f"{source}: {exc} (the conditions sidecar)") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise MeasurementError(f"{source}: cannot read ({exc})") from None
+    except IsADirectoryError:
+        raise MeasurementError(f"{source}: is a directory, not a conditions sidecar") from None
+    except OSError as exc:
+        raise MeasurementError(f"{source}: cannot read ({exc.strerror or exc})") from None
     try:
-        data = parse_json(text)
+        data = parse_json(raw)
     except JsonInputError as exc:
         where = source if exc.line is None else f"{source}:{exc.line}:{exc.column}"
         raise MeasurementError(f"{where}: bad sidecar JSON ({exc.reason})") from None
@@ -356,35 +415,38 @@ def _sidecar_text(conditions: dict[str, Any]) -> str:
 
 
 def write_measurement(m: Measurement, path: str | os.PathLike[str]) -> None:
-    """Write ``m`` as a CSV and its sidecar, each atomically; reading it back gives equal arrays.
+    """Write ``m`` as a CSV and its sidecar, together atomically; reading it back gives equal
+    arrays.
 
     Raises ``ValueError`` (before writing anything) when the conditions hold NaN or infinity,
     and ``TypeError`` when they are not JSON-serialisable. Columns are written in SI units
     with ``repr`` precision, so the round trip is exact.
     """
     csv_bytes = measurement_to_csv(m).encode("utf-8")
-    sidecar = _sidecar_text(m.conditions)
-    # Both texts are built before either file is touched: a bad sidecar leaves both files as
-    # they were.
-    write_atomically(path, csv_bytes)
-    write_atomically(sidecar_path(path), sidecar.encode("utf-8"))
+    sidecar = _sidecar_text(_relative_references(m.conditions, sidecar_path(path)))
+    # Both texts are built before either file is touched, and the files replace the old ones
+    # together: a bad sidecar or a failed write leaves both files as they were.
+    write_atomically_together([(path, csv_bytes), (sidecar_path(path), sidecar.encode("utf-8"))])
 
 
 def write_measurement_blocks(blocks: Iterable[Measurement], conditions: dict[str, Any],
                              path: str | os.PathLike[str]) -> int:
     """Write a recording given as consecutive blocks of samples (each a :class:`Measurement`
     with the same columns; their own conditions are ignored) and its sidecar ``conditions``,
-    each file atomically, holding one block in memory at a time; returns the rows written.
+    the two files together atomically, holding one block in memory at a time; returns the rows
+    written.
 
     The file is the one :func:`write_measurement` writes for the blocks joined. Raises
     ``ValueError`` (before writing anything) when the conditions hold NaN or infinity, or when
     there is no block or the blocks' columns differ (then the CSV is left as it was), and
     ``TypeError`` when the conditions are not JSON-serialisable.
     """
-    sidecar = _sidecar_text(conditions)
+    sidecar = _sidecar_text(_relative_references(conditions, sidecar_path(path)))
     rows = 0
     header: str | None = None
-    with atomic_output(path) as out:
+    # the CSV and the sidecar replace the old pair together (hcard.atomic.atomic_outputs): a
+    # sidecar that cannot be written no longer leaves a new CSV beside the old sidecar
+    with atomic_outputs([path, sidecar_path(path)]) as (out, side):
         for block in blocks:
             block_header = _csv_header(block)
             if header is None:
@@ -397,5 +459,5 @@ def write_measurement_blocks(blocks: Iterable[Measurement], conditions: dict[str
             rows += len(block)
         if header is None:
             raise ValueError("no samples to write")
-    write_atomically(sidecar_path(path), sidecar.encode("utf-8"))
+        side.write(sidecar.encode("utf-8"))
     return rows

@@ -34,6 +34,7 @@ from hcard.calibration.plan import (
 )
 from hcard.calibration.splits import SPLITS
 from hcard.cli.errors import EXIT_FAILED, UserErrorGroup, option_values
+from hcard.cli.input_files import INPUT_FILE
 from hcard.cli.options import plugin_option, quantity_option
 from hcard.cli.verbosity import quiet, verbosity_options
 from hcard.errors import HcardError, UsageError
@@ -242,12 +243,13 @@ def _base_of(measurements: list[Measurement], model_name: str | None,
 def _verification_files(measurements: list[Measurement], card: Path | None,
                         track: Path | None) -> tuple[Path, Path]:
     """The held-out card and track: as given, else ``verify.hcard``/``verify.csv`` next to the
-    card the recordings played (sidecar ``card.path``)."""
+    card the recordings played (sidecar ``card.path``, resolved against the sidecar's folder
+    and inside it: spec/measurement-format.md MF13)."""
     if card is not None and track is not None:
         return card, track
-    played = (measurements[0].conditions.get("card") or {}).get("path")
-    if played:
-        folder = Path(played).parent
+    played = measurements[0].files.get("card.path")
+    if played is not None:
+        folder = played.parent
         card = card or folder / VERIFY_CARD
         track = track or folder / VERIFY_TRACK
         if card.exists() and track.exists():
@@ -263,7 +265,7 @@ def _verification_files(measurements: list[Measurement], card: Path | None,
 @click.option("--model", "-m", "model_name",
               help="Calibrate this bare predictor (see `hcard predict --list`) instead of the "
                    "recordings' device profile.")
-@click.option("--profile", "profile_path", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--profile", "profile_path", type=INPUT_FILE,
               help="Calibrate this device profile (default: the one the recordings' sidecars "
                    "name).")
 @click.option("--finger", "finger_name", default="finger-friction", show_default=True,
@@ -293,9 +295,9 @@ def _verification_files(measurements: list[Measurement], card: Path | None,
 @click.option("--verify", "verify_uri", metavar="URI",
               help="Play the held-out textures on this device without and with the fitted "
                    "profile and report the rendered friction error of each.")
-@click.option("--verify-card", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--verify-card", type=INPUT_FILE,
               help="Held-out card for --verify (default: verify.hcard next to the played card).")
-@click.option("--verify-track", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--verify-track", type=INPUT_FILE,
               help="Its finger track (default: verify.csv next to it).")
 @click.option("--timeout", default=1.0, show_default=True, type=click.FloatRange(min=0.001),
               help="--verify: longest wait for any answer from the device, s.")

@@ -16,14 +16,15 @@ from hcard.card_io import (
     read_card_file,
 )
 from hcard.cli.errors import EXIT_FAILED
+from hcard.cli.input_files import INPUT_FILE_OR_STDIN
 from hcard.cli.verbosity import verbosity_options
 from hcard.describe import card_summary, describe_card
-from hcard.errors import CardError, Problem
+from hcard.errors import CardError, Problem, problem_count
 from hcard.terminal_text import printable
 from hcard.v1 import card_pb2 as pb
 from hcard.validate import validate
 
-CARD = click.Path(dir_okay=False, allow_dash=True, path_type=Path)
+CARD = INPUT_FILE_OR_STDIN
 
 
 @click.command()
@@ -50,6 +51,7 @@ def info(cards: tuple[Path, ...], as_json: bool) -> None:
         name = "<stdin>" if str(card) == STDIN else str(card)
         parsed, data, problems = check_card_file(card)
         errors = [p for p in problems if p.severity == "error"]
+        error_count = problem_count(errors)
         any_failing |= bool(errors)
         if parsed is None:
             if as_json:
@@ -60,8 +62,8 @@ def info(cards: tuple[Path, ...], as_json: bool) -> None:
         form = "JSON" if looks_like_json(data) else "binary"
         if as_json:
             summary = {"file": name, "form": form.lower(), "bytes": len(data),
-                       "valid": not errors, "errors": len(errors),
-                       "warnings": len(problems) - len(errors)}
+                       "valid": not errors, "errors": error_count,
+                       "warnings": problem_count(problems) - error_count}
             summary.update(card_summary(parsed))
             summaries.append(summary)
             continue
@@ -69,7 +71,7 @@ def info(cards: tuple[Path, ...], as_json: bool) -> None:
         for line in describe_card(parsed):
             click.echo(printable(line))
         if errors:
-            click.echo(printable(f"{name}: invalid: {len(errors)} error(s) (hcard validate "
+            click.echo(printable(f"{name}: invalid: {error_count} error(s) (hcard validate "
                                  f"{name} lists them)"), err=True)
     if as_json:
         click.echo(json.dumps(summaries[0] if len(summaries) == 1 else summaries, indent=2))
@@ -131,8 +133,9 @@ def validate_cmd(cards: tuple[Path, ...], as_json: bool, strict: bool) -> None:
         reports.append({
             "file": name,
             "valid": not failing,
+            "problem_count": problem_count(problems),
             "problems": [{"path": p.path, "reason": p.reason, "severity": p.severity,
-                          "rule": p.rule} for p in problems],
+                          "rule": p.rule, "count": p.count} for p in problems],
         })
         if as_json:
             continue
@@ -146,9 +149,9 @@ def validate_cmd(cards: tuple[Path, ...], as_json: bool, strict: bool) -> None:
                 f"{len(parsed.textures)} textures, {parsed.grid.cols} x {parsed.grid.rows} taxtels)"
             ))
         elif failing and parsed is not None:  # an unreadable card's one line says it all
-            errors = sum(p.severity == "error" for p in failing)
-            click.echo(printable(f"{name}: invalid: {len(failing)} problem(s), {errors} error(s)"),
-                       err=True)
+            errors = problem_count([p for p in failing if p.severity == "error"])
+            click.echo(printable(f"{name}: invalid: {problem_count(failing)} problem(s), "
+                                 f"{errors} error(s)"), err=True)
     if as_json:
         click.echo(json.dumps(reports[0] if len(reports) == 1 else reports, indent=2))
     if any_failing:

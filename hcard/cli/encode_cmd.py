@@ -12,9 +12,9 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from hcard import channels, limits
-from hcard.atomic import write_atomically
+from hcard.atomic import write_atomically, write_atomically_together
 from hcard.bounded_read import DEFAULT_MAX_PIXELS, STDIN
-from hcard.card_io import format_for_path, parse_card, save, to_bytes
+from hcard.card_io import checked_bytes, format_for_path, parse_card, save, to_bytes
 from hcard.cli.verbosity import quiet, verbosity_options
 from hcard.errors import CardError, HcardError
 
@@ -225,13 +225,16 @@ def encode(
         if to_stdout:
             card_bytes = to_bytes(result.card)
             parse_card(card_bytes, source="<stdout>")  # validated, as save() does
+            if preview is not None and png is not None:
+                _write_preview(png, preview)  # before the card goes out: it cannot be taken back
             sys.stdout.flush()  # text already printed goes first
             sys.stdout.buffer.write(card_bytes)
+        elif preview is not None and png is not None:
+            _write_card_and_preview(checked_bytes(result.card, output), output, png, preview)
+            card_bytes = b""
         else:
             save(result.card, output)
             card_bytes = b""
-        if preview is not None and png is not None:
-            _write_preview(png, preview)
     except HcardError as exc:
         raise click.ClickException(str(exc)) from None
     summary = dict(result.stats)
@@ -315,6 +318,16 @@ def _preview_bytes(result: EncodeResult, max_error: float | None) -> bytes:
     error = result.maps.get(statistic)
     error_map = None if error is None else error / limits.RELATIVE_FRICTION_JND
     return preview_png(result.card, error_map=error_map, error_label=label)
+
+
+def _write_card_and_preview(card: bytes, card_path: Path, png: bytes, preview: Path) -> None:
+    """Replace the card and its preview together (:func:`hcard.atomic.atomic_outputs`): when
+    either cannot be written (a full disk), both previous files stay as they were."""
+    try:
+        write_atomically_together([(card_path, card), (preview, png)])
+    except OSError as exc:
+        raise CardError(f"cannot write the card and its preview ({exc.strerror or exc})",
+                        source=card_path) from None
 
 
 def _write_preview(png: bytes, path: Path) -> None:

@@ -23,6 +23,7 @@ import numpy as np
 
 from hcard.atomic import write_atomically
 from hcard.cli.errors import option_values
+from hcard.cli.input_files import INPUT_FILE
 from hcard.cli.options import plugin_option
 from hcard.cli.verbosity import verbosity_options
 from hcard.errors import HcardError, UsageError
@@ -391,7 +392,7 @@ def predictor_of_profile(path: Path, model: str | None) -> Predictor:
 @click.option(
     "--profile",
     "profile_path",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=INPUT_FILE,
     help="Take the parameters from a device profile (hcard-device-profile/2, e.g. the "
     "profile.json of hcard calibrate); --param overrides them. Without MODEL, use the "
     "profile's fitted model (a calibrated profile) or its predictor.",

@@ -7,12 +7,13 @@ from pathlib import Path
 import click
 
 import hcard
+from hcard.cli.input_files import INPUT_FILE
 from hcard.cli.verbosity import verbosity_options
 
 
 @click.command("preview")
 @verbosity_options
-@click.argument("card", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("card", type=INPUT_FILE)
 @click.option(
     "-o",
     "--output",

@@ -14,6 +14,7 @@ import click
 import numpy as np
 
 from hcard.card_io import load
+from hcard.cli.input_files import INPUT_FILE
 from hcard.cli.verbosity import quiet, verbosity_options
 from hcard.csv_rows import format_rows
 from hcard.errors import HcardError
@@ -76,9 +77,8 @@ def frames_to_csv(frames: Frames, commands: ActuatorCommands | None = None) -> b
 
 @click.command()
 @verbosity_options
-@click.argument("card", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("--track", "track_path", required=True,
-              type=click.Path(dir_okay=False, path_type=Path),
+@click.argument("card", type=INPUT_FILE)
+@click.option("--track", "track_path", required=True, type=INPUT_FILE,
               help="Finger track CSV (t_s, x_mm, y_mm[, fn_n, contact]; spec/track-format.md).")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="Output file: .csv or .npz.")
@@ -90,7 +90,7 @@ def frames_to_csv(frames: Frames, commands: ActuatorCommands | None = None) -> b
               type=float, help="Longest extrapolation past the last touch sample, s.")
 @click.option("--mode", type=click.Choice(["hybrid", "position-only"]), default="hybrid",
               show_default=True, help="Hybrid control, or the classic position-only baseline.")
-@click.option("--profile", "profile_path", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--profile", "profile_path", type=INPUT_FILE,
               help="Device profile (hcard-device-profile/2): add the actuator commands it gives "
                    "for the targets at the track's speed and force (amplitude_m, voltage_v) and "
                    "the friction it predicts for them (rendered_uv, rendered_ev).")
@@ -114,18 +114,18 @@ def render(card: Path, track_path: Path, output: Path, frame_rate: float, band_l
     suffix = output.suffix.lower()
     if suffix not in (".csv", ".npz"):
         raise click.BadParameter("the output must end in .csv or .npz", param_hint="--output")
-    loaded = load(card)
-    track = read_track_csv(track_path)
-    try:
+    try:  # before the files are read: a bad option costs no reading
         options = RenderOptions(frame_rate_hz=frame_rate, band_limit_hz=band_limit,
                                 dead_reckoning_s=dead_reckoning, mode=RenderMode(mode))
     except ValueError as exc:
         raise click.UsageError(str(exc)) from None
+    loaded = load(card)
+    track = read_track_csv(track_path)
     renderer = Renderer(loaded, options)
     try:
         total = renderer.frame_count(track)  # the frame limit, before any work
     except RenderTooLong as exc:  # too large an input, as play says (README: exit status 1)
-        raise HcardError(f"{track_path}: {exc}") from None
+        raise HcardError(f"{track_path}: t_s: {exc}") from None
     summary = _RenderSummary()
     try:
         with frame_writer(output) as writer, _progress(total) as advance:

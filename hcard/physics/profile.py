@@ -760,9 +760,7 @@ class DeviceProfile:
     ) -> DeviceProfile:
         """A profile from the bytes of a profile file (UTF-8 JSON)."""
         try:
-            raw = parse_json(data.decode("utf-8"))
-        except UnicodeDecodeError:
-            raise ProfileError(f"{source}: not a text (UTF-8) file") from None
+            raw = parse_json(data)
         except JsonInputError as exc:
             raise ProfileError(f"{source}: not valid JSON ({exc})") from None
         return cls.from_dict(raw, source=source, registry=registry)
@@ -843,9 +841,7 @@ def _owned(values: Any, shape: tuple[int, ...]) -> bool:
 def read_json(file: Path) -> Any:
     """The JSON content of ``file``; :class:`ProfileError` naming the file otherwise."""
     try:
-        return parse_json(read_profile_bytes(file).decode("utf-8"))
-    except UnicodeDecodeError:
-        raise ProfileError(f"{file}: not a text (UTF-8) file") from None
+        return parse_json(read_profile_bytes(file))
     except JsonInputError as exc:
         raise ProfileError(f"{file}: not valid JSON ({exc})") from None
 

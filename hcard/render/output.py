@@ -10,7 +10,12 @@ rendering leaves the previous file as it was.
   form (rule TO1), so reading it back gives the rendered numbers exactly.
 - :class:`NpzFrameWriter`: a NumPy ``.npz`` archive (deflated). Each column is spilled to its own
   temporary file while the blocks come, and the archive is assembled from those files at the
-  end, member by member, through a fixed-size buffer.
+  end, member by member, through a fixed-size buffer. The spill folder, next to the output,
+  is named ``.NAME.PID.XXXXXXXX.spill``: a writer killed with ``kill -9`` cannot remove it
+  (212 MB for 10^7 frames), so every NPZ writer first removes the spill folders of its
+  output whose process no longer runs and whose files have not changed for
+  :data:`~hcard.atomic.STALE_AFTER_S` (:func:`remove_stale_spills`), as the atomic writer does
+  with its temporary files.
 """
 
 from __future__ import annotations
@@ -18,8 +23,10 @@ from __future__ import annotations
 import abc
 import contextlib
 import os
+import re
 import shutil
 import tempfile
+import time
 import zipfile
 from collections.abc import Sequence
 from pathlib import Path
@@ -31,7 +38,7 @@ if TYPE_CHECKING:
 
 import numpy as np
 
-from hcard.atomic import atomic_output
+from hcard.atomic import STALE_AFTER_S, atomic_output, process_runs
 from hcard.csv_rows import format_rows
 
 Column = tuple[str, np.ndarray]
@@ -98,7 +105,9 @@ class NpzFrameWriter(_FrameWriter):
     def __init__(self, path: str | os.PathLike[str]) -> None:
         self._path = Path(path)
         directory = self._path.parent if str(self._path.parent) else Path(".")
-        self._spill = tempfile.TemporaryDirectory(prefix=f".{self._path.name}.", dir=directory)
+        remove_stale_spills(self._path)
+        self._spill = tempfile.TemporaryDirectory(prefix=f".{self._path.name}.{os.getpid()}.",
+                                                  suffix=SPILL_SUFFIX, dir=directory)
         self._columns: dict[str, tuple[np.dtype, BinaryIO]] = {}
         self._frames = 0
 
@@ -142,6 +151,39 @@ class NpzFrameWriter(_FrameWriter):
             with contextlib.suppress(OSError):
                 spill.close()
         self._spill.cleanup()
+
+
+SPILL_SUFFIX = ".spill"
+"""The end of a spill folder's name (``.NAME.PID.XXXXXXXX.spill``)."""
+
+
+def remove_stale_spills(target: Path, *, now: float | None = None) -> list[Path]:
+    """Remove the spill folders left next to ``target`` by NPZ writers that were killed: those
+    named ``.NAME.PID.*.spill`` whose process ``PID`` no longer runs and in which nothing has
+    changed for :data:`~hcard.atomic.STALE_AFTER_S`. Returns the folders removed."""
+    directory = target.parent if str(target.parent) else Path(".")
+    pattern = re.compile(rf"\.{re.escape(target.name)}\.(\d+)\.[^.]+{re.escape(SPILL_SUFFIX)}")
+    now = time.time() if now is None else now
+    removed: list[Path] = []
+    try:
+        names = os.listdir(directory)
+    except OSError:
+        return removed
+    for name in names:
+        match = pattern.fullmatch(name)
+        if match is None or process_runs(int(match[1])):
+            continue
+        folder = directory / name
+        try:
+            changed = max([folder.lstat().st_mtime]
+                          + [entry.stat(follow_symlinks=False).st_mtime
+                             for entry in os.scandir(folder)])
+        except OSError:
+            continue
+        if now - changed > STALE_AFTER_S:
+            shutil.rmtree(folder, ignore_errors=True)
+            removed.append(folder)
+    return removed
 
 
 def frame_writer(path: str | os.PathLike[str]) -> CsvFrameWriter | NpzFrameWriter:

@@ -126,13 +126,15 @@ class Renderer:
         Raises:
             RenderTooLong: more than :data:`MAX_RENDER_FRAMES` (checked before any work).
         """
-        total = math.floor(track.duration_s * self.options.frame_rate_hz + 1e-9) + 1
-        if total > MAX_RENDER_FRAMES:
+        frames = track.duration_s * self.options.frame_rate_hz + 1e-9
+        # compared as a float first: a span of 1e305 s is an infinite number of frames, which
+        # math.floor cannot turn into an int (an OverflowError, exit 3, before this check)
+        if not frames < MAX_RENDER_FRAMES:
             raise RenderTooLong(
-                f"the track spans {track.duration_s:.6g} s: {total:.4g} frames at "
+                f"the track spans {track.duration_s:.6g} s: {frames:.4g} frames at "
                 f"{self.options.frame_rate_hz:g} Hz, over the limit of {MAX_RENDER_FRAMES:.0e} "
-                "(render a shorter track, or at a lower frame rate)")
-        return total
+                "(render a shorter track, or at a lower frame rate; spec/track-format.md TK8)")
+        return math.floor(frames) + 1
 
     def blocks(
         self,

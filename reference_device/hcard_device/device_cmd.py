@@ -14,6 +14,7 @@ from pathlib import Path
 import click
 
 from hcard.card_io import load
+from hcard.cli.input_files import INPUT_FILE
 from hcard.cli.verbosity import verbosity_options
 from hcard.errors import HcardError, UsageError
 from hcard.terminal_text import printable
@@ -248,16 +249,15 @@ def synthesize(device_class: str, uri: str | None, effect_names: tuple[str, ...]
 
 @click.command("play")
 @verbosity_options
-@click.argument("card", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("card", type=INPUT_FILE)
 @click.option("--device", "uri", required=True, metavar="URI",
               help="Device URI: sim://, usbip://HOST:PORT/BUSID, pyusb://..., hid://VID:PID "
                    "or hid:///dev/hidrawN (see `hcard device list`).")
-@click.option("--track", "track_path", required=True,
-              type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--track", "track_path", required=True, type=INPUT_FILE,
               help="Finger track CSV (t_s, x_mm, y_mm[, fn_n, contact]).")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="Recording (.csv, plus its .csv.json sidecar), in the measurement format.")
-@click.option("--profile", "profile_path", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--profile", "profile_path", type=INPUT_FILE,
               help="Device profile to render with (hcard-device-profile/2, e.g. the "
                    "profile.json of `hcard calibrate`); default: the device's own.")
 @click.option("--timeout", default=1.0, show_default=True, type=click.FloatRange(min=0.001),

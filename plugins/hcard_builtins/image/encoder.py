@@ -39,7 +39,7 @@ from hcard.validate import errors_of, validate
 
 from .analysis import Target, TaxtelTextures, analyse_image
 from .geometry import Geometry, resolve_geometry
-from .loading import DEFAULT_MAX_PIXELS, GrayImage, load_gray
+from .loading import DEFAULT_MAX_PIXELS, GrayImage, ImageHeader, load_gray
 from .palette import Palette, build_palette
 from .reconstruct import FrictionMap, ReconstructionError, reconstruction_error
 from .spectral import tile_centres
@@ -228,7 +228,14 @@ def encode_image(
     components, max_textures = opts.components, opts.max_textures
     assert components is not None and max_textures is not None  # filled in by checked()
     started = time.perf_counter()
-    image = load_gray(path, max_pixels=opts.max_pixels)
+
+    def check_geometry(header: ImageHeader) -> None:
+        """The surface and grid of the image, checked before it is decoded."""
+        resolve_geometry(header.width, header.height, taxtel_mm=opts.taxtel_mm,
+                         width_mm=opts.width_mm, height_mm=opts.height_mm, dpi=opts.dpi,
+                         embedded_dpi=header.dpi, source=header.path)
+
+    image = load_gray(path, max_pixels=opts.max_pixels, check_header=check_geometry)
     large = image.width * image.height > PROGRESS_MIN_PIXELS
 
     def say(line: str) -> None:

@@ -1,9 +1,14 @@
 """Image loading for the encoder: checks, pixel limit, conversion to a gray array.
 
 Every problem with the input file raises :class:`hcard.errors.ImageError` with a one-line
-reason. The pixel count is checked from the image header *before* any pixel is decoded, so a
-decompression bomb (a small file declaring a huge image) costs no memory: PNG headers are read
-directly, other formats through Pillow's lazy :func:`PIL.Image.open`, which reads the header only.
+reason. What the header declares is checked *before* any pixel is decoded, so a decompression
+bomb (a small file declaring a huge image) costs no memory: PNG headers are read directly, other
+formats through Pillow's lazy :func:`PIL.Image.open`, which reads the header only. Checked
+there: the pixel count (``max_pixels``), the memory the pixels take while they are decoded and
+turned gray (:func:`decode_bytes`: a 0.5 MB PNG declaring 8000 x 8000 pixels of 16-bit RGBA,
+under the pixel limit, took 34 s and 1.0 GB), and whatever the caller checks on the header
+(``check_header``: the encoder's surface and grid, which refused a 64,000,000 x 1 image only
+after its 221 MB were decoded).
 
 Gray follows ITU-R 601 luma (Pillow mode ``"L"``); transparent images are composited over white;
 16-bit gray images keep their 16 bits; an EXIF orientation tag is applied, so the surface is
@@ -16,13 +21,14 @@ import struct
 import threading
 import warnings
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
-from hcard.bounded_read import DEFAULT_MAX_PIXELS
+from hcard.bounded_read import DECODE_BYTES_PER_ALLOWED_PIXEL, DEFAULT_MAX_PIXELS
 from hcard.errors import ImageError
 
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -63,17 +69,38 @@ class GrayImage:
         return int(self.pixels.shape[0])
 
 
-def load_gray(path: str | Path, *, max_pixels: int = DEFAULT_MAX_PIXELS) -> GrayImage:
+@dataclass(frozen=True)
+class ImageHeader:
+    """What an image file declares before any pixel is decoded.
+
+    Attributes:
+        path: the file.
+        width, height: size in pixels as the image is displayed (after its EXIF orientation).
+        mode: Pillow mode of the file (``"L"``, ``"I;16"``, ``"RGBA"``, ...).
+        dpi: resolution stored in the file (as :attr:`GrayImage.dpi`), or ``None``.
+    """
+
+    path: Path
+    width: int
+    height: int
+    mode: str
+    dpi: tuple[float, float] | None
+
+
+def load_gray(path: str | Path, *, max_pixels: int = DEFAULT_MAX_PIXELS,
+              check_header: Callable[[ImageHeader], None] | None = None) -> GrayImage:
     """Read an image file as gray levels (black = 0).
 
     Args:
         path: image file in any format Pillow reads (PNG, JPEG, TIFF, BMP, GIF, WebP, ...).
         max_pixels: largest accepted width x height, pixels; checked from the header before
-            decoding.
+            decoding, with the memory decoding takes (:func:`check_decode_bytes`).
+        check_header: called with the header before decoding; it raises to refuse the image.
 
     Raises:
         ImageError: the file is missing, a directory, empty, not an image, declares zero width
-            or height, exceeds ``max_pixels``, or its pixel data is corrupt or truncated.
+            or height, exceeds ``max_pixels`` or the memory that allows, or its pixel data is
+            corrupt or truncated; or what ``check_header`` raises.
     """
     if max_pixels < 1:
         raise ValueError(f"max_pixels must be at least 1, got {max_pixels}")
@@ -85,6 +112,9 @@ def load_gray(path: str | Path, *, max_pixels: int = DEFAULT_MAX_PIXELS) -> Gray
     image = _open(file, max_pixels)
     try:
         check_size(file, image.width, image.height, max_pixels=max_pixels)
+        check_decode_bytes(file, image.width, image.height, image.mode, max_pixels=max_pixels)
+        if check_header is not None:
+            check_header(header_of(image, file))
         try:
             image.load()
             upright = _upright(image)
@@ -105,6 +135,72 @@ def check_size(file: Path, width: int, height: int, *, max_pixels: int) -> None:
             f"{file}: {width} x {height} = {width * height} pixels exceed the limit of "
             f"{max_pixels} pixels (raise it with --max-pixels if the image is genuine)"
         )
+
+
+_ONE_BYTE_MODES = frozenset({"1", "L"})
+_COLOUR_BYTES = 4
+"""Bytes Pillow keeps a pixel of any colour or multi-band mode in (``RGB`` too)."""
+
+
+def decode_bytes(mode: str) -> int:
+    """Bytes a pixel of Pillow ``mode`` takes at the peak of decoding it and turning it gray
+    (:func:`to_gray`): 1 for 8-bit gray, 2 for 16-bit gray, 4 for 32-bit and float gray, 5 for
+    colour (the image and its gray), 13 with alpha (the image, a white image and their
+    composite, and the gray), 9 for a palette (its RGB or RGBA conversion, and the gray)."""
+    if mode in _ONE_BYTE_MODES:
+        return 1
+    if mode in _SIXTEEN_BIT_MODES:
+        return 2
+    if mode in ("I", "F"):
+        return 4
+    if mode == "P":
+        return 1 + 2 * _COLOUR_BYTES
+    if mode in _ALPHA_MODES:
+        return 3 * _COLOUR_BYTES + 1
+    return _COLOUR_BYTES + 1
+
+
+def check_decode_bytes(file: Path, width: int, height: int, mode: str, *,
+                       max_pixels: int) -> None:
+    """Reject an image whose decoding would take more than
+    :data:`~hcard.bounded_read.DECODE_BYTES_PER_ALLOWED_PIXEL` bytes per pixel of
+    ``max_pixels`` (:func:`decode_bytes`): 256 MB at the default 64 megapixels, which 64
+    megapixels of 8-bit gray take in 64 MB and 16 megapixels of RGBA in 208 MB."""
+    need = width * height * decode_bytes(mode)
+    budget = DECODE_BYTES_PER_ALLOWED_PIXEL * max_pixels
+    if need > budget:
+        raise ImageError(
+            f"{file}: {width} x {height} pixels of mode {mode} take {need / 1e6:.0f} MB to "
+            f"decode ({decode_bytes(mode)} bytes a pixel), over the limit of "
+            f"{budget / 1e6:.0f} MB ({DECODE_BYTES_PER_ALLOWED_PIXEL} bytes a pixel of the "
+            "pixel limit; raise it with --max-pixels if the image is genuine)")
+
+
+def header_of(image: Image.Image, file: Path) -> ImageHeader:
+    """The header of an opened, not yet decoded, image: its size as displayed (a photo
+    stored sideways, EXIF orientation 5-8, has width and height swapped)."""
+    width, height = image.width, image.height
+    if _declared_orientation(image) in (5, 6, 7, 8):
+        width, height = height, width
+    return ImageHeader(file, width, height, image.mode, _dpi_of(image))
+
+
+def _declared_orientation(image: Image.Image) -> int:
+    """The EXIF orientation an opened image declares, read without decoding it (Pillow's
+    ``getexif`` decodes a PNG to look for an eXIf chunk after its pixel data); 1 when it
+    declares none or a corrupt one."""
+    tags = getattr(image, "tag_v2", None)  # TIFF
+    if tags is not None:
+        return int(tags.get(_EXIF_ORIENTATION, 1))
+    raw = image.info.get("exif")  # JPEG, WebP, and a PNG whose eXIf precedes its data
+    if not isinstance(raw, bytes):
+        return 1
+    exif = Image.Exif()
+    try:
+        exif.load(raw)
+        return int(exif.get(_EXIF_ORIENTATION, 1))
+    except (OSError, SyntaxError, ValueError, TypeError, struct.error):
+        return 1
 
 
 def png_header_size(head: bytes) -> tuple[int, int] | None:

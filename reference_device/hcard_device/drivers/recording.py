@@ -305,11 +305,12 @@ def write_recording(result: PlayResult, path: str | os.PathLike[str], *,
                     track_path: str | None = None, card_path: str | None = None) -> int:
     """Write the session's recording (:func:`recording`) and its sidecar to ``path``, block by
     block (:data:`BLOCK_REPORTS` reports in memory at a time besides the packed reports),
-    each file atomically; returns the rows written.
+    the CSV and its sidecar replacing the earlier pair together; returns the rows written.
 
     Raises:
         ValueError: no STATE report was received (nothing is written).
-        OSError: the files cannot be written (the earlier files at ``path`` are kept).
+        OSError: the files cannot be written (the earlier CSV and sidecar at ``path`` are both
+            kept).
     """
     blocks = recording_blocks(result)
     conditions = sidecar(result, track_path=track_path, card_path=card_path)
