@@ -56,6 +56,15 @@ from hcard.render.touch import segment_speeds
 from hcard.track import FingerTrack, straight_stroke
 from hcard.v1 import card_pb2 as pb
 from hcard_conformance.context import Context, session_times
+from hcard_conformance.realtime import (
+    HOST_LATE_S,
+    NOT_KEPT,
+    HostWatch,
+    NotKept,
+    attempts,
+    device_lag,
+    reasons,
+)
 from hcard_conformance.registry import check
 from hcard_conformance.result import CannotAssess, CheckResult, guarded
 from hcard_conformance.streaming import FINGER_PERIOD_S, lead_frames, require_fed, stream_fed
@@ -548,6 +557,15 @@ def check_dynamics(ctx: Context) -> Iterator[CheckResult]:
 
 # ---------------------------------------------------------------------- (c) latency
 
+LATENCY_LATE_S = 0.005
+"""Largest lateness of a kept latency trial (spec QT3), s: the host's loop not iterating, or a
+FINGER report's send call taking longer, or the device flagging a report of the trial
+REALTIME_LAG (device protocol PI4). Half the 10 ms D3 bound, as PI4's own margin."""
+MIN_KEPT_TRIALS = LATENCY_TRIALS // 2
+"""Kept trials a latency run needs, else it is measured again (the median of fewer says more
+about which trials were kept than about the device)."""
+
+
 @dataclass(frozen=True)
 class LatencyRun:
     """What :func:`measure_latency` saw.
@@ -559,10 +577,21 @@ class LatencyRun:
             sample's host time + echo age) the host read it, s: the host's read backlog
             (with the fastest one-way transit). Empty when the device does not date its
             reports (protocol before 1.3).
+        kept: per trial, whether the host and the device kept real time in it (spec QT3).
+        not_kept: why each trial that was not kept was not (one line each).
+        host_late_s: the host's longest lateness over the run (loop gaps, sends), s.
     """
 
     latencies_s: list[float]
     read_lag_s: list[float]
+    kept: list[bool]
+    not_kept: list[str]
+    host_late_s: float = 0.0
+
+    @property
+    def kept_latencies_s(self) -> list[float]:
+        """The latencies of the kept trials, s."""
+        return [lat for lat, ok in zip(self.latencies_s, self.kept, strict=True) if ok]
 
 
 def measure_latency(driver: Driver, trials: int = LATENCY_TRIALS, *,
@@ -570,11 +599,17 @@ def measure_latency(driver: Driver, trials: int = LATENCY_TRIALS, *,
     """Latencies from a FINGER report moving onto a UV 0.4 taxtel to the measured plate
     amplitude crossing half its settled value (method of bench/bench_device_latency.py).
 
-    A report is timed when the host reads it, or with ``dated`` (a host that cannot read in
-    real time, timing class ``software-emulation``) at its own time on the host clock (echoed
-    sample + echo age, PI3), which leaves out the host's read backlog and also the fastest
-    one-way transit of a FINGER report (the device's clock offset, PO2). Each position is held
-    until the host has read the reports of the whole hold, however late it reads them."""
+    A real-time host times the crossing report by its own time on the host clock (PI3: echoed
+    sample + echo age) plus the run's smallest read lag (the fastest delivery of a report to
+    the host, with the fastest one-way transit the device's clock offset took out, PO2): that
+    is the time from the send to the report's frame plus the fastest delivery, the transport
+    included and the host's own lateness in reading left out. A trial is kept only when the
+    host's loop never went :data:`LATENCY_LATE_S` without iterating, no send took longer, and
+    no report of the trial carries REALTIME_LAG (spec QT3); a device before protocol 1.3 is
+    timed when the host read the report, with the same rule. With ``dated`` (a host that cannot
+    read in real time, timing class ``software-emulation``) a report is timed at its own time
+    on the host clock alone and every trial is kept. Each position is held until the host has
+    read the reports of the whole hold, however late it reads them."""
     info = driver.info()
     width, height = info.surface_width_10um * 0.01, info.surface_height_10um * 0.01
     card = build.card(width, height, taxtel_mm=(width / 2, height), textures=[
@@ -586,49 +621,79 @@ def measure_latency(driver: Driver, trials: int = LATENCY_TRIALS, *,
     driver.start()
     read_lag: list[float] = []
 
-    def hold(x: float, seconds: float, poll_s: float = 0.0005) -> list[tuple[State, float]]:
+    @dataclass
+    class Hold:
+        """The reports of one hold: (state, time since the first send by read, by own time)
+        and the host's longest lateness in it, s."""
+
+        seen: list[tuple[State, float, float | None]]
+        late_s: float
+
+    def hold(x: float, seconds: float, poll_s: float = 0.0005) -> Hold:
         """Send the finger at ``x`` (twice: zero velocity) every 10 ms until the host has read
         the reports of ``seconds`` after the first send (at most :data:`READ_CATCH_UP_S`
         more); the reports that echo a sample of this hold (the device applied it: those
-        still echoing an earlier one, read late, belong to an earlier position), each with
-        its time since the first send, s."""
-        seen: list[tuple[State, float]] = []
+        still echoing an earlier one, read late, belong to an earlier position)."""
+        seen: list[tuple[State, float, float | None]] = []
         start = driver.clock()
         start_us = Finger.from_si(start, 0.0, 0.0, 0.0, False).host_time_us
         sent: set[int] = set()
         next_send = start
         covered = -math.inf  # time since the first send that the reports read reach, s
+        late, last = 0.0, start
         while True:
             now = driver.clock()
+            late, last = max(late, now - last), now
             if now >= next_send:
                 t = start if next_send == start else now
                 driver.send_finger(t, x, y, 0.5, True)
                 driver.send_finger(t, x, y, 0.5, True)
                 sent.add(Finger.from_si(t, 0.0, 0.0, 0.0, False).host_time_us)
                 next_send += 0.01
+                late = max(late, driver.clock() - t)  # the sends, from the time they carry
             for state in driver.collect_until(driver.clock() + poll_s):
                 read = driver.clock() - start
                 own = _host_time_since(state, start_us)
                 if own is not None:
                     read_lag.append(read - own)
                 if state.host_time_echo_us in sent:
-                    seen.append((state, own if dated and own is not None else read))
-                    covered = max(covered, seen[-1][1])
+                    seen.append((state, read, own))
+                    covered = max(covered, own if dated and own is not None else read)
             if covered >= seconds or now >= start + seconds + READ_CATCH_UP_S:
-                # dated reports past the hold were read early; read times past it are lag
-                return [(s, t) for s, t in seen if t <= seconds] if dated else seen
+                return Hold(seen, late)
 
-    latencies: list[float] = []
+    holds: list[Hold] = []
     hold(left, 0.05)
     for _ in range(trials):
-        seen = sorted((pair for pair in hold(right, 0.06) if pair[1] >= 0.0),
-                      key=lambda pair: pair[1])
-        settled = float(np.mean([s.amplitude_m for s, _ in seen[-10:]])) if seen else math.nan
-        half = next((dt for s, dt in seen if s.amplitude_m >= settled / 2), math.nan)
-        latencies.append(half)
+        holds.append(hold(right, 0.06))
         hold(left, 0.04)
     driver.stop()
-    return LatencyRun(latencies, read_lag)
+    floor = min(read_lag, default=math.nan)
+    latencies: list[float] = []
+    kept: list[bool] = []
+    why: list[str] = []
+    for k, h in enumerate(holds):
+        own_times = all(own is not None for _, _, own in h.seen)
+        if own_times and (dated or math.isfinite(floor)):
+            # by the device's account (PI3), plus the fastest delivery when timed as read
+            shift = 0.0 if dated else floor
+            timed = [(s, own + shift) for s, _, own in h.seen if own is not None]
+            if dated:  # reports past the hold were read early; their own times are not lag
+                timed = [(s, t) for s, t in timed if t <= 0.06]
+        else:
+            timed = [(s, read) for s, read, _ in h.seen]
+        seen = sorted((pair for pair in timed if pair[1] >= 0.0), key=lambda pair: pair[1])
+        settled = float(np.mean([s.amplitude_m for s, _ in seen[-10:]])) if seen else math.nan
+        latencies.append(next((dt for s, dt in seen if s.amplitude_m >= settled / 2), math.nan))
+        problems = [] if dated else [p for p in (
+            f"the host ran {h.late_s * MS_PER_S:.0f} ms late"
+            if h.late_s > LATENCY_LATE_S else "",
+            device_lag([s for s, _, _ in h.seen])) if p]
+        kept.append(not problems)
+        if problems:
+            why.append(f"trial {k + 1}: {'; '.join(problems)}")
+    return LatencyRun(latencies, read_lag, kept, why,
+                      max((h.late_s for h in holds), default=0.0))
 
 
 def _host_time_since(state: State, start_us: int) -> float | None:
@@ -654,18 +719,30 @@ def check_latency(ctx: Context) -> Iterator[CheckResult]:
     timing = timing_class(ctx)
     runs: list[LatencyRun] = []
 
-    def measure() -> Iterator[CheckResult]:
+    def latency_run() -> LatencyRun:
+        """One run, kept when at least :data:`MIN_KEPT_TRIALS` of its trials were (QT3)."""
         with open_driver() as driver:
             run = measure_latency(driver, dated=not timing.keeps_real_time)
+        if len(run.kept_latencies_s) < MIN_KEPT_TRIALS:
+            raise NotKept(f"{len(run.kept_latencies_s)} of {len(run.latencies_s)} trials kept "
+                          f"(at least {MIN_KEPT_TRIALS} needed): {'; '.join(run.not_kept)}")
+        return run
+
+    def measure() -> Iterator[CheckResult]:
+        run = attempts(latency_run, "the latency run")
         runs.append(run)
-        lat = run.latencies_s
+        lat = run.kept_latencies_s
         timed = ("reports timed on the host clock by the device (PI3), without the host's "
                  "read backlog or the fastest transit" if not timing.keeps_real_time
-                 else "reports timed when the host read them")
+                 else "reports timed by their own time on the host clock (PI3) plus the "
+                 "fastest delivery (the host's lateness in reading left out)")
+        left_out = (f"; {len(run.latencies_s) - len(lat)} trials not kept in real time and "
+                    f"left out ({run.not_kept[0]}{', ...' if len(run.not_kept) > 1 else ''})"
+                    if len(lat) < len(run.latencies_s) else "")
         yield _result("device.latency", "boundary-move", "median_latency",
                       float(np.median(lat)) * MS_PER_S, timing.latency_s * MS_PER_S, "ms",
-                      f"{len(lat)} moves, max {np.nanmax(lat) * MS_PER_S:.1f} ms; {timed}; "
-                      f"{timing.why}")
+                      f"{len(lat)} moves, max {np.nanmax(lat) * MS_PER_S:.1f} ms; {timed}"
+                      f"{left_out}; {timing.why}")
 
     def read_lag() -> Iterator[CheckResult]:
         if not runs:
@@ -674,6 +751,12 @@ def check_latency(ctx: Context) -> Iterator[CheckResult]:
             raise CannotAssess("the device does not date its reports (echo age, protocol 1.3 "
                                "PI3)")
         lags = np.asarray(runs[0].read_lag_s)
+        if timing.keeps_real_time and np.median(lags) > timing.read_lag_s and \
+                runs[0].host_late_s > HOST_LATE_S:
+            raise CannotAssess(
+                f"the host read its reports {np.median(lags) * MS_PER_S:.0f} ms late (median) "
+                f"while it did not run for up to {runs[0].host_late_s * MS_PER_S:.0f} ms: the "
+                f"run {NOT_KEPT}")
         yield _result("device.latency", "host-read-lag", "median_read_lag",
                       float(np.median(lags)) * MS_PER_S, timing.read_lag_s * MS_PER_S, "ms",
                       f"{lags.size} reports, 90th percentile "
@@ -840,6 +923,7 @@ def measure_limits_while_driven(driver: Driver, base: Limits) -> LimitsChange:
                              base.max_voltage_v * LOWERED_FRACTION,
                              base.max_current_a * LOWERED_FRACTION)
     finger = _Finger(driver, info.surface_width_10um * 0.0025, info.surface_height_10um * 0.005)
+    watch = HostWatch(clock=driver.clock)
     driver.set_touch_source(host=True)
     driver.start()
     start = finger.start_s
@@ -849,6 +933,8 @@ def measure_limits_while_driven(driver: Driver, base: Limits) -> LimitsChange:
     sent, next_finger, end, timeout, n_after = 0, start, math.inf, math.inf, 0
     while driver.clock() < timeout and (driver.clock() < end or n_after < MIN_REPORTS_AFTER):
         now = driver.clock()
+        if read_back is None:
+            watch.tick()  # the host's loop before the change: a late one starves the plate
         if now >= next_finger:
             finger.send()
             next_finger += FINGER_PERIOD_S
@@ -875,9 +961,15 @@ def measure_limits_while_driven(driver: Driver, base: Limits) -> LimitsChange:
     require_fed(sum(s.stream_queued == 0 for s in settled), len(settled),
                 f"the stream before the change (plate at {driven * NM_PER_M:.0f} nm)")
     if not driven >= MIN_OVER_NEW_LIMIT * lowered.max_amplitude_m:
-        raise CannotAssess(f"the plate was at {driven * NM_PER_M:.0f} nm before the change, not "
-                           f"{MIN_OVER_NEW_LIMIT:g} x the new "
-                           f"{lowered.max_amplitude_m * NM_PER_M:.0f} nm limit")
+        reason = (f"the plate was at {driven * NM_PER_M:.0f} nm before the change, not "
+                  f"{MIN_OVER_NEW_LIMIT:g} x the new {lowered.max_amplitude_m * NM_PER_M:.0f} nm "
+                  "limit")
+        watchdog = ("the watchdog tripped (the host's finger came late)"
+                    if any(s.faults & FaultBits.WATCHDOG for s in settled) else "")
+        late = reasons(watch.late if driver.realtime else "", device_lag(before), watchdog)
+        if late:  # the host or the device did not keep real time (spec QT3)
+            raise NotKept(f"{reason}: {late}")
+        raise CannotAssess(reason)
     after = [s for s in states if s.host_time_echo_us in finger.after_us]
     if not after:
         raise CannotAssess("no report echoed a FINGER sent after the change")
@@ -924,13 +1016,17 @@ def measure_safety(open_driver: Callable[[], Driver]) -> Iterator[tuple[str, int
         out["stream-extremes"] = _over(states, driver)
     for case, (n, worst) in out.items():
         yield case, n, worst, f"largest measured output {worst:.3f} x its limit in force"
-    with open_driver() as driver:
-        _wait_for_rest(driver)
-        base = driver.limits()
-        try:
-            change = measure_limits_while_driven(driver, base)
-        finally:  # leave the limits as they were, as host-limits does
-            driver.set_limits(base.max_amplitude_m, base.max_voltage_v, base.max_current_a)
+
+    def lowered_while_driven() -> LimitsChange:
+        with open_driver() as driver:
+            _wait_for_rest(driver)
+            base = driver.limits()
+            try:
+                return measure_limits_while_driven(driver, base)
+            finally:  # leave the limits as they were, as host-limits does
+                driver.set_limits(base.max_amplitude_m, base.max_voltage_v, base.max_current_a)
+
+    change = attempts(lowered_while_driven, "the limits-while-driven run")
     yield "limits-while-driven", change.over, change.worst, change.detail
 
 

@@ -43,6 +43,7 @@ from hcard.quantities import MS_PER_S
 from hcard.track import FingerTrack, straight_stroke
 from hcard.v1 import card_pb2 as pb
 from hcard_conformance.context import Context
+from hcard_conformance.realtime import HostWatch, NotKept, attempted_case, device_lag, reasons
 from hcard_conformance.registry import check
 from hcard_conformance.result import (
     CannotAssess,
@@ -224,9 +225,9 @@ def two_hosts(open_driver: Callable[[], Driver]) -> Hosts:
         "one device; run the check on usbip:// or hid://")
 
 
-def session_faults(first: Background, owner: State) -> list[str]:
+def session_faults(first: Background, owner: State, max_lost: float = MAX_LOST) -> list[str]:
     """What went wrong for the first host of ``second-host-refused`` (empty when its play
-    completed up to its last finger sample with at most :data:`MAX_LOST` of its reports lost,
+    completed up to its last finger sample with at most ``max_lost`` of its reports lost,
     and stayed in session ``owner.session_number`` with one card)."""
     if first.error is not None:
         return [f"the first host's play failed: {first.error}"]
@@ -239,7 +240,7 @@ def session_faults(first: Background, owner: State) -> list[str]:
         problems.append("the first host's last report does not echo its last finger sample: "
                         "its recording stops short of the track")
     sent = len(result.states) + result.reports_lost
-    if not sent or result.reports_lost > MAX_LOST * sent:
+    if not sent or result.reports_lost > max_lost * sent:
         problems.append(f"the first host lost {result.reports_lost} of {sent} reports")
     late = [s for s in result.states if s.timestamp_us >= owner.timestamp_us]
     generations = sorted({s.card_generation for s in late})
@@ -252,8 +253,13 @@ def session_faults(first: Background, owner: State) -> list[str]:
     return problems
 
 
-def case_second_host_refused(hosts: Hosts) -> CheckResult:
-    """``second-host-refused`` (module docstring; rules PN3, PN5)."""
+def case_second_host_refused(hosts: Hosts, max_lost: float = MAX_LOST) -> CheckResult:
+    """``second-host-refused`` (module docstring; rules PN3, PN5). ``max_lost``: the fraction
+    of its reports the first host may lose (the timing class's host report loss when larger
+    than :data:`MAX_LOST`). What the device carried out for the second host fails the case
+    whatever the timing; the first host's own troubles (reports lost, a recording cut short)
+    count as intrusions only in a run the host and the device kept in real time (spec QT3):
+    otherwise :class:`NotKept`, and the case is measured again."""
     intrusions: list[str] = []
     starved: list[str] = []
     seen_owner: list[State] = []
@@ -305,11 +311,18 @@ def case_second_host_refused(hosts: Hosts) -> CheckResult:
         # first host went silent for watchdog_ms (its session ended by PN7), not an intrusion
         trips_before = [first_driver.counters().watchdog_trips]
         first = Background(first_driver, stroke_card(info, 0.4), stroke_track(info))
-        first.run(intrude)
+        with HostWatch() as watch:
+            first.run(intrude)
     if starved:
         return unassessed(CHECK, LEVEL, CASES[0], starved[0])
     owner = seen_owner[0]
-    intrusions += session_faults(first, owner)
+    own = session_faults(first, owner, max_lost)
+    if own and not intrusions:
+        late = reasons(watch.late if first.driver.realtime else "",
+                       device_lag(first.result.states if first.result else []))
+        if late:
+            raise NotKept(f"{late}; the first host saw: {'; '.join(own)}")
+    intrusions += own
     if intrusions:
         detail = "; ".join(intrusions)
     else:
@@ -326,7 +339,9 @@ def case_second_host_refused(hosts: Hosts) -> CheckResult:
 def case_takeover_reported(hosts: Hosts, read_lag_s: float = 0.0) -> CheckResult:
     """``takeover-reported`` (module docstring; rules PN6, PN9). ``read_lag_s``: how late
     the timing class lets the host read a report (the first host learns of the loss from
-    one), added to :data:`LOSS_THRESHOLD_S`."""
+    one), added to :data:`LOSS_THRESHOLD_S`. A loss reported too late in a run the host or
+    the device did not keep in real time raises :class:`NotKept` (spec QT3); a loss never
+    reported fails whatever the timing."""
     took_over: list[tuple[Driver, int, float]] = []
     with hosts.open_driver() as first_driver, contextlib.ExitStack() as stack:
         info = first_driver.info()
@@ -338,13 +353,17 @@ def case_takeover_reported(hosts: Hosts, read_lag_s: float = 0.0) -> CheckResult
             took_over.append((second, token, second.clock()))
 
         first = Background(first_driver, stroke_card(info, 0.4), stroke_track(info))
-        first.run(intrude)
+        with HostWatch() as watch:
+            first.run(intrude)
         second, token, at = took_over[0]
         second.send(Control(Command.STOP, token))  # the second host ends its session (PN4)
     if isinstance(first.error, SessionLost):
         delay_ms = (first.error_at - at) * MS_PER_S
         detail = f"the first host's play raised SessionLost {delay_ms:.1f} ms after TAKE_OVER: "
         detail += str(first.error)
+        if delay_ms > (LOSS_THRESHOLD_S + read_lag_s) * MS_PER_S and watch.late and \
+                first.driver.realtime:
+            raise NotKept(f"{watch.late}; {detail}")
     else:
         delay_ms = math.inf
         outcome = ("completed as if nothing happened" if first.error is None
@@ -398,10 +417,14 @@ def check_session_ownership(ctx: Context) -> Iterator[CheckResult]:
     timing = timing_class(ctx)
     read_lag_s = 0.0 if timing.keeps_real_time else timing.read_lag_s
 
+    max_lost = max(MAX_LOST, timing.host_report_loss)
+
     def measure() -> Iterator[CheckResult]:
         hosts = two_hosts(open_driver)
-        yield case_second_host_refused(hosts)
-        yield case_takeover_reported(hosts, read_lag_s)
+        yield attempted_case(CHECK, LEVEL, CASES[0],
+                             lambda: case_second_host_refused(hosts, max_lost))
+        yield attempted_case(CHECK, LEVEL, CASES[1],
+                             lambda: case_takeover_reported(hosts, read_lag_s))
         yield case_released_by_stop(hosts)
 
     yield from guarded(CHECK, LEVEL, CASES, measure)

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hcard.quantities import S_PER_US, US_PER_S
-from hcard_conformance.result import CannotAssess
+from hcard_conformance.realtime import NOT_KEPT, NotKept
 from hcard_device.drivers.base import Driver
 from hcard_device.drivers.recording import unwrapped_times
 from hcard_device.protocol import Capability, State
@@ -94,13 +94,15 @@ def stream_fed(driver: Driver, uv: np.ndarray, ev: np.ndarray | None = None, *,
 
 
 def require_fed(empty: int, reports: int, what: str) -> None:
-    """Raise :class:`CannotAssess` when the host left the stream queue empty in ``empty`` of
-    ``reports`` reports, more than :data:`STARVED_FRACTION`: the stream then measured the host
-    (a software-emulated or overloaded one), not the device (spec/conformance.md 5.2, QT2)."""
+    """Raise :class:`~hcard_conformance.realtime.NotKept` (a CannotAssess) when the host left
+    the stream queue empty in ``empty`` of ``reports`` reports, more than
+    :data:`STARVED_FRACTION`: the stream then measured the host (a software-emulated or
+    overloaded one), not the device (spec/conformance.md 5.2, QT2, QT3)."""
     if empty > STARVED_FRACTION * max(reports, 1):
-        raise CannotAssess(
+        raise NotKept(
             f"{what}: the host left the stream queue empty in {empty} of {reports} reports; "
-            "it cannot feed the device in real time, so the measurement would be of the host")
+            "it cannot feed the device in real time, so the measurement would be of the host "
+            f"(a run that {NOT_KEPT})")
 
 
 class SteadyStroke:
