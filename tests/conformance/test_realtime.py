@@ -189,7 +189,7 @@ def test_the_tests_fail_saying_the_machine_could_not_keep_real_time() -> None:
     assert len(runs) == 3
     assert str(caught.value).startswith(f"{MACHINE} for two clients in 3 attempts")
     assert in_real_time(lambda: 7, "a kept run") == 7
-    with pytest.raises(NotKept, match="up to 45 ms .*; the run found: 12 of 900 reports lost"):
+    with pytest.raises(NotKept, match=r"up to 45 ms .*; the run found: 12 of 900 reports lost"):
         require_kept(["12 of 900 reports lost"], _late_watch(), [])
     with pytest.raises(pytest.fail.Exception, match="12 of 900 reports lost"):
         require_kept(["12 of 900 reports lost"], HostWatch(), [_state()])  # kept: the device
@@ -199,7 +199,7 @@ def test_the_tests_fail_saying_the_machine_could_not_keep_real_time() -> None:
     with pytest.raises(pytest.fail.Exception, match=f"^{MACHINE} for 1 cases"):
         assert_conforms([never])
     failed = CheckResult("device.safety", "device", "host-limits", False, detail="3 over")
-    with pytest.raises(pytest.fail.Exception, match="host-limits.*3 over"):
+    with pytest.raises(pytest.fail.Exception, match=r"host-limits.*3 over"):
         assert_conforms([never, failed])
     assert_conforms([replace(failed, passed=True, outcome="")])
 
