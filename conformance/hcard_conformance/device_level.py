@@ -274,12 +274,22 @@ def speed_known_s(result: PlayResult) -> float:
 
 
 def measure_friction(driver: Driver, card: pb.Card, track: FingerTrack) -> FrictionMeasurement:
-    """Play ``card`` along ``track`` and compare rendered with target friction."""
+    """Play ``card`` along ``track`` and compare rendered with target friction. A play over
+    the threshold in which the host did not run for more than
+    :data:`~hcard_conformance.realtime.HOST_LATE_S` (its finger samples left late: the device
+    rendered from stale ones) or the device flagged a report REALTIME_LAG raises
+    :class:`NotKept` (spec QT3)."""
     profile = device_profile_for(driver.info())
-    result = play(driver, card, track)
+    with HostWatch() as watch:
+        result = play(driver, card, track)
     t, rendered, contact = rendered_friction(result, profile)
-    return friction_error(t, rendered, contact, card, track,
-                          start_s=speed_known_s(result) + PLATE_SETTLE_S)
+    m = friction_error(t, rendered, contact, card, track,
+                       start_s=speed_known_s(result) + PLATE_SETTLE_S)
+    if not m.rms_relative_error <= FRICTION_JND:
+        late = reasons(watch.late if driver.realtime else "", device_lag(result.states))
+        if late:
+            raise NotKept(f"{late}; RMS relative error {m.rms_relative_error:.3f}")
+    return m
 
 
 def friction_error(t: np.ndarray, rendered: np.ndarray, contact: np.ndarray, card: pb.Card,
@@ -315,9 +325,14 @@ def check_friction(ctx: Context) -> Iterator[CheckResult]:
 
         def measure(case: str = case, card: pb.Card = card,
                     track: FingerTrack = track) -> Iterator[CheckResult]:
-            assert ctx.open_driver is not None
-            with ctx.open_driver() as driver:
-                m = measure_friction(driver, card, track)
+            open_driver = ctx.open_driver
+            assert open_driver is not None
+
+            def one_play() -> FrictionMeasurement:
+                with open_driver() as driver:
+                    return measure_friction(driver, card, track)
+
+            m = attempts(one_play, f"the play of {case}")
             if m.reports == 0:
                 raise CannotAssess("no settled report in contact echoed a finger sample of "
                                    "the session")

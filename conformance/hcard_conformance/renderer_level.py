@@ -37,6 +37,7 @@ from hcard.render import Frames
 from hcard_conformance import metrics
 from hcard_conformance.context import Context
 from hcard_conformance.metrics import Metric, Signal, Tolerances
+from hcard_conformance.realtime import NOT_KEPT, HostWatch
 from hcard_conformance.registry import check
 from hcard_conformance.result import CannotAssess, CheckResult, guarded, measured, unassessed
 
@@ -137,8 +138,11 @@ def _render_case(ctx: Context, entry: Any) -> dict[str, Any]:
     golden = replace(Signal.of(entry.load_arrays()), events=metrics.speed_onsets(track))
     in_contact = max(int(np.count_nonzero(golden.contact)), 1)
     losses: list[int] = []
+    late: list[str] = []
     while True:
-        raw = ctx.render(card, track, entry.options())
+        with HostWatch() as watch:
+            raw = ctx.render(card, track, entry.options())
+        late.append(watch.late if not ctx.frame_exact else "")
         if ctx.frame_exact:
             impl, lost = Signal.of(raw), 0
             break
@@ -148,10 +152,14 @@ def _render_case(ctx: Context, entry: Any) -> dict[str, Any]:
             break
         losses.append(lost)
         if len(losses) == RENDER_PLAYS:
+            # a host that did not run while it should have read lost the reports in transit:
+            # every play measured the host (spec QT3); else the loss is the link's or the
+            # device's, which device.report-loss judges
+            why = (f"; each play {NOT_KEPT}: " + "; ".join(late) if all(late) else "")
             raise CannotAssess(
                 f"{_counts(losses)} of {in_contact} golden frames in contact fell in gaps of "
                 f"lost STATE reports in {RENDER_PLAYS} plays (more than "
-                f"{MAX_UNREPORTED_FRACTION:.0%}); device.report-loss judges the loss")
+                f"{MAX_UNREPORTED_FRACTION:.0%}); device.report-loss judges the loss{why}")
     return {"golden": golden, "impl": impl, "card": card, "track": track,
             "tags": set(card_entry.tags), "raw": raw, "unreported_frames": lost,
             "replayed_after": losses}

@@ -50,7 +50,6 @@ from hcard_conformance.result import (
     CheckResult,
     guarded,
     measured,
-    unassessed,
 )
 from hcard_conformance.timing import timing_class
 from hcard_device.drivers.base import Driver
@@ -261,7 +260,7 @@ def case_second_host_refused(hosts: Hosts, max_lost: float = MAX_LOST) -> CheckR
     count as intrusions only in a run the host and the device kept in real time (spec QT3):
     otherwise :class:`NotKept`, and the case is measured again."""
     intrusions: list[str] = []
-    starved: list[str] = []
+    starved: list[tuple[str, bool]] = []  # why, and whether the device's watchdog tripped
     seen_owner: list[State] = []
     with hosts.open_driver() as first_driver, contextlib.ExitStack() as stack:
         info = first_driver.info()
@@ -272,15 +271,28 @@ def case_second_host_refused(hosts: Hosts, max_lost: float = MAX_LOST) -> CheckR
             seen_owner.append(owner)
             if not owner.session_live and (owner.faults & FaultBits.WATCHDOG or
                                            second.counters().watchdog_trips != trips_before[0]):
-                starved.append(
+                starved.append((
                     "the first host went silent for watchdog_ms before the second host came "
                     "(WATCHDOG flagged, its session ended by PN7): this host cannot hold a "
-                    "session in real time, so the refusals of PN3 and PN5 could not be tested")
+                    "session in real time, so the refusals of PN3 and PN5 could not be tested",
+                    True))
+                return
+            if not owner.session_live and owner.session_number != 0:
+                # a session of this device ended while its host played, the second host having
+                # sent nothing: the first host's silence (PN7) or the device's fault
+                starved.append((
+                    f"the first host's session {owner.session_number} had ended (flag SESSION "
+                    "clear) before the second host sent anything", False))
                 return
             if not owner.session_live:
                 intrusions.append("no live session in STATE while the first host plays (PN2)")
             second.send(Control(Command.START, other_token(owner.session_token)))
             seen = second.collect_until(second.clock() + SETTLE_S)
+            if owner.session_live and any(not s.session_live for s in seen):
+                starved.append((  # ended (PN7) between the look and the START
+                    f"the first host's session {owner.session_number} ended (flag SESSION "
+                    "clear) before the second host's START took effect", False))
+                return
             if not any(s.faults & FaultBits.SESSION_BUSY for s in seen):
                 intrusions.append("the second host's START was not flagged SESSION_BUSY (PN3)")
             if any(s.session_number != owner.session_number for s in seen):
@@ -296,11 +308,11 @@ def case_second_host_refused(hosts: Hosts, max_lost: float = MAX_LOST) -> CheckR
                 ended = owner.session_live and any(
                     not s.session_live or s.faults & FaultBits.WATCHDOG for s in during)
                 if tripped or ended:
-                    starved.append(
+                    starved.append((
                         "the first host went silent for watchdog_ms while the second uploaded "
                         "(WATCHDOG flagged, its session ended by PN7 before the COMMIT): this "
                         "host cannot hold a session in real time, so the refusal of PN5 could "
-                        "not be tested")
+                        "not be tested", True))
                     return
                 intrusions.append("the second host's COMMIT replaced the card (PN5)")
             except DeviceError as exc:
@@ -313,15 +325,19 @@ def case_second_host_refused(hosts: Hosts, max_lost: float = MAX_LOST) -> CheckR
         first = Background(first_driver, stroke_card(info, 0.4), stroke_track(info))
         with HostWatch() as watch:
             first.run(intrude)
+    late = reasons(watch.late if first.driver.realtime else "",
+                   device_lag(first.result.states if first.result else []))
     if starved:
-        return unassessed(CHECK, LEVEL, CASES[0], starved[0])
+        # the host went silent for watchdog_ms (its session ended by PN7): a run not kept
+        # when the device tripped its watchdog or the host saw itself late (spec QT3)
+        why, tripped = starved[0]
+        if tripped or late:
+            raise NotKept(reasons(late, why))
+        intrusions.append(f"{why}, though the host kept real time (PN7)")
     owner = seen_owner[0]
     own = session_faults(first, owner, max_lost)
-    if own and not intrusions:
-        late = reasons(watch.late if first.driver.realtime else "",
-                       device_lag(first.result.states if first.result else []))
-        if late:
-            raise NotKept(f"{late}; the first host saw: {'; '.join(own)}")
+    if own and not intrusions and late:
+        raise NotKept(f"{late}; the first host saw: {'; '.join(own)}")
     intrusions += own
     if intrusions:
         detail = "; ".join(intrusions)
