@@ -10,8 +10,9 @@ real-time verdict that depends on an idle machine is a defect, and a test that s
 hide one. A run that was kept is judged as usual, so a faulty device still fails.
 
 * :func:`in_real_time` runs a test's own real-time measurement, which raises
-  :class:`~hcard_conformance.realtime.NotKept` (see :func:`require_kept`) when its run was not
-  kept;
+  :class:`~hcard_conformance.realtime.NotKept` when its run was not kept: a block under
+  :func:`kept_run` does so when an assertion fails in a run the host or the device did not
+  keep;
 * :func:`assert_conforms` judges a conformance report, whose cases are already measured again by
   the suite (QT3): an UNASSESSED case whose every run was not kept fails the test with the
   machine's reason, any other non-PASS with the device's.
@@ -19,7 +20,8 @@ hide one. A run that was kept is judged as usual, so a faulty device still fails
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
+import contextlib
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import TypeVar
 
 import pytest
@@ -29,11 +31,14 @@ from hcard_conformance.realtime import (
     HostWatch,
     NotKept,
     device_lag,
+    host_priority,
     not_kept_results,
     reasons,
 )
 from hcard_conformance.result import CheckResult
 from hcard_device.protocol import State
+
+__all__ = ["MACHINE", "HostWatch", "assert_conforms", "in_real_time", "kept_run"]
 
 T = TypeVar("T")
 MACHINE = "the machine could not keep real time"
@@ -41,29 +46,35 @@ MACHINE = "the machine could not keep real time"
 
 
 def in_real_time(run: Callable[[], T], what: str, attempts: int = ATTEMPTS) -> T:
-    """``run()`` again while it raises NotKept, at most ``attempts`` times; the first kept
-    run's value. When none was kept the test fails with :data:`MACHINE` and every reason."""
+    """``run()`` again while it raises NotKept, at most ``attempts`` times, each at the host
+    priority the conformance suite asks for (:func:`host_priority`); the first kept run's
+    value. When none was kept the test fails with :data:`MACHINE` and every reason."""
     why: list[str] = []
     for attempt in range(1, attempts + 1):
         try:
-            return run()
+            with host_priority():  # a real-time host asks to be one, as the suite does (QT3)
+                return run()
         except NotKept as exc:
             why.append(f"attempt {attempt}: {exc}")
     pytest.fail(f"{MACHINE} for {what} in {attempts} attempts: {'; '.join(why)}",
                 pytrace=False)
 
 
-def require_kept(problems: Sequence[str], watch: HostWatch | None,
-                 states: Iterable[State] = ()) -> None:
-    """After a run: when it went wrong (``problems``, what the test found) and the host
-    (``watch``) or the device (REALTIME_LAG in ``states``, PI4) did not keep real time, raise
-    NotKept; when it went wrong in a run that was kept, fail the test with the problems."""
-    if not problems:
-        return
-    late = reasons(watch.late if watch is not None else "", device_lag(list(states)))
-    if late:
-        raise NotKept(f"{late}; the run found: {'; '.join(problems)}")
-    pytest.fail("; ".join(problems), pytrace=False)
+@contextlib.contextmanager
+def kept_run(states: Sequence[State] = ()) -> Iterator[HostWatch]:
+    """The block is one real-time run, watched (:class:`HostWatch`): an assertion that fails
+    in it (``assert``, ``pytest.raises``, ``pytest.fail``) becomes NotKept when the host did
+    not run for longer than the watch's bound or the device flagged a report of ``states``
+    REALTIME_LAG (PI4; the block may fill the list as it reads); in a run that was kept it
+    stands, and the test fails with the device's verdict."""
+    with HostWatch() as watch:
+        try:
+            yield watch
+        except (AssertionError, pytest.fail.Exception) as exc:
+            late = reasons(watch.late, device_lag(list(states)))
+            if late:
+                raise NotKept(f"{late}; the run found: {exc}") from exc
+            raise
 
 
 def assert_conforms(results: Iterable[CheckResult]) -> None:
