@@ -153,16 +153,17 @@ def _render_case(ctx: Context, entry: Any) -> dict[str, Any]:
         losses.append(lost)
         if len(losses) == RENDER_PLAYS:
             # a host that did not run while it should have read lost the reports in transit:
-            # every play measured the host (spec QT3); else the loss is the link's or the
+            # such plays measured the host (spec QT3); else the loss is the link's or the
             # device's, which device.report-loss judges
-            why = (f"; each play {NOT_KEPT}: " + "; ".join(late) if all(late) else "")
+            why = (f"; the plays {NOT_KEPT}: " + "; ".join(x for x in late if x)
+                   if any(late) else "")
             raise CannotAssess(
                 f"{_counts(losses)} of {in_contact} golden frames in contact fell in gaps of "
                 f"lost STATE reports in {RENDER_PLAYS} plays (more than "
                 f"{MAX_UNREPORTED_FRACTION:.0%}); device.report-loss judges the loss{why}")
     return {"golden": golden, "impl": impl, "card": card, "track": track,
             "tags": set(card_entry.tags), "raw": raw, "unreported_frames": lost,
-            "replayed_after": losses}
+            "replayed_after": losses, "late": late[-1]}
 
 
 def _counts(losses: list[int]) -> str:
@@ -177,9 +178,26 @@ def _each_entry(ctx: Context, name: str, entries: Iterable[Any],
     for entry in entries:
 
         def measure(entry: Any = entry) -> Iterator[CheckResult]:
-            result = judge(entry)
+            key = ("renderer-case", entry.name)
+            late: list[str] = []
+            while True:
+                result = judge(entry)
+                found = ctx.cache.get(key)
+                if result is None or result.passed or not isinstance(found, dict) or \
+                        not found["late"]:
+                    break
+                # failed on a play the host did not keep in real time (spec QT3): play again,
+                # three plays of this entry in all; a pass on such a play stands
+                late.append(found["late"])
+                plays = ctx.cache.get(("renderer-late-plays", entry.name), 1)
+                if plays >= RENDER_PLAYS:
+                    result = unassessed(name, LEVEL, entry.name,
+                                        f"the play {NOT_KEPT} in {plays} plays "
+                                        f"({'; '.join(late)}); it failed so: {result.detail}")
+                    break
+                ctx.cache[("renderer-late-plays", entry.name)] = plays + 1
+                del ctx.cache[key]
             if result is not None:
-                found = ctx.cache.get(("renderer-case", entry.name))
                 if isinstance(found, dict):
                     result.detail += _loss_note(found)
                 yield result
