@@ -23,6 +23,7 @@ measures it first, in the same invocation, and prints the loaded-to-idle time ra
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import shutil
 import signal
@@ -101,16 +102,24 @@ def stop_burners(burners: list[subprocess.Popen[bytes]]) -> None:
 
 
 def run_node(node: str, timeout_s: float) -> tuple[bool, float, str]:
-    """Run one pytest node id in a fresh process: (passed, wall time in s, output tail)."""
+    """Run one pytest node id in a fresh process group: (passed, wall time in s, output tail).
+    The group is killed when the run ends in any way but its own (a timeout, Ctrl-C), so no
+    device server or guest it started outlives it."""
     start = time.monotonic()
+    process = subprocess.Popen(
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", node],
+        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        start_new_session=True)
     try:
-        done = subprocess.run(
-            [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", node],
-            cwd=REPO, capture_output=True, text=True, timeout=timeout_s, check=False)
+        out, _ = process.communicate(timeout=timeout_s)
     except subprocess.TimeoutExpired:
-        return False, time.monotonic() - start, f"timed out after {timeout_s:g} s"
-    tail = "\n".join((done.stdout + done.stderr).strip().splitlines()[-6:])
-    return done.returncode == 0, time.monotonic() - start, tail
+        out = f"timed out after {timeout_s:g} s"
+    finally:  # the run's group: the run itself if still going, and whatever it left behind
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(process.pid, signal.SIGKILL)
+        process.wait()
+    tail = "\n".join(out.strip().splitlines()[-6:])
+    return process.returncode == 0, time.monotonic() - start, tail
 
 
 def measure(nodes: list[str], repeat: int, burners: int,
@@ -130,6 +139,8 @@ def measure(nodes: list[str], repeat: int, burners: int,
                 print(f"  [{burners} burners, run {round_number}/{repeat}] {figure.node}: "
                       f"{'pass' if passed else 'FAIL'} in {seconds:.1f} s "
                       f"(load {os.getloadavg()[0]:.1f})", flush=True)
+                if not passed:
+                    print("    " + tail.replace("\n", "\n    "), flush=True)
     finally:
         stop_burners(processes)
     return figures, time.monotonic() - start
@@ -142,8 +153,8 @@ def report(title: str, figures: list[Figures], wall_s: float, load: str, repeat:
     for f in figures:
         print(f"  {f.node:<{width}}  passed {f.passed:>2} of {repeat}  "
               f"mean {sum(f.seconds) / len(f.seconds):6.1f} s  longest {max(f.seconds):6.1f} s")
-        for tail in f.failures:
-            print("    failure: " + tail.replace("\n", "\n             "))
+        if f.failures:
+            print(f"    {len(f.failures)} failed run(s): their output is above")
 
 
 def main(argv: list[str] | None = None) -> int:

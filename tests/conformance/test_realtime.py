@@ -210,3 +210,55 @@ def test_the_tests_fail_saying_the_machine_could_not_keep_real_time() -> None:
         assert_conforms([never, failed])
     assert_conforms([replace(failed, passed=True, outcome="")])
 
+
+
+def test_a_render_that_failed_on_a_late_play_is_played_again_then_unassessed() -> None:
+    """Renderer level over a device (QT3): an entry that failed on a play the host did not keep
+    is played again, three plays in all, then UNASSESSED; a play that was kept is judged (a
+    faulty device fails); a pass on a late play stands."""
+    from types import SimpleNamespace
+
+    from hcard_conformance.renderer_level import _each_entry
+
+    entry = SimpleNamespace(name="grating@stroke")
+    key = ("renderer-case", entry.name)
+
+    def judged(lateness: list[str], passes: bool) -> tuple[CheckResult, int]:
+        ctx = Context("usbip://served")
+        plays: list[str] = []
+
+        def judge(_entry: object) -> CheckResult:
+            if key not in ctx.cache:  # a play of the entry (case() caches it)
+                late = lateness[min(len(plays), len(lateness) - 1)]
+                plays.append(late)
+                ctx.cache[key] = {"late": late, "replayed_after": [], "unreported_frames": 0}
+            return CheckResult("renderer.friction_error", "renderer", entry.name, passes,
+                               detail="RMS relative error 0.11")
+
+        [result] = _each_entry(ctx, "renderer.friction_error", [entry], judge)
+        return result, len(plays)
+
+    late = "the host did not run for up to 45 ms (1 times over 20 ms)"
+    result, plays = judged([late], passes=False)
+    assert (result.status, plays) == (UNASSESSED, 3)
+    assert f"{NOT_KEPT} in 3 plays" in result.detail and "0.11" in result.detail
+    result, plays = judged([late, ""], passes=False)
+    assert (result.status, plays) == (FAIL, 2)  # the second play was kept: the device fails
+    result, plays = judged([late], passes=True)
+    assert (result.status, plays) == (PASS, 1)
+
+
+def test_only_a_device_on_the_wall_clock_is_judged_by_the_hosts_lateness() -> None:
+    """sim:// runs in simulated time: however late the host ran, its plays are kept (a faulty
+    control fails whatever the load); a served device runs on the wall clock."""
+    from hcard import build
+    from hcard.render import RenderOptions
+    from hcard.track import straight_stroke
+    from hcard_conformance.context import REALTIME_KEY
+
+    card = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[build.texture(0.5, channel="uv")])
+    track = straight_stroke((2.0, 5.0), (40.0, 0.0), 0.1)
+    for uri, realtime in (("sim://", False), ("usbip://loopback", True)):
+        ctx = Context.for_driver(uri)
+        ctx.render(card, track, RenderOptions())
+        assert ctx.cache[REALTIME_KEY] is realtime, uri
