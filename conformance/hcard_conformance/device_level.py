@@ -60,6 +60,7 @@ from hcard_conformance.realtime import (
     HostWatch,
     NotKept,
     attempts,
+    collection_deferred,
     device_lag,
     reasons,
 )
@@ -706,10 +707,11 @@ def measure_latency(driver: Driver, trials: int = LATENCY_TRIALS, *,
                 return Hold(seen, send_late, loop_late)
 
     holds: list[Hold] = []
-    hold(left, 0.05)
-    for _ in range(trials):
-        holds.append(hold(right, 0.06))
-        hold(left, 0.04)
+    with collection_deferred():  # a collection's pause is host lateness (spec QT3)
+        hold(left, 0.05)
+        for _ in range(trials):
+            holds.append(hold(right, 0.06))
+            hold(left, 0.04)
     driver.stop()
     floor = min(read_lag, default=math.nan)
     latencies: list[float] = []
@@ -1071,7 +1073,8 @@ def measure_safety(open_driver: Callable[[], Driver]) -> Iterator[tuple[str, int
             _wait_for_rest(driver)
             base = driver.limits()
             try:
-                return measure_limits_while_driven(driver, base)
+                with collection_deferred():  # a collection's pause would starve the plate
+                    return measure_limits_while_driven(driver, base)
             finally:  # leave the limits as they were, as host-limits does
                 driver.set_limits(base.max_amplitude_m, base.max_voltage_v, base.max_current_a)
 

@@ -45,7 +45,14 @@ from hcard import build
 from hcard.card_io import to_bytes
 from hcard.quantities import MS_PER_S, S_PER_US, US_PER_S
 from hcard_conformance.context import Context
-from hcard_conformance.realtime import NOT_KEPT, NotKept, attempted_case, device_lag, reasons
+from hcard_conformance.realtime import (
+    NOT_KEPT,
+    NotKept,
+    attempted_case,
+    collection_deferred,
+    device_lag,
+    reasons,
+)
 from hcard_conformance.registry import check
 from hcard_conformance.result import CannotAssess, CheckResult, guarded, measured, unassessed
 from hcard_conformance.timing import REAL_TIME, timing_class
@@ -850,7 +857,8 @@ def measure_report_loss(driver: Driver, session_s: float = LOSS_SESSION_S) -> Lo
         session.mark()
         first = len(session.states)
         start = driver.clock()
-        session.run(session_s)
+        with collection_deferred():  # a collection's pause would lose reports (QT3)
+            session.run(session_s)
         counters = driver.counters()
         session.run(TAIL_S)
         duration = driver.clock() - start

@@ -35,9 +35,9 @@ import numpy as np
 
 from hcard.render import Frames
 from hcard_conformance import metrics
-from hcard_conformance.context import REALTIME_KEY, Context
+from hcard_conformance.context import DEVICE_LAG_KEY, REALTIME_KEY, Context
 from hcard_conformance.metrics import Metric, Signal, Tolerances
-from hcard_conformance.realtime import NOT_KEPT, HostWatch
+from hcard_conformance.realtime import NOT_KEPT, HostWatch, reasons
 from hcard_conformance.registry import check
 from hcard_conformance.result import CannotAssess, CheckResult, guarded, measured, unassessed
 
@@ -52,6 +52,10 @@ between them (Q5): the golden frames in between are not compared."""
 MAX_UNREPORTED_FRACTION = 0.05
 """Fraction of the golden in-contact frames that may fall in gaps of lost reports before a
 render is played again (report loss itself is judged by ``device.report-loss``, L1-L3)."""
+PLAY_LATE_S = 0.01
+"""Longest time the host may not run in a kept play of a render through a device (spec QT3),
+s: half the 20 ms touch period of the vectors' tracks, so no touch sample leaves more than
+half a period late."""
 RENDER_PLAYS = 3
 """Most plays of one render whose record keeps losing more than
 :data:`MAX_UNREPORTED_FRACTION` of its frames before it is not assessed: one host stall on a
@@ -140,11 +144,12 @@ def _render_case(ctx: Context, entry: Any) -> dict[str, Any]:
     losses: list[int] = []
     late: list[str] = []
     while True:
-        with HostWatch() as watch:
+        with HostWatch(PLAY_LATE_S) as watch:
             raw = ctx.render(card, track, entry.options())
         # the host's lateness matters only to a device on the wall clock (not sim://)
         realtime = not ctx.frame_exact and ctx.cache.get(REALTIME_KEY, True)
-        late.append(watch.late if realtime else "")
+        late.append(reasons(watch.late if realtime else "",
+                            "" if ctx.frame_exact else ctx.cache.get(DEVICE_LAG_KEY, "")))
         if ctx.frame_exact:
             impl, lost = Signal.of(raw), 0
             break
