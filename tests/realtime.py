@@ -38,7 +38,7 @@ from hcard_conformance.realtime import (
 from hcard_conformance.result import CheckResult
 from hcard_device.protocol import State
 
-__all__ = ["MACHINE", "HostWatch", "assert_conforms", "in_real_time", "kept_run"]
+__all__ = ["MACHINE", "HostWatch", "NotKept", "assert_conforms", "in_real_time", "kept_run"]
 
 T = TypeVar("T")
 MACHINE = "the machine could not keep real time"

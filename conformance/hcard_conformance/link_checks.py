@@ -57,7 +57,7 @@ from hcard_conformance.registry import check
 from hcard_conformance.result import CannotAssess, CheckResult, guarded, measured, unassessed
 from hcard_conformance.timing import REAL_TIME, timing_class
 from hcard_device.drivers.base import Driver
-from hcard_device.drivers.errors import DeviceStall
+from hcard_device.drivers.errors import DeviceStall, SessionLost
 from hcard_device.protocol import (
     FRICTION_SCALE,
     UPLOAD_CHUNK_BYTES,
@@ -910,12 +910,23 @@ def measure_loss_sessions(driver: Driver, attempts: int = LOSS_ATTEMPTS) -> Loss
     lost reports, the one that lost fewest: its loss cases are then not assessed (a run not
     kept in real time, spec QT3, :func:`loss_not_kept`), its anomalies are judged."""
     sessions: list[LossSession] = []
+    lost: list[str] = []
     for attempt in range(1, attempts + 1):
-        m = replace(measure_report_loss(driver), attempt=attempt)
+        try:
+            m = replace(measure_report_loss(driver), attempt=attempt)
+        except SessionLost as exc:
+            # the host went silent for watchdog_ms (PN7 ended its session): a session not
+            # kept (spec QT3); a driver that is not real-time never goes silent
+            if not driver.realtime:
+                raise
+            lost.append(f"session {attempt}: {exc}")
+            continue
         s = m.stats
         if not m.disturbed or s.unexcused + s.duplicates + s.reordered + s.misnumbered == 0:
             return m
         sessions.append(m)
+    if not sessions:
+        raise NotKept(f"every session {NOT_KEPT}: {'; '.join(lost)}")
     return min(sessions, key=lambda m: m.stats.unexcused)
 
 

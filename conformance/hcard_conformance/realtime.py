@@ -24,17 +24,19 @@ real time, it runs ahead of the ordinary processes of its computer where the OS 
 
 from __future__ import annotations
 
-import contextlib
-import gc
-import os
 import threading
 import time
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from typing import TypeVar
 
 from hcard.quantities import MS_PER_S
 from hcard_conformance.result import CannotAssess, CheckResult, unassessed
+from hcard_device.drivers.priority import collection_deferred, host_priority
 from hcard_device.protocol import FaultBits, State
+
+__all__ = ["ATTEMPTS", "HOST_LATE_S", "NOT_KEPT", "HostWatch", "NotKept", "attempted_case",
+           "attempts", "collection_deferred", "device_lag", "host_priority", "not_kept_results",
+           "reasons"]
 
 ATTEMPTS = 3
 """Runs of a measurement at most, while none was kept in real time (spec QT3)."""
@@ -44,11 +46,6 @@ in a run that is kept, s: 20 reports at 1 kHz, one 50 Hz touch period (the bound
 own pauses in the report-loss check, spec 4.7)."""
 WATCH_PERIOD_S = 0.001
 """Sleep of the :class:`HostWatch` thread between two looks at the host's clock, s."""
-HOST_NICE = -10
-"""Nice value a real-time host asks for while it measures (:func:`host_priority`): about nine
-times the CPU share of an ordinary process (each step is ~1.25x). Not real-time scheduling:
-the host also renders and fits with numpy for seconds at a time, which must not hold a CPU
-against every other process."""
 NOT_KEPT = "could not be kept in real time"
 """Words every reason of a run not kept contains (the tests look for them)."""
 
@@ -142,53 +139,21 @@ class HostWatch:
                 f"({self.late_count} times over {self.bound_s * MS_PER_S:.0f} ms)")
 
 
-@contextlib.contextmanager
-def collection_deferred() -> Iterator[None]:
-    """The interpreter's cyclic garbage collection waits for the end of the block (a real-time
-    run: :class:`HostWatch`); reference counting still frees what the block drops. A full
-    collection stops every thread of the process; in a suite's process it took 50-200 ms."""
-    collecting = gc.isenabled()
-    gc.disable()
-    try:
-        yield
-    finally:
-        if collecting:
-            gc.enable()
-
-
-@contextlib.contextmanager
-def host_priority() -> Iterator[str]:
-    """Run the calling thread, and the threads it starts meanwhile (they inherit it), at nice
-    :data:`HOST_NICE` where permitted (root or CAP_SYS_NICE; otherwise as it was, EPERM is not
-    an error), and give the previous value back on exit. Yields what was granted. On a loaded
-    2-core machine (two CPU burners) it took the host's median read lag of the device's
-    reports from 42 ms to 9 ms, what the same host reads with no burner."""
-    before = os.getpriority(os.PRIO_PROCESS, 0)
-    try:
-        os.setpriority(os.PRIO_PROCESS, 0, min(before, HOST_NICE))
-        granted = f"nice {min(before, HOST_NICE)}"
-    except OSError:
-        granted = f"nice {before} (no higher priority permitted)"
-    try:
-        yield granted
-    finally:
-        with contextlib.suppress(OSError):
-            os.setpriority(os.PRIO_PROCESS, 0, before)
-
-
 def reasons(*found: str) -> str:
     """The non-empty reasons of ``found``, joined."""
     return "; ".join(r for r in found if r)
 
 
 def attempts(measure: Callable[[], T], what: str, count: int = ATTEMPTS) -> T:
-    """``measure()`` again while it raises :class:`NotKept`, at most ``count`` runs; the first
-    kept run's value. When none was kept, raises :class:`CannotAssess` naming ``what`` and the
-    reason of every attempt (spec QT3)."""
+    """``measure()`` again while it raises :class:`NotKept`, at most ``count`` runs, each at
+    the host's real-time priority (:func:`host_priority`); the first kept run's value. When
+    none was kept, raises :class:`CannotAssess` naming ``what`` and the reason of every
+    attempt (spec QT3)."""
     why: list[str] = []
     for attempt in range(1, count + 1):
         try:
-            return measure()
+            with host_priority():
+                return measure()
         except NotKept as exc:
             why.append(f"attempt {attempt}: {exc}")
     raise CannotAssess(f"{what} {NOT_KEPT} in {count} attempts ({'; '.join(why)})")

@@ -422,9 +422,15 @@ def _fuzz_one(kind: ReportKind, data: bytes) -> None:
     except ProtocolError:
         return
     assert decode(kind, report.encode()) == report
-    # reports without ignored bytes re-encode to exactly the bytes received (padding aside)
+    # reports without ignored bytes re-encode to exactly the bytes received (padding aside);
+    # one of an older minor version (STATE of 52 or 55 bytes, COUNTERS of 31: rule PV4)
+    # re-encodes to the bytes received followed by the appended fields
     if not isinstance(report, (Stream, UploadData, UploadStatus, ClipReport)):
-        assert report.encode() == data[: type(report).size()]
+        size = type(report).size()
+        if len(data) < size:
+            assert report.encode()[: len(data)] == data
+        else:
+            assert report.encode() == data[:size]
 
 
 @settings(max_examples=600)
