@@ -452,7 +452,8 @@ def test_fuzz_each_report_class(cls: type[Report], body: bytes) -> None:
     except ProtocolError as exc:
         assert exc.report == cls.name()
         return
-    assert len(body) >= cls.size() - 1
+    older = {getattr(cls, name, None) for name in ("LEGACY_SIZE", "SESSION_SIZE")}
+    assert len(body) >= cls.size() - 1 or len(body) + 1 in older  # PV4: an older minor's size
     assert cls.decode(report.encode()) == report
 
 
