@@ -47,6 +47,14 @@ before the first report that echoes it, one because such a device places a sampl
 fastest transport it has seen over all sessions (PO2), which may be up to a period faster than
 this session's fastest."""
 
+REALTIME_KEY = "driver-realtime"
+""":attr:`Context.cache` key: whether the last driver :meth:`Context.render` played through
+runs on the wall clock (a host's lateness matters, spec QT3) or in simulated time."""
+
+DEVICE_LAG_KEY = "device-lag"
+""":attr:`Context.cache` key: why the device did not keep real time in the last play of
+:meth:`Context.render` (REALTIME_LAG, device protocol PI4); empty when it did."""
+
 Renderer = Callable[[pb.Card, FingerTrack, RenderOptions], Frames]
 
 
@@ -162,8 +170,12 @@ class Context:
         from hcard_device.drivers.play import play
 
         with self.open_driver() as driver:
+            self.cache[REALTIME_KEY] = driver.realtime
             result = play(driver, card, track, **({"tail_s": self.options["tail_s"]}
                                                   if "tail_s" in self.options else {}))
+        from hcard_conformance.realtime import device_lag
+
+        self.cache[DEVICE_LAG_KEY] = device_lag(result.states)
         return reported_frames(result.states, track, result.host_us)
 
     @classmethod

@@ -45,11 +45,19 @@ from hcard import build
 from hcard.card_io import to_bytes
 from hcard.quantities import MS_PER_S, S_PER_US, US_PER_S
 from hcard_conformance.context import Context
+from hcard_conformance.realtime import (
+    NOT_KEPT,
+    NotKept,
+    attempted_case,
+    collection_deferred,
+    device_lag,
+    reasons,
+)
 from hcard_conformance.registry import check
 from hcard_conformance.result import CannotAssess, CheckResult, guarded, measured, unassessed
 from hcard_conformance.timing import REAL_TIME, timing_class
 from hcard_device.drivers.base import Driver
-from hcard_device.drivers.errors import DeviceStall
+from hcard_device.drivers.errors import DeviceStall, SessionLost
 from hcard_device.protocol import (
     FRICTION_SCALE,
     UPLOAD_CHUNK_BYTES,
@@ -178,6 +186,21 @@ class FingerSession:
             self.arrivals += [self.driver.clock()] * len(batch)
             got += batch
         self.states += got
+        return got
+
+    def run_quiet(self, seconds: float) -> list[State]:
+        """:meth:`run` for ``seconds`` of the host's clock and of the device's: a device that
+        fell behind its real-time clock (device protocol PI4) counts less time than the host,
+        and an upload silence must last ``seconds`` on the clock of the device's timeout (PU4:
+        "2 s of device time"). The device's time is that of the reports read, from the newest
+        one read before; at most ``seconds`` more of the host's clock are added."""
+        since = self.states[-1].timestamp_us if self.states else None
+        got = self.run(seconds)
+        deadline = self.driver.clock() + seconds
+        while (since is not None and self.driver.clock() < deadline
+               and (not got or ((got[-1].timestamp_us - since) % _TIME_MODULO) * S_PER_US
+                    < seconds)):
+            got += self.run(SETTLE_S)
         return got
 
     def restore(self) -> None:
@@ -333,7 +356,7 @@ def run_attempt(session: FingerSession, steps: Sequence[Step]) -> Attempt:
         if isinstance(step, str):
             probes.append(driver.upload_status())
         elif isinstance(step, float):
-            session.run(step)
+            session.run_quiet(step)
             continue
         else:
             try:
@@ -564,23 +587,47 @@ def measure_upload_integrity(driver: Driver) -> Iterator[CheckResult]:
     session = FingerSession(driver)
     session.begin(anonymous=True)
     try:
-        attempts = bad_uploads(card_b.data, info.max_card_bytes)
-        for case, (steps, expected) in attempts.items():
+        uploads = bad_uploads(card_b.data, info.max_card_bytes)
+        for case, (steps, expected) in uploads.items():
             if case == "oversize" and info.max_card_bytes >= 0xFFFF_FFFF:
                 yield unassessed("device.upload-integrity", LEVEL, case, "max_card_bytes is "
                                  "the largest u32: no announced size is above it")
                 continue
+
+            def refusal(case: str = case, steps: list[Step] = steps,
+                        expected: UploadResult = expected) -> CheckResult:
+                generation = ensure_card(session, card_a)
+                attempt = run_attempt(session, steps)
+                return kept(judge_refusal(case, attempt, expected, card_a, generation), attempt)
+
+            yield attempted_case("device.upload-integrity", LEVEL, case, refusal)
+
+        def commit() -> CheckResult:
             generation = ensure_card(session, card_a)
-            yield judge_refusal(case, run_attempt(session, steps), expected, card_a,
-                                generation)
-        generation = ensure_card(session, card_a)
-        attempt = upload(session, card_b)
-        if attempt.status.state == UploadState.COMMITTED:  # a slow host: B's reports may lag
-            attempt.states += play_until_shown(session, card_b, next_generation(generation))
-        yield judge_commit(attempt, card_b, generation, card_a)
+            attempt = upload(session, card_b)
+            if attempt.status.state == UploadState.COMMITTED:  # a slow host: B's reports lag
+                attempt.states += play_until_shown(session, card_b, next_generation(generation))
+            return kept(judge_commit(attempt, card_b, generation, card_a), attempt)
+
+        yield attempted_case("device.upload-integrity", LEVEL, "valid-after", commit)
         ensure_card(session, card_a)  # leave card A in force (module docstring)
     finally:
         session.restore()
+
+
+def kept(result: CheckResult, attempt: Attempt) -> CheckResult:
+    """``result``, unless it failed in a run not kept in real time (spec QT3): the host paused
+    longer than :data:`HOST_PAUSE_MAX_S` between reads, or the device flagged reports
+    REALTIME_LAG (device protocol PI4); then :class:`NotKept`, and the case is measured again
+    (:func:`~hcard_conformance.realtime.attempted_case`). A result that passed stands."""
+    if result.passed:
+        return result
+    host = (f"the host paused {attempt.longest_pause_s * MS_PER_S:.0f} ms between reads"
+            if attempt.longest_pause_s > HOST_PAUSE_MAX_S else "")
+    why = reasons(host, device_lag(attempt.states))
+    if why:
+        raise NotKept(f"{why}; the case failed so: {result.detail}")
+    return result
 
 
 @check(name="device.upload-integrity", level=LEVEL,
@@ -748,6 +795,8 @@ class LossSession:
         late_s: spread of the reports' delay from the device's clock to the host's read
             (the latest less the earliest), s: reports that reached the host in a burst, late.
         attempt: which session this was (1 = the first, :data:`LOSS_ATTEMPTS` at most).
+        device_late: reports read with fault REALTIME_LAG, or COUNTERS ``late_reports`` if
+            more (the device fell behind its real-time clock, device protocol PI4).
     """
 
     stats: SequenceStats
@@ -759,6 +808,7 @@ class LossSession:
     longest_pause_s: float
     late_s: float = 0.0
     attempt: int = 1
+    device_late: int = 0
 
     @property
     def disturbed(self) -> str:
@@ -774,7 +824,15 @@ class LossSession:
             reasons.append(f"reports reached the host up to {self.late_s * MS_PER_S:.0f} ms late")
         if self.rate_ratio < MIN_RATE_RATIO:
             reasons.append(f"the device's clock ran at {self.rate_ratio:.0%} of the host's")
+        if self.device_late:
+            reasons.append(f"the device produced {self.device_late} reports late on its "
+                           "real-time clock (REALTIME_LAG, device protocol PI4)")
         return " and ".join(reasons)
+
+    @property
+    def lost_while_reading(self) -> bool:
+        """Reports were lost while the host read (gaps its own pauses do not excuse)."""
+        return self.stats.unexcused > 0
 
     def conditions(self) -> str:
         """The session's conditions, for a result's detail."""
@@ -799,7 +857,8 @@ def measure_report_loss(driver: Driver, session_s: float = LOSS_SESSION_S) -> Lo
         session.mark()
         first = len(session.states)
         start = driver.clock()
-        session.run(session_s)
+        with collection_deferred():  # a collection's pause would lose reports (QT3)
+            session.run(session_s)
         counters = driver.counters()
         session.run(TAIL_S)
         duration = driver.clock() - start
@@ -813,9 +872,11 @@ def measure_report_loss(driver: Driver, session_s: float = LOSS_SESSION_S) -> Lo
     stats = sequence_stats([s.sequence for s in states], [s.timestamp_us for s in states],
                            US_PER_S / rate, arrivals, pauses)
     flagged = sum(bool(s.faults & FaultBits.INPUT_DROPPED) for s in states)
+    device_late = max(sum(bool(s.faults & FaultBits.REALTIME_LAG) for s in states),
+                      counters.late_reports)
     return LossSession(stats, counters, states[-1].dropped_reports, flagged, duration,
                        device_span_s(states) / duration, session.longest_pause_s,
-                       delay_spread_s(states, arrivals))
+                       delay_spread_s(states, arrivals), device_late=device_late)
 
 
 def delay_spread_s(states: Sequence[State], arrivals_s: Sequence[float]) -> float:
@@ -846,15 +907,40 @@ def measure_loss_sessions(driver: Driver, attempts: int = LOSS_ATTEMPTS) -> Loss
     """The session the cases judge: the first that was not disturbed
     (:attr:`LossSession.disturbed`) or lost nothing while the host was reading (no gap but
     those its own pauses excuse, no anomaly); when every one of ``attempts`` was disturbed and
-    lost reports, the one that lost fewest (the cases then fail, naming the disturbance)."""
+    lost reports, the one that lost fewest: its loss cases are then not assessed (a run not
+    kept in real time, spec QT3, :func:`loss_not_kept`), its anomalies are judged."""
     sessions: list[LossSession] = []
+    lost: list[str] = []
     for attempt in range(1, attempts + 1):
-        m = replace(measure_report_loss(driver), attempt=attempt)
+        try:
+            m = replace(measure_report_loss(driver), attempt=attempt)
+        except SessionLost as exc:
+            # the host went silent for watchdog_ms (PN7 ended its session): a session not
+            # kept (spec QT3); a driver that is not real-time never goes silent
+            if not driver.realtime:
+                raise
+            lost.append(f"session {attempt}: {exc}")
+            continue
         s = m.stats
         if not m.disturbed or s.unexcused + s.duplicates + s.reordered + s.misnumbered == 0:
             return m
         sessions.append(m)
+    if not sessions:
+        raise NotKept(f"every session {NOT_KEPT}: {'; '.join(lost)}")
     return min(sessions, key=lambda m: m.stats.unexcused)
+
+
+def loss_not_kept(m: LossSession, sessions: int) -> str:
+    """Why the loss cases (L2, L3) of the judged session ``m`` are not assessed: it lost
+    reports while the host read, and it was disturbed (the host paused, reports came in a
+    burst, or the device fell behind its real-time clock), as every one of the ``sessions``
+    measured was (spec QT3: the loss measured the lateness, not the device; empty when the
+    session is judged). Duplicated, reordered or misnumbered reports (L1) owe nothing to
+    lateness and are judged whatever the session's conditions."""
+    if not m.disturbed or not m.lost_while_reading:
+        return ""
+    return (f"every one of {sessions} sessions lost reports while disturbed, so the run "
+            f"{NOT_KEPT} ({m.conditions()}; {m.stats.unexcused} lost while the host read)")
 
 
 def count_error(stats: SequenceStats, counted: int) -> int:
@@ -885,14 +971,20 @@ def check_report_loss(ctx: Context) -> Iterator[CheckResult]:
     timing = timing_class(ctx)
 
     def measure() -> Iterator[CheckResult]:
+        sessions = LOSS_ATTEMPTS if timing.keeps_real_time else 1
         with open_driver() as driver:
-            m = measure_loss_sessions(driver, LOSS_ATTEMPTS if timing.keeps_real_time else 1)
+            m = measure_loss_sessions(driver, sessions)
         s = m.stats
+        not_kept = loss_not_kept(m, sessions) if timing.keeps_real_time else ""
         yield measured("device.report-loss", LEVEL, "sequence-gaps", "n_anomalies",
                        s.duplicates + s.reordered + s.misnumbered, 0.0, unit="reports",
                        detail=f"{s.duplicates} duplicated, {s.reordered} reordered, "
                        f"{s.misnumbered} misnumbered (sequence step != timestamp step) of "
                        f"{s.received} reports; {m.conditions()}")
+        if not_kept:
+            yield unassessed("device.report-loss", LEVEL, "loss-fraction", not_kept)
+            yield unassessed("device.report-loss", LEVEL, "drops-counted", not_kept)
+            return
         yield measured("device.report-loss", LEVEL, "loss-fraction", "loss_fraction",
                        s.loss_fraction * 100, timing.host_report_loss * 100, unit="%",
                        detail=f"{s.unexcused} of {s.expected} reports lost while the host "

@@ -8,6 +8,7 @@ itself never crashes because of the implementation under test.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 from collections.abc import Callable, Iterable, Sequence
@@ -16,8 +17,10 @@ from typing import Any
 
 from hcard_conformance.conditions import run_conditions
 from hcard_conformance.context import Context
+from hcard_conformance.realtime import host_priority
 from hcard_conformance.registry import all_checks, applies_to
 from hcard_conformance.result import LEVELS, CheckResult, error_result, level_index
+from hcard_conformance.timing import timing_class
 
 Progress = Callable[[Any, CheckResult], None]
 """Called after each result with the check and the result (the CLI prints progress)."""
@@ -132,9 +135,24 @@ def run_suite(ctx: Context, levels: Sequence[str] = LEVELS, *, checks: Sequence[
     except Exception as exc:  # no vectors: the checks report it, one failed result each
         report.thresholds = {"error": math.nan}
         report.not_applicable.append(f"(thresholds unavailable: {exc})")
+    priority: contextlib.AbstractContextManager[Any] = contextlib.nullcontext()
     if any(c.level == "device" for c in chosen):
         report.conditions = run_conditions(ctx, ordered)
+        if ctx.open_driver is not None and timing_class(ctx).keeps_real_time:
+            priority = host_priority()  # a real-time host asks to be one (spec QT3)
     start = time.perf_counter()
+    with priority as granted:
+        if granted:
+            report.conditions["host_scheduling"] = granted
+        _run_chosen(chosen, ctx, report, progress, check_done)
+    report.duration_s = time.perf_counter() - start
+    return report
+
+
+def _run_chosen(chosen: Sequence[Any], ctx: Context, report: SuiteReport,
+                progress: Progress | None,
+                check_done: Callable[[Any, list[CheckResult], float], None] | None) -> None:
+    """Run each chosen check on ``ctx`` into ``report`` (not applicable ones listed)."""
     for chk in chosen:
         if not applies_to(chk, ctx):
             report.not_applicable.append(chk.name)
@@ -145,5 +163,3 @@ def run_suite(ctx: Context, levels: Sequence[str] = LEVELS, *, checks: Sequence[
         report.check_durations_s[chk.name] = time.perf_counter() - began
         if check_done is not None:
             check_done(chk, results, report.check_durations_s[chk.name])
-    report.duration_s = time.perf_counter() - start
-    return report

@@ -43,13 +43,13 @@ from hcard.quantities import MS_PER_S
 from hcard.track import FingerTrack, straight_stroke
 from hcard.v1 import card_pb2 as pb
 from hcard_conformance.context import Context
+from hcard_conformance.realtime import HostWatch, NotKept, attempted_case, device_lag, reasons
 from hcard_conformance.registry import check
 from hcard_conformance.result import (
     CannotAssess,
     CheckResult,
     guarded,
     measured,
-    unassessed,
 )
 from hcard_conformance.timing import timing_class
 from hcard_device.drivers.base import Driver
@@ -224,9 +224,9 @@ def two_hosts(open_driver: Callable[[], Driver]) -> Hosts:
         "one device; run the check on usbip:// or hid://")
 
 
-def session_faults(first: Background, owner: State) -> list[str]:
+def session_faults(first: Background, owner: State, max_lost: float = MAX_LOST) -> list[str]:
     """What went wrong for the first host of ``second-host-refused`` (empty when its play
-    completed up to its last finger sample with at most :data:`MAX_LOST` of its reports lost,
+    completed up to its last finger sample with at most ``max_lost`` of its reports lost,
     and stayed in session ``owner.session_number`` with one card)."""
     if first.error is not None:
         return [f"the first host's play failed: {first.error}"]
@@ -239,7 +239,7 @@ def session_faults(first: Background, owner: State) -> list[str]:
         problems.append("the first host's last report does not echo its last finger sample: "
                         "its recording stops short of the track")
     sent = len(result.states) + result.reports_lost
-    if not sent or result.reports_lost > MAX_LOST * sent:
+    if not sent or result.reports_lost > max_lost * sent:
         problems.append(f"the first host lost {result.reports_lost} of {sent} reports")
     late = [s for s in result.states if s.timestamp_us >= owner.timestamp_us]
     generations = sorted({s.card_generation for s in late})
@@ -252,10 +252,15 @@ def session_faults(first: Background, owner: State) -> list[str]:
     return problems
 
 
-def case_second_host_refused(hosts: Hosts) -> CheckResult:
-    """``second-host-refused`` (module docstring; rules PN3, PN5)."""
+def case_second_host_refused(hosts: Hosts, max_lost: float = MAX_LOST) -> CheckResult:
+    """``second-host-refused`` (module docstring; rules PN3, PN5). ``max_lost``: the fraction
+    of its reports the first host may lose (the timing class's host report loss when larger
+    than :data:`MAX_LOST`). What the device carried out for the second host fails the case
+    whatever the timing; the first host's own troubles (reports lost, a recording cut short)
+    count as intrusions only in a run the host and the device kept in real time (spec QT3):
+    otherwise :class:`NotKept`, and the case is measured again."""
     intrusions: list[str] = []
-    starved: list[str] = []
+    starved: list[tuple[str, bool]] = []  # why, and whether the device's watchdog tripped
     seen_owner: list[State] = []
     with hosts.open_driver() as first_driver, contextlib.ExitStack() as stack:
         info = first_driver.info()
@@ -266,15 +271,28 @@ def case_second_host_refused(hosts: Hosts) -> CheckResult:
             seen_owner.append(owner)
             if not owner.session_live and (owner.faults & FaultBits.WATCHDOG or
                                            second.counters().watchdog_trips != trips_before[0]):
-                starved.append(
+                starved.append((
                     "the first host went silent for watchdog_ms before the second host came "
                     "(WATCHDOG flagged, its session ended by PN7): this host cannot hold a "
-                    "session in real time, so the refusals of PN3 and PN5 could not be tested")
+                    "session in real time, so the refusals of PN3 and PN5 could not be tested",
+                    True))
+                return
+            if not owner.session_live and owner.session_number != 0:
+                # a session of this device ended while its host played, the second host having
+                # sent nothing: the first host's silence (PN7) or the device's fault
+                starved.append((
+                    f"the first host's session {owner.session_number} had ended (flag SESSION "
+                    "clear) before the second host sent anything", False))
                 return
             if not owner.session_live:
                 intrusions.append("no live session in STATE while the first host plays (PN2)")
             second.send(Control(Command.START, other_token(owner.session_token)))
             seen = second.collect_until(second.clock() + SETTLE_S)
+            if owner.session_live and any(not s.session_live for s in seen):
+                starved.append((  # ended (PN7) between the look and the START
+                    f"the first host's session {owner.session_number} ended (flag SESSION "
+                    "clear) before the second host's START took effect", False))
+                return
             if not any(s.faults & FaultBits.SESSION_BUSY for s in seen):
                 intrusions.append("the second host's START was not flagged SESSION_BUSY (PN3)")
             if any(s.session_number != owner.session_number for s in seen):
@@ -290,11 +308,11 @@ def case_second_host_refused(hosts: Hosts) -> CheckResult:
                 ended = owner.session_live and any(
                     not s.session_live or s.faults & FaultBits.WATCHDOG for s in during)
                 if tripped or ended:
-                    starved.append(
+                    starved.append((
                         "the first host went silent for watchdog_ms while the second uploaded "
                         "(WATCHDOG flagged, its session ended by PN7 before the COMMIT): this "
                         "host cannot hold a session in real time, so the refusal of PN5 could "
-                        "not be tested")
+                        "not be tested", True))
                     return
                 intrusions.append("the second host's COMMIT replaced the card (PN5)")
             except DeviceError as exc:
@@ -305,11 +323,21 @@ def case_second_host_refused(hosts: Hosts) -> CheckResult:
         # first host went silent for watchdog_ms (its session ended by PN7), not an intrusion
         trips_before = [first_driver.counters().watchdog_trips]
         first = Background(first_driver, stroke_card(info, 0.4), stroke_track(info))
-        first.run(intrude)
+        with HostWatch() as watch:
+            first.run(intrude)
+    late = reasons(watch.late if first.driver.realtime else "",
+                   device_lag(first.result.states if first.result else []))
     if starved:
-        return unassessed(CHECK, LEVEL, CASES[0], starved[0])
+        # the first host's session ended by PN7 (no host report for watchdog_ms) before the
+        # second host's requests could be judged: nothing was intruded, and the refusals were
+        # not tested; a run not kept (spec QT3), measured again
+        why, tripped = starved[0]
+        raise NotKept(reasons(late, why, "the device's watchdog tripped" if tripped else ""))
     owner = seen_owner[0]
-    intrusions += session_faults(first, owner)
+    own = session_faults(first, owner, max_lost)
+    if own and not intrusions and late:
+        raise NotKept(f"{late}; the first host saw: {'; '.join(own)}")
+    intrusions += own
     if intrusions:
         detail = "; ".join(intrusions)
     else:
@@ -326,7 +354,9 @@ def case_second_host_refused(hosts: Hosts) -> CheckResult:
 def case_takeover_reported(hosts: Hosts, read_lag_s: float = 0.0) -> CheckResult:
     """``takeover-reported`` (module docstring; rules PN6, PN9). ``read_lag_s``: how late
     the timing class lets the host read a report (the first host learns of the loss from
-    one), added to :data:`LOSS_THRESHOLD_S`."""
+    one), added to :data:`LOSS_THRESHOLD_S`. A loss reported too late in a run the host or
+    the device did not keep in real time raises :class:`NotKept` (spec QT3); a loss never
+    reported fails whatever the timing."""
     took_over: list[tuple[Driver, int, float]] = []
     with hosts.open_driver() as first_driver, contextlib.ExitStack() as stack:
         info = first_driver.info()
@@ -338,13 +368,25 @@ def case_takeover_reported(hosts: Hosts, read_lag_s: float = 0.0) -> CheckResult
             took_over.append((second, token, second.clock()))
 
         first = Background(first_driver, stroke_card(info, 0.4), stroke_track(info))
-        first.run(intrude)
+        with HostWatch() as watch:
+            first.run(intrude)
         second, token, at = took_over[0]
         second.send(Control(Command.STOP, token))  # the second host ends its session (PN4)
+    if isinstance(first.error, SessionLost) and first.driver.realtime and (
+            first.error_at < at or "taken over by session" not in str(first.error)):
+        # lost before the TAKE_OVER was sent, or for another reason than it: the first host's
+        # own silence ended its session (PN7), which says nothing of how a takeover is
+        # reported (spec QT3)
+        raise NotKept(reasons(watch.late, f"the first host's session was lost "
+                              f"{(first.error_at - at) * MS_PER_S:.0f} ms from the TAKE_OVER, "
+                              f"not by it: {first.error}"))
     if isinstance(first.error, SessionLost):
         delay_ms = (first.error_at - at) * MS_PER_S
         detail = f"the first host's play raised SessionLost {delay_ms:.1f} ms after TAKE_OVER: "
         detail += str(first.error)
+        if delay_ms > (LOSS_THRESHOLD_S + read_lag_s) * MS_PER_S and watch.late and \
+                first.driver.realtime:
+            raise NotKept(f"{watch.late}; {detail}")
     else:
         delay_ms = math.inf
         outcome = ("completed as if nothing happened" if first.error is None
@@ -398,10 +440,14 @@ def check_session_ownership(ctx: Context) -> Iterator[CheckResult]:
     timing = timing_class(ctx)
     read_lag_s = 0.0 if timing.keeps_real_time else timing.read_lag_s
 
+    max_lost = max(MAX_LOST, timing.host_report_loss)
+
     def measure() -> Iterator[CheckResult]:
         hosts = two_hosts(open_driver)
-        yield case_second_host_refused(hosts)
-        yield case_takeover_reported(hosts, read_lag_s)
+        yield attempted_case(CHECK, LEVEL, CASES[0],
+                             lambda: case_second_host_refused(hosts, max_lost))
+        yield attempted_case(CHECK, LEVEL, CASES[1],
+                             lambda: case_takeover_reported(hosts, read_lag_s))
         yield case_released_by_stop(hosts)
 
     yield from guarded(CHECK, LEVEL, CASES, measure)

@@ -8,6 +8,7 @@ The device side lives in :mod:`hcard_device.usb`, the drivers in :mod:`hcard_dev
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable
 from pathlib import Path
 
@@ -287,6 +288,7 @@ def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Pat
     from hcard_device.drivers import PlayTooLong, open_device
     from hcard_device.drivers.play import check_play_length, summary
     from hcard_device.drivers.play import play as play_track
+    from hcard_device.drivers.priority import real_time_host
     from hcard_device.drivers.recording import write_recording
 
     if output.suffix.lower() != ".csv":
@@ -304,7 +306,8 @@ def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Pat
     if profile_path is not None:
         profile_bytes = read_profile_bytes(profile_path)
         DeviceProfile.from_json(profile_bytes, source=str(profile_path))  # checked before use
-    with open_device(uri, timeout_s=timeout) as driver:
+    with open_device(uri, timeout_s=timeout) as driver, \
+            real_time_host() if driver.realtime else contextlib.nullcontext():
         result = play_track(driver, loaded, track, profile=profile_bytes)
     try:
         write_recording(result, output, track_path=str(track_path), card_path=str(card))

@@ -49,6 +49,7 @@ from hcard_device.protocol import (
     POSITION_UNIT_MM,
     PROTOCOL_MAJOR,
     PROTOCOL_MINOR,
+    REALTIME_LATE_S,
     STREAM_FRAMES_PER_REPORT,
     TIME_UNIT_S,
     VOLTAGE_UNIT_V,
@@ -95,7 +96,8 @@ LIMIT_SETTLE_MAX_S = 0.005
 (rule PS5's bound; the reference devices need at most 0.81 ms and 3.52 ms)."""
 REALTIME_MAX_LAG_S = 0.05
 """Most simulated time :meth:`Firmware.run_realtime` catches up in one go, s; beyond it the
-device falls behind the wall clock rather than stalling the USB threads."""
+device falls behind the wall clock rather than stalling the USB threads. Either way the reports
+it produces late are flagged REALTIME_LAG and counted (rule PI4, :data:`REALTIME_LATE_S`)."""
 
 _CONTACT, _RUNNING, _CARD_LOADED = (
     int(StateFlags.CONTACT), int(StateFlags.RUNNING), int(StateFlags.CARD_LOADED)
@@ -104,6 +106,7 @@ _HOST_FINGER, _STREAMING, _UPLOADING, _HOST_PROFILE, _SESSION = (
     int(StateFlags.HOST_FINGER), int(StateFlags.STREAMING), int(StateFlags.UPLOADING),
     int(StateFlags.HOST_PROFILE), int(StateFlags.SESSION),
 )
+_LATE = int(FaultBits.REALTIME_LAG)
 _I16 = (-0x8000, 0x7FFF)
 _U16 = 0xFFFF
 _U32 = 0xFFFF_FFFF
@@ -295,6 +298,9 @@ class Firmware:
         self._clock: Callable[[], float] | None = None
         self._clock_origin = 0.0
         self._served_s = 0.0
+        # reports whose last frame is before this device time (us) are produced late (PI4);
+        # -1: none (set by _follow_clock around a catch-up only)
+        self._late_before_us = -1
         self._clip_index = 0
         self._sequence = 0
         self.session = Session(self.config.watchdog_s)
@@ -414,7 +420,11 @@ class Firmware:
 
         Wakes every ``period_s`` and advances by the wall time elapsed; when the simulation
         falls more than :data:`REALTIME_MAX_LAG_S` behind, the excess is skipped (device time
-        then runs slower than the wall clock instead of building up a backlog)."""
+        then runs slower than the wall clock instead of building up a backlog). Every report
+        produced more than :data:`REALTIME_LATE_S` after its last frame was due on ``clock``
+        (the catch-up after a late wake-up, and every skip) carries fault REALTIME_LAG and
+        counts in COUNTERS ``late_reports`` (rule PI4): a host knows that the run it measured
+        was not one of a device in real time."""
         with self.lock:
             self._clock = clock
             self._clock_origin = clock()
@@ -443,12 +453,20 @@ class Firmware:
         (0.11-0.18) and a bipolar card (0.24) in both runs against one server."""
         if self._clock is None:
             return
-        due = self._clock() - self._clock_origin - self._served_s
+        behind = self._clock() - self._clock_origin - self._served_s
+        due = behind
         if due > REALTIME_MAX_LAG_S:
             self._clock_origin += due - REALTIME_MAX_LAG_S
             due = REALTIME_MAX_LAG_S
         if due > 0:
-            self.advance(due)
+            if behind > REALTIME_LATE_S:
+                # the report ending ``x`` into this catch-up is ``behind - x`` late (rule PI4)
+                self._late_before_us = math.ceil(
+                    (self.sim.time_s + behind - REALTIME_LATE_S) / TIME_UNIT_S)
+            try:
+                self.advance(due)
+            finally:
+                self._late_before_us = -1
             self._served_s += due
 
     # ---- features ---------------------------------------------------------------------------
@@ -747,10 +765,14 @@ class Firmware:
         clipped = int(FaultBits.CARD_CLIPPED) if self._clip_item_count() and not self._streaming \
             else 0
         session, echo, generation = self.session, self._host_time_echo, self.upload.generation
+        late_before = self._late_before_us
         for (time_us, contact, x, y, f0, f1, f2, f3, lateral, amplitude, voltage, current,
              uv, ev, texture, queued, sim_faults) in columns:  # fmt: skip
             session.expire(time_us * TIME_UNIT_S)
             faults = self._faults(sim_faults, clipped)
+            if time_us < late_before:  # produced late on the device's real-time clock (PI4)
+                faults |= _LATE
+                self.counts.late_reports += 1
             self._emit(_STATE_PACK(
                 _STATE_ID, time_us & _U32, self._sequence, self._flags(static, contact), x, y,
                 f0, f1, f2, f3, lateral, amplitude, voltage, current, uv, ev, texture, faults,

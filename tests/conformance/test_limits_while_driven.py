@@ -9,6 +9,7 @@ from __future__ import annotations
 import re
 
 import pytest
+from realtime import assert_conforms
 from served_device import served_device
 
 from hcard_conformance import device_level as dl
@@ -79,7 +80,6 @@ def test_served_device_passes_the_case_twice_against_one_running_server() -> Non
     for report in runs:
         results = {r.case: r for r in report.results}
         assert set(results) == set(dl.SAFETY_CASES)
-        failed = [(r.case, r.outcome, r.detail) for r in report.results if not r.passed]
-        assert not failed, failed
+        assert_conforms(report.results)  # the machine's lateness fails saying so
         over, reports, ratio = _reports_after(results[CASE])
         assert over == 0 and reports >= 30 and ratio <= 1.0 + 1e-3

@@ -11,6 +11,7 @@ without numbering them.
 from __future__ import annotations
 
 import pytest
+from realtime import assert_conforms
 from served_device import served_device
 
 from hcard_conformance import link_checks as lc
@@ -154,9 +155,7 @@ def test_reference_passes_twice_over_usbip_served_by_another_process() -> None:
             after, status = driver.limits(), driver.upload_status()
             flags = driver.read_inputs(max_count=1)[0].flags
     for report in runs:
-        failed = [(r.check, r.case, r.outcome, r.detail) for r in report.results
-                  if not r.passed]
-        assert not failed, failed
+        assert_conforms(report.results)  # a run the machine could not keep fails saying so
         cases = {(r.check, r.case) for r in report.results}
         assert cases == {("device.upload-integrity", c) for c in lc.UPLOAD_CASES} | \
             {("device.report-loss", c) for c in lc.LOSS_CASES}

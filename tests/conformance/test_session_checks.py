@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from realtime import assert_conforms
 from served_device import served_device
 
 from hcard_conformance.context import Context
@@ -40,8 +41,7 @@ def test_the_reference_served_over_usbip_passes_twice_on_one_server() -> None:
         for _ in range(2):  # the device stays powered between runs: sessions carry on
             results = run(served.uri)
             assert set(results) == set(CASES)
-            assert all(r.status == PASS for r in results.values()), \
-                [r.detail for r in results.values()]
+            assert_conforms(results.values())  # the machine's lateness fails saying so
             refused = results["second-host-refused"]
             assert refused.value == 0 and "COMMIT refused (BUSY)" in refused.detail
             takeover = results["takeover-reported"]

@@ -86,14 +86,14 @@ class StallingHost(SimDriver):
         return super().stream_frames(uv, ev)
 
 
-def stalling_host(stalls: int, stall_s: float = 0.08) -> StallingHost:
+def stalling_host(stalls: int, stall_s: float = 0.13) -> StallingHost:
     uri = parse_uri("sim://evita")
     return StallingHost(uri, make_firmware(uri.variant, uri.seed, uri.effects),
                         stall_s=stall_s, stalls=stalls)
 
 
 def test_a_stream_the_host_let_run_dry_is_played_again() -> None:
-    """80 ms of host stall outlasts the 50 ms lead: the queue runs dry and the 390 Hz gain
+    """130 ms of host stall outlasts the 100 ms lead: the queue runs dry and the 390 Hz gain
     measures low. stream_fed plays the sine again and keeps the attempt the host fed whole,
     whose gain is that of a host that never stalled."""
     sine = BANDWIDTH_UV_MEAN + BANDWIDTH_UV_SWING * np.sin(2 * np.pi * 390.0 * np.arange(7000)
@@ -109,8 +109,8 @@ def test_a_stream_the_host_let_run_dry_is_played_again() -> None:
         assert host.starts == 2
     assert again.underruns == 0
     assert again.relative == pytest.approx(fed_gain.relative, rel=0.01)
-    # a host that stalls 200 ms in every attempt: starved past the bound, not assessed
-    with stalling_host(stalls=FED_ATTEMPTS, stall_s=0.2) as hopeless:
+    # a host that stalls 300 ms in every attempt: starved past the bound, not assessed
+    with stalling_host(stalls=FED_ATTEMPTS, stall_s=0.3) as hopeless:
         with pytest.raises(CannotAssess, match="queue empty"):
             amplitude_gain(hopeless, 390.0)
         assert hopeless.starts == FED_ATTEMPTS

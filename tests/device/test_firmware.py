@@ -121,7 +121,7 @@ def test_device_info_describes_the_device(
 ) -> None:
     info = feature(make_fw(config), ReportId.DEVICE_INFO)
     assert isinstance(info, DeviceInfo)
-    assert (info.protocol_major, info.protocol_minor) == (1, 3)  # this document, spec 8.1
+    assert (info.protocol_major, info.protocol_minor) == (1, 4)  # this document, spec 8.1
     assert info.device_kind == kind
     assert info.capabilities == caps
     assert info.plate_frequency_hz == plate_hz
@@ -731,6 +731,58 @@ def test_run_realtime_follows_the_clock_and_caps_the_lag() -> None:
     # 10 + 10 ms, then 480 ms due of which 50 ms are run (lag cap), then 1 ms
     assert fw.sim.time_s == pytest.approx(0.071, abs=1e-4)
     assert len(fw.take_input_reports(1000)) == 71
+
+
+def test_reports_produced_late_on_the_real_time_clock_are_flagged_and_counted() -> None:
+    """Rule PI4: on time (a wake-up 1 ms after the last) nothing is flagged; a wake-up at 20 ms
+    after one at 1 ms runs 19 ms at once, and the reports whose last frame is more than 5 ms
+    before 20 ms (those at 1.9 .. 14.9 ms: 14 reports) are flagged, the last five not; a wake-up
+    179 ms late runs 50 ms (the lag cap, the rest skipped) and every one of its 50 reports is
+    flagged. COUNTERS late_reports counts them (14 + 50), latched_faults latches the bit."""
+    fw = make_fw()
+    stop = threading.Event()
+    ticks = iter([0.0, 0.001, 0.020, 0.021, 0.200, 0.201])
+
+    def clock() -> float:
+        try:
+            return next(ticks)
+        except StopIteration:
+            stop.set()
+            return 0.201
+
+    fw.run_realtime(stop, period_s=0.0, clock=clock)
+    reports = states(fw)
+    late = [s.timestamp_us for s in reports if s.faults & FaultBits.REALTIME_LAG]
+    assert [s.timestamp_us for s in reports] == [900 + 1000 * k for k in range(72)]
+    assert late == [1900 + 1000 * k for k in range(14)] + [21900 + 1000 * k for k in range(50)]
+    counters = fw.counters()
+    assert counters.late_reports == 64
+    assert counters.latched_faults & FaultBits.REALTIME_LAG
+    fw.handle_output(Control(Command.CLEAR_COUNTERS, 0).encode())
+    assert fw.counters().late_reports == 0
+
+
+def test_a_device_that_keeps_real_time_flags_nothing() -> None:
+    """Wake-ups every millisecond, and a simulation stepped by hand (``sim://``, no real-time
+    clock): no report carries REALTIME_LAG (PI4)."""
+    fw = make_fw()
+    stop = threading.Event()
+    ticks = iter([k * 0.001 for k in range(101)])
+
+    def clock() -> float:
+        try:
+            return next(ticks)
+        except StopIteration:
+            stop.set()
+            return 0.1
+
+    fw.run_realtime(stop, period_s=0.0, clock=clock)
+    reports = states(fw)
+    fw.advance(0.1)  # 100 ms at once, on no clock: not late
+    reports += states(fw)
+    assert len(reports) == 200
+    assert not any(s.faults & FaultBits.REALTIME_LAG for s in reports)
+    assert fw.counters().late_reports == 0
 
 
 def test_a_served_device_takes_a_report_at_its_clock_not_the_lagging_simulations():

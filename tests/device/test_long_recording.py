@@ -163,6 +163,7 @@ def test_sessions_over_usbip_are_recorded_in_blocks_twice_against_one_server(tmp
     """Over USB/IP from a server in another process, in real time, two sessions in a row:
     the packed log holds the reports the driver decoded (every field), and the recording written
     in blocks is the one built whole."""
+    from realtime import in_real_time, kept_run
     from served_device import served_device
 
     from hcard_device.drivers import recording as recording_module
@@ -178,14 +179,20 @@ def test_sessions_over_usbip_are_recorded_in_blocks_twice_against_one_server(tmp
             return got
 
         driver.collect_until = collect_until
-        for session in range(2):
+
+        def one_session() -> PlayResult:  # run again while the machine did not keep real time
             seen.append([])
-            result = play(driver, CARD, strokes(2))
-            # what the driver decoded while the session streamed, field by field (it also
-            # collects reports before START, which the recording leaves out)
-            first = seen[-1].index(result.states[0])
-            assert list(result.states) == seen[-1][first:first + len(result.states)]
-            assert len(result.states) == pytest.approx(1000 * result.duration_s, rel=0.05)
+            with kept_run(seen[-1]):
+                result = play(driver, CARD, strokes(2))
+                # what the driver decoded while the session streamed, field by field (it also
+                # collects reports before START, which the recording leaves out)
+                first = seen[-1].index(result.states[0])
+                assert list(result.states) == seen[-1][first:first + len(result.states)]
+                assert len(result.states) == pytest.approx(1000 * result.duration_s, rel=0.05)
+            return result
+
+        for session in range(2):
+            result = in_real_time(one_session, f"recorded session {session + 1} over usbip")
             rows = write_recording(result, tmp_path / f"blocks{session}.csv")
             write_measurement(recording(result), tmp_path / f"whole{session}.csv")
             assert (tmp_path / f"blocks{session}.csv").read_bytes() == \

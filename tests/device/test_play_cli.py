@@ -7,6 +7,7 @@ import socket
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from realtime import in_real_time, kept_run
 from served_device import served_device
 
 from hcard import build
@@ -103,20 +104,23 @@ def test_play_reports_a_card_the_device_clips(files):
 
 
 def test_play_over_usbip_in_real_time(files):
-    with served_device() as served:
-        result = play(files, served.uri)
-    assert result.exit_code == 0, result.output
-    table = recording(files)
-    device_s = column(table, "t_s")[-1]
-    assert device_s == pytest.approx(0.4 + TAIL_S, abs=0.05)  # real time
-    assert len(table) == pytest.approx(device_s * 1000, rel=0.05)
-    # during the stroke (after it, the renderer dead-reckons the finger off the card)
-    during = column(table, "t_s") < 0.4
-    x, target = column(table, "x_mm")[during], column(table, "target_uv")[during]
-    assert np.all(target[x > 11] == pytest.approx(0.4))
-    assert np.all(target[(x > 3) & (x < 9)] == 1.0)
-    lost = int(result.output.split(" lost in transit")[0].rsplit(" ", 1)[1])
-    assert lost <= 2
+    def one_play() -> None:  # played again while the machine did not keep real time
+        with served_device() as served, kept_run():
+            result = play(files, served.uri)
+            assert result.exit_code == 0, result.output
+            table = recording(files)
+            device_s = column(table, "t_s")[-1]
+            assert device_s == pytest.approx(0.4 + TAIL_S, abs=0.05)  # real time
+            assert len(table) == pytest.approx(device_s * 1000, rel=0.05)
+            # during the stroke (after it, the renderer dead-reckons the finger off the card)
+            during = column(table, "t_s") < 0.4
+            x, target = column(table, "x_mm")[during], column(table, "target_uv")[during]
+            assert np.all(target[x > 11] == pytest.approx(0.4))
+            assert np.all(target[(x > 3) & (x < 9)] == 1.0)
+            lost = int(result.output.split(" lost in transit")[0].rsplit(" ", 1)[1])
+            assert lost <= 2
+
+    in_real_time(one_play, "hcard play over usbip")
 
 
 @pytest.mark.parametrize(("uri", "message", "status"), [

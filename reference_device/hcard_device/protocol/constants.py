@@ -12,9 +12,9 @@ from enum import IntEnum, IntFlag
 PROTOCOL_MAJOR = 1
 """Major protocol version (incompatible changes). A host MUST refuse another major
 (spec/device-protocol.md rule PV2)."""
-PROTOCOL_MINOR = 3
+PROTOCOL_MINOR = 4
 """Minor protocol version (compatible additions; 1.2 adds session ownership, spec section 14;
-1.3 the echo age of STATE, rule PI3)."""
+1.3 the echo age of STATE, rule PI3; 1.4 the real-time lag fault and counter, rule PI4)."""
 
 MAX_REPORT_BYTES = 64
 """Largest report on the wire, bytes, including the report ID byte (one full-speed packet)."""
@@ -37,6 +37,10 @@ VOLTAGE_UNIT_V = 0.1
 """EV voltage (envelope): 0.1 V."""
 CURRENT_UNIT_A = 1e-8
 """EV current: 0.01 uA (10 nA)."""
+REALTIME_LATE_S = 0.005
+"""A STATE report produced more than this after its interval's last frame was due on the
+device's real-time clock is flagged REALTIME_LAG and counted (rule PI4), s: five report periods,
+half the 10 ms latency bound of the conformance suite (spec/conformance.md D3)."""
 ECHO_AGE_UNKNOWN = 0xFFFF_FFFF
 """STATE.echo_age_us when the device cannot say (no sample applied yet, or a 1.0-1.2 device)."""
 FRICTION_SCALE = 10_000
@@ -166,6 +170,10 @@ class FaultBits(IntFlag):
     SESSION_BUSY = 1 << 9
     """A START, STOP, COMMIT, COMMIT_PROFILE or DEVICE_PROFILE was refused because another
     host's session is live (protocol 1.2, rules PN3-PN5)."""
+    REALTIME_LAG = 1 << 10
+    """The device produced the report more than :data:`REALTIME_LATE_S` after its interval was
+    due on its real-time clock, or skipped device time in the interval: its reports then cover
+    device time that ran slower than wall time (protocol 1.4, rule PI4)."""
 
 
 class Command(IntEnum):

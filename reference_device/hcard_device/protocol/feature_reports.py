@@ -397,11 +397,18 @@ class Counters(Report):
         stream_gaps: STREAM reports whose stream_seq was not the previous one plus 1.
         watchdog_trips: times the watchdog expired.
         latched_faults: OR of every :class:`FaultBits` reported since the last clear.
+        late_reports: STATE reports produced with fault REALTIME_LAG: the device fell behind
+            its real-time clock (protocol 1.4, rule PI4).
+
+    A protocol 1.0-1.3 device sends the first :data:`LEGACY_SIZE` bytes only; :meth:`decode`
+    reads the missing ``late_reports`` as 0 (rule PV4: a field appended by a minor version).
     """
 
     REPORT_ID: ClassVar[int] = ReportId.COUNTERS
     KIND: ClassVar[ReportKind] = ReportKind.FEATURE
-    STRUCT: ClassVar[struct.Struct] = struct.Struct("<BIIIIIIIH")
+    STRUCT: ClassVar[struct.Struct] = struct.Struct("<BIIIIIIIHI")
+    LEGACY_SIZE: ClassVar[int] = 31
+    """Bytes of COUNTERS in protocol 1.0-1.3 (before ``late_reports`` of 1.4)."""
     GET: ClassVar[bool] = True
     RANGES: ClassVar[dict[str, tuple[int, int]]] = {
         "input_reports": U32,
@@ -412,6 +419,7 @@ class Counters(Report):
         "stream_gaps": U32,
         "watchdog_trips": U32,
         "latched_faults": U16,
+        "late_reports": U32,
     }
 
     input_reports: int
@@ -422,3 +430,14 @@ class Counters(Report):
     stream_gaps: int
     watchdog_trips: int
     latched_faults: int
+    late_reports: int = 0
+
+    @classmethod
+    def decode(cls, data: bytes | bytearray | memoryview) -> Counters:
+        """Parse COUNTERS; one of a protocol 1.0-1.3 device (:data:`LEGACY_SIZE` bytes) reads
+        with ``late_reports`` 0. Otherwise as :meth:`Report.decode`."""
+        if isinstance(data, (bytes, bytearray, memoryview)) and len(data) == cls.LEGACY_SIZE:
+            data = bytes(data) + bytes(cls.STRUCT.size - cls.LEGACY_SIZE)
+        report = super().decode(data)
+        assert isinstance(report, Counters)
+        return report

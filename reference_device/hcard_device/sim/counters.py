@@ -30,6 +30,7 @@ class DeviceCounters:
         stream_gaps: STREAM reports whose stream_seq was not the previous one plus 1.
         watchdog_trips: times the watchdog expired.
         latched_faults: OR of every fault bit reported.
+        late_reports: STATE reports produced with fault REALTIME_LAG (rule PI4).
         stream_underruns: frames played neutral because the stream queue ran dry (not in the
             report).
         invalid_requests: commands to the simulation that carried invalid values (not in the
@@ -44,6 +45,7 @@ class DeviceCounters:
     stream_gaps: int = 0
     watchdog_trips: int = 0
     latched_faults: int = 0
+    late_reports: int = 0
     stream_underruns: int = 0
     invalid_requests: int = 0
 
@@ -63,4 +65,5 @@ class DeviceCounters:
             stream_gaps=self.stream_gaps & _U32,
             watchdog_trips=self.watchdog_trips & _U32,
             latched_faults=self.latched_faults & _U16,
+            late_reports=self.late_reports & _U32,
         )

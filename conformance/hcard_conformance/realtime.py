@@ -1,0 +1,174 @@
+"""Runs a device or its host could not keep in real time (spec/conformance.md QT3).
+
+A device-level measurement is made by two machines at once: the device, which must produce a
+STATE report per millisecond of its clock, and the host, which must send its finger samples and
+read the reports on time. When either falls behind, a real-time measurement (latency, report
+loss, a session kept alive while a second host acts, a stream that keeps the plate driven)
+measures the lateness, not the device. Such a run is **not kept**: it is measured again, at most
+:data:`ATTEMPTS` times in all, and when no attempt was kept the case is UNASSESSED with the
+reason of each attempt, never a FAIL of the device. What the device did wrong regardless of
+timing (a START not refused, a card replaced, a report misnumbered) is judged on any run.
+
+What tells a run was not kept:
+
+* the device's own account (protocol 1.4, rule PI4): fault REALTIME_LAG in a report of the run
+  (:func:`device_lag`), or COUNTERS ``late_reports`` moving over it;
+* the host's own clock (:class:`HostWatch`): the host process was not running for longer than
+  a stated bound (its thread slept or waited for the CPU past it), so its FINGER samples left
+  late and it read the reports late; a host loop also notes the gaps between its own
+  iterations (:meth:`HostWatch.tick`).
+
+A real-time host also asks to be one (:func:`host_priority`): while it measures a device in
+real time, it runs ahead of the ordinary processes of its computer where the OS permits.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable, Iterable, Sequence
+from typing import TypeVar
+
+from hcard.quantities import MS_PER_S
+from hcard_conformance.result import CannotAssess, CheckResult, unassessed
+from hcard_device.drivers.priority import collection_deferred, host_priority
+from hcard_device.protocol import FaultBits, State
+
+__all__ = ["ATTEMPTS", "HOST_LATE_S", "NOT_KEPT", "HostWatch", "NotKept", "attempted_case",
+           "attempts", "collection_deferred", "device_lag", "host_priority", "not_kept_results",
+           "reasons"]
+
+ATTEMPTS = 3
+"""Runs of a measurement at most, while none was kept in real time (spec QT3)."""
+HOST_LATE_S = 0.02
+"""Longest time the host may not run (its loop not iterating, or its watch thread oversleeping)
+in a run that is kept, s: 20 reports at 1 kHz, one 50 Hz touch period (the bound of the host's
+own pauses in the report-loss check, spec 4.7)."""
+WATCH_PERIOD_S = 0.001
+"""Sleep of the :class:`HostWatch` thread between two looks at the host's clock, s."""
+NOT_KEPT = "could not be kept in real time"
+"""Words every reason of a run not kept contains (the tests look for them)."""
+
+T = TypeVar("T")
+
+
+class NotKept(CannotAssess):
+    """Raised by a measurement whose run the device or the host did not keep in real time (the
+    reason is the message); :func:`attempts` measures again."""
+
+
+def device_lag(states: Sequence[State]) -> str:
+    """Why the device did not keep real time over ``states`` (rule PI4): the reports flagged
+    REALTIME_LAG; empty when none was."""
+    late = sum(1 for s in states if s.faults & FaultBits.REALTIME_LAG)
+    if not late:
+        return ""
+    return (f"the device flagged {late} of {len(states)} reports REALTIME_LAG (it produced them "
+            "late on its real-time clock, device protocol PI4)")
+
+
+class HostWatch:
+    """How late the host process ran while a measurement lasted, on the host's own clock.
+
+    Used as a context manager, a daemon thread sleeps :data:`WATCH_PERIOD_S` again and again and
+    notes how much longer than that each sleep took (the process waited for a CPU, or for the
+    interpreter lock behind a thread that computed); a host loop may also call :meth:`tick` at
+    every iteration, which notes the time since its previous call. While it watches, the
+    interpreter's cyclic garbage collection waits for the end of the run (reference counting
+    still frees what a run drops): a full collection of a suite's process stops every thread
+    for 50-200 ms, and the device's reports are lost meanwhile (the served conformance test on
+    a loaded machine saw the host stop for up to 201 ms during plays, losing 7-26 % of a
+    render's reports).
+
+    Args:
+        bound_s: longest lateness of a kept run, s.
+        clock: the host's clock, s.
+    """
+
+    def __init__(self, bound_s: float = HOST_LATE_S,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.bound_s = bound_s
+        self.clock = clock
+        self.longest_s = 0.0
+        """Longest lateness seen, s."""
+        self.late_count = 0
+        """Times the lateness exceeded :attr:`bound_s`."""
+        self._last_tick: float | None = None
+        self._deferred = collection_deferred()
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def note(self, late_s: float) -> None:
+        """Record one lateness of ``late_s`` s."""
+        with self._lock:
+            self.longest_s = max(self.longest_s, late_s)
+            self.late_count += late_s > self.bound_s
+
+    def tick(self) -> None:
+        """A host loop's iteration: note the time since the previous one."""
+        now = self.clock()
+        if self._last_tick is not None:
+            self.note(now - self._last_tick)
+        self._last_tick = now
+
+    def _watch(self) -> None:
+        while not self._stop.is_set():
+            before = time.monotonic()
+            time.sleep(WATCH_PERIOD_S)
+            self.note(time.monotonic() - before - WATCH_PERIOD_S)
+
+    def __enter__(self) -> HostWatch:
+        self._deferred.__enter__()
+        self._thread = threading.Thread(target=self._watch, name="host-watch", daemon=True)
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join()
+        self._deferred.__exit__(None, None, None)
+
+    @property
+    def late(self) -> str:
+        """Why the host did not keep real time (empty when it did)."""
+        if self.longest_s <= self.bound_s:
+            return ""
+        return (f"the host did not run for up to {self.longest_s * MS_PER_S:.0f} ms "
+                f"({self.late_count} times over {self.bound_s * MS_PER_S:.0f} ms)")
+
+
+def reasons(*found: str) -> str:
+    """The non-empty reasons of ``found``, joined."""
+    return "; ".join(r for r in found if r)
+
+
+def attempts(measure: Callable[[], T], what: str, count: int = ATTEMPTS) -> T:
+    """``measure()`` again while it raises :class:`NotKept`, at most ``count`` runs, each at
+    the host's real-time priority (:func:`host_priority`); the first kept run's value. When
+    none was kept, raises :class:`CannotAssess` naming ``what`` and the reason of every
+    attempt (spec QT3)."""
+    why: list[str] = []
+    for attempt in range(1, count + 1):
+        try:
+            with host_priority():
+                return measure()
+        except NotKept as exc:
+            why.append(f"attempt {attempt}: {exc}")
+    raise CannotAssess(f"{what} {NOT_KEPT} in {count} attempts ({'; '.join(why)})")
+
+
+def attempted_case(check: str, level: str, case: str,
+                   measure: Callable[[], CheckResult]) -> CheckResult:
+    """One case's result by :func:`attempts`: UNASSESSED with the reasons when no run was
+    kept (the other cases of a check go on)."""
+    try:
+        return attempts(measure, f"the run of {case}")
+    except CannotAssess as exc:
+        return unassessed(check, level, case, str(exc))
+
+
+def not_kept_results(results: Iterable[CheckResult]) -> list[CheckResult]:
+    """The UNASSESSED results whose reason is a run not kept in real time."""
+    return [r for r in results if r.status == "UNASSESSED" and NOT_KEPT in r.detail]
