@@ -16,7 +16,7 @@ named for type checkers.
 from __future__ import annotations
 
 import abc
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple, Protocol, runtime_checkable
@@ -64,22 +64,43 @@ class EncodeResult:
 
 @runtime_checkable
 class EncoderPlugin(Plugin, Protocol):
-    """Kind ``encoder`` (hook ``hcard_encoders``): turns a source file into a card."""
+    """Kind ``encoder`` (hook ``hcard_encoders``): turns a source file into a card.
 
-    def encode(self, source: Path, **options: Any) -> EncodeResult:
-        """Encode ``source``; options are encoder specific. Raise an HcardError on bad input."""
+    ``hcard encode`` reaches the encoder through this contract only: it hands its options to
+    :meth:`options` first (a bad one is a usage error before any file is read), then what that
+    returns to :meth:`encode`, with ``progress``.
+    """
+
+    def options(self, **values: Any) -> dict[str, Any]:
+        """``values`` checked, with the encoder's defaults filled in: the keyword options
+        :meth:`encode` then takes. The names are the encoder's own (``hcard encode`` passes its
+        options by their long names with ``_`` for ``-``, e.g. ``taxtel_mm``). Raise
+        :class:`~hcard.errors.UsageError` naming the option by that name when one is unknown,
+        out of range or does not fit with another."""
+
+    def encode(self, source: Path, *, progress: Callable[[str], None] | None = None,
+               **options: Any) -> EncodeResult:
+        """Encode ``source``; ``options`` are encoder specific. ``progress``, when given, is
+        called with one line of text at each stage of a long encode (an encoder may say
+        nothing). Raise an HcardError on bad input."""
 
 
 class Encoder(abc.ABC):
-    """Base class of encoders (an :class:`EncoderPlugin`): subclasses define ``encode``."""
+    """Base class of encoders (an :class:`EncoderPlugin`): subclasses define ``encode``, and
+    ``options`` when they can check their options before reading the source."""
 
     kind: ClassVar[str] = "encoder"
     name: ClassVar[str] = ""
     description: ClassVar[str] = ""
 
+    def options(self, **values: Any) -> dict[str, Any]:
+        """``values`` as given: this encoder checks its options when it encodes."""
+        return dict(values)
+
     @abc.abstractmethod
-    def encode(self, source: Path, **options: Any) -> EncodeResult:
-        """Encode ``source``; options are encoder specific. Raise an HcardError on bad input."""
+    def encode(self, source: Path, *, progress: Callable[[str], None] | None = None,
+               **options: Any) -> EncodeResult:
+        """Encode ``source``; see :meth:`EncoderPlugin.encode`."""
 
 
 @runtime_checkable
