@@ -93,7 +93,7 @@ def profile_of(result: CalibrationResult, base: DeviceProfile | None = None, *,
         finger = _finger_of(inner)
     else:
         added = getattr(inner, "effect_list", ())
-        # with effects, ``inner`` is calibration.effects' augmented predictor: it has ``base``
+        # with effects, ``inner`` is physics.effects' augmented predictor: it has ``base``
         predictor = inner.base if added else inner  # type: ignore[union-attr]
         effects = tuple(
             FittedEffect(e, {p.name: table[f"{e.name}.{p.name}"]["value"] for p in e.parameters})

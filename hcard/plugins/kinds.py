@@ -5,7 +5,7 @@ A plugin object is anything a hook of :mod:`hcard.plugins.hookspecs` returns; it
 the Protocol of its kind. The Protocols are ``runtime_checkable``, so ``isinstance(obj,
 PredictorPlugin)`` checks that the members are there (not their signatures). Base classes with
 shared behaviour implement them and may be subclassed: :class:`Encoder` (here),
-:class:`hcard.physics.Predictor`, :class:`hcard.calibration.effects.Effect`,
+:class:`hcard.physics.Predictor`, :class:`hcard.physics.effects.Effect`,
 ``hcard_device.drivers.Driver`` and ``hcard_conformance.registry.Check``.
 
 Every kind has ``kind`` (its name in :data:`KINDS`), ``name`` (unique within the kind) and a
@@ -150,7 +150,7 @@ class EffectPlugin(Plugin, Protocol):
     """Kind ``calibration-effect`` (hook ``hcard_calibration_effects``): a physical effect a
     fitted predictor may lack, which calibration can add (spec/calibration.md).
 
-    Implemented by :class:`hcard.calibration.effects.Effect`, whose transforms default to the
+    Implemented by :class:`hcard.physics.effects.Effect`, whose transforms default to the
     identity.
     """
 

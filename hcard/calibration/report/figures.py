@@ -60,7 +60,7 @@ REGRESSOR_UNITS = {
     "voltage_history": "s",
     "recording": "",
 }
-"""SI unit of each regressor (:mod:`hcard.calibration.effects`,
+"""SI unit of each regressor (:mod:`hcard.physics.effects`,
 :mod:`hcard.calibration.dataset`)."""
 
 BEFORE_COLOUR = "tab:orange"
