@@ -11,7 +11,8 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from hcard import channels, limits
+import hcard.channels as channels
+import hcard.limits as limits
 from hcard.atomic import write_atomically
 from hcard.bounded_read import DEFAULT_MAX_PIXELS, STDIN
 from hcard.card_io import format_for_path, parse_card, save, to_bytes
