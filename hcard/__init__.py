@@ -11,8 +11,6 @@ Cards are ``hcard.v1.card_pb2.Card`` protobuf messages (re-exported as :data:`Ca
 
 from __future__ import annotations
 
-__version__ = "0.1.0"
-
 from hcard.card_io import dumps, load, parse_card, save, to_json
 from hcard.errors import (
     CardError,
@@ -25,6 +23,7 @@ from hcard.errors import (
 )
 from hcard.v1.card_pb2 import Card, Component, Texture
 from hcard.validate import validate
+from hcard.version import __version__
 
 __all__ = [
     "Card",

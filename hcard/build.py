@@ -17,10 +17,11 @@ from typing import cast
 
 import numpy as np
 
-from hcard import __version__, limits
+import hcard.limits as limits
 from hcard.channels import VALUE_OF_NAME
 from hcard.errors import CardValidationError, Problem
 from hcard.v1 import card_pb2 as pb
+from hcard.version import __version__
 
 CHANNELS: dict[str, int] = VALUE_OF_NAME
 LOCKINGS: dict[str, int] = {

@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 from typing import Literal
 
-from hcard import limits
+import hcard.limits as limits
 from hcard.atomic import write_atomically
 from hcard.bounded_read import STDIN, InputTooLarge, read_bounded, read_bounded_stream
 from hcard.errors import CardError, CardValidationError

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     import numpy as np
 
-from hcard import limits
+import hcard.limits as limits
 from hcard.channels import LABEL_OF_VALUE
 from hcard.terminal_text import clipped
 from hcard.v1 import card_pb2 as pb

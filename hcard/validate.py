@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 
-from hcard import limits
+import hcard.limits as limits
 from hcard.channels import VALUES
 from hcard.errors import Problem
 from hcard.terminal_text import clipped

@@ -20,7 +20,8 @@ from hcard.calibration.measurement import MeasurementError, read_measurement
 from hcard.card_io import to_bytes
 from hcard.cli.main import cli
 from hcard.errors import CardError
-from hcard.physics.profile import DeviceProfile, ProfileError
+from hcard.physics.profile import DeviceProfile
+from hcard.physics.profile_error import ProfileError
 from hcard.track import TrackError, read_track_csv
 
 ZERO = Path("/dev/zero")

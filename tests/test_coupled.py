@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from hcard.physics import Predictor, PredictorError
-from hcard.plugins.registry import HcardPluginWarning, PluginRegistry, get_registry
+from hcard.plugins.records import HcardPluginWarning
+from hcard.plugins.registry import PluginRegistry, get_registry
 from hcard.quantities import EPSILON_0
 from hcard_builtins.physics.coupled import Coupled, coupled_class
 from hcard_builtins.physics.electrovibration import AirLayer, ChargeLeakage, Kaczmarek

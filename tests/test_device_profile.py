@@ -9,8 +9,10 @@ import math
 import numpy as np
 import pytest
 
-from hcard.physics.profile import DeviceProfile, ProfileError
+from hcard.physics.actuation import actuate
+from hcard.physics.profile import DeviceProfile
 from hcard.physics.profile_effects import FittedEffect, solve_decreasing
+from hcard.physics.profile_error import ProfileError
 from hcard.plugins.registry import get_registry
 from hcard_builtins.physics.electrovibration import AirLayer
 
@@ -66,7 +68,7 @@ def test_uv_inverse_with_an_effect_solves_the_forward_map(exponent):
     np.testing.assert_allclose(profile.uv_for(amplitude, speed, force)[reachable],
                                target[reachable], atol=1e-9)
     assert np.all(amplitude[~reachable] == 8 * profile.limits.max_amplitude)
-    assert profile.actuate(target, 1.0, speed, force).uv_clipping.clipped >= (~reachable).sum()
+    assert actuate(profile, target, 1.0, speed, force).uv_clipping.clipped >= (~reachable).sum()
     # without the effect the closed form is used, and the bisection agrees with it
     closed = COUPLED.amplitude_for(target, speed, force)
     solved = solve_decreasing(lambda w: COUPLED.uv_for(w, speed, force), target, 1e-4)
@@ -77,9 +79,9 @@ def test_ev_inverse_with_an_effect_renders_the_target_through_actuate():
     profile = with_effects(COUPLED, air_layer={"air_gap": 10e-6})
     ev_target = np.array([1.02, 1.05, 1.08])
     force = np.array([0.4, 0.6, 0.5])
-    commands = profile.actuate(np.ones(3), ev_target, 0.05, force)
+    commands = actuate(profile, np.ones(3), ev_target, 0.05, force)
     np.testing.assert_allclose(commands.ev, ev_target, rtol=1e-9)
-    plain = COUPLED.actuate(np.ones(3), ev_target, 0.05, force)
+    plain = actuate(COUPLED, np.ones(3), ev_target, 0.05, force)
     assert np.all(commands.voltage > plain.voltage)  # the air layer needs more voltage
     # what the plain profile's voltages render on a finger with the air layer falls short
     short = profile.forward(0.0, plain.voltage, 0.05, force)[1]
@@ -88,7 +90,7 @@ def test_ev_inverse_with_an_effect_renders_the_target_through_actuate():
 
 def test_a_profile_clips_to_its_limits_whatever_the_effect_asks():
     profile = with_effects(COUPLED, air_layer={"air_gap": 100e-6})
-    commands = profile.actuate(1.0, 1.5, 0.05, 0.5)
+    commands = actuate(profile, 1.0, 1.5, 0.05, 0.5)
     assert commands.voltage[()] == pytest.approx(profile.voltage_limit[0])
     assert commands.ev_clipping.clipped == 1
 
@@ -143,6 +145,6 @@ def test_an_effect_on_a_channel_the_model_lacks_is_refused():
 def test_a_profile_without_limits_describes_but_does_not_render():
     bare = DeviceProfile(get_registry().get("predictor", "ev-kaczmarek"), None)
     with pytest.raises(ProfileError, match="has no limits"):
-        bare.actuate(1.0, 1.2, 0.05, 0.5)
+        actuate(bare, 1.0, 1.2, 0.05, 0.5)
     finger = DeviceProfile(get_registry().get("predictor", "finger-friction"), None)
     assert finger.uv_model is None and finger.ev_model is None

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import struct
 import zlib
+from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
@@ -14,7 +15,7 @@ from PIL import Image
 
 import hcard
 from hcard import limits
-from hcard.errors import ImageError
+from hcard.errors import ImageError, UsageError
 from hcard.v1 import card_pb2 as pb
 from hcard.validate import errors_of, validate
 from hcard_builtins import encoders
@@ -639,6 +640,28 @@ def test_plugin_hook_returns_the_image_encoder(tmp_path: Path):
     result = encoder.encode(path, taxtel_mm=2.5)
     assert result.card.grid.cols == 2
     assert result.card.textures[0].baseline == pytest.approx(UV_HIGH)
+
+
+def test_plugin_options_are_checked_with_the_defaults_filled_in(tmp_path: Path):
+    """The encoder contract's options(): the checked EncodeOptions fields, which encode() takes
+    back (the card is that of encode_image with the same options); bad ones are usage errors
+    naming the field, as ``hcard encode`` reports them."""
+    (encoder,) = encoders.hcard_encoders()
+    plain = encoder.options(taxtel_mm=2.5)
+    # defaults of EncodeOptions (8 components, 64 textures, the UV range 0.3-1.0) filled in
+    assert (plain["taxtel_mm"], plain["components"], plain["max_textures"]) == (2.5, 8, 64)
+    assert plain["friction_range"] == (0.3, 1.0) and plain["channel"] == "uv"
+    assert set(plain) == {f.name for f in fields(EncodeOptions)}
+    targeted = encoder.options(max_error=1.0)
+    assert (targeted["components"], targeted["max_textures"]) == (16, 256)
+    path = save_gray(np.full((50, 50), 0.0), tmp_path / "black.png")
+    assert encoder.encode(path, **plain).card == encode_image(path, taxtel_mm=2.5).card
+    with pytest.raises(UsageError, match="taxtel_mm must be between"):
+        encoder.options(taxtel_mm=0.0)
+    with pytest.raises(UsageError, match="give either a DPI or a width/height"):
+        encoder.options(dpi=300.0, width_mm=20.0)
+    with pytest.raises(UsageError, match=r"unknown image encoder option\(s\): colour"):
+        encoder.options(colour="red")
 
 
 def test_options_object_defaults_follow_the_issue():

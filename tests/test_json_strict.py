@@ -18,7 +18,8 @@ from hcard.calibration.measurement import MeasurementError, read_measurement
 from hcard.cli.main import cli
 from hcard.errors import CardError
 from hcard.json_text import MAX_JSON_DEPTH, JsonInputError, json_depth, parse_json
-from hcard.physics.profile import DeviceProfile, ProfileError
+from hcard.physics.profile import DeviceProfile
+from hcard.physics.profile_error import ProfileError
 
 CARD = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[
     build.texture(1.0, channel="uv", name="a",

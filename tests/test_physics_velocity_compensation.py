@@ -25,7 +25,8 @@ from hcard import build
 from hcard.cli.main import cli
 from hcard.physics import PredictorError
 from hcard.physics.actuation import actuate
-from hcard.physics.profile import COUPLED_STIMULATOR_LIMITS, DeviceLimits, DeviceProfile
+from hcard.physics.device_limits import COUPLED_STIMULATOR_LIMITS, DeviceLimits
+from hcard.physics.profile import DeviceProfile
 from hcard.track import straight_stroke, track_to_csv
 from hcard_builtins.physics.ultrasonic import SpringSlider
 

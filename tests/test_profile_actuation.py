@@ -15,13 +15,10 @@ from test_physics_velocity_compensation import TOLERANCE, spring_slider_device, 
 from hcard import build
 from hcard.physics import Predictor, PredictorError, Variable
 from hcard.physics.actuation import actuate, actuate_frames
-from hcard.physics.profile import (
-    COUPLED_STIMULATOR_LIMITS,
-    PROFILE_FORMAT,
-    DeviceLimits,
-    DeviceProfile,
-    ProfileError,
-)
+from hcard.physics.device_limits import COUPLED_STIMULATOR_LIMITS, DeviceLimits
+from hcard.physics.profile import DeviceProfile
+from hcard.physics.profile_error import ProfileError
+from hcard.physics.profile_format import PROFILE_FORMAT
 from hcard.quantities import EPSILON_0
 from hcard.render import render
 from hcard.track import straight_stroke

@@ -6,8 +6,8 @@ observed lateral force, every regressor the residual analysis looks at, and a he
 stroke or by time block (spec/measurement-format.md section 4; never by random sample).
 
 Several recordings are concatenated: the ``time`` input restarts at 0 in each (the filters of
-time-dependent effects restart where time decreases, :mod:`hcard.calibration.effects`), strokes
-are numbered per recording, and the ambient pressure of each recording's sidecar becomes the
+time-dependent effects restart where time decreases, :mod:`hcard.calibration.time_series`),
+strokes are numbered per recording, and the ambient pressure of each recording's sidecar becomes the
 ``pressure`` input of its samples (several recordings at different pressures make the
 squeeze-film share identifiable, Fig. 2.12).
 """
@@ -26,7 +26,6 @@ from hcard.calibration.contact import (
     default_contact_threshold,
     in_contact,
 )
-from hcard.calibration.effects import recent_change, time_since_change
 from hcard.calibration.measurement import Measurement, MeasurementError
 from hcard.calibration.noise import NoiseModel, measure_noise
 from hcard.calibration.splits import (
@@ -35,6 +34,7 @@ from hcard.calibration.splits import (
     split_by_stroke,
     stroke_ids,
 )
+from hcard.calibration.time_series import recent_change, time_since_change
 from hcard.physics import Predictor
 from hcard.quantities import ATMOSPHERE_PA, MN_PER_N
 
@@ -69,7 +69,7 @@ class CalibrationData:
             force signed by the direction of the speed when there is a speed column, else
             its magnitude.
         regressors: arrays the residual analysis looks at (module
-            :mod:`hcard.calibration.effects` names, plus ``x``, ``y`` in m and ``recording``
+            :mod:`hcard.physics.effects` names, plus ``x``, ``y`` in m and ``recording``
             when there are several), shape (n,) each. Regressors that do not vary are left out.
         train: mask of the training samples, shape (n,).
         test: mask of the held-out samples, shape (n,).

@@ -25,8 +25,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hcard.calibration.effects import SEPARATOR, Effect, EffectHost
 from hcard.physics import Parameter, Predictor, PredictorError, Variable
+from hcard.physics.effects import SEPARATOR, Effect, EffectHost
 from hcard.physics.profile import DeviceProfile, channels_of
 from hcard.physics.profile_effects import FittedEffect, channel_of, with_effects
 

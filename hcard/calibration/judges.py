@@ -46,7 +46,6 @@ from dataclasses import replace
 import numpy as np
 
 from hcard.calibration.dataset import CalibrationData
-from hcard.calibration.effects import Effect
 from hcard.calibration.fit import FitResult
 from hcard.calibration.model_pool import held_out_criterion
 from hcard.calibration.noise import NoiseModel, detectable_eta2, time_structure_threshold
@@ -70,6 +69,7 @@ from hcard.calibration.results import (
 )
 from hcard.calibration.selection import Comparison
 from hcard.physics import Predictor, PredictorError
+from hcard.physics.effects import Effect
 
 FOREIGN_DOMINANCE = 2.0
 """How many times the signature's eta2 a foreign regressor's must be before the signature test
@@ -122,7 +122,7 @@ def usable_effects(
 ) -> tuple[list[Effect], dict[str, str]]:
     """The effects of ``library`` the loop can try on ``base``, in library order, and why
     each other one cannot be tried (effect name -> reason): it does not apply to ``base``
-    (:meth:`~hcard.calibration.effects.Effect.applies_to`), or none of its signature
+    (:meth:`~hcard.physics.effects.Effect.applies_to`), or none of its signature
     regressors is in ``varying`` (the regressors that vary in the data), so that it cannot be
     identified."""
     skipped: dict[str, str] = {}

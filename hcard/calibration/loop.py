@@ -68,7 +68,6 @@ import numpy as np
 
 from hcard.calibration.bootstrap import stroke_bootstrap
 from hcard.calibration.dataset import CalibrationData
-from hcard.calibration.effects import Effect
 from hcard.calibration.fit import FitResult
 from hcard.calibration.judges import (
     beyond_foreign_structure,
@@ -107,6 +106,7 @@ from hcard.calibration.screening import (
 )
 from hcard.calibration.summary import summarise
 from hcard.physics import Predictor, PredictorError
+from hcard.physics.effects import Effect
 
 Progress = Callable[[str], None]
 

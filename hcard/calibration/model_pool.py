@@ -22,7 +22,6 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 
 from hcard.calibration.dataset import CalibrationData
-from hcard.calibration.effects import Effect, augment
 from hcard.calibration.fit import FitResult, fit_predictor
 from hcard.calibration.observation import (
     FORCE_OFFSET,
@@ -30,6 +29,7 @@ from hcard.calibration.observation import (
     lateral_force_model,
 )
 from hcard.physics import Predictor, PredictorError
+from hcard.physics.effects import Effect, augment
 
 CANDIDATE_EVALUATIONS = 120
 """Most model evaluations of a candidate's fit from the effect's defaults (K7). A fit that

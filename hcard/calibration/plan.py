@@ -48,7 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hcard import build
+import hcard.build as build
 from hcard.errors import UsageError
 from hcard.track import FingerTrack, make_track
 from hcard.v1 import card_pb2 as pb

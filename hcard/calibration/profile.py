@@ -29,8 +29,10 @@ from hcard.calibration.device_model import FINGER_PREFIX, fitted_profile, profil
 from hcard.calibration.fit import FitResult
 from hcard.calibration.observation import FORCE_OFFSET, FRICTION_COEFFICIENT, lateral_force_model
 from hcard.physics import Predictor, PredictorError
-from hcard.physics.profile import DeviceProfile, ProfileError, predictor_from_profile
+from hcard.physics.profile import DeviceProfile
 from hcard.physics.profile_effects import FittedEffect, with_effects
+from hcard.physics.profile_error import ProfileError
+from hcard.physics.profile_format import predictor_from_profile
 
 if TYPE_CHECKING:
     from hcard.calibration.results import CalibrationResult
@@ -93,7 +95,7 @@ def profile_of(result: CalibrationResult, base: DeviceProfile | None = None, *,
         finger = _finger_of(inner)
     else:
         added = getattr(inner, "effect_list", ())
-        # with effects, ``inner`` is calibration.effects' augmented predictor: it has ``base``
+        # with effects, ``inner`` is physics.effects' augmented predictor: it has ``base``
         predictor = inner.base if added else inner  # type: ignore[union-attr]
         effects = tuple(
             FittedEffect(e, {p.name: table[f"{e.name}.{p.name}"]["value"] for p in e.parameters})

@@ -11,12 +11,13 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from hcard import channels, limits
+import hcard.channels as channels
+import hcard.limits as limits
 from hcard.atomic import write_atomically, write_atomically_together
 from hcard.bounded_read import DEFAULT_MAX_PIXELS, STDIN
 from hcard.card_io import checked_bytes, format_for_path, parse_card, save, to_bytes
 from hcard.cli.verbosity import quiet, verbosity_options
-from hcard.errors import CardError, HcardError
+from hcard.errors import CardError, HcardError, UsageError
 
 if TYPE_CHECKING:
     from hcard.plugins.kinds import EncodeResult, EncoderPlugin
@@ -185,10 +186,12 @@ def encode(
       hcard encode photo.png -o - --dpi 300 | hcard info -
     """
     _single_threaded_blas()
-    from hcard_builtins.image import EncodeOptions
-
     try:
-        options = EncodeOptions(
+        encoder = _image_encoder()
+    except HcardError as exc:
+        raise click.ClickException(str(exc)) from None
+    try:
+        options = encoder.options(
             width_mm=width_mm,
             height_mm=height_mm,
             dpi=dpi,
@@ -205,8 +208,8 @@ def encode(
             title=title,
             author=author,
             licence=licence,
-        ).checked()
-    except ValueError as exc:
+        )
+    except UsageError as exc:
         raise click.UsageError(_option_names(str(exc))) from None
     to_stdout = str(output) == STDIN
     if output.suffix.lower() in IMAGE_SUFFIXES:
@@ -218,7 +221,7 @@ def encode(
             _check_writable(output, "card")
         if preview is not None:
             _check_writable(preview, "preview")
-        result = _image_encoder().encode(image, options=options, progress=_progress)
+        result = encoder.encode(image, progress=_progress, **options)
         # The preview is rendered before the card is saved: a preview that cannot be made
         # leaves the previous card in place.
         png = _preview_bytes(result, max_error) if preview is not None else None
@@ -280,7 +283,8 @@ def _single_threaded_blas() -> None:
 
 def _image_encoder() -> EncoderPlugin:
     """The encoder plugin ``image`` of the plugin registry (the built-in one; a third party
-    cannot take its name), whose options are :class:`hcard_builtins.image.EncodeOptions`."""
+    cannot take its name), whose options (:meth:`~hcard.plugins.kinds.EncoderPlugin.options`)
+    are this command's options, named without the ``--`` and with ``_`` for ``-``."""
     from hcard.plugins.registry import get_registry
 
     return get_registry().get("encoder", "image")

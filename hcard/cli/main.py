@@ -11,10 +11,10 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from hcard import __version__
 from hcard.cli.errors import UserErrorGroup
 from hcard.cli.verbosity import verbosity_options
 from hcard.limits import FORMAT_MAJOR, FORMAT_MINOR
+from hcard.version import __version__
 
 if TYPE_CHECKING:
     from hcard.plugins.kinds import CommandPlugin

@@ -8,7 +8,8 @@ import warnings
 import click
 
 from hcard.cli.verbosity import verbosity_options
-from hcard.plugins.registry import HcardPluginWarning, PluginInfo, get_registry
+from hcard.plugins.records import HcardPluginWarning, PluginInfo
+from hcard.plugins.registry import get_registry
 
 COLUMNS = ("NAME", "KIND", "VERSION", "PACKAGE", "DESCRIPTION")
 

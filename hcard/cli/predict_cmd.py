@@ -28,7 +28,8 @@ from hcard.cli.options import plugin_option
 from hcard.cli.verbosity import verbosity_options
 from hcard.errors import HcardError, UsageError
 from hcard.physics.predictor import Parameter, Predictor, PredictorError, Variable
-from hcard.physics.profile import DeviceProfile, ProfileError
+from hcard.physics.profile import DeviceProfile
+from hcard.physics.profile_error import ProfileError
 from hcard.physics.sweep import Sweep, parse_sweep, quantity, split_assignment
 from hcard.plugins.registry import get_registry
 from hcard.quantities import display_unit, format_value

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-import hcard
+from hcard.card_io import load
 from hcard.cli.input_files import INPUT_FILE
 from hcard.cli.verbosity import verbosity_options
 
@@ -47,7 +47,7 @@ def preview(card: Path, output: Path | None, dpi: int) -> None:
     out = output if output is not None else card.with_suffix(".preview.png")
     if out.suffix.lower() != ".png":
         raise click.UsageError(f"output must be a .png file, got '{out}'")
-    loaded = hcard.load(card)
+    loaded = load(card)
     try:
         render_preview(loaded, out, dpi=dpi)
     except OSError as exc:

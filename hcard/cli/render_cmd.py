@@ -21,6 +21,7 @@ from hcard.errors import HcardError
 from hcard.physics.actuation import (
     ChannelClipping,
     UVModelRange,
+    actuate,
     combined_clipping,
     combined_range,
 )
@@ -133,7 +134,7 @@ def render(card: Path, track_path: Path, output: Path, frame_rate: float, band_l
                 commands = None
                 if profile is not None:
                     speed, force = finger_state(track, frames.t)
-                    commands = profile.actuate(frames.uv, frames.ev, speed, force)
+                    commands = actuate(profile, frames.uv, frames.ev, speed, force)
                 writer.write(_output_columns(frames, commands, npz=suffix == ".npz"))
                 summary.add(frames, commands)
                 advance(len(frames))

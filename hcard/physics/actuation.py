@@ -38,7 +38,8 @@ from hcard.physics.predictor import PredictorError
 from hcard.quantities import UM_PER_M
 
 if TYPE_CHECKING:
-    from hcard.physics.profile import DeviceLimits, DeviceProfile
+    from hcard.physics.device_limits import DeviceLimits
+    from hcard.physics.profile import DeviceProfile
     from hcard.render import Frames
 
 DEFAULT_SPEED_FLOOR = 5e-3

@@ -11,64 +11,50 @@ render. It bundles
   gives the voltage (output in N, ``inverse_input == "voltage"``, e.g. ``"ev-kaczmarek"``);
 - optionally a charge-leakage model (Eqs. 3.19-3.23) whose gain at the EV carrier frequency
   scales the voltage that acts on the finger;
-- the device limits (:class:`DeviceLimits`);
+- the device limits (:class:`~hcard.physics.device_limits.DeviceLimits`);
 - the effects a calibration added (``hcard calibrate`` writes device profiles), each on the UV
   channel, the EV channel or the bare finger (:mod:`hcard.physics.profile_effects`), with what
   the profile was fitted on.
 
-Profiles are JSON files (format ``hcard-device-profile/2``, spec/device-profile.md), written
-atomically; every loading error names the file and the field, and files of earlier formats get
-an error that says what to do. :mod:`hcard.physics.actuation` does the rendering.
+This module holds the profile's physics: its channels, the forward map and the inverses.
+Profiles are JSON files (format ``hcard-device-profile/2``, spec/device-profile.md) that
+:mod:`hcard.physics.profile_format` reads and writes; :mod:`hcard.physics.actuation` renders
+with a profile (target friction to clipped actuator commands).
 """
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from hcard.atomic import write_atomically
-from hcard.bounded_read import MAX_JSON_FILE_BYTES, InputTooLarge, read_bounded
 from hcard.errors import HcardError
-from hcard.json_text import JsonInputError, parse_json
 from hcard.physics.contracts import FrequencyResponse, TwoChannelModel
-from hcard.physics.predictor import Predictor, PredictorError
-from hcard.physics.profile_effects import (
-    EffectError,
-    FittedEffect,
-    solve_decreasing,
-    with_effects,
+from hcard.physics.device_limits import (
+    COUPLED_STIMULATOR_LIMITS,
+    DeviceLimits,
+    binding_voltage_limit,
+    layer_capacitance,
 )
-from hcard.quantities import EPSILON_0, UnitError, parse_quantity, parse_unit
+from hcard.physics.predictor import Predictor, PredictorError
+from hcard.physics.profile_effects import FittedEffect, solve_decreasing, with_effects
+from hcard.physics.profile_error import ProfileError
+from hcard.physics.profile_format import (
+    document_json,
+    parse_profile_json,
+    profile_document,
+    profile_fields,
+    read_json,
+    write_profile_file,
+)
 
 if TYPE_CHECKING:
-    from hcard.physics.actuation import ActuatorCommands
     from hcard.plugins.registry import PluginRegistry
-
-PROFILE_FORMAT = "hcard-device-profile/2"
-"""Value of the ``format`` field of a device profile file (spec/device-profile.md)."""
-
-OLD_FORMATS = {
-    "hcard-device-profile/1": (
-        "a version-1 device profile; version 2 adds the effects and the calibration: move its "
-        "fields into a version-2 file (spec/device-profile.md) or write it again with hcard"
-    ),
-    "hcard-calibrated-profile/1": (
-        "the fitted model of an earlier 'hcard calibrate', which now writes device profiles: "
-        "run 'hcard calibrate' on the recordings again"
-    ),
-    "hcard-predictor-profile/1": (
-        "a bare predictor's parameters, which a device profile (hcard-device-profile/2) now "
-        "holds under 'predictor'"
-    ),
-}
-"""Formats of earlier versions, each with what to do instead."""
 
 AMPLITUDE_SEARCH_FACTOR = 8.0
 """The numerical UV inverse searches amplitudes up to this many times the amplitude limit
@@ -77,178 +63,8 @@ AMPLITUDE_SEARCH_FACTOR = 8.0
 REFERENCE_VOLTAGE = 1000.0
 """Envelope at which the EV channel's force is evaluated to scale the inverse, V."""
 
-_LAYER_PARAMETERS = (
-    "area", "sc_thickness", "sc_permittivity", "insulator_thickness", "insulator_permittivity"
-)
-"""Parameters of a layered EV model from which Eq. 3.8 gives the finger capacitance."""
-
 QUADRATIC_TOLERANCE = 1e-6
 """Relative tolerance of the check that an EV force model goes as ``v^2``."""
-
-
-class ProfileError(PredictorError):
-    """A device profile is invalid, or its file cannot be read; the message names file and field."""
-
-
-@dataclass(frozen=True)
-class DeviceLimits:
-    """What a device can do, in SI units; commands are clipped to these.
-
-    Attributes:
-        max_amplitude: largest peak-to-peak plate vibration amplitude, m (0: no UV channel).
-        max_voltage: largest peak EV voltage of the amplifier, V (0: no EV channel).
-        max_current: largest peak current the EV amplifier may drive through the user, A
-            (250 uA on the coupled stimulator of chapter 4, section 3.6.3).
-        carrier_frequency: frequency of the sinusoidal EV carrier, Hz (440 Hz in chapter 4).
-        plate_frequency: resonance frequency of the vibrating plate, Hz (38,220 Hz, chapter 4).
-        load_capacitance: capacitance the EV amplifier drives through the finger, F; ``None``
-            derives it from the EV model's layers, ``C = eps0 A / (d_sc/eps_sc + d_i/eps_i)``
-            (Eq. 3.8; 33 pF for the section 3.6 values). A profile whose EV model has no such
-            layers must give it.
-    """
-
-    max_amplitude: float
-    max_voltage: float
-    max_current: float
-    carrier_frequency: float
-    plate_frequency: float
-    load_capacitance: float | None = None
-
-    UNITS: ClassVar[dict[str, str]] = {
-        "max_amplitude": "m",
-        "max_voltage": "V",
-        "max_current": "A",
-        "carrier_frequency": "Hz",
-        "plate_frequency": "Hz",
-        "load_capacitance": "F",
-    }
-    """SI unit of each field."""
-
-    def __post_init__(self) -> None:
-        for name in self.UNITS:
-            value = getattr(self, name)
-            if value is None and name == "load_capacitance":
-                continue
-            if isinstance(value, bool) or not isinstance(value, int | float):
-                raise ProfileError(f"limits.{name}: must be a number, got {value!r}")
-            value = float(value)
-            object.__setattr__(self, name, value)
-            strictly = name not in ("max_amplitude", "max_voltage")
-            if not math.isfinite(value) or value < 0 or (strictly and value == 0):
-                relation = "> 0" if strictly else ">= 0"
-                raise ProfileError(
-                    f"limits.{name}: must be a finite number {relation} {self.UNITS[name]}, "
-                    f"got {value:g}"
-                )
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready ``{field: {"value": v, "unit": u}}`` (``None`` stays ``None``)."""
-        out: dict[str, Any] = {}
-        for name, unit in self.UNITS.items():
-            value = getattr(self, name)
-            out[name] = None if value is None else {"value": value, "unit": unit}
-        return out
-
-    @classmethod
-    def from_dict(cls, raw: Any, *, source: str) -> DeviceLimits:
-        """Limits from a profile's ``limits`` object.
-
-        Each field is a number in SI units, a ``{"value": v, "unit": u}`` object whose unit
-        has the right dimension (``"um"`` for ``max_amplitude``), or a string such as
-        ``"2.5 um"``. Errors name ``source`` and the field.
-        """
-        if not isinstance(raw, Mapping):
-            raise ProfileError(f"{source}: 'limits' must be an object")
-        unknown = sorted(set(raw) - set(cls.UNITS))
-        if unknown:
-            raise ProfileError(
-                f"{source}: limits.{unknown[0]}: unknown field; fields: {', '.join(cls.UNITS)}"
-            )
-        values: dict[str, float | None] = {}
-        for name, unit in cls.UNITS.items():
-            where = f"{source}: limits.{name}"
-            if name not in raw:
-                if name == "load_capacitance":
-                    continue
-                raise ProfileError(f"{where}: missing ({unit})")
-            values[name] = _si_value(raw[name], unit, where, optional=name == "load_capacitance")
-        try:
-            return cls(**values)  # type: ignore[arg-type]
-        except ProfileError as exc:
-            raise ProfileError(f"{source}: {exc}") from None
-
-
-COUPLED_STIMULATOR_LIMITS = DeviceLimits(
-    max_amplitude=2.5e-6,
-    max_voltage=2000.0,
-    max_current=250e-6,
-    carrier_frequency=440.0,
-    plate_frequency=38_220.0,
-)
-"""The coupled UV+EV stimulator of chapter 4 (section 4.2.1): aluminium plate at 38,220 Hz,
-EV amplifier to 2000 V modulated at 440 Hz, current limited to 250 uA (section 3.6.3); plate
-amplitudes up to 2.5 um peak-to-peak, the range "generally implemented in ultrasonic displays"
-(section 2.4)."""
-
-
-def _si_value(raw: Any, unit: str, where: str, *, optional: bool = False) -> float | None:
-    """An SI float from a profile field (number, ``{"value", "unit"}`` or ``"2.5 um"``)."""
-    if raw is None and optional:
-        return None
-    if isinstance(raw, str):
-        try:
-            return parse_quantity(raw, unit)
-        except UnitError as exc:
-            raise ProfileError(f"{where}: {exc}") from None
-    scale = 1.0
-    if isinstance(raw, Mapping):
-        given_unit = raw.get("unit", unit)
-        if not isinstance(given_unit, str):
-            raise ProfileError(f"{where}: 'unit' must be a string")
-        try:
-            scale, dimension = parse_unit(given_unit)
-            expected = parse_unit(unit)[1]
-        except UnitError as exc:
-            raise ProfileError(f"{where}: {exc}") from None
-        if dimension != expected:
-            raise ProfileError(f"{where}: unit {given_unit!r} is not a unit of {unit}")
-        raw = raw.get("value")
-    if isinstance(raw, bool) or not isinstance(raw, int | float):
-        raise ProfileError(f"{where}: must be a number ({unit}), got {raw!r}")
-    return float(raw) * scale
-
-
-def _registry(registry: PluginRegistry | None) -> PluginRegistry:
-    if registry is not None:
-        return registry
-    from hcard.plugins.registry import get_registry
-
-    return get_registry()
-
-
-def predictor_from_profile(
-    raw: Any, *, source: str, registry: PluginRegistry | None = None
-) -> Predictor:
-    """A predictor from a predictor profile object (:meth:`Predictor.to_profile`).
-
-    The model is looked up by name among the installed predictor plugins; its class reads the
-    parameters (so a model with its own profile layout, such as ``coupled``, reads its own).
-    """
-    if not isinstance(raw, Mapping):
-        raise ProfileError(f"{source}: must be an object with 'model' and 'parameters'")
-    model = raw.get("model")
-    if not isinstance(model, str) or not model:
-        raise ProfileError(f"{source}.model: missing or not a string")
-    try:
-        prototype = _registry(registry).get("predictor", model)
-    except HcardError as exc:
-        raise ProfileError(f"{source}.model: {exc}") from None
-    try:
-        return type(prototype).from_profile(raw, source=source)
-    except ProfileError:
-        raise
-    except PredictorError as exc:
-        raise ProfileError(str(exc)) from None
 
 
 @dataclass(frozen=True)
@@ -424,14 +240,7 @@ class DeviceProfile:
 
     def _binding_voltage_limit(self) -> tuple[float, str]:
         """:attr:`voltage_limit`, worked out."""
-        limits = self.rendering_limits()
-        capacitance = self.load_capacitance
-        if capacitance is None:  # no EV channel: nothing draws current
-            return limits.max_voltage, "max_voltage"
-        by_current = limits.max_current / (2.0 * math.pi * limits.carrier_frequency * capacitance)
-        if by_current < limits.max_voltage:
-            return by_current, "max_current"
-        return limits.max_voltage, "max_voltage"
+        return binding_voltage_limit(self.rendering_limits(), self.load_capacitance)
 
     def _leakage_gain(self) -> float:
         if not isinstance(self.leakage, FrequencyResponse) or self.limits is None:
@@ -453,18 +262,13 @@ class DeviceProfile:
 
     def _derive_capacitance(self, ev: Predictor | None) -> float | None:
         """The limits' load capacitance, else Eq. 3.8 from the EV model's layer parameters
-        (``area``, ``sc_thickness``, ``sc_permittivity``, ``insulator_thickness``,
-        ``insulator_permittivity``), else None (the current limit cannot be checked)."""
+        (:func:`~hcard.physics.device_limits.layer_capacitance`), else None (the current limit
+        cannot be checked)."""
         if self.limits is not None and self.limits.load_capacitance is not None:
             return self.limits.load_capacitance
-        if ev is None or not set(_LAYER_PARAMETERS) <= set(ev.params):
+        if ev is None:
             return None
-        p = ev.params
-        electrical_thickness = (
-            p["sc_thickness"] / p["sc_permittivity"]
-            + p["insulator_thickness"] / p["insulator_permittivity"]
-        )
-        return EPSILON_0 * p["area"] / electrical_thickness
+        return layer_capacitance(ev.params)
 
     # -- forward and rendering -------------------------------------------------------------
     def forward(
@@ -644,45 +448,27 @@ class DeviceProfile:
             ratio = np.where(reference > 0, np.maximum(force_a, 0.0) / reference, np.inf)
         return REFERENCE_VOLTAGE * np.sqrt(ratio)
 
-    def actuate(
-        self, uv: Any, ev: Any, speed: Any, normal_force: Any, **options: Any
-    ) -> ActuatorCommands:
-        """Actuator commands for target relative friction; see
-        :func:`hcard.physics.actuation.actuate` (which takes the same arguments)."""
-        from hcard.physics.actuation import actuate
-
-        return actuate(self, uv, ev, speed, normal_force, **options)
-
-    # -- files -----------------------------------------------------------------------------
+    # -- files (the format: hcard.physics.profile_format) -------------------------------------
     def to_dict(self) -> dict[str, Any]:
-        """The JSON-ready profile (format :data:`PROFILE_FORMAT`, spec/device-profile.md)."""
-        return {
-            "format": PROFILE_FORMAT,
-            "name": self.name,
-            "description": self.description,
-            "predictor": self.predictor.to_profile(),
-            "leakage": None if self.leakage is None else self.leakage.to_profile(),
-            "limits": None if self.limits is None else self.limits.to_dict(),
-            "effects": [fitted.to_dict() for fitted in self.effects],
-            "observation": None if self.observation is None else dict(self.observation),
-            "calibration": None if self.calibration is None else dict(self.calibration),
-        }
+        """The JSON-ready profile (format ``hcard-device-profile/2``, spec/device-profile.md)."""
+        return profile_document(
+            name=self.name,
+            description=self.description,
+            predictor=self.predictor,
+            leakage=self.leakage,
+            limits=self.limits,
+            effects=self.effects,
+            observation=self.observation,
+            calibration=self.calibration,
+        )
 
     def to_json(self) -> bytes:
         """:meth:`to_dict` as UTF-8 JSON text (indented, finite numbers only)."""
-        try:
-            text = json.dumps(self.to_dict(), indent=2, allow_nan=False, ensure_ascii=False)
-        except ValueError as exc:
-            raise ProfileError(f"profile {self.name!r}: {exc}") from None
-        return (text + "\n").encode("utf-8")
+        return document_json(self.to_dict(), self.name)
 
     def save(self, path: str | os.PathLike[str]) -> None:
         """Write the profile as JSON, atomically (readers see the old file or the new one)."""
-        data = self.to_json()
-        try:
-            write_atomically(path, data)
-        except OSError as exc:
-            raise ProfileError(f"{path}: cannot write ({exc.strerror or exc})") from None
+        write_profile_file(path, self.to_json())
 
     @classmethod
     def from_dict(
@@ -693,64 +479,9 @@ class DeviceProfile:
         registry: PluginRegistry | None = None,
     ) -> DeviceProfile:
         """A profile from its JSON object; errors name ``source`` and the field."""
-        if not isinstance(raw, Mapping):
-            raise ProfileError(f"{source}: a device profile must be a JSON object")
-        form = raw.get("format")
-        if form != PROFILE_FORMAT:
-            why = OLD_FORMATS.get(form) if isinstance(form, str) else None
-            if why:
-                raise ProfileError(f"{source}: format: {form!r} is {why}")
-            raise ProfileError(f"{source}: format: expected {PROFILE_FORMAT!r}, got {form!r}")
-        unknown = sorted(set(raw) - set(PROFILE_FIELDS))
-        if unknown:
-            raise ProfileError(f"{source}: {unknown[0]}: unknown field; fields: "
-                               f"{', '.join(PROFILE_FIELDS)}")
-        for text_field in ("name", "description"):
-            if not isinstance(raw.get(text_field, ""), str):
-                raise ProfileError(f"{source}: {text_field}: must be a string")
-        if "predictor" not in raw:
-            raise ProfileError(f"{source}: predictor: missing")
-        registry = _registry(registry)
-        predictor = predictor_from_profile(
-            raw["predictor"], source=f"{source}: predictor", registry=registry
-        )
-        leakage = None
-        if raw.get("leakage") is not None:
-            leakage = predictor_from_profile(
-                raw["leakage"], source=f"{source}: leakage", registry=registry
-            )
-        limits = None
-        if raw.get("limits") is not None:
-            limits = DeviceLimits.from_dict(raw["limits"], source=source)
-        effects_raw = raw.get("effects", [])
-        if not isinstance(effects_raw, list):
-            raise ProfileError(f"{source}: effects: must be a list")
+        values = profile_fields(raw, source=source, registry=registry)
         try:
-            effects = tuple(
-                FittedEffect.from_dict(entry, source=f"{source}: effects[{index}]",
-                                       registry=registry)
-                for index, entry in enumerate(effects_raw)
-            )
-        except EffectError as exc:
-            raise ProfileError(str(exc)) from None
-        extras: dict[str, Mapping[str, Any] | None] = {}
-        for key in ("observation", "calibration"):
-            value = raw.get(key)
-            if value is not None and not isinstance(value, Mapping):
-                raise ProfileError(f"{source}: {key}: must be an object or null")
-            extras[key] = value
-        _check_observation(extras["observation"], source)
-        try:
-            return cls(
-                predictor=predictor,
-                limits=limits,
-                leakage=leakage,
-                name=raw.get("name", "device"),
-                description=raw.get("description", ""),
-                effects=effects,
-                observation=extras["observation"],
-                calibration=extras["calibration"],
-            )
+            return cls(**values)
         except ProfileError as exc:
             raise ProfileError(f"{source}: {exc}") from None
 
@@ -759,11 +490,8 @@ class DeviceProfile:
         cls, data: bytes, *, source: str = "profile", registry: PluginRegistry | None = None
     ) -> DeviceProfile:
         """A profile from the bytes of a profile file (UTF-8 JSON)."""
-        try:
-            raw = parse_json(data)
-        except JsonInputError as exc:
-            raise ProfileError(f"{source}: not valid JSON ({exc})") from None
-        return cls.from_dict(raw, source=source, registry=registry)
+        return cls.from_dict(parse_profile_json(data, source=source), source=source,
+                             registry=registry)
 
     @classmethod
     def load(
@@ -784,8 +512,12 @@ class DeviceProfile:
         """The chapter-4 coupled stimulator (:data:`COUPLED_STIMULATOR_LIMITS`) with the
         default ``coupled`` predictor; ``changes`` replace limits (for example
         ``max_amplitude=5e-6``)."""
+        if registry is None:
+            from hcard.plugins.registry import get_registry
+
+            registry = get_registry()
         try:
-            predictor = _registry(registry).get("predictor", "coupled")
+            predictor = registry.get("predictor", "coupled")
         except HcardError as exc:
             raise ProfileError(f"coupled stimulator: {exc}") from None
         values = {f.name: getattr(COUPLED_STIMULATOR_LIMITS, f.name) for f in fields(DeviceLimits)}
@@ -801,34 +533,6 @@ class DeviceProfile:
         )
 
 
-PROFILE_FIELDS = ("format", "name", "description", "predictor", "leakage", "limits", "effects",
-                  "observation", "calibration")
-"""The fields of a profile file (spec/device-profile.md, rule DP1)."""
-
-OBSERVATION_OUTPUTS = ("lateral_force", "output")
-"""``observation.output``: the model was fitted to a lateral force, or to its own output."""
-
-
-def _check_observation(raw: Mapping[str, Any] | None, source: str) -> None:
-    """The ``observation`` object: ``output`` one of :data:`OBSERVATION_OUTPUTS`, and
-    ``parameters`` an object of ``{"value": number, "unit": str, ...}`` entries."""
-    if raw is None:
-        return
-    output = raw.get("output")
-    if output not in OBSERVATION_OUTPUTS:
-        raise ProfileError(f"{source}: observation.output: {output!r}, expected one of "
-                           f"{', '.join(OBSERVATION_OUTPUTS)}")
-    parameters = raw.get("parameters", {})
-    if not isinstance(parameters, Mapping):
-        raise ProfileError(f"{source}: observation.parameters: must be an object")
-    for name, entry in parameters.items():
-        value = entry.get("value") if isinstance(entry, Mapping) else None
-        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(
-                value):
-            raise ProfileError(f"{source}: observation.parameters.{name}.value: expected a "
-                               "finite number")
-
-
 def _owned(values: Any, shape: tuple[int, ...]) -> bool:
     """``values`` is a float64 array of ``shape`` that owns its memory (a model's new result,
     not a view of an input): the caller may have it without a copy."""
@@ -836,29 +540,6 @@ def _owned(values: Any, shape: tuple[int, ...]) -> bool:
         type(values) is np.ndarray and values.dtype == np.float64 and values.shape == shape
         and values.base is None and values.flags.writeable
     )
-
-
-def read_json(file: Path) -> Any:
-    """The JSON content of ``file``; :class:`ProfileError` naming the file otherwise."""
-    try:
-        return parse_json(read_profile_bytes(file))
-    except JsonInputError as exc:
-        raise ProfileError(f"{file}: not valid JSON ({exc})") from None
-
-
-def read_profile_bytes(file: Path) -> bytes:
-    """The bytes of a profile file (at most :data:`MAX_JSON_FILE_BYTES`); a missing, too large
-    or unreadable file is a :class:`ProfileError` naming it."""
-    try:
-        return read_bounded(file, MAX_JSON_FILE_BYTES)
-    except FileNotFoundError:
-        raise ProfileError(f"{file}: no such file") from None
-    except InputTooLarge as exc:
-        raise ProfileError(f"{file}: {exc} (a device profile)") from None
-    except IsADirectoryError:
-        raise ProfileError(f"{file}: is a directory, not a profile") from None
-    except OSError as exc:
-        raise ProfileError(f"{file}: cannot read ({exc.strerror or exc})") from None
 
 
 def channels_of(predictor: Predictor) -> tuple[Predictor | None, Predictor | None]:

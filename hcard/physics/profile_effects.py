@@ -14,14 +14,13 @@ values and uncertainties). Each effect acts on one part of the device's physics
   so it leaves the relative friction a card asks for unchanged; it is part of the fitted
   lateral-force model, not of the rendering. One exception in the physics: occlusion raises
   the dry friction coefficient ``mu0``, which also enters the ultrasonic group ``Psi`` (Eq. 2.30)
-  through :meth:`~hcard.calibration.effects.Effect.transform_params`, in the share
+  through :meth:`~hcard.physics.effects.Effect.transform_params`, in the share
   ``psi_share`` of its rise; augmenting a UV model with it (:func:`with_effects`) carries that,
   while a model that applies finger effects to the total alone sees only the scaling.
 
-:func:`with_effects` builds a channel model with its effects (:func:`hcard.calibration.effects.
-augment`, imported when needed: the calibration package builds on this one), and
-:func:`solve_decreasing` inverts a monotone channel map numerically where the effects leave no
-closed-form inverse.
+:func:`with_effects` builds a channel model with its effects (:func:`hcard.physics.effects.
+augment`), and :func:`solve_decreasing` inverts a monotone channel map numerically where the
+effects leave no closed-form inverse.
 """
 
 from __future__ import annotations
@@ -33,6 +32,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from hcard.physics.effects import SEPARATOR, augment
 from hcard.physics.predictor import Predictor, PredictorError
 
 if TYPE_CHECKING:
@@ -65,7 +65,7 @@ class FittedEffect:
     """A calibration effect with the values of its parameters.
 
     Attributes:
-        effect: the effect plugin (:class:`hcard.calibration.effects.Effect`).
+        effect: the effect plugin (:class:`hcard.physics.effects.Effect`).
         values: its parameters by short name, in their units (SI).
         uncertainties: standard uncertainty of each fitted parameter (None: not fitted, or not
             identified by the data).
@@ -183,8 +183,6 @@ def with_effects(model: Predictor, effects: Sequence[FittedEffect]) -> Predictor
     """
     if not effects:
         return model
-    from hcard.calibration.effects import SEPARATOR, augment
-
     try:
         augmented = augment(model, [fitted.effect for fitted in effects])
     except PredictorError as exc:

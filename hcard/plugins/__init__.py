@@ -28,11 +28,11 @@ from typing import Any
 
 _LAZY = {
     "ENTRY_POINT_GROUP": "hookspecs", "PROJECT": "hookspecs", "hookimpl": "hookspecs",
-    "hookspec": "hookspecs", "BrokenPlugin": "registry", "HcardPluginWarning": "registry",
-    "PluginInfo": "registry", "PluginRegistry": "registry", "get_registry": "registry",
+    "hookspec": "hookspecs", "BrokenPlugin": "records", "HcardPluginWarning": "records",
+    "PluginInfo": "records", "PluginRegistry": "registry", "get_registry": "registry",
     "COMMAND_ENTRY_POINT_GROUP": "hookspecs", "get_command_registry": "registry",
     **dict.fromkeys(
-        ("KINDS", "PROTOCOL_OF_KIND", "CheckPlugin", "CommandPlugin", "DriverPlugin",
+        ("KINDS", "KIND_TABLE", "PROTOCOL_OF_KIND", "CheckPlugin", "CommandPlugin", "DriverPlugin",
          "EffectPlugin", "EncodeResult", "Encoder", "EncoderPlugin", "Plugin", "PredictorPlugin"),
         "kinds",
     ),
@@ -54,6 +54,7 @@ __all__ = [
     "COMMAND_ENTRY_POINT_GROUP",
     "ENTRY_POINT_GROUP",
     "KINDS",
+    "KIND_TABLE",
     "PROJECT",
     "PROTOCOL_OF_KIND",
     "BrokenPlugin",

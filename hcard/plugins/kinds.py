@@ -1,10 +1,11 @@
-"""The contracts of the plugin kinds: one :class:`typing.Protocol` per kind.
+"""The contracts of the plugin kinds: one :class:`typing.Protocol` per kind, and the table of
+the kinds (:data:`KIND_TABLE`) from which the hooks, the registry and ``hcard plugins`` take them.
 
 A plugin object is anything a hook of :mod:`hcard.plugins.hookspecs` returns; it must match
 the Protocol of its kind. The Protocols are ``runtime_checkable``, so ``isinstance(obj,
 PredictorPlugin)`` checks that the members are there (not their signatures). Base classes with
 shared behaviour implement them and may be subclassed: :class:`Encoder` (here),
-:class:`hcard.physics.Predictor`, :class:`hcard.calibration.effects.Effect`,
+:class:`hcard.physics.Predictor`, :class:`hcard.physics.effects.Effect`,
 ``hcard_device.drivers.Driver`` and ``hcard_conformance.registry.Check``.
 
 Every kind has ``kind`` (its name in :data:`KINDS`), ``name`` (unique within the kind) and a
@@ -15,10 +16,10 @@ named for type checkers.
 from __future__ import annotations
 
 import abc
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple, Protocol, runtime_checkable
 
 from hcard.plugins.lazy_command import LazyCommand
 from hcard.v1 import card_pb2 as pb
@@ -28,9 +29,6 @@ if TYPE_CHECKING:
     import numpy as np
 
     from hcard.physics.predictor import Parameter, Variable
-
-KINDS = ("encoder", "predictor", "driver", "calibration-effect", "conformance-check")
-"""Plugin kinds, in the order ``hcard plugins`` lists them."""
 
 
 @runtime_checkable
@@ -66,22 +64,43 @@ class EncodeResult:
 
 @runtime_checkable
 class EncoderPlugin(Plugin, Protocol):
-    """Kind ``encoder`` (hook ``hcard_encoders``): turns a source file into a card."""
+    """Kind ``encoder`` (hook ``hcard_encoders``): turns a source file into a card.
 
-    def encode(self, source: Path, **options: Any) -> EncodeResult:
-        """Encode ``source``; options are encoder specific. Raise an HcardError on bad input."""
+    ``hcard encode`` reaches the encoder through this contract only: it hands its options to
+    :meth:`options` first (a bad one is a usage error before any file is read), then what that
+    returns to :meth:`encode`, with ``progress``.
+    """
+
+    def options(self, **values: Any) -> dict[str, Any]:
+        """``values`` checked, with the encoder's defaults filled in: the keyword options
+        :meth:`encode` then takes. The names are the encoder's own (``hcard encode`` passes its
+        options by their long names with ``_`` for ``-``, e.g. ``taxtel_mm``). Raise
+        :class:`~hcard.errors.UsageError` naming the option by that name when one is unknown,
+        out of range or does not fit with another."""
+
+    def encode(self, source: Path, *, progress: Callable[[str], None] | None = None,
+               **options: Any) -> EncodeResult:
+        """Encode ``source``; ``options`` are encoder specific. ``progress``, when given, is
+        called with one line of text at each stage of a long encode (an encoder may say
+        nothing). Raise an HcardError on bad input."""
 
 
 class Encoder(abc.ABC):
-    """Base class of encoders (an :class:`EncoderPlugin`): subclasses define ``encode``."""
+    """Base class of encoders (an :class:`EncoderPlugin`): subclasses define ``encode``, and
+    ``options`` when they can check their options before reading the source."""
 
     kind: ClassVar[str] = "encoder"
     name: ClassVar[str] = ""
     description: ClassVar[str] = ""
 
+    def options(self, **values: Any) -> dict[str, Any]:
+        """``values`` as given: this encoder checks its options when it encodes."""
+        return dict(values)
+
     @abc.abstractmethod
-    def encode(self, source: Path, **options: Any) -> EncodeResult:
-        """Encode ``source``; options are encoder specific. Raise an HcardError on bad input."""
+    def encode(self, source: Path, *, progress: Callable[[str], None] | None = None,
+               **options: Any) -> EncodeResult:
+        """Encode ``source``; see :meth:`EncoderPlugin.encode`."""
 
 
 @runtime_checkable
@@ -131,7 +150,7 @@ class EffectPlugin(Plugin, Protocol):
     """Kind ``calibration-effect`` (hook ``hcard_calibration_effects``): a physical effect a
     fitted predictor may lack, which calibration can add (spec/calibration.md).
 
-    Implemented by :class:`hcard.calibration.effects.Effect`, whose transforms default to the
+    Implemented by :class:`hcard.physics.effects.Effect`, whose transforms default to the
     identity.
     """
 
@@ -244,8 +263,61 @@ class CommandPlugin(Protocol):
         """The click command (importing its module)."""
 
 
+class Kind(NamedTuple):
+    """One plugin kind, as a row of :data:`KIND_TABLE`.
+
+    Attributes:
+        name: the kind's name, the ``kind`` of its plugin objects (``"encoder"``).
+        hook: the hook returning its plugin objects (``"hcard_encoders"``,
+            :mod:`hcard.plugins.hookspecs`).
+        protocol: the Protocol its plugin objects implement.
+        attribute: the :class:`~hcard.plugins.registry.PluginRegistry` property giving them
+            by name (``"encoders"``).
+        description: what the hook returns, in words (the hook's and the property's
+            documentation).
+    """
+
+    name: str
+    hook: str
+    protocol: type
+    attribute: str
+    description: str
+
+
+KIND_TABLE: tuple[Kind, ...] = (
+    Kind("encoder", "hcard_encoders", EncoderPlugin, "encoders",
+         "encoders: objects turning a source (image, recipe, recording) into a card"),
+    Kind("predictor", "hcard_predictors", PredictorPlugin, "predictors",
+         "physics predictors: actuation and finger state to friction, and back"),
+    Kind("driver", "hcard_drivers", DriverPlugin, "drivers",
+         "device drivers: transports that upload cards and stream tracks to a device"),
+    Kind("calibration-effect", "hcard_calibration_effects", EffectPlugin, "calibration_effects",
+         "calibration effects: physical effects a fitted model may lack"),
+    Kind("conformance-check", "hcard_conformance_checks", CheckPlugin, "conformance_checks",
+         "conformance checks run by ``hcard conformance``"),
+)
+"""Every plugin kind: its name, its hook, its Protocol, its registry property and what it is,
+in the order ``hcard plugins`` lists them. The hooks (:mod:`hcard.plugins.hookspecs`), the
+registry's properties and lookups (:mod:`hcard.plugins.registry`) and the names below are made
+from it; a new kind is a new row (and its Protocol above)."""
+
+KINDS: tuple[str, ...] = tuple(kind.name for kind in KIND_TABLE)
+"""Plugin kinds, in the order ``hcard plugins`` lists them."""
+
+PROTOCOL_OF_KIND: dict[str, type] = {kind.name: kind.protocol for kind in KIND_TABLE}
+"""The Protocol each kind of :data:`KINDS` implements."""
+
+KIND_OF_HOOK: dict[str, Kind] = {kind.hook: kind for kind in KIND_TABLE}
+"""The kind whose plugin objects each hook returns, by hook name."""
+
+KIND_NAMED: dict[str, Kind] = {kind.name: kind for kind in KIND_TABLE}
+"""Each kind by its name."""
+
 __all__ = [
     "KINDS",
+    "KIND_NAMED",
+    "KIND_OF_HOOK",
+    "KIND_TABLE",
     "PROTOCOL_OF_KIND",
     "CheckPlugin",
     "CommandPlugin",
@@ -254,16 +326,8 @@ __all__ = [
     "EncodeResult",
     "Encoder",
     "EncoderPlugin",
+    "Kind",
     "LazyCommand",
     "Plugin",
     "PredictorPlugin",
 ]
-
-PROTOCOL_OF_KIND: dict[str, type] = {
-    "encoder": EncoderPlugin,
-    "predictor": PredictorPlugin,
-    "driver": DriverPlugin,
-    "calibration-effect": EffectPlugin,
-    "conformance-check": CheckPlugin,
-}
-"""The Protocol each kind of :data:`KINDS` implements."""

@@ -30,7 +30,6 @@ from matplotlib.cm import ScalarMappable
 from matplotlib.colors import BoundaryNorm, ListedColormap
 from matplotlib.figure import Figure
 
-from hcard import __version__
 from hcard.atomic import write_atomically
 from hcard.errors import CardValidationError
 from hcard.preview.error_map import ErrorPanel, draw_error_map, error_panel
@@ -38,6 +37,7 @@ from hcard.preview.glyph_labels import PathLabels
 from hcard.preview.periods import cells_layout, draw_cells
 from hcard.v1 import card_pb2 as pb
 from hcard.validate import errors_of, validate
+from hcard.version import __version__
 
 __all__ = [
     "GRID_AXES_LABEL",

@@ -6,7 +6,7 @@ import math
 from dataclasses import dataclass
 from enum import Enum
 
-from hcard import limits
+import hcard.limits as limits
 from hcard.rates import DEFAULT_FRAME_RATE_HZ
 
 DEFAULT_BAND_LIMIT_HZ = 1_000.0

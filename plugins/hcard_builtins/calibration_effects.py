@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 from hcard.plugins.hookspecs import hookimpl
 
 if TYPE_CHECKING:
-    from hcard.calibration.effects import Effect
+    from hcard.physics.effects import Effect
 
 
 @hookimpl

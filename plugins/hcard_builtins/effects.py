@@ -2,7 +2,7 @@
 entry point ``builtin-effects`` (:mod:`hcard_builtins.calibration_effects`, which imports this
 module when the effects are first asked for) like any vendor's plugin.
 
-Each effect is a :class:`~hcard.calibration.effects.Effect`: what it changes, why its absence
+Each effect is a :class:`~hcard.physics.effects.Effect`: what it changes, why its absence
 leaves a residual, the regressors that residual shows against, and its parameters with the thesis
 source. All quantities are SI.
 """
@@ -16,14 +16,10 @@ from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
-from hcard.calibration.effects import (
-    Effect,
-    ParameterValue,
-    high_pass,
-    low_pass,
-    touchdowns,
-)
+from hcard.calibration.time_series import high_pass, low_pass, touchdowns
 from hcard.physics import Parameter, Variable
+from hcard.physics.effects import Effect
+from hcard.physics.per_sample import ParameterValue
 from hcard.quantities import ATMOSPHERE_PA
 from hcard_builtins.physics.electrovibration import geometry as pad_geometry
 
@@ -85,7 +81,7 @@ CONTACT = Variable(
     "contact", "", "1 while the finger touches the surface, 0 out of contact (lifts)", 1.0
 )
 """Contact flag per sample: filters with state restart where it turns on
-(:func:`~hcard.calibration.effects.touchdowns`); its default (1) is one contact throughout."""
+(:func:`~hcard.calibration.time_series.touchdowns`); its default (1) is one contact throughout."""
 
 MU0_NAMES = ("mu0", "uv_mu0")
 """Names of the dry (no vibration) friction coefficient in the built-in ultrasonic models:
@@ -173,7 +169,7 @@ class OcclusionDrift(Effect):
     (input ``occlusion_time``). ``g = 0`` switches it off.
 
     It acts where ``mu0`` acts. On a base with a dry friction coefficient (:data:`MU0_NAMES`)
-    that it takes per sample (:func:`~hcard.calibration.effects.samplewise_parameters`: the
+    that it takes per sample (:func:`~hcard.physics.per_sample.samplewise_parameters`: the
     dimensionless group and the spring-slider), ``mu0`` drifts per sample inside the model,
     so it enters ``Psi = U / (w f mu0 (1 + nu))`` (Eq. 2.30) as well: with a share ``s``
     (``psi_share``) of the rise, ``mu0_Psi(t) = mu0 (1 + s g (1 - exp(-t / tau_o)))``.
@@ -318,7 +314,7 @@ class ActuatorBandwidth(Effect):
     first-order low-pass of time constant ``tau_a`` (section 4.3: about 1.5 ms for the fast
     stimulator, 15 ms for a plate like [86]'s; Fig. 4.5). The amplitude column is the command;
     when it changes relative to the force sampling is a second parameter, the step offset
-    ``theta`` of :func:`~hcard.calibration.effects.low_pass`: 0 when the command steps at the
+    ``theta`` of :func:`~hcard.calibration.time_series.low_pass`: 0 when the command steps at the
     sample that first shows it (no response there yet, the default), up to 1 a full sample
     earlier. ``tau_a`` at its lower bound (:data:`INSTANT_ACTUATOR_TIME_CONSTANT`) is the base
     model exactly (the neutral values).
@@ -385,7 +381,7 @@ class ChargeLeakage(Effect):
     ``v_e = tau_d s / (1 + tau_d s) v`` (Eqs. 3.19-3.23), not the applied one. It acts on the
     voltage before the EV model (:meth:`transform_inputs`).
 
-    The filter restarts at every touch-down (:func:`~hcard.calibration.effects.touchdowns` of
+    The filter restarts at every touch-down (:func:`~hcard.calibration.time_series.touchdowns` of
     the ``contact`` input; a reversal without a lift is no touch-down): the skin arrives
     uncharged, so at contact the whole voltage acts
     (the filter from rest) and then leaks with ``tau_d``; charge leaked in an earlier contact

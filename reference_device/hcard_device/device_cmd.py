@@ -284,7 +284,8 @@ def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Pat
       hcard play card.hcard --device sim://evita --track stroke.csv -o rec.csv
       hcard play card.hcard --device usbip://127.0.0.1:3240/1-1 --track stroke.csv -o rec.csv
     """
-    from hcard.physics.profile import DeviceProfile, read_profile_bytes
+    from hcard.physics.profile import DeviceProfile
+    from hcard.physics.profile_format import read_profile_bytes
     from hcard_device.drivers import PlayTooLong, open_device
     from hcard_device.drivers.play import check_play_length, summary
     from hcard_device.drivers.play import play as play_track

@@ -21,9 +21,9 @@ from threadpoolctl import threadpool_info, threadpool_limits
 
 from hcard.calibration import blas_threads
 from hcard.calibration.blas_threads import one_blas_thread
-from hcard.calibration.effects import augment
 from hcard.calibration.fit import fit_predictor
 from hcard.calibration.observation import lateral_force_model
+from hcard.physics.effects import augment
 from hcard.plugins.registry import get_registry
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))

@@ -16,10 +16,10 @@ from test_selection_recordings import Hidden, uv_recording
 
 from hcard.calibration.bootstrap import stroke_bootstrap
 from hcard.calibration.dataset import prepare
-from hcard.calibration.effects import augment
 from hcard.calibration.fit import fit_predictor
 from hcard.calibration.observation import lateral_force_model
 from hcard.physics import PredictorError
+from hcard.physics.effects import augment
 from hcard.plugins.registry import get_registry
 
 LOAD = "load-index.load_index"

@@ -12,10 +12,10 @@ import scipy.constants
 
 from hcard.calibration.dataset import prepare
 from hcard.calibration.device_model import FINGER_PREFIX, fitted_profile, profile_model
-from hcard.calibration.effects import augment
 from hcard.calibration.loop import calibrate
 from hcard.calibration.observation import lateral_force_model
 from hcard.calibration.results import EXPLAINED
+from hcard.physics.effects import augment
 from hcard.physics.profile import DeviceProfile
 from hcard.plugins.registry import get_registry
 from hcard_device.sim.tribometer import Protocol, synthesize

@@ -10,8 +10,8 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from hcard.calibration.effects import augment
 from hcard.physics import Predictor
+from hcard.physics.effects import augment
 from hcard_builtins.effects import BUILTIN_EFFECTS, ChargeLeakage
 from hcard_builtins.physics.electrovibration import Kaczmarek
 from hcard_builtins.physics.finger import FingerFriction

@@ -14,14 +14,11 @@ import pytest
 import scipy.constants
 
 from hcard.calibration.dataset import accumulated_contact_time
-from hcard.calibration.effects import (
-    SAMPLEWISE_PARAMETERS,
-    augment,
-    forward_per_sample,
-)
 from hcard.calibration.fit import fit_predictor
 from hcard.calibration.observation import lateral_force_model
 from hcard.physics import Predictor, PredictorError
+from hcard.physics.effects import augment
+from hcard.physics.per_sample import SAMPLEWISE_PARAMETERS, forward_per_sample
 from hcard.plugins.registry import get_registry
 from hcard_builtins.effects import LoadIndex, OcclusionDrift
 from hcard_builtins.physics.coupled import Coupled

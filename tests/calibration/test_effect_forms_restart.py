@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 import scipy.constants
 
-from hcard.calibration.effects import augment, high_pass, touchdowns
 from hcard.calibration.fit import fit_predictor
+from hcard.calibration.time_series import high_pass, touchdowns
 from hcard.physics import PredictorError
+from hcard.physics.effects import augment
 from hcard_builtins.effects import ActuatorBandwidth, ChargeLeakage
 from hcard_builtins.physics.electrovibration import Kaczmarek
 

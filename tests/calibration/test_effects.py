@@ -10,17 +10,11 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from hcard.calibration.effects import (
-    Effect,
-    augment,
-    high_pass,
-    low_pass,
-    recent_change,
-    time_since_change,
-)
 from hcard.calibration.fit import fit_predictor
 from hcard.calibration.residuals import analyse_residuals
+from hcard.calibration.time_series import high_pass, low_pass, recent_change, time_since_change
 from hcard.physics import Predictor, PredictorError
+from hcard.physics.effects import Effect, augment
 from hcard_builtins.effects import (
     ActuatorBandwidth,
     AirLayer,
@@ -63,7 +57,7 @@ def recording(rate_hz: float, seed: int) -> dict[str, np.ndarray]:
 
 
 def regressors(data: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """Every regressor the analysis sees, named as in :mod:`hcard.calibration.effects`."""
+    """Every regressor the analysis sees, named as in :mod:`hcard.physics.effects`."""
     t = data["time"]
     return {
         "normal_force": data["normal_force"],

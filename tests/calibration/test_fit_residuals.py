@@ -248,8 +248,8 @@ def test_p_values_count_autocorrelated_samples_once() -> None:
 
 
 def _lateral(effects: tuple[str, ...] = ()):
-    from hcard.calibration.effects import augment
     from hcard.calibration.observation import lateral_force_model
+    from hcard.physics.effects import augment
     from hcard.plugins.registry import get_registry
 
     registry = get_registry()

@@ -28,7 +28,8 @@ from hcard.calibration.report.figures import (
 from hcard.calibration.report.json_document import FORMAT
 from hcard.calibration.report.writer import write_report
 from hcard.physics import PredictorError
-from hcard.physics.profile import PROFILE_FORMAT, DeviceProfile
+from hcard.physics.profile import DeviceProfile
+from hcard.physics.profile_format import PROFILE_FORMAT
 from hcard.plugins.registry import get_registry
 
 pytest.importorskip("hcard_builtins")

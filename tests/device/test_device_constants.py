@@ -12,7 +12,7 @@ import pytest
 from hcard.bounded_read import DEFAULT_MAX_PIXELS
 from hcard.calibration.dataset import ATMOSPHERE_PA
 from hcard.cli.encode_cmd import encode
-from hcard.physics.profile import COUPLED_STIMULATOR_LIMITS
+from hcard.physics.device_limits import COUPLED_STIMULATOR_LIMITS
 from hcard.rates import DEFAULT_FRAME_RATE_HZ, TOUCH_RATE_HZ
 from hcard.render.options import RenderOptions
 from hcard_builtins.effects import ATMOSPHERE as EFFECTS_ATMOSPHERE

@@ -108,6 +108,9 @@ def test_the_signature_check_finds_a_mismatch() -> None:
     class WrongEncoder:
         kind, name, description = "encoder", "wrong", "takes a path positionally only"
 
+        def options(self, **values):  # type: ignore[no-untyped-def]
+            return values
+
         def encode(self, path, options):  # type: ignore[no-untyped-def]
             return None
 
@@ -115,6 +118,7 @@ def test_the_signature_check_finds_a_mismatch() -> None:
     assert isinstance(wrong, EncoderPlugin)  # the members are there ...
     assert signature_mismatches(wrong, EncoderPlugin) == [  # ... but not the parameters
         "encode: no parameter 'source'",
+        "encode: no parameter 'progress'",
         "encode: no **options",
         "encode: extra parameter 'path' without a default",
     ]

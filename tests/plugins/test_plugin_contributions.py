@@ -23,7 +23,8 @@ from distributions import install_distribution
 
 from hcard.cli.main import cli
 from hcard.physics import Parameter, Predictor, Variable
-from hcard.physics.profile import DeviceLimits, DeviceProfile
+from hcard.physics.device_limits import DeviceLimits
+from hcard.physics.profile import DeviceProfile
 from hcard.plugins import HcardPluginWarning, LazyCommand, hookimpl
 from hcard.plugins.registry import get_command_registry, get_registry
 

@@ -14,8 +14,10 @@ import pytest
 from click.testing import CliRunner
 from PIL import Image
 
+from hcard import build
 from hcard.card_io import load
 from hcard.cli.main import cli
+from hcard.errors import UsageError
 from hcard.plugins import EncodeResult, hookimpl
 from hcard.plugins import registry as registry_module
 from hcard.plugins.registry import PluginRegistry
@@ -106,3 +108,80 @@ def test_the_simulated_device_models_come_from_the_registry(own_registry: Plugin
     inputs = {"amplitude": np.asarray([1e-6]), "speed": np.asarray([0.02]),
               "normal_force": np.asarray([0.5])}
     assert model.forward(**inputs) == pytest.approx(0.5 * reference.forward(**inputs), rel=1e-12)
+
+
+class ContractOnlyEncoder:
+    """An ``image`` encoder that is not the built-in (no EncodeOptions, no ImageEncoder): it
+    keeps what ``hcard encode`` asks of it, and refuses a taxtel under 1 mm in options()."""
+
+    kind, name, description = "encoder", "image", "a vendor's image encoder"
+
+    def __init__(self) -> None:
+        self.asked: list[dict[str, Any]] = []
+        self.encoded: list[tuple[Path, dict[str, Any]]] = []
+
+    def options(self, **values: Any) -> dict[str, Any]:
+        self.asked.append(values)
+        if values["taxtel_mm"] < 1.0:
+            raise UsageError(f"taxtel_mm must be at least 1 mm here, got {values['taxtel_mm']}")
+        return {"taxtel_mm": values["taxtel_mm"], "vendor_level": 3}
+
+    def encode(self, source: Path, *, progress: Any = None, **options: Any) -> EncodeResult:
+        self.encoded.append((Path(source), options))
+        progress("vendor encoder at work")
+        card = build.card(10.0, 10.0, taxtel_mm=options["taxtel_mm"],
+                          textures=[build.texture(1.0, channel="uv", name="flat")],
+                          texture_index=[0, 0, 0, 0], title="vendor")
+        return EncodeResult(card=card, stats=dict(SUMMARY_STATS))
+
+
+SUMMARY_STATS = {
+    "image": "any.png", "image_width_px": 4, "image_height_px": 4, "image_mode": "L",
+    "width_mm": 10.0, "height_mm": 10.0, "pixel_pitch_mm": [2.5, 2.5], "size_source": "given",
+    "cols": 2, "rows": 2, "taxtel_mm": 5.0, "tile_px": [2, 2], "textures": 1,
+    "distinct_textures": 1, "textured_taxtels": 0, "components": 0, "channel": "uv",
+    "friction_range": [0.3, 1.0], "locking": "auto", "card_bytes": 40, "raw_bitmap_bytes": 10000,
+    "rms_error": 0.0, "max_error": 0.0,
+}
+"""What the summary of ``hcard encode`` prints (the keys of the image encoder's stats)."""
+
+
+@pytest.fixture
+def contract_only(monkeypatch: pytest.MonkeyPatch) -> Iterator[ContractOnlyEncoder]:
+    """The process registry replaced by one whose ``image`` encoder is a
+    :class:`ContractOnlyEncoder`."""
+    encoder = ContractOnlyEncoder()
+    plugin = types.ModuleType("vendor_image_encoder")
+    plugin.hcard_encoders = hookimpl(lambda: [encoder])  # type: ignore[attr-defined]
+    registry = PluginRegistry()
+    registry.register(plugin, package="hcard", version="0")
+    monkeypatch.setattr(registry_module, "_default", registry)
+    yield encoder
+
+
+def test_encode_reaches_the_encoder_through_its_contract_only(
+        contract_only: ContractOnlyEncoder, tmp_path: Path) -> None:
+    """The command's options go to options(), and what it returns (not the command's options)
+    to encode(), with progress: nothing of the built-in encoder is needed (on main, the command
+    built hcard_builtins.image.EncodeOptions itself and handed it to encode)."""
+    card = tmp_path / "vendor.hcard"
+    done = CliRunner().invoke(cli, ["encode", str(tmp_path / "any.png"), "-o", str(card),
+                                    "--taxtel-mm", "5", "--channel", "ev"])
+    assert done.exit_code == 0, done.output
+    (asked,) = contract_only.asked
+    assert (asked["taxtel_mm"], asked["channel"], asked["max_error"]) == (5.0, "ev", None)
+    assert contract_only.encoded == [(tmp_path / "any.png", {"taxtel_mm": 5.0,
+                                                              "vendor_level": 3})]
+    assert "hcard encode: vendor encoder at work" in done.stderr
+    assert load(card).metadata.title == "vendor"
+
+
+def test_an_option_the_encoder_refuses_is_a_usage_error_naming_it(
+        contract_only: ContractOnlyEncoder, tmp_path: Path) -> None:
+    card = tmp_path / "vendor.hcard"
+    done = CliRunner().invoke(cli, ["encode", str(tmp_path / "any.png"), "-o", str(card),
+                                    "--taxtel-mm", "0.5"])
+    assert done.exit_code == 2
+    assert done.stderr.splitlines()[-1] == (
+        "Error: --taxtel-mm must be at least 1 mm here, got 0.5")
+    assert contract_only.encoded == [] and not card.exists()

@@ -21,11 +21,11 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator, ScalarFormatter
 from matplotlib.transforms import ScaledTranslation
 
-from hcard import __version__
 from hcard.calibration.report.number_text import force_in_mn
 from hcard.calibration.results import CalibrationResult
 from hcard.preview.glyph_labels import PathLabels
 from hcard.quantities import MN_PER_N, N_PER_MN, SI_UNITS, display_unit
+from hcard.version import __version__
 
 DPI = 100
 """Resolution of the figures, dots per inch."""
@@ -60,7 +60,7 @@ REGRESSOR_UNITS = {
     "voltage_history": "s",
     "recording": "",
 }
-"""SI unit of each regressor (:mod:`hcard.calibration.effects`,
+"""SI unit of each regressor (:mod:`hcard.physics.effects`,
 :mod:`hcard.calibration.dataset`)."""
 
 BEFORE_COLOUR = "tab:orange"

@@ -10,12 +10,12 @@ from typing import Any
 
 import numpy as np
 
-from hcard import __version__
 from hcard.calibration.profile import parameter_table, profile_of
 from hcard.calibration.residuals import ResidualReport
 from hcard.calibration.results import CalibrationResult, ModelFit
 from hcard.calibration.screening import SCREEN_TOLERANCE, describe_screening, screening_stride
 from hcard.physics.profile import DeviceProfile
+from hcard.version import __version__
 
 FORMAT = "hcard-calibration-report/1"
 """Value of the ``format`` key of ``report.json``."""

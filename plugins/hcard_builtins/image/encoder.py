@@ -32,7 +32,7 @@ import numpy as np
 from hcard import __version__, build, limits
 from hcard.card_io import to_bytes
 from hcard.channels import NAMES
-from hcard.errors import CardValidationError
+from hcard.errors import CardValidationError, UsageError
 from hcard.plugins.kinds import Encoder, EncodeResult
 from hcard.v1 import card_pb2 as pb
 from hcard.validate import errors_of, validate
@@ -454,6 +454,18 @@ class ImageEncoder(Encoder):
         "palette of grating textures"
     )
 
-    def encode(self, source: Path, **options: Any) -> EncodeResult:
-        """Encode the image ``source``; ``options`` are :class:`EncodeOptions` fields."""
-        return encode_image(source, **options)
+    def options(self, **values: Any) -> dict[str, Any]:
+        """``values``, :class:`EncodeOptions` fields, checked (:meth:`EncodeOptions.checked`)
+        and with the defaults filled in; a bad one is a :class:`~hcard.errors.UsageError`
+        naming the field."""
+        try:
+            checked = _options(None, values)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+        return {f.name: getattr(checked, f.name) for f in fields(checked)}
+
+    def encode(self, source: Path, *, progress: Callable[[str], None] | None = None,
+               **options: Any) -> EncodeResult:
+        """Encode the image ``source``; ``options`` are :class:`EncodeOptions` fields (or
+        ``options``, an :class:`EncodeOptions`), see :func:`encode_image`."""
+        return encode_image(source, progress=progress, **options)

@@ -15,7 +15,7 @@ A = 1 cm^2, d_sc = 200 um, eps_sc = 1560, d_i = 90 um, eps_i = 3.35), with the p
 of that stimulator (38,220 Hz) as the default ``frequency``. Their parameters appear prefixed
 ``uv_`` and ``ev_``; :meth:`Coupled.compose` couples other models. The device limits of the
 stimulator (2000 V, 440 Hz carrier, 250 uA) belong to its device profile
-(:data:`hcard.physics.profile.COUPLED_STIMULATOR_LIMITS`).
+(:data:`hcard.physics.device_limits.COUPLED_STIMULATOR_LIMITS`).
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ import numpy as np
 
 from hcard.errors import HcardError
 from hcard.physics import Parameter, Predictor, PredictorError, Variable
-from hcard.physics.profile import COUPLED_STIMULATOR_LIMITS
+from hcard.physics.device_limits import COUPLED_STIMULATOR_LIMITS
 from hcard_builtins.physics.electrovibration import Kaczmarek
 from hcard_builtins.physics.ultrasonic import DimensionlessGroup
 

@@ -48,7 +48,8 @@ def driver_classes() -> dict[str, DriverPlugin]:
     """Driver plugins of the plugin registry by URI scheme: the built-ins (package ``hcard``:
     ``sim``, ``usbip``, ``pyusb``, ``hid``), which keep their schemes, then the other installed
     or registered drivers for other schemes."""
-    from hcard.plugins.registry import CORE_DISTRIBUTION, get_registry
+    from hcard.plugins.discovery import CORE_DISTRIBUTION
+    from hcard.plugins.registry import get_registry
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # `hcard plugins` reports broken plugins

@@ -21,7 +21,7 @@ import math
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from hcard.physics.profile import COUPLED_STIMULATOR_LIMITS, DeviceLimits
+from hcard.physics.device_limits import COUPLED_STIMULATOR_LIMITS, DeviceLimits
 from hcard.rates import DEFAULT_FRAME_RATE_HZ, TOUCH_RATE_HZ
 
 EVITA_LIMITS = replace(COUPLED_STIMULATOR_LIMITS, max_voltage=0.0, plate_frequency=60_750.0)

@@ -56,7 +56,8 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from hcard.physics.actuation import actuate
-from hcard.physics.profile import DeviceProfile, ProfileError
+from hcard.physics.profile import DeviceProfile
+from hcard.physics.profile_error import ProfileError
 from hcard.quantities import M_PER_MM
 from hcard.render import Renderer, RenderOptions, RenderStream
 from hcard.track import FingerTrack
