@@ -121,7 +121,7 @@ def test_serve_lists_and_checks_effects():
     assert listing.exit_code == 0 and listing.output.startswith("air-layer (coupled;")
     refused = CliRunner().invoke(cli, ["device", "serve", "--device", "evita", "--effect",
                                        "air-layer", "--port", "0"])
-    assert refused.exit_code == 1
+    assert refused.exit_code == 2  # a bad option value (README: exit status)
     assert "effect air-layer needs the coupled device, not evita" in refused.output
     malformed = CliRunner().invoke(cli, ["device", "serve", "--effect-param", "air-layer=1"])
-    assert malformed.exit_code == 1 and "expected EFFECT.PARAM=VALUE" in malformed.output
+    assert malformed.exit_code == 2 and "expected EFFECT.PARAM=VALUE" in malformed.output
