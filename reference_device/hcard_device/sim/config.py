@@ -56,7 +56,7 @@ class DeviceConfig:
         surface_mm: (width, height) of the touch surface, mm; the corner force sensors sit at
             its corners and the card's coordinates are those of this surface.
         limits: the hardware limits, plate resonance and EV carrier (:data:`EVITA_LIMITS`,
-            :data:`~hcard.physics.profile.COUPLED_STIMULATOR_LIMITS`), SI units; the
+            :data:`~hcard.physics.device_limits.COUPLED_STIMULATOR_LIMITS`), SI units; the
             firmware's model renders with them and the simulated hardware enforces them.
             ``limits.load_capacitance`` is the model's (None: Eq. 3.8's 33 pF).
         plate_quality_factor: unloaded quality factor ``Q0`` of the plate.
@@ -229,7 +229,7 @@ EVITA_SOURCES: dict[str, str] = {
     ),
     "limits.max_amplitude": (
         "section 2.4: amplitudes up to 2.5 um peak-to-peak, the range of ultrasonic displays "
-        "(hcard.physics.profile.COUPLED_STIMULATOR_LIMITS)"
+        "(hcard.physics.device_limits.COUPLED_STIMULATOR_LIMITS)"
     ),
     "limits.max_voltage": "section 5.1: the E-ViTa has no EV amplifier (0 V)",
     "limits.max_current": "section 3.6.3 / [84]: user current limited to 250 uA",

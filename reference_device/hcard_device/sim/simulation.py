@@ -107,7 +107,7 @@ _TARGET_TOLERANCE = 1e-9
 class Limits:
     """Limits in force (hardware limits, or lower ones set by the host).
 
-    Not a :class:`~hcard.physics.profile.DeviceLimits`: a host may set a current limit of 0 A
+    Not a :class:`~hcard.physics.device_limits.DeviceLimits`: a host may set a current limit of 0 A
     (no EV output), which a device profile cannot hold (its ``max_current`` is > 0;
     :func:`.models.device_profile` gives the model no voltage instead). The hardware values are
     ``config.limits``'.

@@ -37,8 +37,8 @@ below run the physics of their own model, not the calibration effect's formula:
 
 Every other registered calibration effect (``ultrasonic-speed``, ``skin-recovery``,
 ``squeeze-film-share``, ``finger-geometry``, plugins' effects) is applied with the effect
-plugin's own :meth:`~hcard.calibration.effects.Effect.transform_inputs` /
-:meth:`~hcard.calibration.effects.Effect.transform_output` on the component its ``outputs``
+plugin's own :meth:`~hcard.physics.effects.Effect.transform_inputs` /
+:meth:`~hcard.physics.effects.Effect.transform_output` on the component its ``outputs``
 names: ``mu'`` for ``relative_friction``, ``F_e`` for ``electrostatic_force``, the total lateral
 force otherwise. Their inputs: ``time`` (s since the recording began), ``stroke`` (strokes since
 the finger last rested, 0 for the first stroke after a rest), ``speed`` (|speed|, m/s),
