@@ -66,3 +66,14 @@ HOSTILE_CARDS = {
     "indices-out-of-range": indices_out_of_range,
 }
 """Name -> builder of each hostile card."""
+
+
+def empty_components_json(size: int = 2 * 1024 * 1024) -> bytes:
+    """A card in the JSON form (README.md F5) of ``size`` bytes whose one texture holds as many
+    empty components (``{}``, 3 bytes each with the comma) as fit: ~699 000 at 2 MiB, the
+    largest card the reference device stores. Invalid (a component needs a frequency)."""
+    card = build.card(10.0, 10.0, taxtel_mm=10.0, textures=[build.texture(0.5, channel="uv")])
+    head, tail = card_io.to_json(card).split('"components": []')
+    count = (size - len(head) - len(tail) - len('"components": []')) // 3
+    text = head + '"components": [' + ",".join(["{}"] * count) + "]" + tail
+    return text.encode().ljust(size)

@@ -8,12 +8,14 @@ another thread of the device's process still stops its firmware thread. So the s
 checks in a **worker process** (:class:`ProcessChecker`, ``python -m hcard_device.card_check``):
 the firmware sends it the staged bytes without holding its lock, waits at most
 :data:`CHECK_TIMEOUT_S` (the bound of spec/README.md section 4 for any card command on any card
-under 16 MiB), and gets back the card as :data:`pieces <card_pieces>`, its header and one piece
-per texture, each a binary card that parses in well under a millisecond, merged in order into
-the card the device renders (protobuf merges repeated fields by appending), so that no single
-step of the device's process holds the lock for long. A worker that does not answer in time is
-killed (and replaced): the upload fails with INVALID_CARD (INVALID_PROFILE) and a detail naming
-the bound, and the device never stalls.
+under 16 MiB), and gets back everything the device needs to render the card: the card compiled
+for the renderer (0.06 s of Python for the largest valid card), its textures' extremes for the
+clip report (0.15 s), and the card itself as :func:`pieces <card_pieces>`, its header and one
+piece per texture, each a binary card that parses in well under a millisecond, merged in order
+into the card the device keeps (protobuf merges repeated fields by appending), so that no
+single step of the device's process holds the interpreter lock for long. A worker that does
+not answer in time is killed (and replaced): the upload fails with INVALID_CARD
+(INVALID_PROFILE) and a detail naming the bound, and the device never stalls.
 
 :class:`InlineChecker` checks in the calling thread (still outside the firmware's lock): the
 in-process ``sim://`` device, whose time only moves when its host advances it, and tests.
@@ -22,6 +24,7 @@ in-process ``sim://`` device, whose time only moves when its host advances it, a
 from __future__ import annotations
 
 import contextlib
+import io
 import os
 import pickle
 import select
@@ -37,8 +40,11 @@ from typing import IO, Protocol
 from hcard.card_io import parse_card
 from hcard.errors import HcardError
 from hcard.physics.profile import DeviceProfile
+from hcard.render.compiled import CompiledCard, compile_card
+from hcard.render.options import RenderOptions
 from hcard.v1 import card_pb2 as pb
 from hcard_device.protocol.upload import failure_detail
+from hcard_device.sim.clip import TextureExtremes, card_extremes
 
 CHECK_TIMEOUT_S = 20.0
 """Longest wait for the check of one COMMIT or COMMIT_PROFILE, waiting for an earlier check
@@ -53,9 +59,19 @@ _READY = b"ready"
 
 @dataclass(frozen=True)
 class CheckedCard:
-    """A valid card, as pieces to merge (:func:`assemble_card`)."""
+    """A valid card, compiled.
+
+    Attributes:
+        pieces: the card, as pieces to merge (:func:`assemble_card`).
+        compiled: its compiled form for the renderer (:func:`hcard.render.compiled.compile_card`
+            with the options of the check).
+        extremes: what each texture the grid uses asks at its extremes (the clip report's card
+            part, :func:`~hcard_device.sim.clip.card_extremes`).
+    """
 
     pieces: tuple[bytes, ...]
+    compiled: CompiledCard
+    extremes: tuple[TextureExtremes, ...]
 
 
 @dataclass(frozen=True)
@@ -81,20 +97,30 @@ class Checker(Protocol):
     """What the firmware needs to check a COMMIT (:class:`InlineChecker`,
     :class:`ProcessChecker`)."""
 
-    def check_card(self, data: bytes) -> CardOutcome: ...
+    def check_card(self, data: bytes, options: RenderOptions) -> CardOutcome: ...
 
     def check_profile(self, data: bytes) -> ProfileOutcome: ...
 
     def close(self) -> None: ...
 
 
+INDEX_PIECE = 8192
+"""Taxtel indices per piece of :func:`card_pieces` (the largest grid has 65 536)."""
+
+
 def card_pieces(card: pb.Card) -> tuple[bytes, ...]:
-    """``card`` as binary pieces whose merge in order is ``card``: everything but the
-    textures, then one piece per texture."""
+    """``card`` as binary pieces whose merge in order is ``card``: everything but the textures
+    and the taxtel indices, the indices :data:`INDEX_PIECE` at a time, then one piece per
+    texture (proto3 leaves default scalars out of a piece, and a merge appends repeated
+    fields, so each piece adds only what it holds)."""
     head = pb.Card()
     head.CopyFrom(card)
     del head.textures[:]
+    del head.grid.texture_index[:]
+    indices = card.grid.texture_index
     return (head.SerializeToString(),
+            *(pb.Card(grid=pb.TaxtelGrid(texture_index=indices[i:i + INDEX_PIECE]))
+              .SerializeToString() for i in range(0, len(indices), INDEX_PIECE)),
             *(pb.Card(textures=[texture]).SerializeToString() for texture in card.textures))
 
 
@@ -107,13 +133,15 @@ def assemble_card(pieces: tuple[bytes, ...]) -> pb.Card:
     return card
 
 
-def check_card_bytes(data: bytes) -> CardOutcome:
-    """Parse and validate a card (binary or JSON form, README.md F5)."""
+def check_card_bytes(data: bytes, options: RenderOptions) -> CardOutcome:
+    """Parse and validate a card (binary or JSON form, README.md F5), then compile it for a
+    renderer with ``options`` and find its textures' extremes."""
     try:
         card = parse_card(data, source="upload")
+        compiled = compile_card(card, options)
     except HcardError as exc:
         return CheckFailed(failure_detail(exc))
-    return CheckedCard(card_pieces(card))
+    return CheckedCard(card_pieces(card), compiled, card_extremes(card))
 
 
 def check_profile_bytes(data: bytes) -> ProfileOutcome:
@@ -127,9 +155,9 @@ def check_profile_bytes(data: bytes) -> ProfileOutcome:
 class InlineChecker:
     """Checks in the calling thread (see the module docstring)."""
 
-    def check_card(self, data: bytes) -> CardOutcome:
+    def check_card(self, data: bytes, options: RenderOptions) -> CardOutcome:
         """:func:`check_card_bytes`."""
-        return check_card_bytes(data)
+        return check_card_bytes(data, options)
 
     def check_profile(self, data: bytes) -> ProfileOutcome:
         """:func:`check_profile_bytes`."""
@@ -179,21 +207,22 @@ class ProcessChecker:
         finally:
             self._lock.release()
 
-    def check_card(self, data: bytes) -> CardOutcome:
+    def check_card(self, data: bytes, options: RenderOptions) -> CardOutcome:
         """Check a card in the worker; CheckFailed when it is invalid or not checked in time."""
-        outcome = self._check(_CARD, data, "card")
+        outcome = self._check(_CARD, data, "card", options)
         if isinstance(outcome, CheckedCard | CheckFailed):
             return outcome
         return CheckFailed("card check: the worker answered nonsense")
 
     def check_profile(self, data: bytes) -> ProfileOutcome:
         """Check a device profile in the worker, like :meth:`check_card`."""
-        outcome = self._check(_PROFILE, data, "profile")
+        outcome = self._check(_PROFILE, data, "profile", None)
         if isinstance(outcome, CheckedProfile | CheckFailed):
             return outcome
         return CheckFailed("profile check: the worker answered nonsense")
 
-    def _check(self, kind: bytes, data: bytes, what: str) -> object:
+    def _check(self, kind: bytes, data: bytes, what: str,
+               options: RenderOptions | None) -> object:
         deadline = time.monotonic() + self.timeout_s
         late = CheckFailed(f"{what} not checked within {self.timeout_s:g} s")
         if not self._lock.acquire(timeout=self.timeout_s):
@@ -204,15 +233,14 @@ class ProcessChecker:
             try:
                 process = self._ensure_worker(deadline)
                 assert process.stdin is not None and process.stdout is not None
-                _write_frame(process.stdin, kind + data)
-                answer = _read_frame(process.stdout, deadline)
+                _write_frame(process.stdin, kind + pickle.dumps(options) + data)
+                return _read_outcome(process.stdout, deadline)
             except TimeoutError:
                 self._kill(f"a {what} check took longer than {self.timeout_s:g} s")
                 return late
             except (OSError, EOFError, ValueError) as exc:
                 self._kill(f"the {what} check worker failed ({exc})")
                 return CheckFailed(f"{what} check failed: the checker stopped")
-            return pickle.loads(answer)
         finally:
             self._lock.release()
 
@@ -318,6 +346,49 @@ def _read_exactly(fd: int, size: int, deadline: float) -> bytes:
     return bytes(chunks)
 
 
+def _blobs(outcome: object) -> tuple[tuple[object, ...], list[bytes]]:
+    """An outcome as a small header and blobs, each unpickled on its own by the device
+    (:func:`_read_outcome`): the card's pieces, each field of its compiled form (each texture
+    apart) and each texture's extremes; none takes long to load."""
+    if isinstance(outcome, CheckedCard):
+        compiled = outcome.compiled
+        fields = [name for name in vars(compiled) if name != "textures"]
+        blobs = [*outcome.pieces,
+                 *(pickle.dumps(getattr(compiled, name)) for name in fields),
+                 *(pickle.dumps(texture) for texture in compiled.textures),
+                 *(pickle.dumps(entry) for entry in outcome.extremes)]
+        return ("card", len(outcome.pieces), tuple(fields), len(compiled.textures),
+                len(outcome.extremes)), blobs
+    return ("object",), [pickle.dumps(outcome)]
+
+
+def _write_outcome(stream: IO[bytes], outcome: object) -> None:
+    header, blobs = _blobs(outcome)
+    _write_frame(stream, pickle.dumps((header, len(blobs))))
+    for blob in blobs:
+        _write_frame(stream, blob)
+
+
+def _read_outcome(stream: IO[bytes], deadline: float) -> object:
+    """An outcome written by :func:`_write_outcome` (the worker is trusted: it is the
+    device's own process)."""
+    header, count = pickle.loads(_read_frame(stream, deadline))
+    blobs = [_read_frame(stream, deadline) for _ in range(count)]
+    if header[0] != "card":
+        return pickle.loads(blobs[0])
+    _, pieces, fields, textures, extremes = header
+    compiled = CompiledCard.__new__(CompiledCard)  # fields as they were, none recomputed
+    at = pieces
+    for name in fields:
+        object.__setattr__(compiled, name, pickle.loads(blobs[at]))
+        at += 1
+    object.__setattr__(compiled, "textures",
+                       tuple(pickle.loads(blob) for blob in blobs[at:at + textures]))
+    at += textures
+    return CheckedCard(tuple(blobs[:pieces]), compiled,
+                       tuple(pickle.loads(blob) for blob in blobs[at:at + extremes]))
+
+
 def _serve(stdin: IO[bytes], stdout: IO[bytes]) -> None:
     """The worker's loop: one check per frame, one answer per check, until stdin closes."""
     _write_frame(stdout, _READY)
@@ -329,13 +400,16 @@ def _serve(stdin: IO[bytes], stdout: IO[bytes]) -> None:
         payload = stdin.read(size)
         if len(payload) < size:
             return
-        kind, data = payload[:1], payload[1:]
+        kind, rest = payload[:1], io.BytesIO(payload[1:])
+        options = pickle.load(rest)  # the request comes from the device: trusted
+        data = rest.read()
         outcome: object
         try:
-            outcome = check_card_bytes(data) if kind == _CARD else check_profile_bytes(data)
+            outcome = (check_card_bytes(data, options) if kind == _CARD
+                       else check_profile_bytes(data))
         except MemoryError:
             outcome = CheckFailed("the card needs more memory than the checker has")
-        _write_frame(stdout, pickle.dumps(outcome, protocol=pickle.HIGHEST_PROTOCOL))
+        _write_outcome(stdout, outcome)
 
 
 if __name__ == "__main__":

@@ -38,6 +38,7 @@ import numpy as np
 from hcard.errors import HcardError
 from hcard.physics.profile import DeviceProfile
 from hcard.quantities import MM_PER_M, MS_PER_S
+from hcard.render import Renderer
 from hcard.track import FingerTrack, make_track
 from hcard_device.card_check import Checker, CheckFailed, InlineChecker, assemble_card
 from hcard_device.protocol import (
@@ -82,7 +83,7 @@ from hcard_device.protocol import (
 )
 from hcard_device.protocol.constants import DEFAULT_MAX_CARD_BYTES
 from hcard_device.protocol.reports import POSITION_RANGE
-from hcard_device.protocol.upload import StagedUpload, UploadStore, detail_text, failure_detail
+from hcard_device.protocol.upload import StagedUpload, UploadStore, detail_text
 from hcard_device.sim import TOUCH_DTYPE, DeviceSimulation, SimBlock
 from hcard_device.sim.clip import ClipItem
 from hcard_device.sim.simulation import PreparedCard
@@ -580,13 +581,13 @@ class Firmware:
         if action == UploadAction.COMMIT_PROFILE:
             profile = self.checker.check_profile(staged.data)
             return profile.detail if isinstance(profile, CheckFailed) else profile.profile
-        card = self.checker.check_card(staged.data)
-        if isinstance(card, CheckFailed):
-            return card.detail
-        try:
-            return self.sim.prepare_card(assemble_card(card.pieces))
-        except HcardError as exc:
-            return failure_detail(exc)
+        checked = self.checker.check_card(staged.data, self.sim.render_options)
+        if isinstance(checked, CheckFailed):
+            return checked.detail
+        card = assemble_card(checked.pieces)
+        return PreparedCard(card, Renderer.from_compiled(card, checked.compiled,
+                                                         self.sim.render_options),
+                            checked.extremes)
 
     def _finish_commit(self, action: int, staged: StagedUpload,
                        checked: PreparedCard | DeviceProfile | str) -> bool:

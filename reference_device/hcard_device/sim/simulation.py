@@ -350,6 +350,11 @@ class DeviceSimulation:
         return self._profile
 
     @property
+    def render_options(self) -> RenderOptions:
+        """The options the simulation renders cards with (its frame rate)."""
+        return self._options
+
+    @property
     def clip_report(self) -> ClipReport:
         """Clip report of the loaded card under the limits in force (empty without a card)."""
         return self._card_report

@@ -54,6 +54,7 @@ import usbip
 
 from hcard_device.card_check import CHECK_TIMEOUT_S, Checker, InlineChecker, ProcessChecker
 from hcard_device.usb.device import DEFAULT_IN_QUEUE, PRODUCTS, HcardHID, build_usb_device
+from hcard_device.usb.server_log import DEFAULT_LOG
 from hcard_device.usb.transport import (
     DEFAULT_BUSID,
     DEFAULT_HOST,
@@ -61,7 +62,6 @@ from hcard_device.usb.transport import (
     MAX_CONNECTIONS,
     BoundedLoopback,
     NoDelayUSBIP,
-    log_to_stderr,
 )
 
 PUMP_INTERVAL_S = 0.0005
@@ -111,7 +111,8 @@ class DeviceServer:
         max_connections: connections served at once.
         check_in_process: check the cards of COMMITs in a worker process (the default), else
             in the committing connection's thread (still outside the firmware's lock).
-        log: the server's log (default: stderr).
+        log: the server's log (default: stderr, through a writer thread that never blocks
+            the server, at most 20 lines a second: :mod:`~hcard_device.usb.server_log`).
 
     Several clients may import the device at once, each isolated from the others by the
     bounds of the module docstring (spec rules PN10, PN12-PN14,
@@ -127,7 +128,7 @@ class DeviceServer:
                  effects: Mapping[str, Mapping[str, float]] | None = None,
                  firmware_factory: Callable[[], Any] | None = None,
                  max_connections: int = MAX_CONNECTIONS, check_in_process: bool = True,
-                 log: Callable[[str], None] = log_to_stderr) -> None:
+                 log: Callable[[str], None] = DEFAULT_LOG) -> None:
         from hcard_device.sim.hidden import resolve
 
         if variant not in PRODUCTS:

@@ -9,8 +9,10 @@ its host drivers; :class:`BoundedLoopback` serves the same way over in-process s
 
 Bounds of a server (spec/device-protocol.md section 13): at most :data:`MAX_CONNECTIONS`
 connections at once (handshakes included); a further one is closed as soon as it is accepted,
-and the refusals are logged (one line per second at most, with the count). Each connection is
-bounded by :class:`~hcard_device.usb.connection.ConnectionLimits`.
+and logged; at most :data:`ACCEPT_RATE_HZ` connections are accepted per second. Each
+connection is bounded by
+:class:`~hcard_device.usb.connection.ConnectionLimits`. The log
+(:mod:`~hcard_device.usb.server_log`) never blocks the server.
 
 Why ``TCP_NODELAY`` matters: the USB/IP client sends a URB as a 48-byte header then its payload
 in two ``sendall`` calls, and the server answers an IN URB the same way. With Nagle's algorithm
@@ -25,7 +27,6 @@ from __future__ import annotations
 import contextlib
 import itertools
 import socket
-import sys
 import threading
 import time
 from collections.abc import Callable
@@ -34,6 +35,7 @@ from typing import Any
 import usbip
 
 from hcard_device.usb.connection import DEFAULT_LIMITS, Connection, ConnectionLimits
+from hcard_device.usb.server_log import DEFAULT_LOG
 
 DEFAULT_HOST = "127.0.0.1"
 """Loopback: the device is not exposed to the network unless asked."""
@@ -46,19 +48,18 @@ DEFAULT_CONNECT_TIMEOUT_S = 2.0
 MAX_CONNECTIONS = 8
 """Connections one server serves at once (import handshakes and device lists included); a
 further one is closed when accepted (spec/device-protocol.md section 13)."""
-REFUSAL_LOG_INTERVAL_S = 1.0
-"""Refused connections are logged at most once per this interval (with their count), s."""
+ACCEPT_RATE_HZ = 50.0
+"""New connections accepted per second at most (after a burst of :data:`ACCEPT_BURST`): a
+client that reconnects as fast as it is closed costs the server at most this many handshakes
+a second; the others wait in the kernel's listen backlog."""
+ACCEPT_BURST = 16
+"""Connections accepted at once before :data:`ACCEPT_RATE_HZ` applies."""
 
 
 def set_nodelay(sock: socket.socket, enabled: bool = True) -> None:
     """Set (or clear) ``TCP_NODELAY`` on a TCP socket; a no-op on other socket families."""
     if sock.family in (socket.AF_INET, socket.AF_INET6):
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1 if enabled else 0)
-
-
-def log_to_stderr(line: str) -> None:
-    """The default server log: one line on stderr, flushed."""
-    print(f"hcard device server: {line}", file=sys.stderr, flush=True)
 
 
 class ConnectionTable:
@@ -73,7 +74,7 @@ class ConnectionTable:
 
     def __init__(self, *, max_connections: int = MAX_CONNECTIONS,
                  limits: ConnectionLimits = DEFAULT_LIMITS,
-                 log: Callable[[str], None] = log_to_stderr) -> None:
+                 log: Callable[[str], None] = DEFAULT_LOG) -> None:
         if max_connections < 1:
             raise ValueError(f"max_connections must be >= 1, got {max_connections}")
         self.max_connections = max_connections
@@ -85,35 +86,28 @@ class ConnectionTable:
         self._connections: dict[int, Connection] = {}
         self._lock = threading.Lock()
         self._stopped = False
-        self._refused_unlogged = 0
-        self._refusal_logged_at = -float("inf")
 
     def serve(self, sock: socket.socket, peer: str) -> bool:
         """Serve ``sock`` on a new thread; False (and ``sock`` closed) when the server is
         stopped or full."""
         with self._lock:
-            full = len(self._connections) >= self.max_connections
-            if self._stopped or full:
-                if full and not self._stopped:
-                    self._refuse_locked(peer)
-                with contextlib.suppress(OSError):
-                    sock.close()
-                return False
-            connection = Connection(sock, next(self._numbers), peer, limits=self.limits,
-                                    log=self.log)
-            self._connections[connection.number] = connection
+            stopped, full = self._stopped, len(self._connections) >= self.max_connections
+            if not (stopped or full):
+                connection = Connection(sock, next(self._numbers), peer, limits=self.limits,
+                                        log=self.log)
+                self._connections[connection.number] = connection
+            elif not stopped:
+                self.refused += 1
+        if stopped or full:
+            with contextlib.suppress(OSError):
+                sock.close()
+            if not stopped:
+                self.log(f"refused a connection from {peer}: {self.max_connections} "
+                         "connections are served already")
+            return False
         threading.Thread(target=self._run, args=(connection,), daemon=True,
                          name=f"usbip-conn-{connection.number}").start()
         return True
-
-    def _refuse_locked(self, peer: str) -> None:
-        self.refused += 1
-        self._refused_unlogged += 1
-        now = time.monotonic()
-        if now - self._refusal_logged_at >= REFUSAL_LOG_INTERVAL_S:
-            self.log(f"refused {self._refused_unlogged} connection(s), the last from {peer}: "
-                     f"{self.max_connections} connections are served already")
-            self._refused_unlogged, self._refusal_logged_at = 0, now
 
     def _run(self, connection: Connection) -> None:
         device = self.device
@@ -166,7 +160,7 @@ class NoDelayUSBIP(usbip.USBIP):
         connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S,
         max_connections: int = MAX_CONNECTIONS,
         limits: ConnectionLimits = DEFAULT_LIMITS,
-        log: Callable[[str], None] = log_to_stderr,
+        log: Callable[[str], None] = DEFAULT_LOG,
     ) -> None:
         super().__init__(host, port)
         self.nodelay = nodelay
@@ -202,13 +196,29 @@ class NoDelayUSBIP(usbip.USBIP):
                          name="usbip-accept").start()
 
     def _accept_loop(self, server: socket.socket) -> None:
+        tokens, refilled = float(ACCEPT_BURST), time.monotonic()
         while True:
+            now = time.monotonic()
+            tokens = min(tokens + (now - refilled) * ACCEPT_RATE_HZ, float(ACCEPT_BURST))
+            refilled = now
+            if tokens < 1.0:
+                time.sleep((1.0 - tokens) / ACCEPT_RATE_HZ)
+                continue
+            tokens -= 1.0
             try:
                 conn, addr = server.accept()
             except OSError:
-                return  # closed by stop()
-            set_nodelay(conn, self.nodelay)
-            self.table.serve(conn, f"{addr[0]}:{addr[1]}")
+                if self._server is not server:
+                    return  # closed by stop()
+                time.sleep(0.01)  # e.g. out of file descriptors: try again, never spin
+                continue
+            try:
+                set_nodelay(conn, self.nodelay)  # fails on a connection already reset
+                self.table.serve(conn, f"{addr[0]}:{addr[1]}")
+            except (OSError, RuntimeError) as exc:  # RuntimeError: no thread to be had
+                self.table.log(f"dropped a connection from {addr[0]}:{addr[1]} ({exc})")
+                with contextlib.suppress(OSError):
+                    conn.close()
 
     @property
     def connections(self) -> list[Connection]:
@@ -256,7 +266,7 @@ class BoundedLoopback(usbip.Loopback):
 
     def __init__(self, *, max_connections: int = MAX_CONNECTIONS,
                  limits: ConnectionLimits = DEFAULT_LIMITS,
-                 log: Callable[[str], None] = log_to_stderr) -> None:
+                 log: Callable[[str], None] = DEFAULT_LOG) -> None:
         super().__init__()
         self.table = ConnectionTable(max_connections=max_connections, limits=limits, log=log)
 
