@@ -58,7 +58,7 @@ ACTUATION = ("amplitude", "voltage")
 SIDECAR_STRINGS = ("device", "surface", "participant", "probe", "notes", "voltage_form")
 SIDECAR_NUMBERS = ("plate_frequency_hz", "ambient_pressure_pa", "temperature_c",
                    "relative_humidity", "carrier_frequency_hz")
-SIDECAR_OBJECTS = ("limits", "card", "profile", "session", "firmware")
+SIDECAR_OBJECTS = ("limits", "limits_at_start", "card", "profile", "session", "firmware")
 VOLTAGE_FORMS = ("instantaneous", "envelope")
 """Values of the sidecar key ``voltage_form``: the voltage column is the instantaneous voltage
 (the default) or the peak envelope of a sinusoidal carrier at ``carrier_frequency_hz``."""

@@ -31,8 +31,6 @@ from dataclasses import dataclass, field
 
 from usbip import protocol
 
-from hcard_device.drivers import open_device
-from hcard_device.drivers.usbip_client import UsbipDriver
 from hcard_device.drivers.usbip_link import UsbipLink
 from hcard_device.protocol import (
     INPUT_RATE_HZ,
@@ -66,10 +64,11 @@ def in_urbs(first: int, count: int) -> bytes:
 
 
 @functools.cache
-def feature_gets(first: int, count: int) -> bytes:
-    """``count`` GET_REPORT(Feature DEVICE_INFO) control URBs numbered from ``first``."""
-    setup = struct.pack("<BBHHH", 0xA1, 0x01, 0x0320, 0, 64)
-    return b"".join(submit_header(n, _IN, 0, 64, setup) for n in range(first, first + count))
+def descriptor_gets(first: int, count: int) -> bytes:
+    """``count`` GET_DESCRIPTOR(Report) control URBs numbered from ``first`` (the largest
+    answer the device gives: 48 + 111 bytes)."""
+    setup = struct.pack("<BBHHH", 0x81, 0x06, 0x2200, 0, 128)
+    return b"".join(submit_header(n, _IN, 0, 128, setup) for n in range(first, first + count))
 
 
 @functools.cache
@@ -135,11 +134,13 @@ class Delivery:
 
 def measure_delivery(host: str, port: int, seconds: float, *, settle_s: float = 0.3,
                      beside: Callable[[], contextlib.AbstractContextManager[object]] | None = None,
+                     beside_settle_s: float | None = None,
                      during: Callable[[], object] | None = None) -> Delivery:
     """The well-behaved client: import the device with the hcard link, read STATE reports for
     ``settle_s`` (dropped), enter ``beside()`` (misbehaving clients, started after this one
-    holds its connection) and wait ``settle_s`` more, then read for ``seconds`` (and, with
-    ``during``, for as long as ``during()`` runs on another thread) and return what arrived."""
+    holds its connection) and read ``beside_settle_s`` more (default ``settle_s``; the
+    misbehaviour takes effect), then read for ``seconds`` (and, with ``during``, for as long
+    as ``during()`` runs on another thread) and return what arrived."""
     link = UsbipLink.open(host, port, "1-1", timeout_s=5.0)
     try:
         link.control_out(0x00, 0x09, 1, 0, b"", timeout_s=5.0)  # SET_CONFIGURATION 1
@@ -148,7 +149,7 @@ def measure_delivery(host: str, port: int, seconds: float, *, settle_s: float = 
             _read_for(link, settle_s)
             if beside is not None:
                 stack.enter_context(beside())
-                _read_for(link, settle_s)
+                _read_for(link, settle_s if beside_settle_s is None else beside_settle_s)
             worker = None
             if during is not None:
                 worker = threading.Thread(target=during, daemon=True)
@@ -201,33 +202,97 @@ class CommitOutcome:
     status: UploadStatus
 
 
-def measure_commit(host: str, port: int, data: bytes, *, min_seconds: float = 1.0,
-                   timeout_s: float = 60.0) -> CommitOutcome:
-    """Upload ``data`` (BEGIN and DATA) with the usbip driver, then COMMIT it while an observer
-    (:func:`measure_delivery`, another connection) reads STATE reports; then measure the
-    observer alone over as long (at least ``min_seconds``)."""
-    uri = f"usbip://{host}:{port}/1-1"
-    timing: dict[str, float] = {}
-    with open_device(uri, timeout_s=timeout_s) as uploader:
-        assert isinstance(uploader, UsbipDriver)
+def set_report_urb(seqnum: int, report: bytes) -> bytes:
+    """A SET_REPORT(Feature) control URB carrying ``report`` (header and data stage)."""
+    setup = struct.pack("<BBHHH", 0x21, 0x09, 0x0300 | report[0], 0, len(report))
+    return submit_header(seqnum, _OUT, 0, len(report), setup) + report
 
-        @contextlib.contextmanager
-        def staged() -> Iterator[None]:
-            reports = upload_reports(data, UploadAction.COMMIT)
-            for report in reports[:-1]:  # BEGIN and DATA: the COMMIT is what is measured
-                uploader._set_feature(report)
-            timing["commit"] = 0.0
+
+def get_report_urb(seqnum: int, report_id: int, length: int = 64) -> bytes:
+    """A GET_REPORT(Feature) control URB for ``report_id``."""
+    setup = struct.pack("<BBHHH", 0xA1, 0x01, 0x0300 | report_id, 0, length)
+    return submit_header(seqnum, _IN, 0, length, setup)
+
+
+def read_answer(sock: socket.socket) -> tuple[int, int, bytes]:
+    """The next RET_SUBMIT on ``sock``: (seqnum, status, data)."""
+    header = _read_exactly(sock, 48)
+    _command, seqnum, _devid, direction, _ep = struct.unpack_from(">IIIII", header)
+    status, actual = struct.unpack_from(">ii", header, 20)
+    data = _read_exactly(sock, actual) if direction == _IN and actual > 0 else b""
+    return seqnum, status, data
+
+
+def _read_exactly(sock: socket.socket, size: int) -> bytes:
+    out = bytearray()
+    while len(out) < size:
+        chunk = sock.recv(size - len(out))
+        if not chunk:
+            raise OSError("the server closed the connection")
+        out += chunk
+    return bytes(out)
+
+
+def staged_upload(host: str, port: int, data: bytes) -> socket.socket:
+    """A raw connection that sent the UPLOAD_BEGIN and UPLOAD_DATA reports of ``data``
+    (pipelined, 256 transfers in flight: ~1 s for 2 MiB instead of the 10 s one transfer at a
+    time takes), each answered without a STALL, ready for the COMMIT (:func:`timed_commit`).
+
+    Raises:
+        OSError: a transfer STALLed or the connection closed.
+    """
+    sock = import_device(host, port, timeout_s=60.0)
+    reports = upload_reports(data, UploadAction.COMMIT)[:-1]
+    window = 256
+    for start in range(0, len(reports), window):
+        chunk = reports[start:start + window]
+        sock.sendall(b"".join(set_report_urb(start + i + 1, report)
+                              for i, report in enumerate(chunk)))
+        for _ in chunk:
+            seqnum, status, _ = read_answer(sock)
+            if status:
+                raise OSError(f"upload transfer {seqnum} answered with status {status}")
+    return sock
+
+
+def timed_commit(sock: socket.socket) -> tuple[float, UploadStatus]:
+    """Send UPLOAD_END COMMIT on a :func:`staged_upload` connection; (how long the control
+    transfer took, s; UPLOAD_STATUS after it)."""
+    t0 = time.monotonic()
+    sock.sendall(set_report_urb(1 << 30, UploadEnd(UploadAction.COMMIT).encode()))
+    read_answer(sock)
+    took = time.monotonic() - t0
+    sock.sendall(get_report_urb((1 << 30) + 1, 0x25))
+    _seqnum, _status, answer = read_answer(sock)
+    return took, UploadStatus.decode(answer)
+
+
+def measure_commit(host: str, port: int, data: bytes, *, min_seconds: float = 1.0) -> CommitOutcome:
+    """Upload ``data`` on one connection (:func:`staged_upload`), then COMMIT it while an
+    observer (:func:`measure_delivery`, another connection) reads STATE reports; then measure
+    the observer alone over as long (at least ``min_seconds``)."""
+    timing: dict[str, object] = {}
+
+    @contextlib.contextmanager
+    def staged() -> Iterator[None]:
+        sock = staged_upload(host, port, data)
+        timing["sock"] = sock
+        try:
             yield
+        finally:
+            sock.close()
 
-        def commit() -> None:
-            t0 = time.monotonic()
-            uploader._set_feature(UploadEnd(UploadAction.COMMIT).encode())
-            timing["commit"] = time.monotonic() - t0
+    def commit() -> None:
+        sock = timing["sock"]
+        assert isinstance(sock, socket.socket)
+        timing["commit_s"], timing["status"] = timed_commit(sock)
 
-        during = measure_delivery(host, port, 0.0, settle_s=0.3, beside=staged, during=commit)
-        status = uploader.upload_status()
-    baseline = measure_delivery(host, port, max(timing["commit"], min_seconds))
-    return CommitOutcome(during, baseline, timing["commit"], status)
+    during = measure_delivery(host, port, 0.0, beside=staged, during=commit)
+    commit_s = timing["commit_s"]
+    status = timing["status"]
+    assert isinstance(commit_s, float) and isinstance(status, UploadStatus)
+    baseline = measure_delivery(host, port, max(commit_s, min_seconds))
+    return CommitOutcome(during, baseline, commit_s, status)
 
 
 class Hostile:
@@ -308,12 +373,12 @@ class Hostile:
 
 
 class NonReader(Hostile):
-    """Parks interrupt-IN URBs and never reads its socket, while it asks for feature reports
-    (answered at once) until the answers fill its socket and the server's: the review's
-    client that stops reading its IN endpoint, made to fill the buffers in a second instead
-    of the half minute its parked URBs alone take at 1000 reports a second. On a server that
-    parks without bound, URBs stay parked when the buffers are full, and completing one then
-    writes to a socket that takes nothing more."""
+    """Parks interrupt-IN URBs and never reads its socket, while it asks for the report
+    descriptor (answered at once) until the answers fill its socket and the server's (4 MiB on
+    Linux loopback): the review's client that stops reading its IN endpoint, made to fill the
+    buffers in seconds instead of the half minute its parked URBs alone take at 1000 reports a
+    second. On a server that parks without bound, URBs stay parked when the buffers are full,
+    and completing one then writes to a socket that takes nothing more."""
 
     name = "non-reading client"
     receive_buffer = 4096
@@ -323,7 +388,7 @@ class NonReader(Hostile):
         sock.settimeout(1.0)
         sock.sendall(in_urbs(1, self.PARKED))
         self.urbs += self.PARKED
-        batch = feature_gets(self.PARKED + 1, 256)
+        batch = descriptor_gets(self.PARKED + 1, 256)
         while not self._stop.is_set():
             try:
                 sock.sendall(batch)
