@@ -15,9 +15,9 @@
         uploads another card. Metric: the intrusions the device carried out (a START not
         refused with SESSION_BUSY or that changed the session, PN3; an upload not refused, its
         COMMIT with BUSY, PN5, or, on a device that attributes sessions to connections, its
-        first report with SESSION_BUSY, PN13; the first host's play failing, its last report not echoing its last
-        finger sample, more than :data:`MAX_LOST` of its reports lost, or its reports showing
-        another session or card); must be 0.
+        first report with SESSION_BUSY, PN13; the first host's play failing, its last report
+        not echoing its last finger sample, more than :data:`MAX_LOST` of its reports lost,
+        or its reports showing another session or card); must be 0.
     ``takeover-reported``
         As above, but the second host sends TAKE_OVER (PN6) and keeps its session fed. Metric:
         time from the TAKE_OVER to the first host's play raising
