@@ -35,7 +35,7 @@ from typing import Any, Protocol
 
 import usbip
 from usbip.classes.device import hid
-from usbip.core import ENDPOINT, FEATURE_ENDPOINT_HALT, OUT, STANDARD, Setup, Stall, Urb
+from usbip.core import CLASS, ENDPOINT, FEATURE_ENDPOINT_HALT, OUT, STANDARD, Setup, Stall, Urb
 from usbip.device import IN, Endpoint, _EPSpec
 
 from hcard_device.protocol import REPORT_DESCRIPTOR, ProtocolError, ReportId, ReportKind
@@ -306,7 +306,8 @@ class HcardHID(hid.HID):
 
     # ---- firmware calls ------------------------------------------------------------------
 
-    def _refuse(self) -> Stall:
+    def refuse(self) -> Stall:
+        """A STALL to raise for a request the device refuses (counted in :attr:`stalls`)."""
         self.stalls += 1
         return Stall()
 
@@ -321,11 +322,11 @@ class HcardHID(hid.HID):
                 with self.lock:
                     return bytes(self.firmware.get_feature(report_id, origin=origin))
             except ProtocolError:
-                raise self._refuse() from None
+                raise self.refuse() from None
         if report_type == ReportKind.INPUT and report_id == ReportId.STATE:
             with self.lock:
                 return bytes(self.firmware.latest_input_report())
-        raise self._refuse()
+        raise self.refuse()
 
     def set_report(self, report_type: int, report_id: int, payload: bytes,
                    origin: object | None = None) -> None:
@@ -339,17 +340,17 @@ class HcardHID(hid.HID):
                 firmware refused the feature report (PE1, PN13), or the report type is Input.
         """
         if not payload or payload[0] != report_id:
-            raise self._refuse()
+            raise self.refuse()
         if report_type == ReportKind.FEATURE:
             try:
                 self.firmware.set_feature(bytes(payload), origin=origin)
             except ProtocolError:
-                raise self._refuse() from None
+                raise self.refuse() from None
             return
         if report_type == ReportKind.OUTPUT:
             self.output(payload, origin)
             return
-        raise self._refuse()
+        raise self.refuse()
 
     def output(self, payload: bytes, origin: object | None = None) -> None:
         """An output report (interrupt OUT or SET_REPORT(Output)); never refused here (the
@@ -478,13 +479,17 @@ class ConnectionView:
             if request == _GET_CONFIGURATION:
                 return bytes([self.configuration])
             return self._shared(urb)
-        if setup.bmRequestType == _CLASS_INTERFACE_IN and setup.bRequest == hid.GET_REPORT:
-            return self._interface.get_report(setup.wValue >> 8, setup.wValue & 0xFF,
-                                              self.origin)
-        if setup.bmRequestType == _CLASS_INTERFACE_OUT and setup.bRequest == hid.SET_REPORT:
-            self._interface.set_report(setup.wValue >> 8, setup.wValue & 0xFF,
-                                       bytes(urb.buffer), self.origin)
-            return b""
+        if setup.type == CLASS and setup.bRequest in (hid.GET_REPORT, hid.SET_REPORT):
+            # whatever the recipient and direction bits say: no report reaches the firmware
+            # without its connection (rule PN13)
+            if setup.bmRequestType == _CLASS_INTERFACE_IN and setup.bRequest == hid.GET_REPORT:
+                return self._interface.get_report(setup.wValue >> 8, setup.wValue & 0xFF,
+                                                  self.origin)
+            if setup.bmRequestType == _CLASS_INTERFACE_OUT and setup.bRequest == hid.SET_REPORT:
+                self._interface.set_report(setup.wValue >> 8, setup.wValue & 0xFF,
+                                           bytes(urb.buffer), self.origin)
+                return b""
+            raise self._interface.refuse()
         return self._shared(urb)
 
     def _endpoint_request(self, setup: Setup) -> bytes:

@@ -55,7 +55,7 @@ import usbip
 
 from hcard_device.card_check import CHECK_TIMEOUT_S, Checker, InlineChecker, ProcessChecker
 from hcard_device.usb.device import DEFAULT_IN_QUEUE, PRODUCTS, HcardHID, build_usb_device
-from hcard_device.usb.server_log import DEFAULT_LOG
+from hcard_device.usb.server_log import DEFAULT_LOG, ServerLog
 from hcard_device.usb.transport import (
     DEFAULT_BUSID,
     DEFAULT_HOST,
@@ -290,6 +290,8 @@ def serve(variant: str = "evita", host: str = DEFAULT_HOST, port: int = DEFAULT_
         server.stop()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+    if isinstance(server.log, ServerLog):
+        server.log.drain()  # the lines of the last closes, before the final ones
     if server.thread_errors:
         echo(f"error: the device stopped: {server.thread_errors[0]!r}", True)
         return 1
