@@ -32,6 +32,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -188,6 +189,27 @@ _STATE_ID = State.REPORT_ID
 firmware packs the values it has already saturated to their ranges (rule PI2) without making a
 State, whose range checks cost more than the rest of a report. A host that decodes the report
 checks the ranges (:meth:`State.decode`)."""
+
+
+@dataclass(frozen=True)
+class Refusal:
+    """Why a COMMIT's staged bytes are refused: the UPLOAD_STATUS result and detail."""
+
+    result: UploadResult
+    detail: str
+
+
+@dataclass(frozen=True)
+class Checked:
+    """What the checks of a COMMIT found (:meth:`Firmware._check_staged`).
+
+    Attributes:
+        data: the staged bytes.
+        outcome: the card compiled or the profile to put in force, or why not.
+    """
+
+    data: bytes
+    outcome: PreparedCard | DeviceProfile | Refusal
 
 
 class Session:
@@ -573,51 +595,50 @@ class Firmware:
             return None
         return self.upload.stage_commit(now)
 
-    def _check_staged(self, action: int,
-                      staged: StagedUpload) -> PreparedCard | DeviceProfile | str:
-        """Without the lock: check the staged bytes (:attr:`checker`) and compile a card for
-        the simulation. The card or profile to put in force, or why not (UPLOAD_STATUS
-        ``detail``)."""
+    def _check_staged(self, action: int, staged: StagedUpload) -> Checked:
+        """Without the lock: check the CRC-32 and the staged bytes (:attr:`checker`), and
+        compile a card for the simulation."""
+        data = bytes(staged.buffer)
+        if not staged.crc_matches():
+            return Checked(data, Refusal(UploadResult.CRC_MISMATCH, ""))
         if action == UploadAction.COMMIT_PROFILE:
-            profile = self.checker.check_profile(staged.data)
-            return profile.detail if isinstance(profile, CheckFailed) else profile.profile
-        checked = self.checker.check_card(staged.data, self.sim.render_options)
+            profile = self.checker.check_profile(data)
+            if isinstance(profile, CheckFailed):
+                return Checked(data, Refusal(UploadResult.INVALID_PROFILE, profile.detail))
+            return Checked(data, profile.profile)
+        checked = self.checker.check_card(data, self.sim.render_options)
         if isinstance(checked, CheckFailed):
-            return checked.detail
+            return Checked(data, Refusal(UploadResult.INVALID_CARD, checked.detail))
         card = assemble_card(checked.pieces)
-        return PreparedCard(card, Renderer.from_compiled(card, checked.compiled,
-                                                         self.sim.render_options),
-                            checked.extremes)
+        return Checked(data, PreparedCard(
+            card, Renderer.from_compiled(card, checked.compiled, self.sim.render_options),
+            checked.extremes))
 
-    def _finish_commit(self, action: int, staged: StagedUpload,
-                       checked: PreparedCard | DeviceProfile | str) -> bool:
+    def _finish_commit(self, action: int, staged: StagedUpload, checked: Checked) -> bool:
         """Under the lock: put what was checked in force between two frames, or fail the
         upload; True when it is in force. Nothing happens when the upload was discarded or
         failed while it was checked; a session begun meanwhile makes it BUSY (PN5)."""
         if not self.upload.is_staged(staged):
             return False
+        outcome = checked.outcome
+        if isinstance(outcome, Refusal):  # CRC first, as PU3 orders the checks
+            return self.upload.fail_check(outcome.result, outcome.detail)
         self.session.expire(self.sim.time_s)
         if self.session.token:
             self._pending_faults |= FaultBits.SESSION_BUSY
             return self.upload.fail_check(UploadResult.BUSY, self.session.busy_detail())
-        if action == UploadAction.COMMIT_PROFILE:
-            if isinstance(checked, str):
-                return self.upload.fail_check(UploadResult.INVALID_PROFILE, checked)
-            assert isinstance(checked, DeviceProfile)
+        if isinstance(outcome, DeviceProfile):
             try:
-                self.sim.set_profile(checked)
+                self.sim.set_profile(outcome)
             except HcardError as exc:
                 return self.upload.fail_check(UploadResult.INVALID_PROFILE, str(exc))
             self._clip_index = 0
             return self.upload.finish_profile()
-        if isinstance(checked, str):
-            return self.upload.fail_check(UploadResult.INVALID_CARD, checked)
-        assert isinstance(checked, PreparedCard)
-        self.sim.load_prepared(checked)
+        self.sim.load_prepared(outcome)
         self._streaming = False
-        self._active_card = checked
+        self._active_card = outcome
         self._clip_index = 0
-        return self.upload.finish_card(staged, checked.card)
+        return self.upload.finish_card(staged, outcome.card, checked.data)
 
     def _settle_limits(self) -> int:
         """Run the device, frame by frame with its STATE reports, until the limits set are in

@@ -25,15 +25,24 @@ from hcard_device.protocol.reports import UploadBegin, UploadData, UploadStatus
 
 @dataclass(frozen=True)
 class StagedUpload:
-    """The bytes of an upload handed to the card or profile check by a COMMIT.
+    """The bytes of an upload handed over by a COMMIT to the checks that run outside the
+    device's lock (rule PU12): the CRC-32 (:meth:`crc_matches`), then the card or profile.
 
     Attributes:
         serial: which upload (a BEGIN starts a new one).
-        data: the bytes received (length and CRC-32 checked).
+        buffer: the bytes received (their length checked). The store never changes it again:
+            a BEGIN or a failure gives the store a new staging buffer.
+        crc32: the CRC-32 announced by UPLOAD_BEGIN.
     """
 
     serial: int
-    data: bytes
+    buffer: bytearray
+    crc32: int
+
+    def crc_matches(self) -> bool:
+        """The CRC-32 of the bytes is the one announced (PU3; 2 MiB take ~2 ms, so outside
+        the lock)."""
+        return crc32(self.buffer) == self.crc32
 
 
 @dataclass
@@ -136,9 +145,9 @@ class UploadStore:
         return True
 
     def stage_commit(self, now_s: float) -> StagedUpload | None:
-        """UPLOAD_END COMMIT or COMMIT_PROFILE, first step (rules PU3, PU9): check the length
-        and the CRC-32, then hand the staged bytes over for the card or profile check, which
-        runs outside the device's lock (rule PU12). The upload stays RECEIVING (its timeout
+        """UPLOAD_END COMMIT or COMMIT_PROFILE, first step (rules PU3, PU9): check the length,
+        then hand the staged bytes over for the CRC-32 and the card or profile check, which
+        run outside the device's lock (rule PU12). The upload stays RECEIVING (its timeout
         suspended) until :meth:`finish_card`, :meth:`finish_profile` or :meth:`fail_check`.
         None when the COMMIT is decided already: the upload failed (the reason in
         UPLOAD_STATUS), or the staged bytes are being checked already (nothing changes)."""
@@ -148,7 +157,7 @@ class UploadStore:
         if data is None:
             return None
         self.checking = True
-        return StagedUpload(self._serial, data)
+        return StagedUpload(self._serial, data, self.expected_crc)
 
     def is_staged(self, staged: StagedUpload) -> bool:
         """The upload ``staged`` is still the one being checked (no BEGIN discarded it and no
@@ -156,10 +165,11 @@ class UploadStore:
         return (self.checking and self.state == UploadState.RECEIVING
                 and staged.serial == self._serial)
 
-    def finish_card(self, staged: StagedUpload, card: pb.Card) -> bool:
-        """The checked ``card`` is in force: it becomes the active card (PU3). True."""
+    def finish_card(self, staged: StagedUpload, card: pb.Card, data: bytes) -> bool:
+        """The checked ``card`` (``data``, the bytes of ``staged``) is in force: it becomes the
+        active card (PU3). True."""
         self._generation = self._generation % 0xFFFF + 1
-        self.active = ActiveCard(card, staged.data, self.expected_crc, self._generation)
+        self.active = ActiveCard(card, data, staged.crc32, self._generation)
         return self._committed()
 
     def finish_profile(self) -> bool:
@@ -171,9 +181,10 @@ class UploadStore:
         session began meanwhile): the upload fails, the active card stays. False."""
         return self._fail(result, detail)
 
-    def _staged(self, now_s: float) -> bytes | None:
-        """The staged bytes when a COMMIT may go ahead (receiving, complete, CRC right); None
-        after failing the upload with the reason otherwise."""
+    def _staged(self, now_s: float) -> bytearray | None:
+        """The staging buffer when a COMMIT may go ahead (receiving, complete; its CRC-32 is
+        checked next, :meth:`StagedUpload.crc_matches`); None after failing the upload with
+        the reason otherwise. O(1): the buffer is handed over, not copied."""
         if self.poll(now_s):
             return None
         if self.state != UploadState.RECEIVING:
@@ -182,11 +193,7 @@ class UploadStore:
         if self.received != self.total_length:
             self._fail(UploadResult.SHORT)
             return None
-        data = bytes(self._staging)
-        if crc32(data) != self.expected_crc:
-            self._fail(UploadResult.CRC_MISMATCH)
-            return None
-        return data
+        return self._staging
 
     def _committed(self) -> bool:
         self._reset_staging()
