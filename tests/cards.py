@@ -22,3 +22,22 @@ def two_texture_card():
     return build.card(20.0, 10.0, taxtel_mm=5.0, textures=[grating, bumps],
                       texture_index=[0, 0, 1, 1, 0, 0, 1, 1], title="two textures",
                       author="hcard tests", licence="CC0-1.0")
+
+
+def large_valid_card():
+    """A valid card near the largest (spec/README.md section 4: about 1.4 MB in binary form):
+    256 UV textures of 16 components each, names of 1024 code points, a 256 x 256 grid using
+    every texture; 1.3 MB in binary form."""
+    import numpy as np
+
+    text = "\U0001F600" * 1020  # 4 bytes each in UTF-8
+    textures = []
+    for t in range(256):
+        components = [build.spatial(0.5 + 0.01 * (k + 1), 0.01, phase=0.1 * k,
+                                    orientation=0.1 * k, channel="uv") if k % 2
+                      else build.temporal(100.0 + k, 0.01) for k in range(16)]
+        textures.append(build.texture(0.6, components, channel="uv",
+                                      name=f"{t:04d}" + text))
+    return build.card(256 * 0.3, 256 * 0.3, taxtel_mm=0.3, textures=textures,
+                      texture_index=np.arange(256 * 256) % 256, title=text, author=text,
+                      licence=text, description=text)

@@ -76,9 +76,10 @@ def control_description(count: int | None = None) -> bytes:
     return head + _field(2, _field(5, b"\x01" * length))  # Card.metadata.description
 
 
-def _json_with_array(path: tuple[str | int, ...], unit: str, count: int | None) -> bytes:
+def _json_with_array(path: tuple[str | int, ...], unit: str, count: int | None,
+                     size: int = limits.MAX_CARD_BYTES) -> bytes:
     """The JSON form of a small valid card whose field at ``path`` is an array of ``count``
-    copies of ``unit``; by default as many as fit in the size limit."""
+    copies of ``unit``; by default as many as fit in ``size`` bytes (the format's limit)."""
     card = build.card(10.0, 10.0, taxtel_mm=10.0, textures=[build.texture(0.5, channel="uv")])
     obj = json.loads(card_io.to_json(card))
     target = obj
@@ -86,14 +87,16 @@ def _json_with_array(path: tuple[str | int, ...], unit: str, count: int | None) 
         target = target[key]
     target[path[-1]] = "@"
     text = json.dumps(obj, separators=(",", ":"))
-    count = (limits.MAX_CARD_BYTES - len(text)) // (len(unit) + 1) if count is None else count
+    count = (size - len(text)) // (len(unit) + 1) if count is None else count
     return text.replace('"@"', "[" + ",".join([unit] * count) + "]").encode()
 
 
-def json_empty_components(count: int | None = None) -> bytes:
+def json_empty_components(count: int | None = None,
+                          size: int = limits.MAX_CARD_BYTES) -> bytes:
     """A JSON card whose one texture holds ``count`` empty components ``{}``; by default as
-    many as fit, ~5.6 million."""
-    return _json_with_array(("textures", 0, "components"), "{}", count)
+    many as fit in ``size`` bytes: ~5.6 million in the format's 16 MiB, ~699 000 in the 2 MiB
+    the reference device stores. Invalid (a component needs a frequency)."""
+    return _json_with_array(("textures", 0, "components"), "{}", count, size)
 
 
 def json_empty_textures(count: int | None = None) -> bytes:

@@ -79,7 +79,7 @@ from hcard_device.protocol import FaultBits, ReportId, crc32
 from hcard_device.protocol.upload import UploadStore
 from hcard_device.sim import DeviceConfig, DeviceSimulation
 from hcard_device.sim.clip import ClipReport
-from hcard_device.sim.simulation import Limits, SimBlock
+from hcard_device.sim.simulation import Limits, PreparedCard, SimBlock
 
 ADDED_LATENCY_S = 0.030
 """Delay the ``latency-30ms`` control adds to every FINGER report, s."""
@@ -152,8 +152,11 @@ class CardMisreadSimulation(DeviceSimulation):
         super().__init__(config, seed)
         self.misread = misread
 
-    def load_card(self, card: pb.Card) -> ClipReport:
-        return super().load_card(_remap_card(card, self.misread))
+    def load_prepared(self, prepared: PreparedCard) -> ClipReport:
+        """Every card goes into force through here (a COMMIT compiles the card elsewhere,
+        rule PU12): the misread card is compiled again, as this firmware reads it."""
+        return super().load_prepared(self.prepare_card(_remap_card(prepared.card,
+                                                                   self.misread)))
 
 
 class SwappedChannelsSimulation(DeviceSimulation):
@@ -253,7 +256,7 @@ class NoCrcUploadStore(UploadStore):
     a COMMIT is judged, the declared CRC-32 is replaced by that of the bytes received, so the
     comparison always holds; length and card checks stay."""
 
-    def _staged(self, now_s: float) -> bytes | None:
+    def _staged(self, now_s: float) -> bytearray | None:
         self.expected_crc = crc32(bytes(self._staging))
         return super()._staged(now_s)
 

@@ -34,7 +34,7 @@ class NoOwnershipFirmware(Firmware):
         """DEVICE_INFO of a protocol 1.1 device."""
         return dataclasses.replace(super().device_info(), protocol_minor=1)
 
-    def _session_command(self, command: int, token: int) -> bool:
+    def _session_command(self, command: int, token: int, origin: object | None = None) -> bool:
         """START and STOP whatever the token (no session ever begins); TAKE_OVER refused."""
         if command == Command.TAKE_OVER:
             return False

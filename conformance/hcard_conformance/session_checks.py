@@ -13,10 +13,11 @@
         The first host plays a :data:`PLAY_S` stroke (:func:`hcard_device.drivers.play.play`);
         :data:`INTRUDE_S` after its START, the second host sends START with another token and
         uploads another card. Metric: the intrusions the device carried out (a START not
-        refused with SESSION_BUSY or that changed the session, PN3; a COMMIT not refused with
-        BUSY, PN5; the first host's play failing, its last report not echoing its last
-        finger sample, more than :data:`MAX_LOST` of its reports lost, or its reports showing
-        another session or card); must be 0.
+        refused with SESSION_BUSY or that changed the session, PN3; an upload not refused, its
+        COMMIT with BUSY, PN5, or, on a device that attributes sessions to connections, its
+        first report with SESSION_BUSY, PN13; the first host's play failing, its last report
+        not echoing its last finger sample, more than :data:`MAX_LOST` of its reports lost,
+        or its reports showing another session or card); must be 0.
     ``takeover-reported``
         As above, but the second host sends TAKE_OVER (PN6) and keeps its session fed. Metric:
         time from the TAKE_OVER to the first host's play raising
@@ -343,7 +344,7 @@ def case_second_host_refused(hosts: Hosts, max_lost: float = MAX_LOST) -> CheckR
     else:
         result = first.result
         assert result is not None
-        detail = (f"second host: START refused (SESSION_BUSY), COMMIT refused (BUSY); first "
+        detail = (f"second host: START refused (SESSION_BUSY), upload refused (BUSY); first "
                   f"host: {len(result.states)} reports over {result.duration_s:.3f} s in "
                   f"session {owner.session_number}, card generation "
                   f"{result.upload.status.card_generation} throughout")

@@ -59,7 +59,7 @@ ACTUATION = ("amplitude", "voltage")
 SIDECAR_STRINGS = ("device", "surface", "participant", "probe", "notes", "voltage_form")
 SIDECAR_NUMBERS = ("plate_frequency_hz", "ambient_pressure_pa", "temperature_c",
                    "relative_humidity", "carrier_frequency_hz")
-SIDECAR_OBJECTS = ("limits", "card", "profile", "session", "firmware")
+SIDECAR_OBJECTS = ("limits", "limits_at_start", "card", "profile", "session", "firmware")
 FILE_REFERENCES = (("card", "path"), ("session", "track"))
 """Sidecar keys that name a file (rule MF13): the card played and its finger track, each
 relative to the sidecar's folder and inside it."""

@@ -101,6 +101,20 @@ class Renderer:
         self.compiled: CompiledCard = compile_card(card, self.options)
         self._workspace = Workspace()
 
+    @classmethod
+    def from_compiled(cls, card: pb.Card, compiled: CompiledCard,
+                      options: RenderOptions | None = None) -> Renderer:
+        """A renderer of ``card`` from its compiled form, made elsewhere (another process) by
+        :func:`~hcard.render.compiled.compile_card` with the same ``options`` from the card
+        validated there: neither validated nor compiled again, so that a device can take a
+        large card into force without spending that time on its real-time process."""
+        renderer = cls.__new__(cls)
+        renderer.card = card
+        renderer.options = options or RenderOptions()
+        renderer.compiled = compiled
+        renderer._workspace = Workspace()
+        return renderer
+
     def frame_times(self, t0: float, first: int, count: int) -> np.ndarray:
         """Times of frames ``first .. first+count-1`` of a rendering starting at ``t0``, s."""
         return FrameClock(t0, self.options.frame_rate_hz).times(first, count)

@@ -32,13 +32,16 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
+from hcard.errors import HcardError
 from hcard.physics.profile import DeviceProfile
 from hcard.quantities import MM_PER_M, MS_PER_S
+from hcard.render import Renderer
 from hcard.track import FingerTrack, make_track
-from hcard.v1 import card_pb2 as pb
+from hcard_device.card_check import Checker, CheckFailed, InlineChecker, assemble_card
 from hcard_device.protocol import (
     AMPLITUDE_UNIT_M,
     CURRENT_UNIT_A,
@@ -75,15 +78,17 @@ from hcard_device.protocol import (
     UploadBegin,
     UploadData,
     UploadEnd,
+    UploadResult,
     UploadState,
     decode_output,
     report_class,
 )
 from hcard_device.protocol.constants import DEFAULT_MAX_CARD_BYTES
 from hcard_device.protocol.reports import POSITION_RANGE
-from hcard_device.protocol.upload import UploadStore, detail_text
+from hcard_device.protocol.upload import StagedUpload, UploadStore, detail_text
 from hcard_device.sim import TOUCH_DTYPE, DeviceSimulation, SimBlock
 from hcard_device.sim.clip import ClipItem
+from hcard_device.sim.simulation import PreparedCard
 
 DEFAULT_INPUT_QUEUE = 128
 """STATE reports the firmware keeps for the host before dropping the oldest (128 ms)."""
@@ -189,6 +194,27 @@ State, whose range checks cost more than the rest of a report. A host that decod
 checks the ranges (:meth:`State.decode`)."""
 
 
+@dataclass(frozen=True)
+class Refusal:
+    """Why a COMMIT's staged bytes are refused: the UPLOAD_STATUS result and detail."""
+
+    result: UploadResult
+    detail: str
+
+
+@dataclass(frozen=True)
+class Checked:
+    """What the checks of a COMMIT found (:meth:`Firmware._check_staged`).
+
+    Attributes:
+        data: the staged bytes.
+        outcome: the card compiled or the profile to put in force, or why not.
+    """
+
+    data: bytes
+    outcome: PreparedCard | DeviceProfile | Refusal
+
+
 class Session:
     """Session ownership of one device (spec section 14, protocol 1.2).
 
@@ -202,11 +228,14 @@ class Session:
         timeout_s: the device's ``watchdog_ms``, s.
         ended: how the last session ended: ``""`` (none ended yet), ``stop``, ``timeout`` or
             ``take-over``.
+        owner: the origin (the USB/IP connection) whose START or TAKE_OVER began the live
+            session; None when it was begun by a caller that names none (rule PN12).
     """
 
     def __init__(self, timeout_s: float) -> None:
         self.number = 0
         self.token: int | None = None
+        self.owner: object | None = None
         self.last_host_s = 0.0
         self.timeout_s = float(timeout_s)
         self.ended = ""
@@ -220,17 +249,26 @@ class Session:
         """A live session whose token is not ``token`` (rules PN3, PN4)."""
         return self.token is not None and self.token != token
 
-    def begin(self, token: int) -> None:
-        """A new session for ``token`` (START with no session live, or TAKE_OVER: PN1, PN6)."""
+    def foreign(self, origin: object | None) -> bool:
+        """A report from ``origin`` comes from another connection than the one that began
+        the live session (rule PN13); never for a caller or a session that names no origin."""
+        return (self.token is not None and self.owner is not None and origin is not None
+                and origin != self.owner)
+
+    def begin(self, token: int, owner: object | None = None) -> None:
+        """A new session for ``token`` begun by ``owner`` (START with no session live, or
+        TAKE_OVER: PN1, PN6, PN12)."""
         if self.token is not None:
             self.ended = "take-over"
         self.number = (self.number + 1) & _U16
         self.token = token
+        self.owner = owner
 
     def end(self, how: str) -> None:
         """End the live session (STOP, PN4; timeout, PN7)."""
         if self.token is not None:
             self.token = None
+            self.owner = None
             self.ended = how
 
     def expire(self, now_s: float) -> None:
@@ -257,6 +295,8 @@ class Firmware:
         max_card_bytes: largest card UPLOAD_BEGIN accepts, bytes.
         internal_track: the finger the internal touch sensor sees after CONTROL
             SET_TOUCH_SOURCE internal (None: nobody touches).
+        checker: checks the bytes of a COMMIT (default: in the calling thread, outside the
+            lock; :class:`~hcard_device.card_check.ProcessChecker` in a worker process).
     """
 
     def __init__(
@@ -266,6 +306,7 @@ class Firmware:
         input_queue: int = DEFAULT_INPUT_QUEUE,
         max_card_bytes: int = DEFAULT_MAX_CARD_BYTES,
         internal_track: FingerTrack | None = None,
+        checker: Checker | None = None,
     ) -> None:
         if input_queue < 1:
             raise ValueError(f"input_queue must be >= 1, got {input_queue}")
@@ -304,13 +345,21 @@ class Firmware:
         self._clip_index = 0
         self._sequence = 0
         self.session = Session(self.config.watchdog_s)
+        self.checker: Checker = checker if checker is not None else InlineChecker()
+        """Checks the staged bytes of a COMMIT (:mod:`hcard_device.card_check`); the served
+        device uses a worker process."""
+        self._active_card: PreparedCard | None = None  # the active card, compiled
         # counters (spec 8.4), zeroed by CLEAR_COUNTERS: the simulation's, one set
         self.counts = sim.counts
 
     # ---- host requests ----------------------------------------------------------------------
 
-    def get_feature(self, report_id: int) -> bytes:
+    def get_feature(self, report_id: int, origin: object | None = None) -> bytes:
         """GET_REPORT(Feature): the report's bytes, report ID first.
+
+        ``origin``: the connection the request came from (None: unknown). A GET is answered
+        whoever asks; from another connection than the live session's owner it does not feed
+        the watchdog nor keep the session alive (rule PN13).
 
         Raises:
             ProtocolError: unknown or non-feature report ID (answer with STALL).
@@ -321,33 +370,59 @@ class Firmware:
             except ProtocolError:
                 self.counts.rejected_requests += 1
                 raise
-            self._host_report()
+            if not self._foreign(origin):
+                self._host_report()
             return self._feature_report(cls).encode()
 
-    def set_feature(self, data: bytes) -> None:
+    def set_feature(self, data: bytes, origin: object | None = None) -> None:
         """SET_REPORT(Feature) with the report's bytes, report ID first.
 
         Upload failures are not errors here: they are reported in UPLOAD_STATUS (rule PU6).
+        A COMMIT or COMMIT_PROFILE returns once the staged bytes are checked and in force (or
+        refused): the check runs without the firmware's lock (rule PU12), so the device keeps
+        running meanwhile. ``origin``: the connection the request came from (None: unknown).
 
         Raises:
-            ProtocolError: unknown ID, read-only report, or malformed report (STALL).
+            ProtocolError: unknown ID, read-only report, malformed report, or a SET from
+                another connection than the live session's owner (rule PN13) (STALL).
         """
         with self.lock:
             try:
                 report = self._decode_feature_set(data)
-                accepted = self._apply_feature(report)
             except ProtocolError:
                 self.counts.rejected_requests += 1
                 raise
-            if not accepted:
+            if self._foreign(origin):
                 self.counts.rejected_requests += 1
+                self._pending_faults |= FaultBits.SESSION_BUSY
+                raise ProtocolError(
+                    f"refused: session {self.session.number} belongs to another connection",
+                    report=type(report).name())
             self._host_report()
+            if isinstance(report, UploadEnd) and report.action in (
+                    UploadAction.COMMIT, UploadAction.COMMIT_PROFILE):
+                staged = self._stage_commit(report.action)
+                if staged is None:
+                    self.counts.rejected_requests += 1
+                    return
+            else:
+                if not self._apply_feature(report):
+                    self.counts.rejected_requests += 1
+                return
+        checked = self._check_staged(report.action, staged)  # without the lock (PU12)
+        with self.lock:
+            if not self._finish_commit(report.action, staged, checked):
+                self.counts.rejected_requests += 1
+            if not self._foreign(origin):
+                self._host_report()
 
-    def handle_output(self, data: bytes) -> None:
+    def handle_output(self, data: bytes, origin: object | None = None) -> None:
         """An output report (interrupt OUT or SET_REPORT(Output)), report ID first.
 
         Never raises: a malformed or refused report is ignored, counted in
-        ``rejected_requests`` and flagged INVALID_REQUEST in the next STATE report (PE2).
+        ``rejected_requests`` and flagged INVALID_REQUEST in the next STATE report (PE2); one
+        from another connection than the live session's owner (``origin``; TAKE_OVER
+        excepted) is refused and flagged SESSION_BUSY too (rule PN13).
         """
         with self.lock:
             try:
@@ -355,12 +430,25 @@ class Firmware:
             except ProtocolError:
                 self._refuse()
                 return
-            if not self._apply_output(report):
+            if self._foreign(origin) and not (
+                    isinstance(report, Control) and report.command == Command.TAKE_OVER):
+                self._refuse()
+                self._pending_faults |= FaultBits.SESSION_BUSY
+                return
+            if not self._apply_output(report, origin):
                 self._refuse()
                 return
             if not (isinstance(report, Control) and report.command == Command.CLEAR_COUNTERS):
                 self.counts.output_reports += 1  # CLEAR_COUNTERS leaves every counter at 0
             self._host_report()
+
+    def _foreign(self, origin: object | None) -> bool:
+        """A request from ``origin`` while a session another connection began is live
+        (rule PN13)."""
+        if origin is None or self.session.owner is None:
+            return False
+        self.session.expire(self.sim.time_s)
+        return self.session.foreign(origin)
 
     def _host_report(self) -> None:
         """A host report that was not malformed or refused arrived: it feeds the watchdog
@@ -509,19 +597,66 @@ class Firmware:
             return self.upload.begin(report, now)
         if isinstance(report, UploadData):
             return self.upload.data(report, now)
-        assert isinstance(report, UploadEnd)
-        if report.action == UploadAction.ABORT:
-            return self.upload.abort(now)
+        assert isinstance(report, UploadEnd) and report.action == UploadAction.ABORT
+        return self.upload.abort(now)
+
+    # ---- COMMIT and COMMIT_PROFILE (PU3, PU9, PU12) --------------------------------------------
+
+    def _stage_commit(self, action: int) -> StagedUpload | None:
+        """Under the lock: a COMMIT's session check (PN5), length and CRC-32; the staged bytes
+        to check, or None when the COMMIT is decided already (failed, or already checking)."""
+        now = self.sim.time_s
         self.session.expire(now)
         if self.session.token:  # a session with a token is live: no commit (PN5)
             self._pending_faults |= FaultBits.SESSION_BUSY
-            return self.upload.busy(self.session.busy_detail())
-        if report.action == UploadAction.COMMIT_PROFILE:
-            return self.upload.commit_profile(self._load_profile, now)
-        committed = self.upload.commit(self._load_card, now)
-        if committed:
+            self.upload.busy(self.session.busy_detail())
+            return None
+        return self.upload.stage_commit(now)
+
+    def _check_staged(self, action: int, staged: StagedUpload) -> Checked:
+        """Without the lock: check the CRC-32 and the staged bytes (:attr:`checker`), and
+        compile a card for the simulation."""
+        data = bytes(staged.buffer)
+        if not staged.crc_matches():
+            return Checked(data, Refusal(UploadResult.CRC_MISMATCH, ""))
+        if action == UploadAction.COMMIT_PROFILE:
+            profile = self.checker.check_profile(data)
+            if isinstance(profile, CheckFailed):
+                return Checked(data, Refusal(UploadResult.INVALID_PROFILE, profile.detail))
+            return Checked(data, profile.profile)
+        checked = self.checker.check_card(data, self.sim.render_options)
+        if isinstance(checked, CheckFailed):
+            return Checked(data, Refusal(UploadResult.INVALID_CARD, checked.detail))
+        card = assemble_card(checked.pieces)
+        return Checked(data, PreparedCard(
+            card, Renderer.from_compiled(card, checked.compiled, self.sim.render_options),
+            checked.extremes))
+
+    def _finish_commit(self, action: int, staged: StagedUpload, checked: Checked) -> bool:
+        """Under the lock: put what was checked in force between two frames, or fail the
+        upload; True when it is in force. Nothing happens when the upload was discarded or
+        failed while it was checked; a session begun meanwhile makes it BUSY (PN5)."""
+        if not self.upload.is_staged(staged):
+            return False
+        outcome = checked.outcome
+        if isinstance(outcome, Refusal):  # CRC first, as PU3 orders the checks
+            return self.upload.fail_check(outcome.result, outcome.detail)
+        self.session.expire(self.sim.time_s)
+        if self.session.token:
+            self._pending_faults |= FaultBits.SESSION_BUSY
+            return self.upload.fail_check(UploadResult.BUSY, self.session.busy_detail())
+        if isinstance(outcome, DeviceProfile):
+            try:
+                self.sim.set_profile(outcome)
+            except HcardError as exc:
+                return self.upload.fail_check(UploadResult.INVALID_PROFILE, str(exc))
             self._clip_index = 0
-        return committed
+            return self.upload.finish_profile()
+        self.sim.load_prepared(outcome)
+        self._streaming = False
+        self._active_card = outcome
+        self._clip_index = 0
+        return self.upload.finish_card(staged, outcome.card, checked.data)
 
     def _settle_limits(self) -> int:
         """Run the device, frame by frame with its STATE reports, until the limits set are in
@@ -539,19 +674,6 @@ class Firmware:
             frames += n
         self._frame_debt -= frames
         return frames
-
-    def _load_card(self, card: pb.Card) -> None:
-        """The loader of a COMMIT: the card goes into force between two frames."""
-        self.sim.load_card(card)
-        self._streaming = False
-
-    def _load_profile(self, data: bytes) -> None:
-        """The loader of a COMMIT_PROFILE (rule PU9): the bytes are a device profile
-        (spec/device-profile.md) that renders the device's channels; it goes into force
-        between two frames, under the device's own limits. Raises ProfileError otherwise."""
-        profile = DeviceProfile.from_json(data, source="profile")
-        self.sim.set_profile(profile)
-        self._clip_index = 0
 
     def _feature_report(self, cls: type[Report]) -> Report:
         if cls is DeviceInfo:
@@ -656,8 +778,9 @@ class Firmware:
         self.counts.rejected_requests += 1
         self._pending_faults |= FaultBits.INVALID_REQUEST
 
-    def _apply_output(self, report: Report) -> bool:
-        """Carry out a decoded output report; False when it is refused (PO5)."""
+    def _apply_output(self, report: Report, origin: object | None = None) -> bool:
+        """Carry out a decoded output report from ``origin``; False when it is refused
+        (PO5)."""
         if isinstance(report, Finger):
             self._touch_source = TouchSource.HOST
             self._follow_clock()  # timed on arrival at the device's clock (_follow_clock)
@@ -677,14 +800,14 @@ class Firmware:
             self._streaming = True
             return True
         assert isinstance(report, Control)
-        return self._command(report)
+        return self._command(report, origin)
 
-    def _command(self, report: Control) -> bool:
+    def _command(self, report: Control, origin: object | None = None) -> bool:
         command = report.command
         if command == Command.KEEPALIVE:
             return True
         if command in (Command.START, Command.STOP, Command.TAKE_OVER):
-            return self._session_command(command, report.argument)
+            return self._session_command(command, report.argument, origin)
         if command == Command.CLEAR_COUNTERS:
             self.counts.clear()
             return True
@@ -696,9 +819,10 @@ class Firmware:
             self._clip_index = 0
             return True
         if command == Command.PLAY_CARD:
-            if self.upload.active is None:
+            if self.upload.active is None or self._active_card is None:
                 return False
-            self._load_card(self.upload.active.card)
+            self.sim.load_prepared(self._active_card)  # compiled at its COMMIT (PU12)
+            self._streaming = False
             return True
         # SET_TOUCH_SOURCE (the simulated devices have both touch sources)
         if report.argument == TouchSource.HOST:
@@ -708,13 +832,14 @@ class Firmware:
         self.sim.use_internal_finger(self.internal_track or _no_finger_track())
         return True
 
-    def _session_command(self, command: int, token: int) -> bool:
-        """START (PN1, PN3), STOP (PN4) or TAKE_OVER (PN6) with the host's ``token``; False
-        when refused because another token's session is live."""
+    def _session_command(self, command: int, token: int, origin: object | None = None) -> bool:
+        """START (PN1, PN3), STOP (PN4) or TAKE_OVER (PN6) with the host's ``token`` from
+        ``origin`` (the session begun is attributed to it, PN12); False when refused because
+        another token's session is live."""
         session = self.session
         session.expire(self.sim.time_s)
         if command == Command.TAKE_OVER:
-            session.begin(token)
+            session.begin(token, origin)
             self.sim.start()
             return True
         if session.owned_by_other(token):
@@ -724,7 +849,7 @@ class Firmware:
             session.end("stop")
             return True
         if not session.live:
-            session.begin(token)
+            session.begin(token, origin)
         self.sim.start()
         return True
 

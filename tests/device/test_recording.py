@@ -20,6 +20,7 @@ from hcard.track import make_track, straight_stroke
 from hcard_device.drivers import open_device
 from hcard_device.drivers.play import play, session_host_times
 from hcard_device.drivers.recording import echoed_samples, recording, track_speeds
+from hcard_device.protocol import PROTOCOL_MAJOR, PROTOCOL_MINOR
 
 CARD = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[
     build.texture(1.0, channel="uv", name="plain"), build.texture(0.5, channel="uv", name="slip")],
@@ -136,8 +137,10 @@ def test_the_sidecar_holds_what_the_device_and_host_know():
     with open_device("sim://coupled?seed=1") as driver:
         result = play(driver, CARD, track)
     conditions = recording(result, track_path="t.csv", card_path="c.hcard").conditions
-    assert conditions["device"] == "coupled UV+EV stimulator (hcard protocol 1.3)"
-    assert conditions["firmware"]["protocol"] == "1.3"
+    version = f"{PROTOCOL_MAJOR}.{PROTOCOL_MINOR}"  # the protocol the device reports (PV1)
+    assert version == "1.4"  # spec/device-protocol.md, the version this firmware implements
+    assert conditions["device"] == f"coupled UV+EV stimulator (hcard protocol {version})"
+    assert conditions["firmware"]["protocol"] == version
     assert conditions["plate_frequency_hz"] == 38_220.0
     assert conditions["voltage_form"] == "envelope"
     assert conditions["carrier_frequency_hz"] == 440.0
@@ -152,6 +155,39 @@ def test_the_sidecar_holds_what_the_device_and_host_know():
     own = DeviceProfile.from_dict(profile["content"])
     assert own.predictor.params == DeviceProfile.coupled_stimulator().predictor.params
     json.dumps(conditions, allow_nan=False)  # a valid sidecar
+
+
+def test_the_sidecar_records_the_limits_in_force_during_the_recording_not_before():
+    """A second host lowers the amplitude limit halfway through the recording (sim:// names
+    no origin, so the device carries it out, PN12): the sidecar records the limits in force
+    at the recording's end, read back from the device, and those from its start beside them
+    (spec/measurement-format.md MF9). Before, it recorded those read before START."""
+    track = back_and_forth()
+    with open_device("sim://evita?seed=3") as driver, driver.another_host() as other:
+        send_finger = driver.send_finger
+        sent = []
+
+        def finger_then_lower(*args: object) -> None:
+            send_finger(*args)  # type: ignore[arg-type]
+            sent.append(args)
+            if len(sent) == 30:
+                other.set_limits(max_amplitude_m=1.0e-6)
+
+        driver.send_finger = finger_then_lower  # type: ignore[method-assign]
+        result = play(driver, CARD, track)
+    conditions = recording(result).conditions
+    assert conditions["limits"]["max_amplitude_m"] == pytest.approx(1.0e-6)
+    assert conditions["limits_at_start"]["max_amplitude_m"] == pytest.approx(2.5e-6)
+    # the plate obeyed the new limit from the change on (PS5: within 5 ms)
+    amplitude = recording(result).column("amplitude")
+    assert amplitude[-50:].max() <= 1.0e-6 + 1e-9
+    json.dumps(conditions, allow_nan=False)
+
+
+def test_the_sidecar_has_no_limits_at_start_when_the_limits_did_not_change():
+    with open_device("sim://evita") as driver:
+        result = play(driver, CARD, back_and_forth())
+    assert "limits_at_start" not in recording(result).conditions
 
 
 def test_an_uploaded_profile_is_named_by_its_digest():

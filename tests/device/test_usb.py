@@ -150,9 +150,8 @@ def test_unread_input_reports_are_dropped_not_queued_without_bound(loopback):
     assert server.interface is not None
     link.start_in(IN_ENDPOINT, 64, urbs=1)
     time.sleep(0.3)  # ~300 reports produced, the host reads none
-    endpoint = server.interface.in_ep
-    assert isinstance(endpoint, BoundedEndpoint)
-    assert endpoint.queued <= endpoint.capacity == 32
+    (pipe,) = server.interface.pipes  # the connection's own IN queue
+    assert pipe.queued <= pipe.capacity == 32
     assert server.interface.in_dropped >= 150
     # The pump keeps the firmware's own queue (128) near empty: a report per millisecond moves
     # to the endpoint every 0.5 ms; a busy machine may hold the pump thread for some ms.
@@ -199,7 +198,7 @@ def test_tcp_nodelay_on_every_socket():
         assert link._sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) == 1
         transport = server.transport
         assert isinstance(transport, NoDelayUSBIP) and transport.connection_count == 1
-        served = next(iter(transport._connections))
+        served = transport.connections[0].sock
         assert served.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) == 1
         link.close()
 

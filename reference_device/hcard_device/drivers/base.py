@@ -329,9 +329,26 @@ class Driver(abc.ABC):
                 status = self.upload_status()
                 if status.state == UploadState.FAILED:
                     raise DeviceError(f"{self.uri}: {upload_error(status, what)}") from None
+                self._raise_if_refused_for_a_session(what)
                 raise
         self._wait_committed(commit_timeout_s, what)
         return len(reports)
+
+    def _raise_if_refused_for_a_session(self, what: str) -> None:
+        """After a STALLed upload report: raise :class:`SessionBusy` when the device refused it
+        because another host's session is live (SESSION_BUSY in the next STATE report: a
+        served device refuses the reports of every connection but the session owner's, rule
+        PN13)."""
+        if not self.sessions_supported():
+            return
+        seen = self._observe(SESSION_PEEK_S if self.realtime else 0.0)
+        busy = [s for s in seen if s.faults & FaultBits.SESSION_BUSY and self._foreign(s)]
+        if busy:
+            state = busy[-1]
+            raise SessionBusy(
+                f"{self.uri}: device busy: the {what} upload was refused (SESSION_BUSY), "
+                f"session {state.session_number} of another host "
+                f"({_owner(state.session_token)}) is live (spec PN13)") from None
 
     def abort_upload(self) -> None:
         """Abort an upload in progress (the previous card stays active)."""

@@ -72,7 +72,9 @@ class PlayResult:
         track: the finger track played.
         card_bytes: the card as uploaded (binary form).
         card_title: the card's title.
-        limits: the device's limits in force during the session.
+        limits: the device's limits in force during the session, read back at its end.
+        limits_at_start: those read back when the session began, when they differ from
+            :attr:`limits` (the limits changed during the recording); None otherwise.
         profile: the profile record of the recording's sidecar (``source``, ``name``,
             ``sha256``, ``content``; spec/measurement-format.md rule MF9).
         uri: the device URI.
@@ -97,6 +99,7 @@ class PlayResult:
     uri: str = ""
     started: str = ""
     host_us: np.ndarray | None = None
+    limits_at_start: Limits | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.states, StateLog):  # reports given as a list of State
@@ -170,7 +173,6 @@ def play(driver: Driver, card: pb.Card, track: FingerTrack, *, profile: bytes | 
     profile_record = _profile_record(driver, info, profile)
     card_bytes = to_bytes(card)
     upload = driver.upload_card(card_bytes)
-    limits = driver.limits()
     driver.clear_counters()
     if info.capabilities & Capability.HOST_FINGER:
         driver.set_touch_source(host=True)
@@ -179,6 +181,9 @@ def play(driver: Driver, card: pb.Card, track: FingerTrack, *, profile: bytes | 
     started = datetime.now(timezone.utc).isoformat(timespec="seconds")
     driver.start()
     start = driver.clock()
+    # read back once the session is granted: no other host can change them from then on (a
+    # served device refuses it, PN13); before it, one could
+    limits_at_start = driver.limits()
     # losses of this session only: idle reports the host did not read while it uploaded the
     # card are not the recording's (they fall before its first report)
     lost_before = driver.reports_lost
@@ -192,12 +197,14 @@ def play(driver: Driver, card: pb.Card, track: FingerTrack, *, profile: bytes | 
                           f"{len(states)} reports: nothing is recorded") from None
     duration = driver.clock() - start
     _check_stream(driver, start + duration - last_report, duration)
-    driver.stop()
+    limits = driver.limits()  # in force at the end: a device that cannot tell hosts apart
+    driver.stop()             # may have had them changed during the recording
     counters = driver.counters()
     return PlayResult(states, duration, upload, info, counters,
                       driver.reports_lost - lost_before,
                       driver.malformed_inputs, track, card_bytes, card.metadata.title, limits,
-                      profile_record, str(driver.uri), started, host_us)
+                      profile_record, str(driver.uri), started, host_us,
+                      None if limits == limits_at_start else limits_at_start)
 
 
 def check_play_length(track: FingerTrack) -> None:

@@ -30,7 +30,7 @@ from hcard.quantities import M_PER_MM, S_PER_US
 from hcard.render.touch import speed_estimate
 from hcard.track import FingerTrack
 from hcard_device.drivers.state_log import state_field
-from hcard_device.protocol import Capability, DeviceInfo, DeviceKind, State
+from hcard_device.protocol import Capability, DeviceInfo, DeviceKind, Limits, State
 from hcard_device.protocol.constants import (
     AMPLITUDE_UNIT_M,
     CURRENT_UNIT_A,
@@ -153,6 +153,12 @@ def public_uri(uri: str) -> str:
     return str(uri).split("?", 1)[0]
 
 
+def limits_record(limits: Limits) -> dict[str, float]:
+    """LIMITS as the sidecar records them (rule MF9 ``limits``), SI units."""
+    return {"max_amplitude_m": limits.max_amplitude_m, "max_voltage_v": limits.max_voltage_v,
+            "max_current_a": limits.max_current_a}
+
+
 def sidecar(result: PlayResult, *, track_path: str | None = None,
             card_path: str | None = None) -> dict[str, Any]:
     """The conditions of a play session (rule MF9 keys)."""
@@ -169,11 +175,7 @@ def sidecar(result: PlayResult, *, track_path: str | None = None,
             "input_rate_hz": int(info.input_rate_hz),
             "touch_rate_hz": int(info.touch_rate_hz),
         },
-        "limits": {
-            "max_amplitude_m": result.limits.max_amplitude_m,
-            "max_voltage_v": result.limits.max_voltage_v,
-            "max_current_a": result.limits.max_current_a,
-        },
+        "limits": limits_record(result.limits),
         "card": {
             "sha256": hashlib.sha256(result.card_bytes).hexdigest(),
             "bytes": len(result.card_bytes),
@@ -194,6 +196,8 @@ def sidecar(result: PlayResult, *, track_path: str | None = None,
         },
         "notes": "recorded by hcard play",
     }
+    if result.limits_at_start is not None:
+        conditions["limits_at_start"] = limits_record(result.limits_at_start)
     if has_ev:
         conditions["voltage_form"] = "envelope"
         conditions["carrier_frequency_hz"] = float(info.ev_carrier_hz)

@@ -90,7 +90,7 @@ def encode(report: Report) -> bytes:
     return report.encode()
 
 
-def crc32(data: bytes) -> int:
+def crc32(data: bytes | bytearray) -> int:
     """CRC-32 of the upload integrity check: ISO-HDLC (zlib, Ethernet), u32."""
     return zlib.crc32(data) & 0xFFFF_FFFF
 

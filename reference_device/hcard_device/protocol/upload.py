@@ -1,5 +1,7 @@
 """The device side of the card upload (spec/device-protocol.md section 9): a staging buffer, the
-CRC-32 check, card validation and the atomic swap, as a state machine independent of USB.
+CRC-32 check and the atomic swap, as a state machine independent of USB; the card check runs
+between :meth:`UploadStore.stage_commit` and :meth:`UploadStore.finish_card` outside the
+device's lock (:mod:`hcard_device.card_check`, rule PU12).
 
 The previous card stays active until a COMMIT succeeds; every failure frees the staging buffer,
 records why (UPLOAD_STATUS) and leaves the active card alone.
@@ -7,10 +9,8 @@ records why (UPLOAD_STATUS) and leaves the active card alone.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
-from hcard.card_io import parse_card
 from hcard.errors import CardValidationError, HcardError
 from hcard.v1 import card_pb2 as pb
 from hcard_device.protocol.codec import crc32
@@ -21,6 +21,28 @@ from hcard_device.protocol.constants import (
     UploadState,
 )
 from hcard_device.protocol.reports import UploadBegin, UploadData, UploadStatus
+
+
+@dataclass(frozen=True)
+class StagedUpload:
+    """The bytes of an upload handed over by a COMMIT to the checks that run outside the
+    device's lock (rule PU12): the CRC-32 (:meth:`crc_matches`), then the card or profile.
+
+    Attributes:
+        serial: which upload (a BEGIN starts a new one).
+        buffer: the bytes received (their length checked). The store never changes it again:
+            a BEGIN or a failure gives the store a new staging buffer.
+        crc32: the CRC-32 announced by UPLOAD_BEGIN.
+    """
+
+    serial: int
+    buffer: bytearray
+    crc32: int
+
+    def crc_matches(self) -> bool:
+        """The CRC-32 of the bytes is the one announced (PU3; 2 MiB take ~2 ms, so outside
+        the lock)."""
+        return crc32(self.buffer) == self.crc32
 
 
 @dataclass
@@ -83,12 +105,17 @@ class UploadStore:
         self._generation = 0
         self._staging = bytearray()
         self._last_activity_s = 0.0
+        self._serial = 0
+        self.checking = False
+        """The staged bytes of a COMMIT are being checked (:meth:`stage_commit`)."""
 
     # ---- requests ---------------------------------------------------------------------------
 
     def begin(self, report: UploadBegin, now_s: float) -> bool:
         """UPLOAD_BEGIN (rule PU1). Returns False when the upload failed at once."""
         self._reset_staging()
+        self._serial += 1
+        self.checking = False
         self.received = 0
         self.total_length = report.total_length
         self.expected_crc = report.crc32
@@ -117,39 +144,47 @@ class UploadStore:
         self.received += len(report.data)
         return True
 
-    def commit(self, loader: Callable[[pb.Card], None], now_s: float) -> bool:
-        """UPLOAD_END COMMIT (rule PU3): check length, CRC and card, then ``loader(card)``
-        (which puts the card in force; a HcardError from it fails the upload) and swap.
-        Returns True when the new card is active."""
+    def stage_commit(self, now_s: float) -> StagedUpload | None:
+        """UPLOAD_END COMMIT or COMMIT_PROFILE, first step (rules PU3, PU9): check the length,
+        then hand the staged bytes over for the CRC-32 and the card or profile check, which
+        run outside the device's lock (rule PU12). The upload stays RECEIVING (its timeout
+        suspended) until :meth:`finish_card`, :meth:`finish_profile` or :meth:`fail_check`.
+        None when the COMMIT is decided already: the upload failed (the reason in
+        UPLOAD_STATUS), or the staged bytes are being checked already (nothing changes)."""
+        if self.checking:
+            return None
         data = self._staged(now_s)
         if data is None:
-            return False
-        try:
-            card = parse_card(data, source="upload")
-            loader(card)
-        except HcardError as exc:
-            return self._fail(UploadResult.INVALID_CARD, failure_detail(exc))
+            return None
+        self.checking = True
+        return StagedUpload(self._serial, data, self.expected_crc)
+
+    def is_staged(self, staged: StagedUpload) -> bool:
+        """The upload ``staged`` is still the one being checked (no BEGIN discarded it and no
+        request failed it meanwhile)."""
+        return (self.checking and self.state == UploadState.RECEIVING
+                and staged.serial == self._serial)
+
+    def finish_card(self, staged: StagedUpload, card: pb.Card, data: bytes) -> bool:
+        """The checked ``card`` (``data``, the bytes of ``staged``) is in force: it becomes the
+        active card (PU3). True."""
         self._generation = self._generation % 0xFFFF + 1
-        self.active = ActiveCard(card, data, self.expected_crc, self._generation)
+        self.active = ActiveCard(card, data, staged.crc32, self._generation)
         return self._committed()
 
-    def commit_profile(self, loader: Callable[[bytes], None], now_s: float) -> bool:
-        """UPLOAD_END COMMIT_PROFILE (rule PU9): check length and CRC, then ``loader(bytes)``
-        (which parses the profile and puts it in force; a HcardError from it fails the upload
-        with INVALID_PROFILE). The active card stays. Returns True when the profile is in
-        force."""
-        data = self._staged(now_s)
-        if data is None:
-            return False
-        try:
-            loader(data)
-        except HcardError as exc:
-            return self._fail(UploadResult.INVALID_PROFILE, str(exc))
+    def finish_profile(self) -> bool:
+        """The checked profile is in force (PU9); the active card stays. True."""
         return self._committed()
 
-    def _staged(self, now_s: float) -> bytes | None:
-        """The staged bytes when a COMMIT may go ahead (receiving, complete, CRC right); None
-        after failing the upload with the reason otherwise."""
+    def fail_check(self, result: UploadResult, detail: str) -> bool:
+        """The check refused the staged bytes (INVALID_CARD, INVALID_PROFILE, or BUSY when a
+        session began meanwhile): the upload fails, the active card stays. False."""
+        return self._fail(result, detail)
+
+    def _staged(self, now_s: float) -> bytearray | None:
+        """The staging buffer when a COMMIT may go ahead (receiving, complete; its CRC-32 is
+        checked next, :meth:`StagedUpload.crc_matches`); None after failing the upload with
+        the reason otherwise. O(1): the buffer is handed over, not copied."""
         if self.poll(now_s):
             return None
         if self.state != UploadState.RECEIVING:
@@ -158,14 +193,11 @@ class UploadStore:
         if self.received != self.total_length:
             self._fail(UploadResult.SHORT)
             return None
-        data = bytes(self._staging)
-        if crc32(data) != self.expected_crc:
-            self._fail(UploadResult.CRC_MISMATCH)
-            return None
-        return data
+        return self._staging
 
     def _committed(self) -> bool:
         self._reset_staging()
+        self.checking = False
         self.state = UploadState.COMMITTED
         self.result = UploadResult.OK
         self.detail, self.detail_truncated = "", False
@@ -184,6 +216,7 @@ class UploadStore:
         when this call failed it."""
         if (
             self.state == UploadState.RECEIVING
+            and not self.checking  # the host waits for its COMMIT's status stage (PU12)
             and now_s - self._last_activity_s >= self.timeout_s
         ):
             self._fail(UploadResult.TIMEOUT)
@@ -235,6 +268,7 @@ class UploadStore:
 
     def _fail(self, result: UploadResult, detail: str = "") -> bool:
         self._reset_staging()
+        self.checking = False
         self.state = UploadState.FAILED
         self.result = result
         self.detail, self.detail_truncated = detail_text(detail)

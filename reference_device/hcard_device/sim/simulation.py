@@ -64,7 +64,7 @@ from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb
 from hcard_device.protocol.constants import FaultBits
 from hcard_device.sim.amplifier import EVAmplifier
-from hcard_device.sim.clip import ClipReport, clip_report
+from hcard_device.sim.clip import ClipReport, TextureExtremes, card_extremes, clip_items
 from hcard_device.sim.config import DeviceConfig
 from hcard_device.sim.counters import DeviceCounters
 from hcard_device.sim.finger import FingerPhysics, FingerTruth, HostFinger, TrackFinger
@@ -199,6 +199,22 @@ class SimBlock:
         return SimBlock(**values)
 
 
+@dataclass(frozen=True)
+class PreparedCard:
+    """A card compiled for the simulation (:meth:`DeviceSimulation.prepare_card`).
+
+    Attributes:
+        card: the card.
+        renderer: its renderer (stateless; each load starts a new stream of it).
+        extremes: what each texture the grid uses asks at its extremes (the clip report's
+            card part).
+    """
+
+    card: pb.Card
+    renderer: Renderer
+    extremes: tuple[TextureExtremes, ...]
+
+
 class DeviceSimulation:
     """A simulated E-ViTa or coupled stimulator (see the module documentation).
 
@@ -268,6 +284,7 @@ class DeviceSimulation:
         self._render_reference_s: float | None = None  # offset of the render time line, s
         self._render_shift_s = 0.0  # render time - device time, s
         self._renderer: Renderer | None = None
+        self._extremes: tuple[TextureExtremes, ...] = ()
         self._stream: RenderStream | None = None
         self._card_report = ClipReport()
         self._streaming = False
@@ -334,6 +351,11 @@ class DeviceSimulation:
         return self._profile
 
     @property
+    def render_options(self) -> RenderOptions:
+        """The options the simulation renders cards with (its frame rate)."""
+        return self._options
+
+    @property
     def clip_report(self) -> ClipReport:
         """Clip report of the loaded card under the limits in force (empty without a card)."""
         return self._card_report
@@ -358,18 +380,35 @@ class DeviceSimulation:
 
 
     # -- commands --------------------------------------------------------------------------
+    def prepare_card(self, card: pb.Card) -> PreparedCard:
+        """Compile ``card`` (validated) for :meth:`load_prepared`: its renderer and the
+        extremes of its textures (:func:`~hcard_device.sim.clip.card_extremes`). Reads nothing
+        the simulation changes, so it runs outside the firmware's lock: the largest valid card
+        takes 0.2 s, which the device's real-time loop must not wait for (rule PU12).
+
+        Raises:
+            CardValidationError: the card is invalid.
+        """
+        return PreparedCard(card, Renderer(card, self._options), card_extremes(card))
+
     def load_card(self, card: pb.Card) -> ClipReport:
         """Play ``card`` (validated) from now on; returns what the device cannot render.
 
         The card replaces any previous card and ends direct streaming. Raises only for an
         invalid card (:class:`hcard.errors.CardValidationError`).
         """
-        renderer = Renderer(card, self._options)
-        self._renderer = renderer
+        return self.load_prepared(self.prepare_card(card))
+
+    def load_prepared(self, prepared: PreparedCard) -> ClipReport:
+        """Play a card compiled by :meth:`prepare_card` from now on (from its initial state:
+        also how PLAY_CARD replays the active card); returns what the device cannot render.
+        Costs a clip report under the profile in force (no compilation)."""
+        self._renderer = prepared.renderer
+        self._extremes = prepared.extremes
         self._new_stream()
         self._streaming = False
         self._clear_queue()
-        self._card_report = clip_report(card, self._profile)
+        self._card_report = clip_items(self._extremes, self._profile)
         return self._card_report
 
     def set_limits(
@@ -421,7 +460,7 @@ class DeviceSimulation:
             self.amplifier.max_voltage_v = self._limits.max_voltage_v
             self.amplifier.max_current_a = self._limits.max_current_a
         if self._renderer is not None:
-            self._card_report = clip_report(self._renderer.card, self._profile)
+            self._card_report = clip_items(self._extremes, self._profile)
         return self._limits
 
     def _commit_limits(self) -> None:
@@ -457,7 +496,7 @@ class DeviceSimulation:
         self._host_profile = profile
         self._profile = self._profile_in_force()
         if self._renderer is not None:
-            self._card_report = clip_report(self._renderer.card, self._profile)
+            self._card_report = clip_items(self._extremes, self._profile)
         return self._card_report
 
     @property

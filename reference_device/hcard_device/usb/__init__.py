@@ -3,8 +3,10 @@ USB/IP server.
 
 - :mod:`.device`: the HID interface (report descriptor, interrupt IN/OUT, GET/SET_REPORT) wired
   to the firmware; VID/PID and strings.
-- :mod:`.transport`: USB/IP over TCP with ``TCP_NODELAY`` on every socket, connect timeouts and
-  a clean stop.
+- :mod:`.connection`: one client's connection, bounded and never waited for (spec rule PN15).
+- :mod:`.transport`: USB/IP over TCP with ``TCP_NODELAY`` on every socket, connect timeouts, a
+  bounded number of connections and a clean stop.
+- :mod:`.server_log`: the server's log, which never blocks it.
 - :mod:`.server`: :class:`~.server.DeviceServer` (firmware in real time, report pump, listener)
   and ``python -m hcard_device.usb.server`` / ``hcard device serve``.
 """

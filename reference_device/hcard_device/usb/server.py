@@ -1,15 +1,39 @@
 """Serve the hcard reference device over USB/IP: ``python -m hcard_device.usb.server``.
 
 The firmware runs in real time on its own thread (:meth:`Firmware.run_realtime`); a pump thread
-moves its STATE reports to the interrupt IN endpoint every :data:`PUMP_INTERVAL_S`; the USB/IP
-listener (``TCP_NODELAY`` on every socket) serves URBs on per-connection threads. Any Linux
-host can then ``usbip attach -r HOST -b 1-1`` and get a ``/dev/hidrawN``. SIGINT and SIGTERM
-stop it cleanly: the firmware and pump threads end and are joined, the listener and every
-connection are closed (hosts see the device vanish), and the process exits with status 0.
+moves its STATE reports to the interrupt IN queue of every connection every
+:data:`PUMP_INTERVAL_S`; the USB/IP listener (``TCP_NODELAY`` on every socket) serves URBs on
+per-connection threads; the card of a COMMIT is checked in a worker process
+(:class:`~hcard_device.card_check.ProcessChecker`, at most 20 s) while the device runs on. Any
+Linux host can then ``usbip attach -r HOST -b 1-1`` and get a ``/dev/hidrawN``. SIGINT and
+SIGTERM stop it cleanly: the firmware and pump threads end and are joined, the listener and
+every connection are closed (hosts see the device vanish), the check worker ends, and the
+process exits with status 0.
 
 Several clients may import the device at the same time, as several processes may open one
-hidraw node: each gets every STATE report, and the protocol's sessions (spec section 14) decide
-which host owns the device; a second host's START is refused while the first's session is live.
+hidraw node (spec rules PN10, PN12-PN14): each gets every STATE report in its own bounded
+queue; the connection whose START or TAKE_OVER began the live session owns it, and the
+state-changing reports of the others are refused while it lasts; endpoint halts are per
+connection. Every client is isolated from the others' behaviour by bounds (spec section 13):
+
+========================================  ==========  =========================================
+bound                                     value       past it
+========================================  ==========  =========================================
+connections served at once                8           a further one is closed when accepted
+connections accepted per second           50          the others wait in the listen backlog
+STATE reports queued per connection       32          the oldest is dropped (counted, PT5)
+interrupt-IN URBs parked per connection   64          the connection is closed
+OUT transfer length                       4096 B      the connection is closed, unread
+IN transfer length                        65535 B     the connection is closed
+answers waiting for a non-reading client  64 KiB      the connection is closed
+control transfers behind a slow one       4           the connection is closed
+import handshake                          2 s         the connection is closed
+check of one COMMIT (worker process)      20 s        worker killed; upload FAILED, INVALID_CARD
+========================================  ==========  =========================================
+
+No thread waits for a client: answers are written with non-blocking sends, and whatever a
+socket does not take waits in the connection's own bounded buffer. Each close is logged on
+stderr with its reason (refused connections: one line per second at most).
 
 Options: ``--host`` (default 127.0.0.1), ``--port`` (default 3240; 0 picks a free port),
 ``--device evita|coupled``, ``--seed``. The first line on stdout is
@@ -36,8 +60,17 @@ from typing import Any, ClassVar
 
 import usbip
 
+from hcard_device.card_check import CHECK_TIMEOUT_S, Checker, InlineChecker, ProcessChecker
 from hcard_device.usb.device import DEFAULT_IN_QUEUE, PRODUCTS, HcardHID, build_usb_device
-from hcard_device.usb.transport import DEFAULT_BUSID, DEFAULT_HOST, DEFAULT_PORT, NoDelayUSBIP
+from hcard_device.usb.server_log import DEFAULT_LOG, ServerLog
+from hcard_device.usb.transport import (
+    DEFAULT_BUSID,
+    DEFAULT_HOST,
+    DEFAULT_PORT,
+    MAX_CONNECTIONS,
+    BoundedLoopback,
+    NoDelayUSBIP,
+)
 
 PUMP_INTERVAL_S = 0.0005
 """Period of the pump that moves STATE reports from the firmware to the IN endpoint, s."""
@@ -103,16 +136,22 @@ class DeviceServer:
         variant: ``evita`` or ``coupled``.
         host, port: where to listen (port 0: a free one, see :attr:`port`).
         seed: seed of the simulation's noise.
-        loopback: serve on an in-process socket pair (:class:`usbip.Loopback`) instead of TCP.
+        loopback: serve on in-process socket pairs (:class:`BoundedLoopback`) instead of TCP.
         nodelay: ``TCP_NODELAY`` on the served sockets (benchmarks turn it off).
-        in_queue: STATE reports the IN endpoint holds before dropping the oldest.
+        in_queue: STATE reports each connection's IN queue holds before dropping the oldest.
         effects: physical effects hidden in the hardware (:mod:`hcard_device.sim.hidden`:
             name -> parameter values), checked here.
         firmware_factory: builds the firmware instead of :func:`make_firmware` (negative
             controls of the conformance suite serve a deliberately faulty one).
+        max_connections: connections served at once.
+        check_in_process: check the cards of COMMITs in a worker process (the default), else
+            in the committing connection's thread (still outside the firmware's lock).
+        log: the server's log (default: stderr, through a writer thread that never blocks
+            the server, at most 20 lines a second: :mod:`~hcard_device.usb.server_log`).
 
-    Several clients may import the device at once; each gets every STATE report (spec rule
-    PN10, :class:`~hcard_device.usb.device.ConnectionView`).
+    Several clients may import the device at once, each isolated from the others by the
+    bounds of the module docstring (spec rules PN10, PN12-PN14,
+    :class:`~hcard_device.usb.device.ConnectionView`).
     """
 
     _running: ClassVar[set[DeviceServer]] = set()
@@ -122,7 +161,9 @@ class DeviceServer:
                  port: int = DEFAULT_PORT, seed: int = 0, loopback: bool = False,
                  nodelay: bool = True, in_queue: int = DEFAULT_IN_QUEUE,
                  effects: Mapping[str, Mapping[str, float]] | None = None,
-                 firmware_factory: Callable[[], Any] | None = None) -> None:
+                 firmware_factory: Callable[[], Any] | None = None,
+                 max_connections: int = MAX_CONNECTIONS, check_in_process: bool = True,
+                 log: Callable[[str], None] = DEFAULT_LOG) -> None:
         from hcard_device.sim.hidden import resolve
 
         if variant not in PRODUCTS:
@@ -132,8 +173,13 @@ class DeviceServer:
         self.host = host
         self.seed = seed
         self.loopback = loopback
-        self.transport: Any = usbip.Loopback() if loopback else NoDelayUSBIP(
-            host, port, nodelay=nodelay)
+        self.log = log
+        self.transport: Any = (
+            BoundedLoopback(max_connections=max_connections, log=log) if loopback
+            else NoDelayUSBIP(host, port, nodelay=nodelay, max_connections=max_connections,
+                              log=log))
+        self.check_in_process = check_in_process
+        self.checker: Checker | None = None
         self.in_queue = in_queue
         self.firmware_factory = firmware_factory
         self.firmware: Any = None
@@ -169,6 +215,9 @@ class DeviceServer:
         """
         self.firmware = (self.firmware_factory() if self.firmware_factory is not None
                          else make_firmware(self.variant, self.seed, self.effects))
+        self.checker = (ProcessChecker(CHECK_TIMEOUT_S, log=self.log).start()
+                        if self.check_in_process else InlineChecker())
+        self.firmware.checker = self.checker
         self.usb_device, self.interface = build_usb_device(self.firmware, self.variant,
                                                            in_queue=self.in_queue)
         self.usb_device.plug(via=self.transport)
@@ -220,6 +269,9 @@ class DeviceServer:
         if self.usb_device is not None:
             self.usb_device.unplug()
             self.usb_device = None
+        if self.checker is not None:
+            self.checker.close()
+            self.checker = None
         with self._running_lock:
             self._running.discard(self)
 
@@ -273,6 +325,8 @@ def serve(variant: str = "evita", host: str = DEFAULT_HOST, port: int = DEFAULT_
         server.stop()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+    if isinstance(server.log, ServerLog):
+        server.log.drain()  # the lines of the last closes, before the final ones
     if server.thread_errors:
         echo(f"error: the device stopped: {server.thread_errors[0]!r}", True)
         return 1

@@ -1,0 +1,437 @@
+"""Each client of a served device is isolated (spec/device-protocol.md rules PN10, PN12-PN15,
+PU12; the bounds of section 13), tested against a server in another process over TCP on
+127.0.0.1 with the hostile clients of ``usbip_clients.py``, each in a process of its own.
+
+The tests of the server fail against the server of before this isolation (usbip's
+``serve_connection``, commit checked under the firmware's lock), which was run with them: its
+pump stopped for every client when one stopped reading, it parked and read whatever a client
+declared, 300 idle importers took 60-87 % of a client's reports, a 2 MiB card commit stopped
+STATE for its whole parse, and a second client could halt, drive and re-limit the first one's
+session. Two pass there too: the OUT-report flood (which never starved a client, kept as a
+guard) and, on a lightly loaded machine, the 2 GiB OUT URB's share of reports (its memory test
+fails there). The checker's bound and the log are the new code's own.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import socket
+import struct
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import usbip_clients as clients
+from cards import large_valid_card
+from hostile_cards import json_empty_components
+from served_device import ServedDevice, served_device
+
+from hcard import build
+from hcard.calibration.measurement import read_measurement
+from hcard.card_io import save, to_bytes
+from hcard.render.options import RenderOptions
+from hcard.track import straight_stroke, track_to_csv
+from hcard_device.card_check import CHECK_TIMEOUT_S, CheckedCard, CheckFailed, ProcessChecker
+from hcard_device.drivers import open_device
+from hcard_device.drivers.errors import DeviceStall, SessionBusy, SessionLost
+from hcard_device.protocol import (
+    Command,
+    Control,
+    FaultBits,
+    Finger,
+    Limits,
+    Stream,
+    UploadBegin,
+    UploadResult,
+    UploadState,
+)
+from hcard_device.protocol.constants import DEFAULT_MAX_CARD_BYTES
+from hcard_device.usb.connection import DEFAULT_LIMITS
+from hcard_device.usb.transport import MAX_CONNECTIONS
+
+DELIVERY_SHARE = 0.9
+"""Share of the STATE reports a well-behaved client receives alone that it still receives
+beside any misbehaving client (spec/device-protocol.md section 13, rule PN15)."""
+MEASURE_S = 3.0
+"""Length of each delivery measurement, s."""
+RSS_GROWTH_MIB = 16.0
+"""Most the server's resident memory may grow while a client floods it, MiB (its bounds
+allow under 1 MiB for all connections together, section 13; the rest is allocator slack)."""
+
+
+def rss_mib(pid: int) -> float:
+    """Resident memory of process ``pid``, MiB."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    raise AssertionError(f"no VmRSS for process {pid}")
+
+
+@pytest.fixture(scope="module")
+def served():
+    """One E-ViTa served in another process for the tests of this module."""
+    with served_device() as device:
+        yield device
+
+
+def delivery_beside(served: ServedDevice, kind: str) -> tuple[clients.Delivery,
+                                                              clients.Delivery]:
+    """A well-behaved client's STATE delivery alone, then beside the misbehaving client
+    ``kind`` (started once it holds its connection, given 2 s to take effect)."""
+    alone = clients.measure_delivery(served.host, served.port, MEASURE_S)
+    beside = clients.measure_delivery(
+        served.host, served.port, MEASURE_S, beside_settle_s=2.0,
+        beside=lambda: clients.hostile_process(kind, served.host, served.port))
+    return alone, beside
+
+
+# ---------------------------------------------------------------------- STATE delivery (PN15)
+
+ATTEMPTS = 3
+"""Pairs of measurements (alone, beside) a delivery test may take: other processes on the
+machine move the share of a single measurement by more than the bound; a server that does not
+isolate its clients fails every pair (the server before: 0 beside a client that stops
+reading, 0.35-0.42 beside 300 idle importers)."""
+
+
+@pytest.mark.parametrize("kind", sorted(clients.HOSTILE_KINDS))
+def test_a_misbehaving_client_does_not_starve_another(served, kind):
+    """Against the old server: a client that stops reading stopped every client's STATE
+    (0 reports a second), 300 idle importers cut it to 24-42 %, URB floods to 70-90 %."""
+    pairs = []
+    for _attempt in range(ATTEMPTS):
+        alone, beside = delivery_beside(served, kind)
+        pairs.append(f"{beside.fraction:.3f} beside, {alone.fraction:.3f} alone "
+                     f"(largest gap {beside.max_arrival_gap_ms:.0f} ms)")
+        if (alone.fraction > 0.5 and beside.fraction >= DELIVERY_SHARE * alone.fraction
+                and beside.max_arrival_gap_ms < 1000.0):
+            return
+    pytest.fail(f"{kind}: the share of STATE reports a client receives: " + "; ".join(pairs))
+
+
+# ---------------------------------------------------------------------- bounds (PN15, sec. 13)
+
+def test_a_transfer_declared_past_the_bound_closes_the_connection_unread(served):
+    """One OUT URB declaring 2 GiB: the old server read 1.5 GB of it into memory."""
+    before = rss_mib(served.process.pid)
+    sock = clients.import_device(served.host, served.port)
+    fed = 0
+    with contextlib.suppress(OSError), sock:
+        sock.sendall(clients.submit_header(1, 0, clients.OUT_EP, (1 << 31) - 1))
+        sock.settimeout(5.0)
+        chunk = bytes(1 << 20)
+        while fed < 256 << 20:
+            sock.sendall(chunk)
+            fed += len(chunk)
+    assert fed < 64 << 20, f"the server read {fed >> 20} MiB of a 2 GiB transfer"
+    assert rss_mib(served.process.pid) - before < RSS_GROWTH_MIB
+
+
+def test_parked_in_urbs_past_the_bound_close_the_connection(served):
+    """The old server parked every IN URB it was sent (400 000: +267 MB)."""
+    before = rss_mib(served.process.pid)
+    sock = clients.import_device(served.host, served.port)
+    with sock:
+        sock.settimeout(10.0)
+        with contextlib.suppress(OSError):
+            sock.sendall(clients.in_urbs(1, 100_000))
+        answered = 0
+        with contextlib.suppress(OSError):
+            while clients.read_answer(sock):
+                answered += 1
+    # a few reports may complete URBs before the 65th parks; the rest are never answered
+    assert answered < DEFAULT_LIMITS.max_parked_in_urbs + 200
+    assert rss_mib(served.process.pid) - before < RSS_GROWTH_MIB
+
+
+def test_a_client_that_does_not_read_its_answers_is_closed(served):
+    """Answers pile up for a client that never reads: past the bound it is closed, and the
+    server never waits for it (the old server's threads blocked in sendall)."""
+    sock = clients.import_device(served.host, served.port, receive_buffer=4096)
+    with sock:
+        sock.settimeout(0.5)
+        sent = 0
+        with contextlib.suppress(OSError):  # reset, or the server stopped reading
+            while sent < 2_000_000:
+                sock.sendall(clients.descriptor_gets(1, 256))
+                sent += 256
+        sock.settimeout(5.0)
+        with contextlib.suppress(OSError):
+            while sock.recv(1 << 16):
+                pass  # what was sent before the close, then end of stream
+        with pytest.raises(OSError):
+            sock.sendall(clients.descriptor_gets(1, 256) * 64)  # closed: reset or broken pipe
+            sock.sendall(clients.descriptor_gets(1, 256) * 64)
+    # the server still serves others
+    assert clients.measure_delivery(served.host, served.port, 0.5).received > 100
+
+
+def test_connections_past_the_bound_are_refused(served):
+    """The old server served every importer (300 of them: every report to each)."""
+    with clients.IdleImporters(served.host, served.port, 3 * MAX_CONNECTIONS) as idle:
+        assert len(idle.held) == MAX_CONNECTIONS
+        assert idle.refused == 2 * MAX_CONNECTIONS
+        for sock in idle.held:  # each held one is served: it gets an answer
+            sock.sendall(clients.descriptor_gets(1, 1))
+            assert clients.read_answer(sock)[1] == 0
+    deadline = time.monotonic() + 5.0  # closed connections free their slots
+    while True:
+        try:
+            clients.import_device(served.host, served.port).close()
+            break
+        except OSError:
+            assert time.monotonic() < deadline, "no slot freed after the importers left"
+            time.sleep(0.05)
+
+
+# ---------------------------------------------------------------------- card check (PU12)
+
+@pytest.mark.parametrize("card", ["json-empty-components", "large-binary"])
+def test_a_2_mib_commit_does_not_stop_state(served, card):
+    """The old server parsed under the firmware's lock: a 2 MiB JSON card of 698 966 empty
+    components stopped STATE for the 46-82 s of its parse."""
+    data = (json_empty_components(size=DEFAULT_MAX_CARD_BYTES) if card == "json-empty-components"
+            else to_bytes(large_valid_card()))
+    outcome = clients.measure_commit(served.host, served.port, data)
+    if card == "json-empty-components":
+        assert outcome.status.state == UploadState.FAILED
+        assert outcome.status.result == UploadResult.INVALID_CARD, outcome.status
+        assert outcome.commit_s < CHECK_TIMEOUT_S + 5.0
+    else:
+        assert outcome.status.state == UploadState.COMMITTED, outcome.status
+    during, baseline = outcome.during, outcome.baseline
+    assert during.max_arrival_gap_ms < 1000.0, during
+    assert during.fraction >= 0.5 * baseline.fraction, (during, baseline)
+
+
+def test_a_check_longer_than_its_bound_fails_the_upload_and_the_next_one_works():
+    """The check's time is bounded (PU12): a worker that has not answered is killed and
+    replaced. Checking the largest valid card takes tens of milliseconds, more than 5 ms."""
+    data = to_bytes(large_valid_card())
+    options = RenderOptions(frame_rate_hz=10_000)
+    checker = ProcessChecker(timeout_s=0.005).start()
+    try:
+        late = checker.check_card(data, options)
+        assert isinstance(late, CheckFailed)
+        assert late.detail == "card not checked within 0.005 s"
+        assert checker.killed == 1
+        checker.timeout_s = CHECK_TIMEOUT_S
+        assert isinstance(checker.check_card(to_bytes(build.card(
+            10.0, 10.0, taxtel_mm=10.0, textures=[build.texture(0.5, channel="uv")])),
+            options), CheckedCard)
+    finally:
+        checker.close()
+
+
+# ---------------------------------------------------------------------- sessions (PN12-PN14)
+
+def test_another_connection_cannot_change_the_owners_session(served):
+    """The old server carried out a second client's reports inside the first's session."""
+    with open_device(served.uri) as owner, open_device(served.uri) as other:
+        owner.start()
+        owner.send_finger(0.5, 10.0, 5.0, 0.5, True)
+        before = owner.counters()
+        limits = owner.limits()
+        other.send(Finger.from_si(0.000777, 70.0, 40.0, 0.5, True))
+        other.send(Stream(1, (2000,), (10000,)))
+        for command in (Command.KEEPALIVE, Command.CLEAR_COUNTERS, Command.STOP,
+                        Command.PLAY_CARD):
+            other.command(command, owner.session_token or 0)
+        for report in (Limits.from_si(1e-7, 0.0, 1e-6), UploadBegin(16, 0)):
+            with pytest.raises(DeviceStall):
+                other.set_report(report)
+        seen = other.collect_until(other.clock() + 0.02)
+        owner.keepalive()
+        states = owner.collect_until(owner.clock() + 0.02)
+        after = owner.counters()
+        assert any(s.faults & FaultBits.SESSION_BUSY for s in seen)
+        assert after.rejected_requests - before.rejected_requests == 8  # 6 outputs, 2 SETs
+        assert after.output_reports - before.output_reports == 1  # the owner's KEEPALIVE
+        assert owner.limits() == limits
+        assert all(s.host_time_echo_us == 500_000 for s in states[-5:])  # its own finger
+        assert all(s.session_live and s.session_token == owner.session_token for s in states)
+        owner.stop()
+
+
+def test_another_connections_reports_do_not_keep_a_silent_owners_session_alive(served):
+    """PN13 with PN7: the old server let a second host's KEEPALIVEs hold the session open."""
+    with open_device(served.uri) as owner, open_device(served.uri) as other:
+        owner.start()
+        number = owner.session_number
+        t0 = other.clock()
+        states = []
+        while other.clock() - t0 < 0.4:  # the owner is silent; the other one is not
+            other.keepalive()
+            states += other.collect_until(other.clock() + 0.02)
+        last = states[-1]
+        assert last.session_number == number and not last.session_live  # ended (PN7)
+        other.start()  # and the device is free
+        assert other.session_number == number + 1
+        other.stop()
+
+
+def test_take_over_stays_possible_and_moves_the_session_to_its_connection(served):
+    with open_device(served.uri) as first, open_device(served.uri) as second:
+        first.start()
+        second.take_over()
+        with pytest.raises(SessionLost, match="taken over"):
+            first.collect_until(first.clock() + 0.05)
+        before = second.counters().rejected_requests
+        # the driver sends nothing after a loss (PN9); bypass it: now the other connection
+        first._write_output(Control(Command.KEEPALIVE).encode())
+        second.keepalive()
+        assert second.counters().rejected_requests - before == 1
+        second.stop()
+
+
+def test_an_endpoint_halt_is_the_halting_connections_own(served):
+    """The old server shared the OUT endpoint's halt: a second client's SET_FEATURE(ENDPOINT
+    _HALT) made the first host's `hcard play` exit 1."""
+    with open_device(served.uri) as first, open_device(served.uri) as second:
+        second.link.control_out(0x02, 0x03, 0, 0x01, b"", timeout_s=1.0)  # halt OUT 0x01
+        status = second.link.control_in(0x82, 0x00, 0, 0x01, 2, timeout_s=1.0)
+        assert status == b"\x01\x00"  # GET_STATUS: its own OUT pipe is halted
+        with pytest.raises(DeviceStall):
+            second.keepalive()
+        first.keepalive()  # the first connection's pipes run on
+        assert first.link.control_in(0x82, 0x00, 0, 0x01, 2, timeout_s=1.0) == b"\x00\x00"
+        second.link.control_out(0x02, 0x01, 0, 0x01, b"", timeout_s=1.0)  # CLEAR_FEATURE
+        second.keepalive()
+        # halting its IN pipe STALLs the second connection's IN URBs (those parked at once,
+        # the next ones when its link submits them), no one else's
+        with pytest.raises(DeviceStall, match="interrupt IN endpoint STALLed"):
+            second.link.control_out(0x02, 0x03, 0, 0x81, b"", timeout_s=1.0)
+            for _ in range(100):
+                second.link.read_in(0.01)
+        assert first.link.control_in(0x82, 0x00, 0, 0x81, 2, timeout_s=1.0) == b"\x00\x00"
+        assert first.read_inputs(1.0)  # its IN pipe runs on
+
+
+def _play(card: Path, uri: str, track: Path, output: Path) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-c", "from hcard.cli.main import cli; cli()", "play", str(card),
+         "--device", uri, "--track", str(track), "-o", str(output)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def test_hcard_play_records_only_its_own_session_whatever_another_client_sends(tmp_path):
+    """The review's scenario: beside a playing host, a second client halts the OUT endpoint,
+    sends FINGER reports at x = 70 mm, STREAM and a LIMITS change. The old server made play
+    exit 1 (the halt), or exit 0 with 1200 of 4568 rows at the injected finger and a sidecar
+    with the limits from before the change."""
+    card = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[
+        build.texture(1.0, channel="uv"), build.texture(0.4, channel="uv")], texture_index=[0, 1])
+    save(card, tmp_path / "step.hcard")
+    stroke = straight_stroke((2.0, 5.0), (16.0 / 3.0, 0.0), 3.0)
+    (tmp_path / "stroke.csv").write_text(track_to_csv(stroke))
+    output = tmp_path / "rec.csv"
+    with served_device() as served:
+        player = _play(tmp_path / "step.hcard", served.uri, tmp_path / "stroke.csv", output)
+        with open_device(served.uri) as intruder:
+            deadline = time.monotonic() + 20.0
+            while not any(s.session_live for s in intruder.read_inputs(0.05)):
+                assert time.monotonic() < deadline, "the player began no session"
+            intruder.link.control_out(0x02, 0x03, 0, 0x01, b"", timeout_s=1.0)
+            intruder.link.control_out(0x02, 0x01, 0, 0x01, b"", timeout_s=1.0)
+            t_end = time.monotonic() + 1.5
+            while time.monotonic() < t_end:
+                intruder._write_output(Finger.from_si(0.000777, 70.0, 5.0, 0.5, True).encode())
+                intruder._write_output(Stream(1, (1000,), (10000,)).encode())
+                with contextlib.suppress(DeviceStall):
+                    intruder.set_report(Limits.from_si(1e-7, 0.0, 1e-6))
+                intruder.read_inputs(0.01)
+            _out, err = player.communicate(timeout=60)
+    assert player.returncode == 0, err
+    table = read_measurement(output)
+    touching = table.column("contact").astype(bool)
+    x_mm = table.column("x")[touching] * 1e3
+    assert x_mm.max() == pytest.approx(18.0, abs=0.3)  # never the injected 70 mm
+    assert not np.any(table.column("echo") == 0.000777)
+    conditions = table.conditions
+    hardware = 2.5e-6  # the E-ViTa's amplitude limit (spec section 13): never lowered
+    assert conditions["limits"]["max_amplitude_m"] == pytest.approx(hardware)
+    assert "limits_at_start" not in conditions
+
+
+# ---------------------------------------------------------------------- the server's log
+
+def test_closes_are_logged_with_their_reason_and_the_log_never_blocks_the_server():
+    """A reconnect flood closes hundreds of connections a second; their log lines once filled
+    a stderr pipe nobody read and stopped the accept loop."""
+    command = [sys.executable, "-m", "hcard_device.usb.server", "--port", "0"]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    try:
+        assert process.stdout is not None
+        line = process.stdout.readline().decode()
+        port = int(line.split("usbip://127.0.0.1:")[1].split("/")[0])
+        with clients.hostile_process("giant-out-urb", "127.0.0.1", port) as stats:
+            time.sleep(3.0)  # stderr is not read meanwhile: a 64 KiB pipe would fill
+        assert stats["connections"] >= 20
+        sock = clients.import_device("127.0.0.1", port)  # still accepting
+        sock.close()
+        process.send_signal(2)
+        _out, err = process.communicate(timeout=10)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait(5)
+    text = err.decode()
+    assert "declares a transfer of 2147483647 bytes (OUT transfers: 0..4096)" in text
+    assert "more lines not logged: over 20 a second" in text
+
+
+def test_refused_requests_of_a_raw_client_do_not_crash_its_connection(served):
+    """An unknown command, a bad direction: the connection closes with a reason; others go on."""
+    for header in (struct.pack(">IIIII", 7, 1, clients.DEVID, 0, 0) + bytes(28),
+                   struct.pack(">IIIII", 1, 1, clients.DEVID, 5, 1) + bytes(28)):
+        sock = clients.import_device(served.host, served.port)
+        with sock:
+            sock.sendall(header)
+            sock.settimeout(5.0)
+            assert sock.recv(64) == b""  # closed
+    with contextlib.suppress(SessionBusy), open_device(served.uri) as driver:
+        assert driver.info().protocol_major == 1
+    socket.create_connection((served.host, served.port), timeout=2).close()
+
+
+# ---------------------------------------------------------------------- the stated bounds
+
+def test_the_bounds_stated_in_the_spec_and_the_server_docstring_are_the_servers():
+    """spec/device-protocol.md section 13 and hcard_device.usb.server state the bounds of the
+    server's code; a change to one shows here."""
+    from hcard_device.usb import server, transport
+    from hcard_device.usb.device import DEFAULT_IN_QUEUE
+
+    limits = DEFAULT_LIMITS
+    spec = (Path(__file__).resolve().parents[2] / "spec" / "device-protocol.md").read_text()
+    rows = {
+        "connections served at once (handshakes and device lists included)":
+            f"{transport.MAX_CONNECTIONS}",
+        "connections accepted per second":
+            f"{transport.ACCEPT_RATE_HZ:g} ({transport.ACCEPT_BURST} at once)",
+        "import handshake (OP_REQ_IMPORT or OP_REQ_DEVLIST)": f"{limits.handshake_timeout_s:g} s",
+        "STATE reports queued per connection": f"{DEFAULT_IN_QUEUE} ({DEFAULT_IN_QUEUE} ms)",
+        "interrupt-IN URBs parked per connection (usbhid keeps 1)":
+            f"{limits.max_parked_in_urbs}",
+        "length of an OUT transfer (a report is at most 64 bytes)":
+            f"{limits.max_out_bytes} bytes",
+        "length of an IN transfer": f"{limits.max_in_bytes:,} bytes".replace(",", " "),
+        "answers waiting for a client that does not read, beyond its socket buffers":
+            f"{limits.max_pending_bytes // 1024} KiB",
+        "control transfers waiting behind a card check": f"{limits.max_queued_controls}",
+        "check of one COMMIT or COMMIT_PROFILE (PU12), in a worker process":
+            f"{CHECK_TIMEOUT_S:g} s",
+    }
+    for bound, value in rows.items():
+        assert f"| {bound} | {value} |" in spec, bound
+    doc = server.__doc__ or ""
+    for value in (transport.MAX_CONNECTIONS, DEFAULT_IN_QUEUE, limits.max_parked_in_urbs,
+                  limits.max_out_bytes, limits.max_in_bytes, limits.max_queued_controls):
+        assert f" {value} " in doc, value
+    assert f"{limits.max_pending_bytes // 1024} KiB" in doc
+    assert f"{CHECK_TIMEOUT_S:g} s" in doc and f"{limits.handshake_timeout_s:g} s" in doc
