@@ -12,11 +12,8 @@ happened, the rendered friction error against the card's target included
 
 from __future__ import annotations
 
-import contextlib
-import gc
 import hashlib
 import json
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from typing import TYPE_CHECKING, Any
@@ -31,6 +28,7 @@ from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb
 from hcard_device.drivers.base import Driver, UploadOutcome
 from hcard_device.drivers.errors import DeviceError, PlayTooLong, SessionLost
+from hcard_device.drivers.priority import collection_deferred
 from hcard_device.drivers.recording import HOST_TIME_MODULO, force_recording
 from hcard_device.drivers.state_log import StateLog
 from hcard_device.protocol import (
@@ -189,7 +187,7 @@ def play(driver: Driver, card: pb.Card, track: FingerTrack, *, profile: bytes | 
     lost_before = driver.reports_lost
     host_us = session_host_times(start, track)
     try:
-        with collector_paused():
+        with collection_deferred():
             last_report = _drive(driver, track, host_us, start, keepalive_s, tail_s, states)
     except SessionLost as exc:
         raise SessionLost(f"{exc}; play stopped after {driver.clock() - start:.3f} s of the "
@@ -211,25 +209,8 @@ def check_play_length(track: FingerTrack) -> None:
     """Raise :class:`PlayTooLong` when ``track`` lasts longer than :data:`MAX_PLAY_S`."""
     span_s = float(track.t[-1] - track.t[0])
     if span_s > MAX_PLAY_S:
-        raise PlayTooLong(f"the track lasts {span_s:.0f} s; one session plays at most "
+        raise PlayTooLong(f"the track lasts {span_s:.4g} s; one session plays at most "
                           f"{MAX_PLAY_S:.0f} s ({MAX_PLAY_S / 3600:g} h): play it in parts")
-
-
-@contextlib.contextmanager
-def collector_paused() -> Iterator[None]:
-    """Python's cyclic garbage collector off while a session streams, as it was after.
-
-    The device keeps 32 STATE reports (32 ms) for the host; a full collection in a process
-    holding millions of objects (a test run, a notebook) takes 0.5 s, and the reports of that
-    pause are lost. What a play allocates (reports, no cycles) is freed by reference counting
-    alone, so nothing piles up while the collector rests."""
-    was_enabled = gc.isenabled()
-    gc.disable()
-    try:
-        yield
-    finally:
-        if was_enabled:
-            gc.enable()
 
 
 def _drive(driver: Driver, track: FingerTrack, host_us: np.ndarray, start: float,
