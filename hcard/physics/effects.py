@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import abc
 from collections.abc import Mapping, Sequence
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -285,5 +285,17 @@ def augment(base: Predictor, effects: Sequence[Effect]) -> Predictor:
         def _inverse(self, target: np.ndarray, **inputs: np.ndarray) -> np.ndarray:
             return self._base.inverse(target, **inputs)
 
+        def __reduce__(self) -> tuple[Any, ...]:
+            # the class is made here, so pickle rebuilds it from what it was made of (a device
+            # profile crosses to the served device's card-check worker and back)
+            return _augmented_again, (prototype, effects, self.params)
+
     Augmented.__name__ = Augmented.__qualname__ = f"Augmented_{type(base).__name__}"
     return Augmented()
+
+
+def _augmented_again(base: Predictor, effects: tuple[Effect, ...],
+                     params: dict[str, float]) -> Predictor:
+    """:func:`augment` of ``base`` and ``effects`` at ``params`` (SI units): how a pickled
+    augmented predictor is made again."""
+    return augment(base, effects).with_params(**params)

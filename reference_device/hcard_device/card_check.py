@@ -364,8 +364,9 @@ def _blobs(outcome: object) -> tuple[tuple[object, ...], list[bytes]]:
     return ("object",), [pickle.dumps(outcome)]
 
 
-def _write_outcome(stream: IO[bytes], outcome: object) -> None:
-    header, blobs = _blobs(outcome)
+def _write_outcome(stream: IO[bytes], outcome: tuple[tuple[object, ...], list[bytes]]) -> None:
+    """Write an outcome made into a header and blobs by :func:`_blobs`."""
+    header, blobs = outcome
     _write_frame(stream, pickle.dumps((header, len(blobs))))
     for blob in blobs:
         _write_frame(stream, blob)
@@ -413,9 +414,12 @@ def _serve(stdin: IO[bytes], stdout: IO[bytes]) -> None:
         try:
             outcome = (check_card_bytes(data, options) if kind == _CARD
                        else check_profile_bytes(data))
+            blobs = _blobs(outcome)
         except MemoryError:
-            outcome = CheckFailed("the card needs more memory than the checker has")
-        _write_outcome(stdout, outcome)
+            blobs = _blobs(CheckFailed("the card needs more memory than the checker has"))
+        except Exception as exc:  # a defect of the checker: said in the upload's detail
+            blobs = _blobs(CheckFailed(f"the checker failed ({type(exc).__name__}: {exc})"))
+        _write_outcome(stdout, blobs)
 
 
 if __name__ == "__main__":

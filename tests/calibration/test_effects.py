@@ -4,6 +4,7 @@ explained by the augmented model and flagged by the residual analysis of the bas
 from __future__ import annotations
 
 import math
+import pickle
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -231,6 +232,20 @@ def test_augmented_parameters_are_prefixed_and_effects_at_neutral_values_vanish(
     fitted = model.with_params(**{"load-index.load_index": 0.8})
     assert fitted["load-index.load_index"] == 0.8
     assert fitted.params["friction_occluded"] == base["friction_occluded"]
+
+
+def test_an_augmented_predictor_survives_pickling_with_its_values_and_outputs() -> None:
+    """A device profile with a fitted effect crosses to the served device's card-check worker
+    process and back by pickle; the augmented class is made at run time."""
+    model = augment(FingerFriction(load_index=1.0), [LoadIndex(), OcclusionDrift()]).with_params(
+        **{"load-index.load_index": 0.8, "occlusion-drift.gain": 0.3})
+    again = pickle.loads(pickle.dumps(model))
+    assert type(again).__name__ == "Augmented_FingerFriction"
+    assert again.params == model.params
+    force, occluded = np.array([0.2, 0.5, 1.4]), np.array([0.0, 5.0, 50.0])
+    expected = model.forward(normal_force=force, occlusion_time=occluded)
+    assert np.array_equal(again.forward(normal_force=force, occlusion_time=occluded), expected)
+    assert not np.allclose(expected, FingerFriction(load_index=1.0).forward(normal_force=force))
 
 
 def test_finger_geometry_at_neutral_value_is_the_base_exactly() -> None:

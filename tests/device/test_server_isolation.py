@@ -33,9 +33,18 @@ from served_device import ServedDevice, served_device
 from hcard import build
 from hcard.calibration.measurement import read_measurement
 from hcard.card_io import save, to_bytes
+from hcard.physics.profile import DeviceProfile
+from hcard.physics.profile_effects import FittedEffect
+from hcard.plugins.registry import get_registry
 from hcard.render.options import RenderOptions
 from hcard.track import straight_stroke, track_to_csv
-from hcard_device.card_check import CHECK_TIMEOUT_S, CheckedCard, CheckFailed, ProcessChecker
+from hcard_device.card_check import (
+    CHECK_TIMEOUT_S,
+    CheckedCard,
+    CheckedProfile,
+    CheckFailed,
+    ProcessChecker,
+)
 from hcard_device.drivers import open_device
 from hcard_device.drivers.errors import DeviceStall, SessionBusy, SessionLost
 from hcard_device.protocol import (
@@ -223,6 +232,29 @@ def test_a_check_longer_than_its_bound_fails_the_upload_and_the_next_one_works()
         assert isinstance(checker.check_card(to_bytes(build.card(
             10.0, 10.0, taxtel_mm=10.0, textures=[build.texture(0.5, channel="uv")])),
             options), CheckedCard)
+    finally:
+        checker.close()
+
+
+def test_a_profile_with_fitted_effects_is_checked_in_the_worker_and_comes_back_whole():
+    """``hcard calibrate --verify`` uploads a profile whose channels carry fitted effects
+    (predictor classes made at run time); the worker once died pickling them, and the upload
+    failed with 'the checker stopped'."""
+    effects = get_registry().calibration_effects
+    profile = DeviceProfile.coupled_stimulator().replace(effects=(
+        FittedEffect(effects["air-layer"], {"air_gap": 6e-6}),
+        FittedEffect(effects["load-index"], {"load_index": 0.8})))
+    checker = ProcessChecker().start()
+    try:
+        pid = checker.worker_pid
+        checked = checker.check_profile(profile.to_json())
+        assert isinstance(checked, CheckedProfile), checked
+        assert checked.profile.to_json() == profile.to_json()
+        voltage, force = np.array([300.0, 900.0]), np.array([0.3, 1.2])
+        assert np.array_equal(checked.profile.ev_channel.forward(voltage=voltage,
+                                                                 normal_force=force),
+                              profile.ev_channel.forward(voltage=voltage, normal_force=force))
+        assert checker.worker_pid == pid and checker.killed == 0
     finally:
         checker.close()
 
