@@ -64,6 +64,17 @@ def test_the_no_ownership_control_fails_every_case() -> None:
     assert "session 0, token 0, flag SESSION 0" in results["released-by-stop"].detail
 
 
+def test_an_intrusion_fails_under_software_emulation_too() -> None:
+    """A class whose host does not keep real time excuses the first host's own losses (spec
+    QT3), never a refusal the device did not make."""
+    ctx = Context.for_driver("control:no-ownership")
+    ctx.options["timing"] = "software-emulation"
+    results = {r.case: r for r in check_session_ownership(ctx)}
+    refused = results["second-host-refused"]
+    assert refused.status == FAIL and refused.value >= 3, refused.detail
+    assert "was not flagged SESSION_BUSY (PN3)" in refused.detail
+
+
 @pytest.mark.parametrize("uri", ["sim://", "sim://coupled"])
 def test_sim_passes_with_a_second_host_on_the_simulated_device(uri: str) -> None:
     results = run(uri)
