@@ -209,7 +209,7 @@ def check_play_length(track: FingerTrack) -> None:
     """Raise :class:`PlayTooLong` when ``track`` lasts longer than :data:`MAX_PLAY_S`."""
     span_s = float(track.t[-1] - track.t[0])
     if span_s > MAX_PLAY_S:
-        raise PlayTooLong(f"the track lasts {span_s:.4g} s; one session plays at most "
+        raise PlayTooLong(f"the track lasts {span_s:.6g} s; one session plays at most "
                           f"{MAX_PLAY_S:.0f} s ({MAX_PLAY_S / 3600:g} h): play it in parts")
 
 

@@ -42,6 +42,8 @@ from typing import Any, Protocol
 from usbip import protocol
 from usbip.core import IN, OUT, Urb
 
+from hcard.errors import HcardError
+
 HEADER_BYTES = 48
 """Size of every USB/IP URB-phase header (20-byte basic + 28-byte union), bytes."""
 _BASIC = struct.Struct(">IIIII")  # command, seqnum, devid, direction, ep
@@ -83,7 +85,7 @@ DEFAULT_LIMITS = ConnectionLimits()
 """The bounds every connection of the reference device's server gets."""
 
 
-class ConnectionClosed(Exception):
+class ConnectionClosed(HcardError):
     """Raised inside a connection's threads to end it; its message is the logged reason."""
 
 
