@@ -175,7 +175,7 @@ def test_builtin_image_encoder_is_found_through_the_entry_point(restore_registry
     assert info.entry_point == "builtin-encoders"
     assert registry.encoders["image"] is info.obj
     assert callable(info.obj.encode)
-    assert type(info.obj).__module__.startswith("hcard_builtins.")
+    assert type(info.obj.load()).__module__.startswith("hcard_builtins.")
     assert [b for b in registry.broken if "package 'hcard'" in b.reason] == []
 
 

@@ -64,10 +64,9 @@ from hcard_conformance.realtime import (
     device_lag,
     reasons,
 )
-from hcard_conformance.registry import check
 from hcard_conformance.result import CannotAssess, CheckResult, guarded
 from hcard_conformance.streaming import FINGER_PERIOD_S, lead_frames, require_fed, stream_fed
-from hcard_conformance.timing import needs_real_time_host, timing_class
+from hcard_conformance.timing import timing_class
 from hcard_device.drivers.base import Driver
 from hcard_device.drivers.play import PlayResult, play
 from hcard_device.protocol import (
@@ -312,8 +311,6 @@ def friction_error(t: np.ndarray, rendered: np.ndarray, contact: np.ndarray, car
                                target[settled])
 
 
-@check(name="device.friction", level=LEVEL, applies=needs_real_time_host,
-       description="rendered friction (measured actuation) matches the card's target")
 def check_friction(ctx: Context) -> Iterator[CheckResult]:
     """Rendered friction from measured actuation vs the card's target, per case."""
     if ctx.open_driver is None:
@@ -543,8 +540,6 @@ def measure_rise_time(driver: Driver, max_rise_s: float) -> float:
                      1.0 / rate, hold_s)
 
 
-@check(name="device.dynamics", level=LEVEL, applies=needs_real_time_host,
-       description="plate amplitude -3 dB bandwidth and rise time meet the device class")
 def check_dynamics(ctx: Context) -> Iterator[CheckResult]:
     """Bandwidth and rise time of the plate amplitude under direct streaming."""
     if ctx.open_driver is None:
@@ -758,8 +753,6 @@ def _host_time_since(state: State, start_us: int) -> float | None:
     return since_us * S_PER_US + age
 
 
-@check(name="device.latency", level=LEVEL,
-       description="finger move to friction change, median within 10 ms (real-time host)")
 def check_latency(ctx: Context) -> Iterator[CheckResult]:
     """End-to-end latency from a host finger update to the plate's change, and (case
     ``host-read-lag``) how late the host read the device's reports."""
@@ -1082,8 +1075,6 @@ def measure_safety(open_driver: Callable[[], Driver]) -> Iterator[tuple[str, int
     yield "limits-while-driven", change.over, change.worst, change.detail
 
 
-@check(name="device.safety", level=LEVEL,
-       description="measured amplitude, voltage and current never exceed the limits")
 def check_safety(ctx: Context) -> Iterator[CheckResult]:
     """Outputs stay within the limits in force whatever is asked (spec PS1)."""
     if ctx.open_driver is None:
@@ -1162,8 +1153,6 @@ def _read_briefly(driver: Driver, seconds: float) -> list[State]:
     return states
 
 
-@check(name="device.watchdog", level=LEVEL,
-       description="outputs ramp to zero and WATCHDOG is reported when the host goes silent")
 def check_watchdog(ctx: Context) -> Iterator[CheckResult]:
     """Fault behaviour on host silence (spec PS3)."""
     if ctx.open_driver is None:

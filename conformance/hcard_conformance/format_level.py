@@ -20,7 +20,6 @@ from hcard.card_io import card_from_bytes, dumps, parse_card, read_card_file, to
 from hcard.errors import CardError
 from hcard.validate import errors_of, validate
 from hcard_conformance.context import Context
-from hcard_conformance.registry import check
 from hcard_conformance.result import CheckResult
 
 LEVEL = "format"
@@ -35,8 +34,6 @@ def _first_difference(a: bytes, b: bytes) -> str:
     return f"first difference at byte {n} ({len(a)} vs {len(b)} bytes)"
 
 
-@check(name="format.parse", level=LEVEL,
-       description="Q2: every vector card parses and validates, binary and JSON")
 def check_parse(ctx: Context) -> Iterator[CheckResult]:
     """Q2: parse and validate both files of every card; metric = validation errors found."""
     for entry in ctx.manifest.cards:
@@ -54,8 +51,6 @@ def check_parse(ctx: Context) -> Iterator[CheckResult]:
                               "Q2", float(len(problems)), 0.0, "errors", detail)
 
 
-@check(name="format.round_trip", level=LEVEL,
-       description="Q3: binary and JSON round trips are bit exact")
 def check_round_trip(ctx: Context) -> Iterator[CheckResult]:
     """Q3: metric = number of round trips (of three) whose bytes differ."""
     for entry in ctx.manifest.cards:
@@ -75,8 +70,6 @@ def check_round_trip(ctx: Context) -> Iterator[CheckResult]:
                           "; ".join(bad) or f"{len(binary)} bytes, 3 round trips bit exact")
 
 
-@check(name="format.reject", level=LEVEL,
-       description="Q4: every invalid vector is rejected with its documented error")
 def check_reject(ctx: Context) -> Iterator[CheckResult]:
     """Q4: metric = 0 when rejected as documented, 1 otherwise."""
     for entry in ctx.manifest.invalid:

@@ -53,7 +53,6 @@ from hcard_conformance.realtime import (
     device_lag,
     reasons,
 )
-from hcard_conformance.registry import check
 from hcard_conformance.result import CannotAssess, CheckResult, guarded, measured, unassessed
 from hcard_conformance.timing import REAL_TIME, timing_class
 from hcard_device.drivers.base import Driver
@@ -630,8 +629,6 @@ def kept(result: CheckResult, attempt: Attempt) -> CheckResult:
     return result
 
 
-@check(name="device.upload-integrity", level=LEVEL,
-       description="refused uploads (CRC, short, order, timeout, size) leave the card playing")
 def check_upload_integrity(ctx: Context) -> Iterator[CheckResult]:
     """Bad uploads are refused with their reason and the previous card keeps playing (U1-U3)."""
     if ctx.open_driver is None:
@@ -960,8 +957,6 @@ def drop_count_limit(expected: int, host_loss: float) -> int:
     return DROP_COUNT_SLACK + math.floor(host_loss * expected)
 
 
-@check(name="device.report-loss", level=LEVEL,
-       description="STATE reports arrive in sequence, lose at most 0.1 %, drops are counted")
 def check_report_loss(ctx: Context) -> Iterator[CheckResult]:
     """Sequence gaps, loss fraction and COUNTERS agreement of the STATE stream (L1-L3)."""
     if ctx.open_driver is None:

@@ -1,11 +1,14 @@
-"""The registry of conformance checks: the ``@check`` decorator and plugin-provided checks.
+"""The registry of conformance checks: the built-in checks' table, the ``@check`` decorator and
+plugin-provided checks.
 
-A check is a function ``(ctx: Context) -> Iterable[CheckResult]`` decorated with
-:func:`check`; it yields one result per case (vector, track, fault...). Built-in checks live in
-:data:`BUILTIN_MODULES`; a vendor adds checks with a plugin implementing the hook
-``hcard_conformance_checks`` (entry-point group ``hcard.plugins``) that returns
-:class:`Check` objects (or any object with ``name``, ``level``, ``description`` and
-``run(ctx)``)::
+A check is a function ``(ctx: Context) -> Iterable[CheckResult]``; it yields one result per case
+(vector, track, fault...). The built-in checks are the rows of :data:`BUILTIN_CHECKS`, each a
+:class:`LazyCheck`: name, level and description there and only there, the function named by
+import path and imported when the check runs (``hcard plugins`` lists the checks without
+importing a check module, a driver or the reference device). A vendor adds checks with a plugin
+implementing the hook ``hcard_conformance_checks`` (entry-point group ``hcard.plugins``) that
+returns :class:`Check` objects, :class:`LazyCheck` rows, or any object with ``name``,
+``level``, ``description`` and ``run(ctx)``::
 
     from hcard.plugins import hookimpl
     from hcard_conformance.registry import check
@@ -24,11 +27,11 @@ This module is itself such a plugin (the built-ins), so ``hcard plugins`` lists 
 
 from __future__ import annotations
 
-import importlib
+import pkgutil
 import warnings
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 from hcard.plugins.hookspecs import hookimpl
 from hcard_conformance.result import LEVELS, CheckResult, level_index
@@ -39,14 +42,6 @@ if TYPE_CHECKING:
 
 CheckFunction = Callable[["Context"], Iterable[CheckResult]]
 
-BUILTIN_MODULES: tuple[str, ...] = (
-    "hcard_conformance.format_level",
-    "hcard_conformance.renderer_level",
-    "hcard_conformance.device_level",
-    "hcard_conformance.link_checks",
-    "hcard_conformance.session_checks",
-)
-"""Modules whose ``@check`` functions are the built-in checks, in level order."""
 
 
 @dataclass(frozen=True)
@@ -78,18 +73,121 @@ class Check:
         return self.run(ctx)
 
 
-_BUILTIN: dict[str, Check] = {}
+class LazyCheck(NamedTuple):  # a row of the table: defined in microseconds, nothing imported
+    """A check named by import path (a :class:`~hcard.plugins.kinds.CheckPlugin`): the
+    function, and its ``applies`` predicate, are imported when the check runs.
+
+    Attributes:
+        name: unique name, ``level.what``.
+        level: ``format``, ``renderer`` or ``device``.
+        description: one line: what it verifies.
+        target: ``"package.module:function"`` yielding the :class:`CheckResult` objects.
+        applies_target: ``"package.module:predicate"`` on the Context (see :class:`Check`);
+            None: the level's default.
+    """
+
+    name: str
+    level: str
+    description: str
+    target: str
+    applies_target: str | None = None
+
+    @property
+    def kind(self) -> str:
+        """``"conformance-check"``."""
+        return "conformance-check"
+
+    @property
+    def func(self) -> CheckFunction:
+        """The check's function (imported)."""
+        func: CheckFunction = pkgutil.resolve_name(self.target)
+        return func
+
+    @property
+    def applies(self) -> Callable[[Context], bool] | None:
+        """The check's predicate (imported), or None."""
+        if self.applies_target is None:
+            return None
+        predicate: Callable[[Context], bool] = pkgutil.resolve_name(self.applies_target)
+        return predicate
+
+    def run(self, ctx: Context) -> Iterable[CheckResult]:
+        """The check's results on ``ctx`` (a generator: the runner times each case)."""
+        return self.func(ctx)
+
+    def __call__(self, ctx: Context) -> Iterable[CheckResult]:
+        return self.run(ctx)
+
+
+BUILTIN_CHECKS: tuple[LazyCheck, ...] = (
+    LazyCheck("format.parse", "format",
+              "Q2: every vector card parses and validates, binary and JSON",
+              "hcard_conformance.format_level:check_parse"),
+    LazyCheck("format.round_trip", "format",
+              "Q3: binary and JSON round trips are bit exact",
+              "hcard_conformance.format_level:check_round_trip"),
+    LazyCheck("format.reject", "format",
+              "Q4: every invalid vector is rejected with its documented error",
+              "hcard_conformance.format_level:check_reject"),
+    LazyCheck("renderer.exact", "renderer",
+              "A0: every golden render reproduced frame for frame within 1e-5",
+              "hcard_conformance.renderer_level:check_exact",
+              "hcard_conformance.renderer_level:frame_exact"),
+    LazyCheck("renderer.friction_error", "renderer",
+              "A1: RMS relative friction error within the 8% JND on every golden render",
+              "hcard_conformance.renderer_level:check_friction_error"),
+    LazyCheck("renderer.component_amplitude", "renderer",
+              "A2: amplitude of each golden spectral peak within 8% of the mean friction",
+              "hcard_conformance.renderer_level:check_component_amplitude"),
+    LazyCheck("renderer.component_frequency", "renderer",
+              "A3: frequency of each golden spectral peak within 5%",
+              "hcard_conformance.renderer_level:check_component_frequency"),
+    LazyCheck("renderer.spatial_phase", "renderer",
+              "A4: position-locked features within 2.5 mm of where they are drawn",
+              "hcard_conformance.renderer_level:check_spatial_phase"),
+    LazyCheck("renderer.boundary", "renderer",
+              "A5: taxtel boundaries within 2.5 mm of where they are drawn",
+              "hcard_conformance.renderer_level:check_boundary"),
+    LazyCheck("device.friction", "device",
+              "rendered friction (measured actuation) matches the card's target",
+              "hcard_conformance.device_level:check_friction",
+              "hcard_conformance.timing:needs_real_time_host"),
+    LazyCheck("device.dynamics", "device",
+              "plate amplitude -3 dB bandwidth and rise time meet the device class",
+              "hcard_conformance.device_level:check_dynamics",
+              "hcard_conformance.timing:needs_real_time_host"),
+    LazyCheck("device.latency", "device",
+              "finger move to friction change, median within 10 ms (real-time host)",
+              "hcard_conformance.device_level:check_latency"),
+    LazyCheck("device.safety", "device",
+              "measured amplitude, voltage and current never exceed the limits",
+              "hcard_conformance.device_level:check_safety"),
+    LazyCheck("device.watchdog", "device",
+              "outputs ramp to zero and WATCHDOG is reported when the host goes silent",
+              "hcard_conformance.device_level:check_watchdog"),
+    LazyCheck("device.upload-integrity", "device",
+              "refused uploads (CRC, short, order, timeout, size) leave the card playing",
+              "hcard_conformance.link_checks:check_upload_integrity"),
+    LazyCheck("device.report-loss", "device",
+              "STATE reports arrive in sequence, lose at most 0.1 %, drops are counted",
+              "hcard_conformance.link_checks:check_report_loss"),
+    LazyCheck("device.session-ownership", "device",
+              "a second host is refused, a takeover is reported, STOP releases the device",
+              "hcard_conformance.session_checks:check_session_ownership"),
+)
+"""The built-in checks, in level order: the one place their names, levels and descriptions are
+written."""
 
 
 def check(*, name: str, level: str, description: str = "",
           applies: Callable[[Context], bool] | None = None,
           registry: dict[str, Check] | None = None) -> Callable[[CheckFunction], Check]:
-    """Decorator: make a function a :class:`Check` and register it.
+    """Decorator: make a function a :class:`Check` (a vendor's; the built-ins are the rows of
+    :data:`BUILTIN_CHECKS`), returned from a plugin's ``hcard_conformance_checks`` hook.
 
-    ``registry`` defaults to the built-in checks (used by this package's modules); a vendor
-    plugin passes its own dict, or ``{}``, and returns the Check from its
-    ``hcard_conformance_checks`` hook. The description defaults to the function's docstring's
-    first line.
+    ``registry``: a dict to add it to by name (a plugin's own collection), refused when the
+    name is there already; None: not collected. The description defaults to the function's
+    docstring's first line.
 
     Raises:
         ValueError: unknown level, empty name, or a name already registered.
@@ -97,14 +195,14 @@ def check(*, name: str, level: str, description: str = "",
     level_index(level)
     if not name.strip():
         raise ValueError("a check needs a non-empty name")
-    target = _BUILTIN if registry is None else registry
 
     def decorate(func: CheckFunction) -> Check:
         doc = (func.__doc__ or "").strip().splitlines()
         made = Check(name, level, description or (doc[0] if doc else ""), func, applies)
-        if name in target and target[name].func is not func:
-            raise ValueError(f"conformance check {name!r} is already registered")
-        target[name] = made
+        if registry is not None:
+            if name in registry and registry[name].func is not func:
+                raise ValueError(f"conformance check {name!r} is already registered")
+            registry[name] = made
         return made
 
     return decorate
@@ -119,21 +217,13 @@ def applies_to(chk: Any, ctx: Context) -> bool:
     return chk.level != "device" or ctx.open_driver is not None
 
 
-def builtin_checks() -> list[Check]:
-    """The built-in checks (importing :data:`BUILTIN_MODULES`), in level order."""
-    for module in BUILTIN_MODULES:
-        try:
-            importlib.import_module(module)
-        except ModuleNotFoundError as exc:
-            if exc.name != module:
-                raise
-            warnings.warn(f"built-in conformance module {module} is not installed; its checks "
-                          "are not run", stacklevel=2)
-    return sorted(_BUILTIN.values(), key=lambda c: level_index(c.level))
+def builtin_checks() -> list[LazyCheck]:
+    """The built-in checks (:data:`BUILTIN_CHECKS`), in level order."""
+    return sorted(BUILTIN_CHECKS, key=lambda c: level_index(c.level))
 
 
 @hookimpl
-def hcard_conformance_checks() -> list[Check]:
+def hcard_conformance_checks() -> list[LazyCheck]:
     """The built-in conformance checks (format, renderer and device levels)."""
     return list(builtin_checks())
 
@@ -145,7 +235,7 @@ def _valid_plugin_check(obj: Any) -> bool:
 
 
 def all_checks(levels: Sequence[str] = LEVELS, *, plugins: bool = True,
-               registry: PluginRegistry | None = None) -> list[Check | Any]:
+               registry: PluginRegistry | None = None) -> list[LazyCheck | Check | Any]:
     """Checks of ``levels``: built-ins first, then plugin checks, grouped in level order.
 
     ``registry`` defaults to the installed plugins (:func:`hcard.plugins.get_registry`); a

@@ -38,7 +38,6 @@ from hcard_conformance import metrics
 from hcard_conformance.context import DEVICE_LAG_KEY, REALTIME_KEY, Context
 from hcard_conformance.metrics import Metric, Signal, Tolerances
 from hcard_conformance.realtime import NOT_KEPT, HostWatch, reasons
-from hcard_conformance.registry import check
 from hcard_conformance.result import CannotAssess, CheckResult, guarded, measured, unassessed
 
 LEVEL = "renderer"
@@ -249,8 +248,11 @@ def _unmeasured(name: str, entry: Any, data: dict[str, Any],
                       f"{found.detail} in the implementation's frames (applies to the golden)")
 
 
-@check(name="renderer.exact", level=LEVEL, applies=lambda ctx: ctx.frame_exact,
-       description="A0: every golden render reproduced frame for frame within 1e-5")
+def frame_exact(ctx: Context) -> bool:
+    """Whether the implementation claims frame-exact renders (check ``renderer.exact``)."""
+    return bool(ctx.frame_exact)
+
+
 def check_exact(ctx: Context) -> Iterator[CheckResult]:
     """A0 on every golden render (frame-exact implementations only)."""
 
@@ -266,8 +268,6 @@ def check_exact(ctx: Context) -> Iterator[CheckResult]:
     yield from _each_entry(ctx, "renderer.exact", _entries(ctx), judge)
 
 
-@check(name="renderer.friction_error", level=LEVEL,
-       description="A1: RMS relative friction error within the 8% JND on every golden render")
 def check_friction_error(ctx: Context) -> Iterator[CheckResult]:
     """A1 on every golden render."""
 
@@ -315,8 +315,6 @@ def _components(ctx: Context, entry: Any, which: int, name: str, metric_id: str,
     return _result(name, entry, metric_id, metric, threshold, unit)
 
 
-@check(name="renderer.component_amplitude", level=LEVEL,
-       description="A2: amplitude of each golden spectral peak within 8% of the mean friction")
 def check_component_amplitude(ctx: Context) -> Iterator[CheckResult]:
     """A2 on dense, oriented, temporal and bipolar cards."""
 
@@ -327,8 +325,6 @@ def check_component_amplitude(ctx: Context) -> Iterator[CheckResult]:
     yield from _each_entry(ctx, "renderer.component_amplitude", _entries(ctx), judge)
 
 
-@check(name="renderer.component_frequency", level=LEVEL,
-       description="A3: frequency of each golden spectral peak within 5%")
 def check_component_frequency(ctx: Context) -> Iterator[CheckResult]:
     """A3 on dense, oriented, temporal and bipolar cards."""
 
@@ -339,8 +335,6 @@ def check_component_frequency(ctx: Context) -> Iterator[CheckResult]:
     yield from _each_entry(ctx, "renderer.component_frequency", _entries(ctx), judge)
 
 
-@check(name="renderer.spatial_phase", level=LEVEL,
-       description="A4: position-locked features within 2.5 mm of where they are drawn")
 def check_spatial_phase(ctx: Context) -> Iterator[CheckResult]:
     """A4 on coarse and sparse cards."""
 
@@ -362,8 +356,6 @@ def check_spatial_phase(ctx: Context) -> Iterator[CheckResult]:
     yield from _each_entry(ctx, "renderer.spatial_phase", entries, judge)
 
 
-@check(name="renderer.boundary", level=LEVEL,
-       description="A5: taxtel boundaries within 2.5 mm of where they are drawn")
 def check_boundary(ctx: Context) -> Iterator[CheckResult]:
     """A5 on every golden render whose texture changes while in contact."""
 

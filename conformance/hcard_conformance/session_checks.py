@@ -47,7 +47,6 @@ from hcard.track import FingerTrack, straight_stroke
 from hcard.v1 import card_pb2 as pb
 from hcard_conformance.context import Context
 from hcard_conformance.realtime import HostWatch, NotKept, attempted_case, device_lag, reasons
-from hcard_conformance.registry import check
 from hcard_conformance.result import (
     CannotAssess,
     CheckResult,
@@ -447,8 +446,6 @@ def case_released_by_stop(hosts: Hosts) -> CheckResult:
                        detail)
 
 
-@check(name=CHECK, level=LEVEL,
-       description="a second host is refused, a takeover is reported, STOP releases the device")
 def check_session_ownership(ctx: Context) -> Iterator[CheckResult]:
     """Session ownership between two hosts on one device (spec section 14)."""
     if ctx.open_driver is None:

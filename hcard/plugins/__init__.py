@@ -37,6 +37,8 @@ _LAZY = {
         "kinds",
     ),
     "LazyCommand": "lazy_command",
+    "LazyDriver": "lazy_plugins",
+    "LazyEncoder": "lazy_plugins",
 }
 """The module of each name, imported on first use: the plugin kinds alone (an encoder's base
 class) do not need pluggy or the entry-point machinery (importlib.metadata), and ``hcard --help``
@@ -67,6 +69,8 @@ __all__ = [
     "EncoderPlugin",
     "HcardPluginWarning",
     "LazyCommand",
+    "LazyDriver",
+    "LazyEncoder",
     "Plugin",
     "PluginInfo",
     "PluginRegistry",

@@ -211,7 +211,8 @@ class DriverPlugin(Plugin, Protocol):
     """Kind ``driver`` (hook ``hcard_drivers``): a transport to devices of some URI schemes.
 
     The plugin object is usually a class (``hcard_device.drivers.Driver`` subclass) whose
-    ``open`` returns a connected instance.
+    ``open`` returns a connected instance, or a :class:`~hcard.plugins.lazy_plugins.LazyDriver`
+    naming that class, imported when a device is first opened (the built-ins).
     """
 
     @property

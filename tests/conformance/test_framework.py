@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import ast
+import importlib
+import inspect
 import json
 import math
 import shutil
@@ -19,7 +22,7 @@ from hcard.cli.main import cli
 from hcard.plugins import hookimpl
 from hcard.plugins.registry import PluginRegistry
 from hcard_conformance.context import Context
-from hcard_conformance.registry import Check, all_checks, builtin_checks, check
+from hcard_conformance.registry import BUILTIN_CHECKS, Check, all_checks, builtin_checks, check
 from hcard_conformance.report import failure_message, json_bytes, junit_xml, table
 from hcard_conformance.result import CheckResult, measured
 from hcard_conformance.runner import SuiteReport, run_suite
@@ -65,6 +68,39 @@ def test_builtin_checks_are_ordered_by_level() -> None:
     assert levels.count("format") == 3
     assert [c.name for c in all_checks(("format",), plugins=False)] == [
         "format.parse", "format.round_trip", "format.reject"]
+
+
+def test_every_row_of_the_builtin_table_names_a_check_function_of_its_level() -> None:
+    """The table is the only place a built-in check's name is written: each row's function
+    (and predicate) imports, and every public ``check_*`` function of the check modules is a
+    row (a function left out of the table would never run)."""
+    targets = {row.target for row in BUILTIN_CHECKS}
+    assert len({row.name for row in BUILTIN_CHECKS}) == len(BUILTIN_CHECKS) == 17
+    modules = {target.split(":")[0] for target in targets}
+    for row in BUILTIN_CHECKS:
+        assert callable(row.func) and row.name.split(".")[0] == row.level, row
+        assert row.applies_target is None or callable(row.applies), row
+    for module in modules:
+        found = {f"{module}:{name}" for name, value in vars(importlib.import_module(module)).items()
+                 if name.startswith("check_") and inspect.isfunction(value)
+                 and value.__module__ == module}
+        assert found <= targets, found - targets
+
+
+def test_listing_the_plugins_imports_no_check_module_and_no_driver() -> None:
+    """``hcard plugins`` lists 17 checks and 4 drivers from their tables (rows, not modules)."""
+    code = ("import sys, warnings\n"
+            "from hcard.plugins.registry import get_registry\n"
+            "warnings.simplefilter('ignore')\n"
+            "registry = get_registry(); registry.collect()\n"
+            "print(len(registry.infos('conformance-check')), len(registry.infos('driver')))\n"
+            "print(sorted(m for m in sys.modules if m.startswith(('hcard_conformance.',"
+            " 'hcard_device.drivers.', 'hcard_device.usb', 'hcard_device.firmware'))))\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=True)
+    counts, imported = done.stdout.splitlines()
+    assert counts.split() == ["17", "4"]
+    assert ast.literal_eval(imported) == ["hcard_conformance.registry", "hcard_conformance.result"]
 
 
 def test_plugin_checks_join_the_suite() -> None:

@@ -24,6 +24,9 @@ from hcard.plugins import (
     PredictorPlugin,
     get_registry,
 )
+from hcard.plugins.lazy_plugins import LazyDriver, LazyEncoder
+from hcard_builtins.encoders import BUILTIN_ENCODERS
+from hcard_device.driver_plugins import BUILTIN_DRIVERS
 
 _POSITIONAL = (inspect.Parameter.POSITIONAL_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
 
@@ -147,3 +150,23 @@ def test_device_profile_contracts_are_implemented_by_the_builtins() -> None:
     two_channel = {name for name, obj in registry.predictors.items()
                    if isinstance(obj, TwoChannelModel)}
     assert two_channel == {"coupled"}
+
+
+@pytest.mark.parametrize("lazy", BUILTIN_DRIVERS, ids=lambda lazy: lazy.name)
+def test_a_lazy_builtin_driver_says_what_its_class_says(lazy: LazyDriver) -> None:
+    """The built-in drivers are listed without importing them (``hcard plugins`` stays fast);
+    what they are listed as is their class's own, which implements the driver Protocol too."""
+    driver = lazy.load()
+    assert (lazy.name, lazy.description, lazy.schemes) == (
+        driver.name, driver.description, driver.schemes)
+    assert isinstance(driver, PROTOCOL_OF_KIND["driver"])
+    assert signature_mismatches(driver, PROTOCOL_OF_KIND["driver"]) == []
+
+
+@pytest.mark.parametrize("lazy", BUILTIN_ENCODERS, ids=lambda lazy: lazy.name)
+def test_a_lazy_builtin_encoder_says_what_its_encoder_says(lazy: LazyEncoder) -> None:
+    encoder = lazy.load()
+    assert (lazy.name, lazy.description) == (encoder.name, encoder.description)
+    assert isinstance(encoder, EncoderPlugin)
+    assert signature_mismatches(encoder, EncoderPlugin) == []
+    assert lazy.load() is encoder  # made once
