@@ -122,7 +122,7 @@ def commit_rows(host: str, port: int, pid: int) -> None:
     for name, make in cards:
         data = make()
         with PeakRss(pid) as rss:
-            outcome = clients.measure_commit(host, port, data)
+            outcome = clients.measure_commit(host, port, data, real_time=True)
         during, without = outcome.during, outcome.baseline
         result = "COMMITTED" if outcome.status.state == 2 else f"FAILED/{outcome.status.result}"
         print(f"{name:28s} {result:>8s} {outcome.commit_s:7.2f} "
@@ -130,6 +130,8 @@ def commit_rows(host: str, port: int, pid: int) -> None:
               f"{during.max_arrival_gap_ms / without.max_arrival_gap_ms:6.2f} "
               f"{during.max_stamp_gap_us:8d} {STEP_GOAL_US:6d} {during.lost:5d} "
               f"{rss.peak:9.1f}")
+    print("observer read at the device's SCHED_RR priority: "
+          f"{'yes' if outcome.during.real_time else 'no (not permitted)'}")
 
 
 def main(argv: list[str] | None = None) -> int:

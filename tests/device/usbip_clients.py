@@ -42,6 +42,7 @@ from hcard_device.protocol import (
     decode_input,
     upload_reports,
 )
+from hcard_device.usb.server import REALTIME_PRIORITY
 
 _SUBMIT = struct.Struct(">IIIIIIiiii8s")
 _IN, _OUT = 1, 0
@@ -126,6 +127,8 @@ class Delivery:
     lost: int
     arrivals: list[float] = field(default_factory=list, repr=False)
     stamps_us: list[int] = field(default_factory=list, repr=False)
+    real_time: bool = False
+    """Whether the client read at the device's real-time priority (:func:`real_time_thread`)."""
 
     @property
     def fraction(self) -> float:
@@ -133,15 +136,48 @@ class Delivery:
         return self.received / self.seconds / INPUT_RATE_HZ
 
 
+@contextlib.contextmanager
+def real_time_thread() -> Iterator[bool]:
+    """Run the calling thread at ``SCHED_RR`` with the served device's own priority where
+    permitted (root or CAP_SYS_NICE), and as it was afterwards. Yields whether it was granted:
+    a client that reads at that priority receives what the device delivers, not what the
+    machine's other processes leave its thread (on 2 shared cores, 10-20 ms gaps at an
+    ordinary priority with nothing else happening)."""
+    try:
+        policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
+        os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(REALTIME_PRIORITY))
+    except OSError:
+        yield False
+        return
+    try:
+        yield True
+    finally:
+        os.sched_setscheduler(0, policy, param)
+
+
 def measure_delivery(host: str, port: int, seconds: float, *, settle_s: float = 0.3,
                      beside: Callable[[], contextlib.AbstractContextManager[object]] | None = None,
                      beside_settle_s: float | None = None,
-                     during: Callable[[], object] | None = None) -> Delivery:
+                     during: Callable[[], object] | None = None,
+                     real_time: bool = False) -> Delivery:
     """The well-behaved client: import the device with the hcard link, read STATE reports for
     ``settle_s`` (dropped), enter ``beside()`` (misbehaving clients, started after this one
     holds its connection) and read ``beside_settle_s`` more (default ``settle_s``; the
     misbehaviour takes effect), then read for ``seconds`` (and, with ``during``, for as long
-    as ``during()`` runs on another thread) and return what arrived."""
+    as ``during()`` runs on another thread) and return what arrived. ``real_time``: read at
+    the device's real-time priority (:func:`real_time_thread`), where permitted
+    (:attr:`Delivery.real_time` says whether it was)."""
+    with real_time_thread() if real_time else contextlib.nullcontext(False) as granted:
+        delivery = _measure_delivery(host, port, seconds, settle_s, beside, beside_settle_s,
+                                     during)
+    delivery.real_time = bool(granted)
+    return delivery
+
+
+def _measure_delivery(host: str, port: int, seconds: float, settle_s: float,
+                      beside: Callable[[], contextlib.AbstractContextManager[object]] | None,
+                      beside_settle_s: float | None,
+                      during: Callable[[], object] | None) -> Delivery:
     link = UsbipLink.open(host, port, "1-1", timeout_s=5.0)
     try:
         link.control_out(0x00, 0x09, 1, 0, b"", timeout_s=5.0)  # SET_CONFIGURATION 1
@@ -268,7 +304,8 @@ def timed_commit(sock: socket.socket) -> tuple[float, UploadStatus]:
     return took, UploadStatus.decode(answer)
 
 
-def measure_commit(host: str, port: int, data: bytes, *, min_seconds: float = 1.0) -> CommitOutcome:
+def measure_commit(host: str, port: int, data: bytes, *, min_seconds: float = 1.0,
+                   real_time: bool = False) -> CommitOutcome:
     """Upload ``data`` on one connection (:func:`staged_upload`), then COMMIT it while an
     observer (:func:`measure_delivery`, another connection) reads STATE reports; then measure
     the observer alone over as long (at least ``min_seconds``)."""
@@ -288,11 +325,11 @@ def measure_commit(host: str, port: int, data: bytes, *, min_seconds: float = 1.
         assert isinstance(sock, socket.socket)
         timing["commit_s"], timing["status"] = timed_commit(sock)
 
-    during = measure_delivery(host, port, 0.0, beside=staged, during=commit)
+    during = measure_delivery(host, port, 0.0, beside=staged, during=commit, real_time=real_time)
     commit_s = timing["commit_s"]
     status = timing["status"]
     assert isinstance(commit_s, float) and isinstance(status, UploadStatus)
-    baseline = measure_delivery(host, port, max(commit_s, min_seconds))
+    baseline = measure_delivery(host, port, max(commit_s, min_seconds), real_time=real_time)
     return CommitOutcome(during, baseline, commit_s, status)
 
 
