@@ -634,7 +634,7 @@ def test_card_is_valid_and_round_trips(tmp_path: Path):
 
 def test_plugin_hook_returns_the_image_encoder(tmp_path: Path):
     (encoder,) = encoders.hcard_encoders()
-    assert isinstance(encoder, ImageEncoder)
+    assert isinstance(encoder.load(), ImageEncoder)  # made on first use
     assert encoder.name == "image" and encoder.kind == "encoder" and encoder.description
     path = save_gray(np.full((50, 50), 0.0), tmp_path / "black.png")
     result = encoder.encode(path, taxtel_mm=2.5)

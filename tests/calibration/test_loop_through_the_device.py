@@ -104,7 +104,7 @@ def assert_not_worse(report: dict) -> None:
     assert after <= max(1.25 * before, before + 0.003), rendering
 
 
-@pytest.mark.parametrize(("air_gap_m", "seed"), [(10e-6, 3), (6e-6, 8)])
+@pytest.mark.parametrize(("air_gap_m", "seed"), [(6e-6, 8)])  # 10 um: the served device's
 def test_sim_device_with_a_hidden_air_layer(plan, tmp_path, air_gap_m, seed):
     uri = f"sim://coupled?seed={seed}&effect=air-layer&air-layer.air_gap={air_gap_m!r}"
     report = run_loop(uri, plan, tmp_path)

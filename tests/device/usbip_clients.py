@@ -15,6 +15,7 @@ host's usbhid keeps one or more) reading STATE reports for a while, and what it 
 
 from __future__ import annotations
 
+import abc
 import contextlib
 import functools
 import itertools
@@ -333,7 +334,7 @@ def measure_commit(host: str, port: int, data: bytes, *, min_seconds: float = 1.
     return CommitOutcome(during, baseline, commit_s, status)
 
 
-class Hostile:
+class Hostile(abc.ABC):
     """A hostile client on its own thread until :meth:`stop` (see the module docstring).
 
     Attributes:
@@ -405,9 +406,9 @@ class Hostile:
             finally:
                 self._forget(sock)
 
+    @abc.abstractmethod
     def misbehave(self, sock: socket.socket) -> None:
         """What the client does with one connection until the server closes it."""
-        raise NotImplementedError
 
 
 class NonReader(Hostile):
