@@ -395,7 +395,14 @@ def _read_outcome(stream: IO[bytes], deadline: float) -> object:
 def _serve(stdin: IO[bytes], stdout: IO[bytes]) -> None:
     """The worker's loop: one check per frame, one answer per check, until stdin closes. It
     runs at a lower CPU priority (:data:`WORKER_NICENESS`): on a machine with few cores, a
-    20 s check of hostile input must not take the CPU from the device's real-time process."""
+    20 s check of hostile input must not take the CPU from the device's real-time process.
+    A process inherits its parent's scheduling: started by a device server running at
+    ``SCHED_RR``, the worker first goes back to ordinary scheduling (else the nice value means
+    nothing, and a check ran ahead of every ordinary process and beside the device's threads
+    at their priority)."""
+    with contextlib.suppress(OSError, AttributeError):
+        if os.sched_getscheduler(0) != os.SCHED_OTHER:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     with contextlib.suppress(OSError):
         os.nice(WORKER_NICENESS)
     _write_frame(stdout, _READY)

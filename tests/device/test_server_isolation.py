@@ -40,6 +40,7 @@ from hcard.render.options import RenderOptions
 from hcard.track import straight_stroke, track_to_csv
 from hcard_device.card_check import (
     CHECK_TIMEOUT_S,
+    WORKER_NICENESS,
     CheckedCard,
     CheckedProfile,
     CheckFailed,
@@ -267,6 +268,35 @@ def test_a_profile_with_fitted_effects_is_checked_in_the_worker_and_comes_back_w
         assert checker.worker_pid == pid and checker.killed == 0
     finally:
         checker.close()
+
+
+def _children(pid: int) -> list[int]:
+    """Process IDs whose parent is ``pid``."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            with contextlib.suppress(OSError):
+                stat = (entry / "stat").read_text()
+                if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                    found.append(int(entry.name))
+    return found
+
+
+def test_the_check_worker_runs_below_the_device_and_below_ordinary_processes(served):
+    """The server runs at SCHED_RR where permitted, and a child inherits its parent's
+    scheduling: the worker once checked cards at the device's own real-time priority, beside
+    its threads (and ahead of every ordinary process) however nice it made itself."""
+    server = served.process.pid
+    deadline = time.monotonic() + 30.0
+    while not (workers := [c for c in _children(server)
+                           if b"card_check" in Path(f"/proc/{c}/cmdline").read_bytes()]):
+        assert time.monotonic() < deadline, "no card check worker under the server"
+        time.sleep(0.1)
+    (worker,) = workers
+    assert os.sched_getscheduler(worker) == os.SCHED_OTHER
+    assert os.getpriority(os.PRIO_PROCESS, worker) >= WORKER_NICENESS
+    granted = os.sched_getscheduler(server) == os.SCHED_RR
+    assert granted or os.geteuid() != 0  # as root the server's real-time request is granted
 
 
 # ---------------------------------------------------------------------- sessions (PN12-PN14)

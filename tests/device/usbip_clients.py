@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 
 from usbip import protocol
 
+from hcard_device.drivers.priority import real_time_priority
 from hcard_device.drivers.usbip_link import UsbipLink
 from hcard_device.protocol import (
     INPUT_RATE_HZ,
@@ -43,7 +44,6 @@ from hcard_device.protocol import (
     decode_input,
     upload_reports,
 )
-from hcard_device.usb.server import REALTIME_PRIORITY
 
 _SUBMIT = struct.Struct(">IIIIIIiiii8s")
 _IN, _OUT = 1, 0
@@ -139,21 +139,14 @@ class Delivery:
 
 @contextlib.contextmanager
 def real_time_thread() -> Iterator[bool]:
-    """Run the calling thread at ``SCHED_RR`` with the served device's own priority where
-    permitted (root or CAP_SYS_NICE), and as it was afterwards. Yields whether it was granted:
-    a client that reads at that priority receives what the device delivers, not what the
-    machine's other processes leave its thread (on 2 shared cores, 10-20 ms gaps at an
-    ordinary priority with nothing else happening)."""
-    try:
-        policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
-        os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(REALTIME_PRIORITY))
-    except OSError:
-        yield False
-        return
-    try:
-        yield True
-    finally:
-        os.sched_setscheduler(0, policy, param)
+    """Run the calling thread at a host's real-time priority
+    (:func:`hcard_device.drivers.priority.real_time_priority`: ``SCHED_RR`` below the device's
+    own) where permitted (root or CAP_SYS_NICE). Yields whether it was granted: a client that
+    reads at that priority receives what the device delivers, not what the machine's other
+    processes leave its thread (on 2 shared cores, 10-20 ms gaps at an ordinary priority with
+    nothing else happening)."""
+    with real_time_priority() as granted:
+        yield granted.startswith("SCHED_RR")
 
 
 def measure_delivery(host: str, port: int, seconds: float, *, settle_s: float = 0.3,
