@@ -44,6 +44,7 @@ from hcard_device.protocol import (
     decode_input,
     upload_reports,
 )
+from hcard_device.usb.server import REALTIME_PRIORITY
 
 _SUBMIT = struct.Struct(">IIIIIIiiii8s")
 _IN, _OUT = 1, 0
@@ -139,13 +140,15 @@ class Delivery:
 
 @contextlib.contextmanager
 def real_time_thread() -> Iterator[bool]:
-    """Run the calling thread at a host's real-time priority
-    (:func:`hcard_device.drivers.priority.real_time_priority`: ``SCHED_RR`` below the device's
-    own) where permitted (root or CAP_SYS_NICE). Yields whether it was granted: a client that
-    reads at that priority receives what the device delivers, not what the machine's other
-    processes leave its thread (on 2 shared cores, 10-20 ms gaps at an ordinary priority with
-    nothing else happening)."""
-    with real_time_priority() as granted:
+    """Run the calling thread at the served device's own real-time priority
+    (:func:`hcard_device.drivers.priority.real_time_priority` at ``SCHED_RR``
+    :data:`~hcard_device.usb.server.REALTIME_PRIORITY`) where permitted (root or
+    CAP_SYS_NICE). Yields whether it was granted: a client that reads at that priority receives
+    what the device delivers, not what the machine's other processes, or the device's own
+    busy threads, leave its thread (on 2 shared cores, 10-20 ms gaps at an ordinary priority
+    with nothing else happening; 4 ms and more beside a commit at a priority below the
+    device's, with two burners)."""
+    with real_time_priority(REALTIME_PRIORITY) as granted:
         yield granted.startswith("SCHED_RR")
 
 

@@ -67,21 +67,21 @@ device it measures."""
 
 
 @contextlib.contextmanager
-def real_time_priority() -> Iterator[str]:
+def real_time_priority(priority: int = HOST_RT_PRIORITY) -> Iterator[str]:
     """Run the calling thread, and the threads it starts meanwhile, at ``SCHED_RR``
-    :data:`HOST_RT_PRIORITY` where permitted (root or CAP_SYS_NICE), else as
-    :func:`host_priority`; the previous scheduling on exit. Yields what was granted. For one
-    real-time run only (seconds): the kernel's real-time throttling still leaves ordinary
-    processes 5 % of each CPU, and the run must not compute for long."""
+    ``priority`` (default :data:`HOST_RT_PRIORITY`) where permitted (root or CAP_SYS_NICE),
+    else as :func:`host_priority`; the previous scheduling on exit. Yields what was granted.
+    For one real-time run only (seconds): the kernel's real-time throttling still leaves
+    ordinary processes 5 % of each CPU, and the run must not compute for long."""
     try:
         policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
-        os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(HOST_RT_PRIORITY))
+        os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(priority))
     except (OSError, AttributeError):  # not permitted (or not Linux): a lower nice value
         with host_priority() as granted:
             yield granted
         return
     try:
-        yield f"SCHED_RR {HOST_RT_PRIORITY}"
+        yield f"SCHED_RR {priority}"
     finally:
         with contextlib.suppress(OSError):
             os.sched_setscheduler(0, policy, param)
