@@ -146,8 +146,8 @@ def real_time_thread() -> Iterator[bool]:
     CAP_SYS_NICE). Yields whether it was granted: a client that reads at that priority receives
     what the device delivers, not what the machine's other processes, or the device's own
     busy threads, leave its thread (on 2 shared cores, 10-20 ms gaps at an ordinary priority
-    with nothing else happening; 4 ms and more beside a commit at a priority below the
-    device's, with two burners)."""
+    with nothing else happening; beside a commit, at a priority below the device's and with
+    two burners, more than 2 report periods over its gap without one)."""
     with real_time_priority(REALTIME_PRIORITY) as granted:
         yield granted.startswith("SCHED_RR")
 
