@@ -35,13 +35,14 @@ from hcard_conformance.result import CannotAssess, CheckResult, unassessed
 from hcard_device.drivers.priority import (
     collection_deferred,
     host_priority,
+    real_time_allowed,
     real_time_priority,
 )
 from hcard_device.protocol import FaultBits, State
 
 __all__ = ["ATTEMPTS", "HOST_LATE_S", "NOT_KEPT", "HostWatch", "NotKept", "attempted_case",
            "attempts", "collection_deferred", "device_lag", "host_priority", "not_kept_results",
-           "real_time_priority", "reasons"]
+           "real_time_allowed", "real_time_priority", "reasons"]
 
 ATTEMPTS = 3
 """Runs of a measurement at most, while none was kept in real time (spec QT3)."""

@@ -60,6 +60,25 @@ def host_priority() -> Iterator[str]:
             os.setpriority(os.PRIO_PROCESS, 0, before)
 
 
+_REAL_TIME_ALLOWED = [True]
+"""Whether :func:`real_time_priority` may ask for ``SCHED_RR`` (see :func:`real_time_allowed`)."""
+
+
+@contextlib.contextmanager
+def real_time_allowed(allowed: bool) -> Iterator[None]:
+    """Within the block, :func:`real_time_priority` asks for real-time scheduling only when
+    ``allowed`` (else for a nice value). A host that does not keep real time anyway must not
+    take it: under software emulation (a TCG guest, spec/conformance.md 5.2) a host thread at
+    ``SCHED_RR`` held the guest's one CPU against its own USB/IP kernel threads, and the suite
+    took several times as long."""
+    before = _REAL_TIME_ALLOWED[0]
+    _REAL_TIME_ALLOWED[0] = allowed
+    try:
+        yield
+    finally:
+        _REAL_TIME_ALLOWED[0] = before
+
+
 HOST_RT_PRIORITY = 5
 """``SCHED_RR`` priority of a host's real-time run: ahead of every ordinary process, behind the
 served device's threads (priority 10) so that a host on the same machine never delays the
@@ -69,11 +88,14 @@ device it measures."""
 @contextlib.contextmanager
 def real_time_priority(priority: int = HOST_RT_PRIORITY) -> Iterator[str]:
     """Run the calling thread, and the threads it starts meanwhile, at ``SCHED_RR``
-    ``priority`` (default :data:`HOST_RT_PRIORITY`) where permitted (root or CAP_SYS_NICE),
-    else as :func:`host_priority`; the previous scheduling on exit. Yields what was granted.
-    For one real-time run only (seconds): the kernel's real-time throttling still leaves
-    ordinary processes 5 % of each CPU, and the run must not compute for long."""
+    ``priority`` (default :data:`HOST_RT_PRIORITY`) where permitted (root or CAP_SYS_NICE) and
+    allowed (:func:`real_time_allowed`), else as :func:`host_priority`; the previous
+    scheduling on exit. Yields what was granted. For one real-time run only (seconds): the
+    kernel's real-time throttling still leaves ordinary processes 5 % of each CPU, and the run
+    must not compute for long."""
     try:
+        if not _REAL_TIME_ALLOWED[0]:
+            raise PermissionError("real-time scheduling not allowed here")
         policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
         os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(priority))
     except (OSError, AttributeError):  # not permitted (or not Linux): a lower nice value
