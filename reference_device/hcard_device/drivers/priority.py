@@ -67,10 +67,10 @@ _REAL_TIME_ALLOWED = [True]
 @contextlib.contextmanager
 def real_time_allowed(allowed: bool) -> Iterator[None]:
     """Within the block, :func:`real_time_priority` asks for real-time scheduling only when
-    ``allowed`` (else for a nice value). A host that does not keep real time anyway must not
-    take it: under software emulation (a TCG guest, spec/conformance.md 5.2) a host thread at
-    ``SCHED_RR`` held the guest's one CPU against its own USB/IP kernel threads, and the suite
-    took several times as long."""
+    ``allowed`` (else for a nice value). A host that does not keep real time anyway gains
+    nothing from it and must not take it: under software emulation (a TCG guest,
+    spec/conformance.md 5.2) its one CPU also runs the guest's USB/IP kernel threads, at
+    ordinary priority, which a real-time thread would run ahead of."""
     before = _REAL_TIME_ALLOWED[0]
     _REAL_TIME_ALLOWED[0] = allowed
     try:
