@@ -31,8 +31,8 @@ from hcard_conformance.realtime import (
     HostWatch,
     NotKept,
     device_lag,
+    host_priority,
     not_kept_results,
-    real_time_priority,
     reasons,
 )
 from hcard_conformance.result import CheckResult
@@ -47,12 +47,12 @@ MACHINE = "the machine could not keep real time"
 
 def in_real_time(run: Callable[[], T], what: str, attempts: int = ATTEMPTS) -> T:
     """``run()`` again while it raises NotKept, at most ``attempts`` times, each at the host
-    priority the conformance suite asks for (:func:`real_time_priority`); the first kept run's
+    priority the conformance suite asks for (:func:`host_priority`); the first kept run's
     value. When none was kept the test fails with :data:`MACHINE` and every reason."""
     why: list[str] = []
     for attempt in range(1, attempts + 1):
         try:
-            with real_time_priority():  # a real-time host asks to be one, as the suite (QT3)
+            with host_priority():  # a real-time host asks to be one, as the suite does (QT3)
                 return run()
         except NotKept as exc:
             why.append(f"attempt {attempt}: {exc}")

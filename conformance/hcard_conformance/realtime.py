@@ -18,9 +18,8 @@ What tells a run was not kept:
   late and it read the reports late; a host loop also notes the gaps between its own
   iterations (:meth:`HostWatch.tick`).
 
-A real-time host also asks to be one: the suite at a lower nice value (:func:`host_priority`),
-each real-time run at round-robin real-time scheduling below the device's
-(:func:`real_time_priority`), where the OS permits.
+A real-time host also asks to be one (:func:`host_priority`): while it measures a device in
+real time, it runs ahead of the ordinary processes of its computer where the OS permits.
 """
 
 from __future__ import annotations
@@ -32,17 +31,12 @@ from typing import TypeVar
 
 from hcard.quantities import MS_PER_S
 from hcard_conformance.result import CannotAssess, CheckResult, unassessed
-from hcard_device.drivers.priority import (
-    collection_deferred,
-    host_priority,
-    real_time_allowed,
-    real_time_priority,
-)
+from hcard_device.drivers.priority import collection_deferred, host_priority
 from hcard_device.protocol import FaultBits, State
 
 __all__ = ["ATTEMPTS", "HOST_LATE_S", "NOT_KEPT", "HostWatch", "NotKept", "attempted_case",
            "attempts", "collection_deferred", "device_lag", "host_priority", "not_kept_results",
-           "real_time_allowed", "real_time_priority", "reasons"]
+           "reasons"]
 
 ATTEMPTS = 3
 """Runs of a measurement at most, while none was kept in real time (spec QT3)."""
@@ -154,13 +148,13 @@ def reasons(*found: str) -> str:
 
 def attempts(measure: Callable[[], T], what: str, count: int = ATTEMPTS) -> T:
     """``measure()`` again while it raises :class:`NotKept`, at most ``count`` runs, each at
-    the host's real-time priority (:func:`real_time_priority`); the first kept run's value.
-    When none was kept, raises :class:`CannotAssess` naming ``what`` and the reason of every
+    the host's real-time priority (:func:`host_priority`); the first kept run's value. When
+    none was kept, raises :class:`CannotAssess` naming ``what`` and the reason of every
     attempt (spec QT3)."""
     why: list[str] = []
     for attempt in range(1, count + 1):
         try:
-            with real_time_priority():
+            with host_priority():
                 return measure()
         except NotKept as exc:
             why.append(f"attempt {attempt}: {exc}")

@@ -17,7 +17,7 @@ from typing import Any
 
 from hcard_conformance.conditions import run_conditions
 from hcard_conformance.context import Context
-from hcard_conformance.realtime import host_priority, real_time_allowed
+from hcard_conformance.realtime import host_priority
 from hcard_conformance.registry import all_checks, applies_to
 from hcard_conformance.result import LEVELS, CheckResult, error_result, level_index
 from hcard_conformance.timing import timing_class
@@ -136,14 +136,12 @@ def run_suite(ctx: Context, levels: Sequence[str] = LEVELS, *, checks: Sequence[
         report.thresholds = {"error": math.nan}
         report.not_applicable.append(f"(thresholds unavailable: {exc})")
     priority: contextlib.AbstractContextManager[Any] = contextlib.nullcontext()
-    keeps_real_time = True
     if any(c.level == "device" for c in chosen):
         report.conditions = run_conditions(ctx, ordered)
-        keeps_real_time = timing_class(ctx).keeps_real_time
-        if ctx.open_driver is not None and keeps_real_time:
+        if ctx.open_driver is not None and timing_class(ctx).keeps_real_time:
             priority = host_priority()  # a real-time host asks to be one (spec QT3)
     start = time.perf_counter()
-    with priority as granted, real_time_allowed(keeps_real_time):
+    with priority as granted:
         if granted:
             report.conditions["host_scheduling"] = granted
         _run_chosen(chosen, ctx, report, progress, check_done)

@@ -20,12 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hcard.quantities import S_PER_US, US_PER_S
-from hcard_conformance.realtime import (
-    NOT_KEPT,
-    NotKept,
-    collection_deferred,
-    real_time_priority,
-)
+from hcard_conformance.realtime import NOT_KEPT, NotKept, collection_deferred
 from hcard_device.drivers.base import Driver
 from hcard_device.drivers.recording import unwrapped_times
 from hcard_device.protocol import Capability, State
@@ -152,11 +147,9 @@ def lead_frames(capacity_frames: int, frame_rate_hz: float) -> int:
 
 
 def stream(driver: Driver, uv: np.ndarray, ev: np.ndarray | None = None) -> StreamSession:
-    """:func:`stream_once` at the host's real-time priority (:func:`real_time_priority`: under
-    two CPU burners on 2 cores a host at nice -10 left the queue empty in 64-123 of ~900
-    reports) and with the interpreter's cyclic collection deferred to its end (a collection's
-    pause would leave the queue empty, spec QT3)."""
-    with real_time_priority(), collection_deferred():
+    """:func:`stream_once` with the interpreter's cyclic collection deferred to its end (a
+    collection's pause would leave the queue empty, spec QT3)."""
+    with collection_deferred():
         return stream_once(driver, uv, ev)
 
 

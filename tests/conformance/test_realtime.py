@@ -5,7 +5,6 @@ time."""
 
 from __future__ import annotations
 
-import os
 import sys
 import time
 from dataclasses import replace
@@ -263,35 +262,3 @@ def test_only_a_device_on_the_wall_clock_is_judged_by_the_hosts_lateness() -> No
         ctx = Context.for_driver(uri)
         ctx.render(card, track, RenderOptions())
         assert ctx.cache[REALTIME_KEY] is realtime, uri
-
-
-def test_a_real_time_run_is_scheduled_below_the_device_and_then_as_before() -> None:
-    """Each run a judge repeats (``attempts``) runs at SCHED_RR below the served device's
-    priority where permitted (a nice value alone left a stream queue empty under two burners),
-    and the thread's scheduling is what it was afterwards; without the permission, nice."""
-    from hcard_device.drivers.priority import HOST_RT_PRIORITY, real_time_priority
-    from hcard_device.usb.server import REALTIME_PRIORITY
-
-    before = os.sched_getscheduler(0), os.sched_getparam(0).sched_priority, os.nice(0)
-    seen: list[tuple[int, int]] = []
-    attempts(lambda: seen.append((os.sched_getscheduler(0),
-                                  os.sched_getparam(0).sched_priority)), "a probe")
-    with real_time_priority() as granted:
-        pass
-    assert (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority, os.nice(0)) == before
-    if os.geteuid() == 0:
-        assert granted == f"SCHED_RR {HOST_RT_PRIORITY}"
-        assert seen == [(os.SCHED_RR, HOST_RT_PRIORITY)]
-        assert 0 < HOST_RT_PRIORITY < REALTIME_PRIORITY
-    else:
-        assert granted.startswith("nice")
-
-
-def test_a_host_that_does_not_keep_real_time_never_takes_real_time_scheduling() -> None:
-    """Under software emulation (a TCG guest) a host at SCHED_RR held the guest's one CPU against
-    its own USB/IP kernel threads; the suite allows it only for a class that keeps real time."""
-    from hcard_device.drivers.priority import real_time_allowed, real_time_priority
-
-    with real_time_allowed(False), real_time_priority() as granted:
-        assert os.sched_getscheduler(0) == os.SCHED_OTHER
-    assert granted.startswith("nice")

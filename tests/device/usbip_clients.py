@@ -33,7 +33,6 @@ from dataclasses import dataclass, field
 
 from usbip import protocol
 
-from hcard_device.drivers.priority import real_time_priority
 from hcard_device.drivers.usbip_link import UsbipLink
 from hcard_device.protocol import (
     INPUT_RATE_HZ,
@@ -140,16 +139,21 @@ class Delivery:
 
 @contextlib.contextmanager
 def real_time_thread() -> Iterator[bool]:
-    """Run the calling thread at the served device's own real-time priority
-    (:func:`hcard_device.drivers.priority.real_time_priority` at ``SCHED_RR``
-    :data:`~hcard_device.usb.server.REALTIME_PRIORITY`) where permitted (root or
-    CAP_SYS_NICE). Yields whether it was granted: a client that reads at that priority receives
-    what the device delivers, not what the machine's other processes, or the device's own
-    busy threads, leave its thread (on 2 shared cores, 10-20 ms gaps at an ordinary priority
-    with nothing else happening; beside a commit, at a priority below the device's and with
-    two burners, more than 2 report periods over its gap without one)."""
-    with real_time_priority(REALTIME_PRIORITY) as granted:
-        yield granted.startswith("SCHED_RR")
+    """Run the calling thread at ``SCHED_RR`` with the served device's own priority where
+    permitted (root or CAP_SYS_NICE), and as it was afterwards. Yields whether it was granted:
+    a client that reads at that priority receives what the device delivers, not what the
+    machine's other processes leave its thread (on 2 shared cores, 10-20 ms gaps at an
+    ordinary priority with nothing else happening)."""
+    try:
+        policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
+        os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(REALTIME_PRIORITY))
+    except OSError:
+        yield False
+        return
+    try:
+        yield True
+    finally:
+        os.sched_setscheduler(0, policy, param)
 
 
 def measure_delivery(host: str, port: int, seconds: float, *, settle_s: float = 0.3,

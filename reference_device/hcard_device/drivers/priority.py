@@ -1,14 +1,10 @@
 """A host that plays to a device in real time asks its operating system to run it ahead of
-ordinary processes (spec/conformance.md QT3); and it defers its interpreter's cyclic garbage
-collection to the end of the run (:func:`collection_deferred`).
+ordinary processes (spec/conformance.md QT3): :func:`host_priority`; and it defers its
+interpreter's cyclic garbage collection to the end of the run (:func:`collection_deferred`).
 
-Two strengths: :func:`host_priority`, a lower nice value, for a whole command or suite (it also
-renders, fits and writes files for seconds at a time, which must not hold a CPU against every
-other process); and :func:`real_time_priority`, round-robin real-time scheduling below the
-device's own (:func:`hcard_device.usb.server.raise_priority`), for one real-time run only (a
-stream, a play, a measured case): on 2 cores with two CPU burners a host at nice -10 still left
-a device's stream queue empty for 123 of 966 reports, because a nice value only weighs a share
-of a core that the device's real-time threads and the burners divide between them.
+The device side does the same (:func:`hcard_device.usb.server.raise_priority`, round-robin
+real-time scheduling); a host asks only for a lower nice value, because it also renders, fits
+and writes files for seconds at a time, which must not hold a CPU against every other process.
 """
 
 from __future__ import annotations
@@ -58,55 +54,6 @@ def host_priority() -> Iterator[str]:
     finally:
         with contextlib.suppress(OSError):
             os.setpriority(os.PRIO_PROCESS, 0, before)
-
-
-_REAL_TIME_ALLOWED = [True]
-"""Whether :func:`real_time_priority` may ask for ``SCHED_RR`` (see :func:`real_time_allowed`)."""
-
-
-@contextlib.contextmanager
-def real_time_allowed(allowed: bool) -> Iterator[None]:
-    """Within the block, :func:`real_time_priority` asks for real-time scheduling only when
-    ``allowed`` (else for a nice value). A host that does not keep real time anyway gains
-    nothing from it and must not take it: under software emulation (a TCG guest,
-    spec/conformance.md 5.2) its one CPU also runs the guest's USB/IP kernel threads, at
-    ordinary priority, which a real-time thread would run ahead of."""
-    before = _REAL_TIME_ALLOWED[0]
-    _REAL_TIME_ALLOWED[0] = allowed
-    try:
-        yield
-    finally:
-        _REAL_TIME_ALLOWED[0] = before
-
-
-HOST_RT_PRIORITY = 5
-"""``SCHED_RR`` priority of a host's real-time run: ahead of every ordinary process, behind the
-served device's threads (priority 10) so that a host on the same machine never delays the
-device it measures."""
-
-
-@contextlib.contextmanager
-def real_time_priority(priority: int = HOST_RT_PRIORITY) -> Iterator[str]:
-    """Run the calling thread, and the threads it starts meanwhile, at ``SCHED_RR``
-    ``priority`` (default :data:`HOST_RT_PRIORITY`) where permitted (root or CAP_SYS_NICE) and
-    allowed (:func:`real_time_allowed`), else as :func:`host_priority`; the previous
-    scheduling on exit. Yields what was granted. For one real-time run only (seconds): the
-    kernel's real-time throttling still leaves ordinary processes 5 % of each CPU, and the run
-    must not compute for long."""
-    try:
-        if not _REAL_TIME_ALLOWED[0]:
-            raise PermissionError("real-time scheduling not allowed here")
-        policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
-        os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(priority))
-    except (OSError, AttributeError):  # not permitted (or not Linux): a lower nice value
-        with host_priority() as granted:
-            yield granted
-        return
-    try:
-        yield f"SCHED_RR {priority}"
-    finally:
-        with contextlib.suppress(OSError):
-            os.sched_setscheduler(0, policy, param)
 
 
 @contextlib.contextmanager
