@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hcard.quantities import S_PER_US, US_PER_S
-from hcard_conformance.realtime import NOT_KEPT, NotKept, collection_deferred
+from hcard_conformance.realtime import NOT_KEPT, NotKept, collection_deferred, device_lag
 from hcard_device.drivers.base import Driver
 from hcard_device.drivers.recording import unwrapped_times
 from hcard_device.protocol import Capability, State
@@ -74,9 +74,12 @@ class StreamSession:
         return np.array([getattr(s, name) for s in self.states], dtype=float)
 
     def require_fed(self, what: str) -> None:
-        """:func:`require_fed` over this session's span (lead :attr:`lead_frames`)."""
+        """:func:`require_fed` over this session's span (lead :attr:`lead_frames`); when the
+        device flagged reports REALTIME_LAG, the reason says so: a device that fell behind its
+        clock and caught up plays frames the host has not sent yet, and empties its queue with
+        a host that never stalled (``bench/bench_stream_feed.py``)."""
         require_fed(self.underruns, len(self.states),
-                    f"{what} (lead {self.lead_frames} frames)")
+                    f"{what} (lead {self.lead_frames} frames)", device_lag(self.states))
 
 
 def stream_fed(driver: Driver, uv: np.ndarray, ev: np.ndarray | None = None, *,
@@ -96,12 +99,16 @@ def stream_fed(driver: Driver, uv: np.ndarray, ev: np.ndarray | None = None, *,
     return best
 
 
-def require_fed(empty: int, reports: int, what: str) -> None:
-    """Raise :class:`~hcard_conformance.realtime.NotKept` (a CannotAssess) when the host left
-    the stream queue empty in ``empty`` of ``reports`` reports, more than
-    :data:`STARVED_FRACTION`: the stream then measured the host (a software-emulated or
-    overloaded one), not the device (spec/conformance.md 5.2, QT2, QT3)."""
+def require_fed(empty: int, reports: int, what: str, lag: str = "") -> None:
+    """Raise :class:`~hcard_conformance.realtime.NotKept` (a CannotAssess) when the stream
+    queue was empty in ``empty`` of ``reports`` reports, more than :data:`STARVED_FRACTION`:
+    the stream then measured the host (a software-emulated or overloaded one) or a device
+    that fell behind its own clock (``lag``: :func:`device_lag` of the reports, empty when
+    none was flagged), not the device's response (spec/conformance.md 5.2, QT2, QT3)."""
     if empty > STARVED_FRACTION * max(reports, 1):
+        if lag:
+            raise NotKept(f"{what}: the stream queue was empty in {empty} of {reports} "
+                          f"reports and {lag} (a run that {NOT_KEPT})")
         raise NotKept(
             f"{what}: the host left the stream queue empty in {empty} of {reports} reports; "
             "it cannot feed the device in real time, so the measurement would be of the host "

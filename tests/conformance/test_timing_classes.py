@@ -61,6 +61,13 @@ def test_a_starved_stream_is_not_assessed_only_beyond_the_fraction() -> None:
     require_fed(int(STARVED_FRACTION * reports), reports, "at the bound")  # 35 of 700: judged
     with pytest.raises(CannotAssess, match="36 of 700 reports"):
         require_fed(int(STARVED_FRACTION * reports) + 1, reports, "one more")
+    # a device that flagged reports REALTIME_LAG fell behind its own clock: the reason names
+    # it, not the host
+    lag = "the device flagged 38 of 700 reports REALTIME_LAG"
+    with pytest.raises(CannotAssess, match="empty in 36 of 700 reports and the device flagged"
+                       ) as raised:
+        require_fed(int(STARVED_FRACTION * reports) + 1, reports, "lagging", lag)
+    assert "the host left" not in str(raised.value)
 
 
 class StallingHost(SimDriver):
