@@ -47,28 +47,21 @@ def atomic_output(path: str | os.PathLike[str]) -> Iterator[BinaryIO]:
     target = Path(path)
     if target.is_symlink():
         target = Path(os.path.realpath(target))
-    directory = target.parent if str(target.parent) else Path(".")
     remove_stale_temporaries(target)
     fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.{os.getpid()}.", suffix=".tmp",
-                                    dir=directory)
+                                    dir=_directory_of(target))
     try:
         with os.fdopen(fd, "wb") as tmp:
             yield tmp
             tmp.flush()
             os.fsync(tmp.fileno())
-        if target.exists():
-            with contextlib.suppress(OSError):
-                os.chmod(tmp_name, target.stat().st_mode & 0o7777)
-        else:
-            umask = os.umask(0)
-            os.umask(umask)
-            os.chmod(tmp_name, 0o666 & ~umask)
+        _set_mode(tmp_name, target)
         os.replace(tmp_name, target)
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(tmp_name)
         raise
-    sync_directory(directory)
+    sync_directory(_directory_of(target))
 
 
 @contextlib.contextmanager
@@ -179,24 +172,29 @@ def remove_stale_temporaries(target: Path, *, now: float | None = None) -> list[
     """Remove the temporary files left next to ``target`` by writers that were killed: those
     named ``.NAME.PID.*.tmp`` whose process ``PID`` no longer runs and that are older than
     :data:`STALE_AFTER_S`. Returns the files removed."""
-    directory = target.parent if str(target.parent) else Path(".")
-    pattern = re.compile(rf"\.{re.escape(target.name)}\.(\d+)\.[^.]+\.tmp")
     now = time.time() if now is None else now
     removed: list[Path] = []
-    try:
-        names = os.listdir(directory)
-    except OSError:
-        return removed
-    for name in names:
-        match = pattern.fullmatch(name)
-        if match is None or process_runs(int(match[1])):
-            continue
-        leftover = directory / name
+    for leftover in dead_writers_leftovers(target, ".tmp"):
         with contextlib.suppress(OSError):
             if now - leftover.lstat().st_mtime > STALE_AFTER_S:
                 leftover.unlink()
                 removed.append(leftover)
     return removed
+
+
+def dead_writers_leftovers(target: Path, suffix: str) -> list[Path]:
+    """The entries next to ``target`` named ``.NAME.PID.XXXXXXXX<suffix>`` (a writer's
+    temporary file or folder) whose process ``PID`` no longer runs (empty when the folder
+    cannot be read)."""
+    directory = _directory_of(target)
+    pattern = re.compile(rf"\.{re.escape(target.name)}\.(\d+)\.[^.]+{re.escape(suffix)}")
+    try:
+        names = os.listdir(directory)
+    except OSError:
+        return []
+    return [directory / name for name in names
+            if (match := pattern.fullmatch(name)) is not None
+            and not process_runs(int(match[1]))]
 
 
 def process_runs(pid: int) -> bool:

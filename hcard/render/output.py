@@ -23,7 +23,6 @@ from __future__ import annotations
 import abc
 import contextlib
 import os
-import re
 import shutil
 import tempfile
 import time
@@ -38,7 +37,7 @@ if TYPE_CHECKING:
 
 import numpy as np
 
-from hcard.atomic import STALE_AFTER_S, atomic_output, process_runs
+from hcard.atomic import STALE_AFTER_S, atomic_output, dead_writers_leftovers
 from hcard.csv_rows import format_rows
 
 Column = tuple[str, np.ndarray]
@@ -161,19 +160,9 @@ def remove_stale_spills(target: Path, *, now: float | None = None) -> list[Path]
     """Remove the spill folders left next to ``target`` by NPZ writers that were killed: those
     named ``.NAME.PID.*.spill`` whose process ``PID`` no longer runs and in which nothing has
     changed for :data:`~hcard.atomic.STALE_AFTER_S`. Returns the folders removed."""
-    directory = target.parent if str(target.parent) else Path(".")
-    pattern = re.compile(rf"\.{re.escape(target.name)}\.(\d+)\.[^.]+{re.escape(SPILL_SUFFIX)}")
     now = time.time() if now is None else now
     removed: list[Path] = []
-    try:
-        names = os.listdir(directory)
-    except OSError:
-        return removed
-    for name in names:
-        match = pattern.fullmatch(name)
-        if match is None or process_runs(int(match[1])):
-            continue
-        folder = directory / name
+    for folder in dead_writers_leftovers(target, SPILL_SUFFIX):
         try:
             changed = max([folder.lstat().st_mtime]
                           + [entry.stat(follow_symlinks=False).st_mtime
