@@ -68,6 +68,10 @@ the emulated guest decodes fewer than the device's 1000 reports/s, and a longer 
 send the finger samples late and in bursts."""
 CATCH_UP_S = 3.0
 """Longest the hcard mode reads on after the track for the reports the guest has not read yet, s."""
+DWELL_REPORTS = 30
+"""Touching STATE reports wanted on each side of the boundary before the finger moves on."""
+DWELL_MAX_S = 5.0
+"""Longest the finger dwells at either end of the track waiting for those reports, s."""
 STALL_DUMP_S = 60.0  # s; the stacks of a payload still running after this long are logged
 
 
@@ -353,26 +357,53 @@ def play_track(driver: Any, track: Any, boundary_x_mm: float) -> dict[str, Any]:
     (1 mm margin)."""
     from hcard_device.protocol import Finger, StateFlags
 
+    margin = 100  # 1 mm in 0.01 mm
+    boundary = round(boundary_x_mm * 100)
     states: list[tuple[float, Any]] = []  # (arrival, State)
     sent: dict[int, float] = {}  # host_time_us -> send time
     driver.set_touch_source(True)
     driver.start()
     start = time.monotonic()
-    crossing_sent: float | None = None
-    for i in range(len(track)):
-        due = start + float(track.t[i] - track.t[0])
+
+    def read_until(due: float) -> None:
         while (now := time.monotonic()) < due:
             batch = driver.read_inputs(due - now, max_count=PLAY_READ_BATCH)
-            states += [(time.monotonic(), s) for s in batch]
+            states.extend((time.monotonic(), s) for s in batch)
+
+    def send(i: int) -> float:
         host_t = time.monotonic() - start + 1e-3  # > 0: an echo of 0 means "none yet"
         driver.send_finger(host_t, track.x[i], track.y[i], track.normal_force[i],
                            bool(track.contact[i]))
         sent[Finger.from_si(host_t, 0.0, 0.0, 0.0, False).host_time_us] = time.monotonic()
+        return host_t
+
+    def dwell(i: int, on_side: Any) -> float:
+        """Hold the finger at sample ``i`` (sent at the track's rate) until DWELL_REPORTS
+        touching STATE reports place it on the side ``on_side(x_10um)`` tells, or DWELL_MAX_S:
+        a guest starved of CPU reads its reports a second late, and a track played blind would
+        pass the left half before the guest saw it there. Returns the last host time sent."""
+        first = len(states)
+        period = float(track.t[1] - track.t[0]) if len(track) > 1 else 0.02  # s
+        host_t, until = send(i), time.monotonic() + DWELL_MAX_S
+        while time.monotonic() < until:
+            read_until(time.monotonic() + period)
+            seen = sum(1 for _, s in states[first:]
+                       if s.flags & StateFlags.CONTACT and on_side(s.x_10um))
+            if seen >= DWELL_REPORTS:
+                break
+            host_t = send(i)
+        return host_t
+
+    dwell(0, lambda x: x <= boundary - margin)
+    crossing_sent: float | None = None
+    offset = time.monotonic()
+    for i in range(len(track)):
+        read_until(offset + float(track.t[i] - track.t[0]))
+        host_t = send(i)
         if crossing_sent is None and track.x[i] >= boundary_x_mm:
             crossing_sent = time.monotonic()
-    end = time.monotonic() + 0.2
-    while (now := time.monotonic()) < end:
-        states += [(time.monotonic(), s) for s in driver.read_inputs(end - now)]
+    host_t = dwell(len(track) - 1, lambda x: x >= boundary + margin)
+    read_until(time.monotonic() + 0.2)
     driver.stop()
     # The emulated guest reads its reports up to a second late: read on until one echoes
     # the last finger sample (or CATCH_UP_S), so the end of the track is seen too.
@@ -410,8 +441,6 @@ def play_track(driver: Any, track: Any, boundary_x_mm: float) -> dict[str, Any]:
             )
             first = next(changed, None)
             friction_latency = None if first is None else first - crossing_sent
-    margin = 100  # 1 mm in 0.01 mm
-    boundary = round(boundary_x_mm * 100)
     touching = [s for _, s in states if s.flags & StateFlags.CONTACT]
     left = [s.target_uv_x1e4 for s in touching if s.x_10um <= boundary - margin]
     right = [s.target_uv_x1e4 for s in touching if s.x_10um >= boundary + margin]

@@ -94,8 +94,12 @@ DEFAULT_INPUT_QUEUE = 128
 """STATE reports the firmware keeps for the host before dropping the oldest (128 ms)."""
 MAX_BLOCK_FRAMES = 1000
 """Largest simulation step of :meth:`Firmware.advance`, frames (0.1 s at 10 kHz)."""
-REALTIME_PERIOD_S = 1e-3
-"""Wake-up period of :meth:`Firmware.run_realtime`, s."""
+REALTIME_PERIOD_S = 2e-3
+"""Wake-up period of :meth:`Firmware.run_realtime`, s. A step costs ~0.2-0.4 ms of CPU
+whatever its length (the simulation's per-call work, not its per-frame work): waking every
+millisecond held ~40 % of a core idle and up to 70 % while streaming, and the served device fell
+behind its clock on a busy 2-core machine; every 2 ms it holds ~20 % idle, and the STATE reports
+(one per millisecond of device time) leave in pairs."""
 LIMIT_SETTLE_MAX_S = 0.005
 """Longest time a SET of LIMITS may run the device to bring the plate under a lowered limit, s
 (rule PS5's bound; the reference devices need at most 0.81 ms and 3.52 ms)."""
@@ -503,10 +507,14 @@ class Firmware:
         *,
         period_s: float = REALTIME_PERIOD_S,
         clock: Callable[[], float] = time.monotonic,
+        after_step: Callable[[], object] | None = None,
     ) -> None:
         """Advance the simulation following ``clock`` until ``stop_event`` is set.
 
-        Wakes every ``period_s`` and advances by the wall time elapsed; when the simulation
+        Wakes every ``period_s``, advances by the wall time elapsed and then calls
+        ``after_step`` (outside the lock: the server hands the new STATE reports to its
+        connections there, on this thread, instead of polling for them on another); when the
+        simulation
         falls more than :data:`REALTIME_MAX_LAG_S` behind, the excess is skipped (device time
         then runs slower than the wall clock instead of building up a backlog). Every report
         produced more than :data:`REALTIME_LATE_S` after its last frame was due on ``clock``
@@ -521,6 +529,8 @@ class Firmware:
             while not stop_event.is_set():
                 with self.lock:
                     self._follow_clock()
+                if after_step is not None:
+                    after_step()
                 stop_event.wait(period_s)
         finally:
             with self.lock:

@@ -146,10 +146,12 @@ def test_guest_hidapi_driver_uploads_card_and_streams_track(tmp_path: Path) -> N
     # The friction target followed the finger: where the STATE reports put the finger on the
     # left half the target is that texture's constant 0.85; on the right half (baseline 0.45 with
     # a grating, clipped to what E-ViTa reaches) it goes well below that; and it changed after
-    # the finger crossed x = 10 mm.  Median on the left, minimum on the right: a guest starved
-    # of CPU (a loaded machine) sends its finger updates late and in bursts; then the watchdog
-    # ramps the outputs to zero (target 1.0) in some reports, and some reports pair a position
-    # on one side with a target from the other (seen with echo latencies of seconds).
+    # the finger crossed x = 10 mm.  The finger dwells at either end until the guest has read 30
+    # touching reports placing it there (one CI run played the track blind with the guest's
+    # reads 1.3 s late and saw none on the left).  Median on the left, minimum on the right: a
+    # guest starved of CPU (a loaded machine) sends its finger updates late and in bursts; then
+    # the watchdog ramps the outputs to zero (target 1.0) in some reports, and some reports pair
+    # a position on one side with a target from the other (seen with echo latencies of seconds).
     left, right = payload["target_uv_left"], payload["target_uv_right"]
     context = (
         f"left {left}, right {right}; finger echo latency {payload['finger_echo_latency_ms']} "

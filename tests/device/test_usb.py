@@ -153,8 +153,8 @@ def test_unread_input_reports_are_dropped_not_queued_without_bound(loopback):
     (pipe,) = server.interface.pipes  # the connection's own IN queue
     assert pipe.queued <= pipe.capacity == 32
     assert server.interface.in_dropped >= 150
-    # The pump keeps the firmware's own queue (128) near empty: a report per millisecond moves
-    # to the endpoint every 0.5 ms; a busy machine may hold the pump thread for some ms.
+    # The pump keeps the firmware's own queue (128) near empty: the firmware thread moves its
+    # reports to the endpoint after every step (2 ms); a busy machine may hold it for some ms.
     queued = []
     for _ in range(20):
         queued.append(server.firmware.queued_input_reports)

@@ -7,8 +7,8 @@ USB/IP server.
 - :mod:`.transport`: USB/IP over TCP with ``TCP_NODELAY`` on every socket, connect timeouts, a
   bounded number of connections and a clean stop.
 - :mod:`.server_log`: the server's log, which never blocks it.
-- :mod:`.server`: :class:`~.server.DeviceServer` (firmware in real time, report pump, listener)
-  and ``python -m hcard_device.usb.server`` / ``hcard device serve``.
+- :mod:`.server`: :class:`~.server.DeviceServer` (firmware in real time with its report pump,
+  listener) and ``python -m hcard_device.usb.server`` / ``hcard device serve``.
 """
 
 from hcard_device.usb.device import IN_ENDPOINT, OUT_ENDPOINT, PID, VID, HcardHID

@@ -2,10 +2,10 @@
 
 usbip 0.7.0's ``protocol.serve_connection`` trusts the client: it reads whatever transfer length
 a URB header declares, parks every IN URB it is sent, and answers with a blocking ``sendall``
-under a per-connection lock, from whichever thread completes the URB. The pump thread completes
-the parked IN URBs of every connection, so one client that stops reading its socket blocked
-the STATE stream of all of them. :class:`Connection` serves the URB phase itself (the 48-byte
-headers of the kernel's ``Documentation/usb/usbip_protocol.rst``, the handshake through
+under a per-connection lock, from whichever thread completes the URB. The pump (on the firmware
+thread) completes the parked IN URBs of every connection, so one client that stops reading its
+socket blocked the STATE stream of all of them. :class:`Connection` serves the URB phase itself (the
+48-byte headers of the kernel's ``Documentation/usb/usbip_protocol.rst``, the handshake through
 :func:`usbip.protocol.serve_handshake`) with every resource bounded by
 :class:`ConnectionLimits`:
 

@@ -1,12 +1,15 @@
 """Serve the hcard reference device over USB/IP: ``python -m hcard_device.usb.server``.
 
-The firmware runs in real time on its own thread (:meth:`Firmware.run_realtime`); a pump thread
-moves its STATE reports to the interrupt IN queue of every connection every
-:data:`PUMP_INTERVAL_S`; the USB/IP listener (``TCP_NODELAY`` on every socket) serves URBs on
-per-connection threads; the card of a COMMIT is checked in a worker process
+The firmware runs in real time on its own thread (:meth:`Firmware.run_realtime`), which after
+each step hands its new STATE reports to the interrupt IN queue of every connection (the pump,
+:meth:`HcardHID.pump`; a separate pump thread that polled every 0.5 ms cost 15 % of a core and
+left the server's threads, which share one interpreter lock, no spare time on a 2-core machine:
+a streamed queue ran dry in 10-156 of ~800 reports, 0-1 with the pump on the firmware's
+thread, ``bench/bench_stream_feed.py``); the USB/IP listener (``TCP_NODELAY`` on every socket)
+serves URBs on per-connection threads; the card of a COMMIT is checked in a worker process
 (:class:`~hcard_device.card_check.ProcessChecker`, at most 20 s) while the device runs on. Any
 Linux host can then ``usbip attach -r HOST -b 1-1`` and get a ``/dev/hidrawN``. SIGINT and
-SIGTERM stop it cleanly: the firmware and pump threads end and are joined, the listener and
+SIGTERM stop it cleanly: the firmware thread ends and are joined, the listener and
 every connection are closed (hosts see the device vanish), the check worker ends, and the
 process exits with status 0.
 
@@ -72,8 +75,6 @@ from hcard_device.usb.transport import (
     NoDelayUSBIP,
 )
 
-PUMP_INTERVAL_S = 0.0005
-"""Period of the pump that moves STATE reports from the firmware to the IN endpoint, s."""
 SWITCH_INTERVAL_S = 0.0002
 """GIL switch interval of the server process, s (Python's default is 5 ms)."""
 JOIN_TIMEOUT_S = 2.0
@@ -92,9 +93,9 @@ def raise_priority() -> str:
     it), ahead of ordinary processes: ``SCHED_RR`` at :data:`REALTIME_PRIORITY` where permitted
     (root, or CAP_SYS_NICE), else nice :data:`NICE_INCREMENT`, else nothing (an unprivileged
     user; EPERM is not an error). The loops it protects sleep between steps (the firmware every
-    millisecond, the pump every half), so they never hold a CPU; the kernel also keeps 5 % of
-    every CPU for ordinary processes whatever real-time threads do (``sched_rt_runtime_us``).
-    Returns what was granted, for the banner."""
+    :data:`~hcard_device.firmware.REALTIME_PERIOD_S`), so they never hold a CPU; the kernel
+    also keeps 5 % of every CPU for ordinary processes whatever real-time threads do
+    (``sched_rt_runtime_us``). Returns what was granted, for the banner."""
     try:
         os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(REALTIME_PRIORITY))
         return f"SCHED_RR {REALTIME_PRIORITY}"
@@ -130,7 +131,8 @@ def make_firmware(variant: str, seed: int = 0,
 
 
 class DeviceServer:
-    """The device, its firmware thread, its pump thread and its USB/IP listener.
+    """The device, its firmware thread (which also pumps its STATE reports to the connections)
+    and its USB/IP listener.
 
     Args:
         variant: ``evita`` or ``coupled``.
@@ -223,27 +225,17 @@ class DeviceServer:
         self.usb_device.plug(via=self.transport)
         with self._running_lock:
             self._running.add(self)
-        for target, name in ((self._run_firmware, "hcard-firmware"),
-                             (self._run_pump, "hcard-pump")):
-            thread = threading.Thread(target=target, name=name, daemon=True)
-            thread.start()
-            self._threads.append(thread)
+        thread = threading.Thread(target=self._run_firmware, name="hcard-firmware", daemon=True)
+        thread.start()
+        self._threads.append(thread)
         return self
 
     def _run_firmware(self) -> None:
-        try:
-            self.firmware.run_realtime(self._stop)
-        except BaseException as exc:  # reported by stop(); the device must not die silently
-            self.thread_errors.append(exc)
-            self._stop.set()
-
-    def _run_pump(self) -> None:
         interface = self.interface
         assert interface is not None
         try:
-            while not self._stop.wait(PUMP_INTERVAL_S):
-                interface.pump()
-        except BaseException as exc:
+            self.firmware.run_realtime(self._stop, after_step=interface.pump)
+        except BaseException as exc:  # reported by stop(); the device must not die silently
             self.thread_errors.append(exc)
             self._stop.set()
 
@@ -261,7 +253,7 @@ class DeviceServer:
         self._stop.set()
 
     def stop(self) -> None:
-        """Stop the firmware and the pump, close every connection, unplug (idempotent)."""
+        """Stop the firmware, close every connection, unplug (idempotent)."""
         self._stop.set()
         for thread in self._threads:
             thread.join(JOIN_TIMEOUT_S)
