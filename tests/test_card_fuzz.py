@@ -66,8 +66,10 @@ def test_random_json_documents(document):
 
 
 SECONDS_PER_BYTE = 5e-7
-"""Time a read and validation may take per input byte, beyond :data:`BASE_SECONDS` (measured
-~6e-8 s/byte on the 16 MiB hostile cards: 1 s)."""
+"""CPU time a read and validation may take per input byte, beyond :data:`BASE_SECONDS`
+(measured ~6e-8 s/byte on the 16 MiB hostile cards: 1 s). CPU time, not wall time: CI runs
+these tests again beside the suite at a low priority, where a wall clock measures the
+machine's other work."""
 BASE_SECONDS = 0.5
 
 
@@ -77,12 +79,12 @@ def test_repeated_structure_costs_time_in_proportion_and_a_bounded_report(kind, 
     """Whatever is repeated and how often: read and validation take time in proportion to the
     bytes, and the report lists at most MAX_LISTED_PROBLEMS problems plus one count per rule."""
     data = HOSTILE_CARDS[kind](count)
-    started = time.perf_counter()
+    started = time.process_time()
     try:
         card = card_from_bytes(data)
         problems = validate(card)
     finally:
-        elapsed = time.perf_counter() - started
+        elapsed = time.process_time() - started
     assert elapsed < BASE_SECONDS + SECONDS_PER_BYTE * len(data), (kind, count, elapsed)
     assert errors_of(problems)
     listed = [p for p in problems if p.path]
