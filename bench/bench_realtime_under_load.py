@@ -9,7 +9,7 @@ each, as ``yes >/dev/null &`` in a shell), runs every pytest node id ``--repeat`
 in a fresh ``python -m pytest`` process, and prints, per node id, the runs that passed, the
 wall time of its runs (mean and longest) and the 1-minute load average over them; then the
 whole measurement's wall time and load average. The burners are stopped (by their process
-ids) however the measurement ends, Ctrl-C included. A node id may be a file, a directory
+ids) however the measurement ends, Ctrl-C and SIGTERM included. A node id may be a file, a directory
 (``tests`` runs the suite) or a test; ``--burners 0`` measures the idle figure of the same
 runs.
 
@@ -157,6 +157,10 @@ def report(title: str, figures: list[Figures], wall_s: float, load: str, repeat:
             print(f"    {len(f.failures)} failed run(s): their output is above")
 
 
+def _interrupt(signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns 0 when every run of the loaded measurement passed, else 1."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -170,6 +174,11 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.burners < 0 or args.repeat < 1:
         parser.error("--burners must be >= 0 and --repeat >= 1")
+    # SIGTERM (kill, a CI timeout) and SIGINT stop it the same way, burners and runs included:
+    # a shell's background job ignores SIGINT, and a bench stopped by SIGTERM left its two
+    # burners running (an orphaned burner loads every later measurement)
+    signal.signal(signal.SIGTERM, _interrupt)
+    signal.signal(signal.SIGINT, _interrupt)
     print(f"goal: every run passes ({args.repeat} of {args.repeat}) with {args.burners} "
           f"burners on {os.cpu_count()} CPUs")
     with LoadSampler() as sampler:
@@ -187,4 +196,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    try:
+        raise SystemExit(main())
+    except KeyboardInterrupt as stopped:
+        print(f"stopped ({stopped}); burners and runs ended", file=sys.stderr)
+        raise SystemExit(130) from None
