@@ -513,10 +513,10 @@ class Firmware:
 
         Wakes every ``period_s``, advances by the wall time elapsed and then calls
         ``after_step`` (outside the lock: the server hands the new STATE reports to its
-        connections there, on this thread, instead of polling for them on another); when the
-        simulation
-        falls more than :data:`REALTIME_MAX_LAG_S` behind, the excess is skipped (device time
-        then runs slower than the wall clock instead of building up a backlog). Every report
+        connections there, on this thread, instead of polling for them on another). When the
+        simulation falls more than :data:`REALTIME_MAX_LAG_S` behind, the excess is skipped
+        (device time then runs slower than the wall clock instead of building up a backlog).
+        Every report
         produced more than :data:`REALTIME_LATE_S` after its last frame was due on ``clock``
         (the catch-up after a late wake-up, and every skip) carries fault REALTIME_LAG and
         counts in COUNTERS ``late_reports`` (rule PI4): a host knows that the run it measured

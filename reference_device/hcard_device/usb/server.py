@@ -9,7 +9,7 @@ thread, ``bench/bench_stream_feed.py``); the USB/IP listener (``TCP_NODELAY`` on
 serves URBs on per-connection threads; the card of a COMMIT is checked in a worker process
 (:class:`~hcard_device.card_check.ProcessChecker`, at most 20 s) while the device runs on. Any
 Linux host can then ``usbip attach -r HOST -b 1-1`` and get a ``/dev/hidrawN``. SIGINT and
-SIGTERM stop it cleanly: the firmware thread ends and are joined, the listener and
+SIGTERM stop it cleanly: the firmware thread ends and is joined, the listener and
 every connection are closed (hosts see the device vanish), the check worker ends, and the
 process exits with status 0.
 
