@@ -103,6 +103,10 @@ behind its clock on a busy 2-core machine; every 2 ms it holds ~20 % idle, and t
 LIMIT_SETTLE_MAX_S = 0.005
 """Longest time a SET of LIMITS may run the device to bring the plate under a lowered limit, s
 (rule PS5's bound; the reference devices need at most 0.81 ms and 3.52 ms)."""
+ECHOES_AHEAD = 256
+"""Host samples placed ahead of the simulated frames whose echo (PI3) waits for its report
+(at 1 kHz a client's FINGER reports over :data:`REALTIME_MAX_LAG_S` are 50; a client that
+sends more loses the oldest echoes, never a newer one)."""
 REALTIME_MAX_LAG_S = 0.05
 """Most simulated time :meth:`Firmware.run_realtime` catches up in one go, s; beyond it the
 device falls behind the wall clock rather than stalling the USB threads. Either way the reports
@@ -339,6 +343,9 @@ class Firmware:
         self._expected_seq: int | None = None
         self._host_time_echo = 0
         self._echo_placed_us: int | None = None  # device time of the echoed sample (PO2)
+        # (host time, placement) of samples placed ahead of the frames simulated (_arrival_s):
+        # echoed from the first report that reaches their placement
+        self._echoes_ahead: deque[tuple[int, int]] = deque(maxlen=ECHOES_AHEAD)
         # run_realtime's clock, its origin and the device time granted so far (_follow_clock)
         self._clock: Callable[[], float] | None = None
         self._clock_origin = 0.0
@@ -538,17 +545,7 @@ class Firmware:
 
     def _follow_clock(self) -> None:
         """While :meth:`run_realtime` serves: run the simulation up to the device's clock (the
-        wall clock's, less what was skipped). Called at every wake-up of the loop and before a
-        FINGER report is applied, so the finger is timed at the device's time on arrival (other
-        reports need no more than the loop's millisecond; a step per STREAM report slowed a
-        host's burst of them to 2.5 ms each). Applied at the simulation's last step instead, a
-        FINGER report that came while the
-        simulation lagged (its process waiting for the CPU) arrived up to
-        :data:`REALTIME_MAX_LAG_S` early on the device clock; the host clock offset (PO2, the
-        smallest arrival - host time ever seen) kept that error for the device's life, every
-        later sample was placed tens of ms before it arrived, and the device rendered from
-        stale samples: on a loaded machine the served reference failed A1 on a noisy stroke
-        (0.11-0.18) and a bipolar card (0.24) in both runs against one server."""
+        wall clock's, less what was skipped); called at every wake-up of the loop."""
         if self._clock is None:
             return
         behind = self._clock() - self._clock_origin - self._served_s
@@ -782,6 +779,28 @@ class Firmware:
             texture_name=detail_text(item.name)[0][:41],
         )
 
+    def _arrival_s(self) -> float:
+        """The device time of a report arriving now, s: while :meth:`run_realtime` serves, the
+        device's clock (ahead of the simulated frames by the time since the loop last ran, at
+        most :data:`REALTIME_MAX_LAG_S`, which the loop would skip); else the simulation's.
+
+        A FINGER report is timed there without running the simulation up to it (the frames
+        before that time keep the previous finger, :class:`hcard_device.sim.finger.HostFinger`).
+        Timed at the simulation's last step instead, a report that came while the simulation
+        lagged arrived up to :data:`REALTIME_MAX_LAG_S` early on the device clock; the host
+        clock offset (PO2, the smallest arrival - host time ever seen) kept that error for the
+        device's life and the device rendered from stale samples (a loaded machine failed A1 on
+        a noisy stroke, 0.11-0.18). Running the simulation up to each arrival instead cost a
+        step per report (0.2-0.4 ms of CPU whatever its length): a client that sent FINGER
+        reports as fast as it could took 90 % of a core on its connection's thread and cut
+        another client's STATE stream to 0.56-0.83 of its share.
+        """
+        if self._clock is None:
+            return self.sim.time_s
+        behind = self._clock() - self._clock_origin - self._served_s
+        carried = self._frame_debt / self.config.frame_rate_hz  # a frame's fraction not run
+        return self.sim.time_s + min(max(behind + carried, 0.0), REALTIME_MAX_LAG_S)
+
     # ---- outputs ----------------------------------------------------------------------------
 
     def _refuse(self) -> None:
@@ -793,14 +812,12 @@ class Firmware:
         (PO5)."""
         if isinstance(report, Finger):
             self._touch_source = TouchSource.HOST
-            self._follow_clock()  # timed on arrival at the device's clock (_follow_clock)
             placed_s = self.sim.host_finger(
-                self.sim.time_s, report.x_mm, report.y_mm, report.fn_n, report.contact,
+                self._arrival_s(), report.x_mm, report.y_mm, report.fn_n, report.contact,
                 host_time_s=report.host_time_us * TIME_UNIT_S,
             )
             if placed_s is not None:
-                self._host_time_echo = report.host_time_us
-                self._echo_placed_us = round(placed_s / TIME_UNIT_S)
+                self._place_echo(report.host_time_us, round(placed_s / TIME_UNIT_S))
             return True
         if isinstance(report, Stream):
             if self._expected_seq is not None and report.stream_seq != self._expected_seq:
@@ -899,12 +916,13 @@ class Firmware:
         static = self._static_flags()
         clipped = int(FaultBits.CARD_CLIPPED) if self._clip_item_count() and not self._streaming \
             else 0
-        session, echo, generation = self.session, self._host_time_echo, self.upload.generation
+        session, generation = self.session, self.upload.generation
         late_before = self._late_before_us
         for (time_us, contact, x, y, f0, f1, f2, f3, lateral, amplitude, voltage, current,
              uv, ev, texture, queued, sim_faults) in columns:  # fmt: skip
             session.expire(time_us * TIME_UNIT_S)
             faults = self._faults(sim_faults, clipped)
+            echo, echo_age = self._echo_at(time_us)
             if time_us < late_before:  # produced late on the device's real-time clock (PI4)
                 faults |= _LATE
                 self.counts.late_reports += 1
@@ -913,7 +931,7 @@ class Firmware:
                 f0, f1, f2, f3, lateral, amplitude, voltage, current, uv, ev, texture, faults,
                 self.counts.input_dropped & _U16, self.counts.rejected_requests & _U16,
                 min(max(queued, 0), _U16), echo, generation, session.number,
-                session.token or 0, self._echo_age(time_us),
+                session.token or 0, echo_age,
             ), faults)  # fmt: skip
 
     def _covered_faults(self, faults: np.ndarray, ends: range, any_fault: int) -> list[int]:
@@ -1000,16 +1018,34 @@ class Firmware:
 
     def _idle_state(self) -> State:
         """A STATE report before the first interval completed."""
+        echo, echo_age = self._echo_at(round(self.sim.time_s / TIME_UNIT_S))
         return State(
             timestamp_us=round(self.sim.time_s / TIME_UNIT_S) & _U32, sequence=self._sequence,
             flags=0, x_10um=0, y_10um=0, corner_forces_mn=(0, 0, 0, 0), lateral_force_mn=0,
             amplitude_nm=0, voltage_dv=0, current_10na=0, target_uv_x1e4=FRICTION_SCALE,
             target_ev_x1e4=FRICTION_SCALE, texture=-1, faults=0, dropped_reports=0,
             rejected_requests=self.counts.rejected_requests & _U16, stream_queued=0,
-            host_time_echo_us=self._host_time_echo, card_generation=self.upload.generation,
-            echo_age_us=self._echo_age(round(self.sim.time_s / TIME_UNIT_S)),
+            host_time_echo_us=echo, card_generation=self.upload.generation,
+            echo_age_us=echo_age,
             **self._session_fields(),
         )  # fmt: skip
+
+    def _place_echo(self, host_time_us: int, placed_us: int) -> None:
+        """A host sample of ``host_time_us`` was placed at ``placed_us`` (device clock, us):
+        echoed (PI3) by the reports from that time on."""
+        if placed_us <= round(self.sim.time_s / TIME_UNIT_S):
+            self._echoes_ahead.clear()  # placements rise: none ahead precedes this one
+            self._host_time_echo, self._echo_placed_us = host_time_us, placed_us
+        else:
+            self._echoes_ahead.append((host_time_us, placed_us))
+
+    def _echo_at(self, time_us: int) -> tuple[int, int]:
+        """STATE host_time_echo_us and echo_age_us of a report whose last frame is at
+        ``time_us`` (device clock, us, not wrapped): the latest sample placed by then."""
+        ahead = self._echoes_ahead
+        while ahead and ahead[0][1] <= time_us:
+            self._host_time_echo, self._echo_placed_us = ahead.popleft()
+        return self._host_time_echo, self._echo_age(time_us)
 
     def _echo_age(self, time_us: int) -> int:
         """STATE echo_age_us of a report whose last frame is at ``time_us`` (device clock, us,

@@ -788,9 +788,11 @@ def test_a_device_that_keeps_real_time_flags_nothing() -> None:
 def test_a_served_device_takes_a_report_at_its_clock_not_the_lagging_simulations():
     """While run_realtime serves, the device's clock runs on between the simulation's wake-ups
     (and while its process waits for the CPU). A FINGER arriving 40 ms after the simulation's
-    last step is taken at its true arrival: the simulation catches up first. Taken at the
-    simulation's last step, it fixed the host clock offset (PO2) 40 ms short for good, and every
-    later sample, arriving on time, was placed 40 ms before it arrived."""
+    last step is timed at its true arrival, without running the simulation there (a step per
+    report let a client flooding FINGER reports take a core): the frames before it keep the
+    previous finger and the reports before it do not echo it. Taken at the simulation's last
+    step, it fixed the host clock offset (PO2) 40 ms short for good, and every later sample,
+    arriving on time, was placed 40 ms before it arrived."""
     fw = make_fw()
     wall = [0.0]
     stop = threading.Event()
@@ -808,9 +810,10 @@ def test_a_served_device_takes_a_report_at_its_clock_not_the_lagging_simulations
         run_until(0.2)
         with fw.lock:  # the server's loop cannot step: the simulation lags the clock by 40 ms
             wall[0] += 0.040
-            assert fw.sim.time_s == pytest.approx(0.2, abs=0.002)
+            lagging_s = fw.sim.time_s
+            assert lagging_s == pytest.approx(0.2, abs=0.002)
             fw.handle_output(Finger.from_si(10.000, 20.0, 20.0, 0.5, True).encode())
-            assert fw.sim.time_s == pytest.approx(0.240, abs=0.0002)  # caught up first
+            assert fw.sim.time_s == lagging_s  # not run up to the arrival on this thread
         # later samples arrive on time: host time 10.000 is device time 0.240
         for k in range(1, 6):
             run_until(0.240 + 0.010 * k)
@@ -820,7 +823,15 @@ def test_a_served_device_takes_a_report_at_its_clock_not_the_lagging_simulations
     finally:
         stop.set()
         server.join()
-    last = [s for s in states(fw) if s.host_time_echo_us == round(10.050 * 1e6)]
+    reports = states(fw)
+    first = [s for s in reports if s.host_time_echo_us == round(10.000 * 1e6)]
+    assert first and min(s.timestamp_us for s in first) * 1e-6 >= 0.240 - 1e-6
+    touching = [s for s in reports if s.flags & StateFlags.CONTACT]
+    assert touching and min(s.timestamp_us for s in touching) * 1e-6 >= 0.240 - 1e-6
+    for report in first:  # placed at its arrival, 0.240 s
+        assert report.echo_age_us * 1e-6 == pytest.approx(report.timestamp_us * 1e-6 - 0.240,
+                                                          abs=0.0015)
+    last = [s for s in reports if s.host_time_echo_us == round(10.050 * 1e6)]
     assert last, "no report echoes the last sample"
     for report in last:  # placed at its arrival, 0.290 s: the age counts from there
         age_s = report.echo_age_us * 1e-6

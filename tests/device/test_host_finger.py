@@ -36,3 +36,25 @@ def test_host_time_wraps_and_a_lift_stops_the_finger():
     assert finger.speed_m_s == pytest.approx(0.040)
     finger.update(1.02, 2.8, 20.0, 0.0, False, host_t=0.015)
     assert finger.speed_m_s == 0.0
+
+
+def test_a_report_timed_ahead_of_the_frames_holds_from_its_time_on():
+    """The served firmware times a FINGER at its arrival, ahead of the frames simulated so
+    far: the frames before it keep the previous report, frame by frame."""
+    finger = HostFinger((80.0, 50.0))
+    finger.update(0.000, 2.0, 20.0, 0.5, True)
+    finger.update(0.0105, 3.0, 20.0, 0.7, True)  # arrives between frames 105 and 106
+    finger.update(0.0125, 4.0, 20.0, 0.0, False)  # lifts 2 ms later
+    times = np.arange(100, 120) / 10_000  # frames of 0.1 ms, 10.0 to 11.9 ms
+    truth = finger.state(times)
+    before, after = times < 0.0105, times >= 0.0105
+    np.testing.assert_array_equal(truth.x_mm, np.where(before, 2.0, 3.0))
+    np.testing.assert_array_equal(truth.normal_force_n, np.where(before, 0.5, 0.7))
+    np.testing.assert_allclose(truth.speed_m_s[after], 1.0 / 0.0105 * 1e-3)
+    assert truth.speed_m_s[before].max() == 0.0  # the touch-down report had no speed
+    np.testing.assert_allclose(truth.contact_time_s, times)  # one contact since 0 s
+    later = finger.state(np.arange(120, 130) / 10_000)  # 12.0 to 12.9 ms: the lift at 12.5
+    np.testing.assert_array_equal(later.contact, np.arange(120, 130) < 125)
+    np.testing.assert_array_equal(later.normal_force_n[5:], 0.0)
+    held = finger.state(np.arange(130, 140) / 10_000)  # nothing ahead: one state held
+    assert held.held and not held.contact.any()

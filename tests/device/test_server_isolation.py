@@ -62,7 +62,7 @@ from hcard_device.protocol import (
     UploadState,
 )
 from hcard_device.protocol.constants import DEFAULT_MAX_CARD_BYTES
-from hcard_device.usb.connection import DEFAULT_LIMITS
+from hcard_device.usb.connection import DEFAULT_LIMITS, ReportPacer
 from hcard_device.usb.transport import MAX_CONNECTIONS
 
 DELIVERY_SHARE = 0.9
@@ -158,6 +158,40 @@ def test_parked_in_urbs_past_the_bound_close_the_connection(served):
     # a few reports may complete URBs before the 65th parks; the rest are never answered
     assert answered < DEFAULT_LIMITS.max_parked_in_urbs + 200
     assert rss_mib(served.process.pid) - before < RSS_GROWTH_MIB
+
+
+def test_interrupt_out_reports_complete_at_the_buss_rate_after_a_burst(served):
+    """A client that submits 664 FINGER reports at once gets 64 answered at once and the rest
+    at one a millisecond (a full-speed bus frame each): 0.6 s at least, however idle the
+    machine. The old server answered them as fast as it could carry them out (1557 a second
+    while each one ran the simulation, 7900 after), and the flood took a core."""
+    burst, rate = DEFAULT_LIMITS.out_report_burst, DEFAULT_LIMITS.out_reports_per_s
+    count = burst + 600
+    sock = clients.import_device(served.host, served.port)
+    with sock:
+        sock.settimeout(10.0)
+        start = time.monotonic()
+        sock.sendall(clients.finger_outs(1, count))
+        answered = [clients.read_answer(sock) for _ in range(count)]
+        elapsed = time.monotonic() - start
+    assert [seqnum for seqnum, _status, _data in answered] == list(range(1, count + 1))
+    assert {status for _seqnum, status, _data in answered} == {0}
+    assert elapsed >= (count - burst) / rate - 0.01, f"{count} reports in {elapsed:.3f} s"
+
+
+def test_the_pacer_lets_a_burst_through_and_then_one_per_period():
+    now = [0.0]
+    pacer = ReportPacer(1000.0, 4, clock=lambda: now[0])
+    assert [pacer.take() for _ in range(4)] == [0.0] * 4
+    waits = [pacer.take() for _ in range(3)]  # at the same instant: 1, 2 and 3 ms to wait
+    np.testing.assert_allclose(waits, [0.001, 0.002, 0.003])
+    now[0] = 0.010  # 10 ms idle: the 3 owed are paid and the bucket is full again
+    assert [pacer.take() for _ in range(4)] == [0.0] * 4
+    assert pacer.take() == pytest.approx(0.001)
+    now[0] = 0.0125  # 2.5 ms later: the one owed is paid, one and a half tokens left
+    assert pacer.take() == 0.0 and pacer.take() == pytest.approx(0.0005)
+    with pytest.raises(ValueError, match="rate > 0"):
+        ReportPacer(0.0, 4)
 
 
 def test_a_client_that_does_not_read_its_answers_is_closed(served):
@@ -501,6 +535,8 @@ def test_the_bounds_stated_in_the_spec_and_the_server_docstring_are_the_servers(
         "length of an OUT transfer (a report is at most 64 bytes)":
             f"{limits.max_out_bytes} bytes",
         "length of an IN transfer": f"{limits.max_in_bytes:,} bytes".replace(",", " "),
+        "interrupt-OUT URBs completed per connection (a full-speed bus carries one report a "
+        "frame)": f"{limits.out_reports_per_s:g} a second ({limits.out_report_burst} at once)",
         "answers waiting for a client that does not read, beyond its socket buffers":
             f"{limits.max_pending_bytes // 1024} KiB",
         "control transfers waiting behind a card check": f"{limits.max_queued_controls}",
@@ -515,3 +551,5 @@ def test_the_bounds_stated_in_the_spec_and_the_server_docstring_are_the_servers(
         assert f" {value} " in doc, value
     assert f"{limits.max_pending_bytes // 1024} KiB" in doc
     assert f"{CHECK_TIMEOUT_S:g} s" in doc and f"{limits.handshake_timeout_s:g} s" in doc
+    assert f" {limits.out_reports_per_s:g} /s " in doc
+    assert f"({limits.out_report_burst} pass at once)" in doc

@@ -154,9 +154,28 @@ class TrackFinger:
         return FingerTruth(x, y, np.where(contact, fn, 0.0), contact, speed, contact_time)
 
 
+@dataclass(frozen=True)
+class _HeldReport:
+    """A host's report as the finger holds it from its time ``t`` (s, device clock) on."""
+
+    t: float
+    x: float
+    y: float
+    normal_force: float  # 0 off the plate
+    speed_m_s: float  # 0 off the plate
+    on: bool  # in contact and on the plate
+    touchdown_s: float
+
+
 class HostFinger:
-    """A finger whose state the host reports (touch sensing on the host side); between reports
-    the last reported state holds, and the speed is that of the last two reports of a contact.
+    """A finger whose state the host reports (touch sensing on the host side); from the time
+    of each report on, until the next one, the state it reported holds, and the speed is
+    that of the last two reports of a contact.
+
+    A report may be timed ahead of the frames simulated so far (the served device times a
+    FINGER report at its arrival on the wall clock without first running the simulation up
+    to it, :meth:`hcard_device.firmware.Firmware.handle_output`): the frames before that time
+    keep the previous report's state.
 
     Args:
         surface_mm: the plate's (width, height), mm.
@@ -169,6 +188,8 @@ class HostFinger:
         self.contact = False
         self.speed_m_s = 0.0
         self.touchdown_s = 0.0
+        # in time order; the first holds since before every frame still to be simulated
+        self._held = [_HeldReport(-math.inf, 0.0, 0.0, 0.0, 0.0, False, 0.0)]
 
     def update(self, t: float, x: float, y: float, normal_force: float, contact: bool,
                host_t: float | None = None) -> None:
@@ -186,22 +207,57 @@ class HostFinger:
         self.t, self.x, self.y, self.contact = t, x, y, contact
         self.normal_force = max(normal_force, 0.0)
         self.host_t = host_t
+        width, height = self.surface_mm
+        on = bool(contact and 0 <= x <= width and 0 <= y <= height)
+        self._held.append(_HeldReport(
+            t, x, y, self.normal_force if on else 0.0, self.speed_m_s if on else 0.0, on,
+            self.touchdown_s))
 
     def state(self, times: np.ndarray) -> FingerTruth:
-        """The held state at ``times`` (s)."""
+        """The held state at ``times`` (s, rising; each call's later than the previous
+        call's): at each time, that of the latest report not after it."""
+        held = self._held
         n = times.shape[0]
-        width, height = self.surface_mm
-        on = bool(self.contact and 0 <= self.x <= width and 0 <= self.y <= height)
-        fn, speed = (self.normal_force, self.speed_m_s) if on else (0.0, 0.0)
-        contact_time = np.maximum(times - self.touchdown_s, 0.0) if on else np.zeros(n)
-        x, y, force, sliding = np.array([[self.x], [self.y], [fn], [speed]]).repeat(n, axis=1)
+        if n == 0:
+            return self._constant(held[0], times)
+        first, last = float(times[0]), float(times[-1])
+        # reports superseded before this call's first time are no longer needed
+        drop = 0
+        while drop + 1 < len(held) and held[drop + 1].t <= first:
+            drop += 1
+        if drop:
+            del held[:drop]
+        if len(held) == 1 or held[1].t > last:
+            return self._constant(held[0], times)
+        starts = np.array([report.t for report in held])
+        index = np.searchsorted(starts, times, side="right") - 1
+        np.maximum(index, 0, out=index)
+
+        def column(name: str) -> np.ndarray:
+            return np.array([getattr(report, name) for report in held])[index]
+
+        on = column("on")
+        contact_time = np.where(on, np.maximum(times - column("touchdown_s"), 0.0), 0.0)
+        truth = FingerTruth(column("x"), column("y"), column("normal_force"), on,
+                            column("speed_m_s"), contact_time)
+        self._held = held[int(index[-1]):]
+        return truth
+
+    @staticmethod
+    def _constant(report: _HeldReport, times: np.ndarray) -> FingerTruth:
+        """The state of ``report`` at every one of ``times``."""
+        n = times.shape[0]
+        contact_time = (np.maximum(times - report.touchdown_s, 0.0) if report.on
+                        else np.zeros(n))
+        x, y, force, sliding = np.array(
+            [[report.x], [report.y], [report.normal_force], [report.speed_m_s]]).repeat(n, axis=1)
         contact = np.empty(n, dtype=bool)
-        contact.fill(on)
+        contact.fill(report.on)
         truth = FingerTruth(x, y, force, contact, sliding, contact_time, held=True)
         # the held values are scalars: checking them is cheaper than checking the arrays
         truth.__dict__["checked"] = (
-            0.0 <= fn < math.inf and 0.0 <= speed < math.inf
-            and math.isfinite(self.touchdown_s)
+            0.0 <= report.normal_force < math.inf and 0.0 <= report.speed_m_s < math.inf
+            and math.isfinite(report.touchdown_s)
         )
         return truth
 

@@ -87,6 +87,12 @@ NaN time before the first sample)."""
 HOST_SAMPLE_SPACING_S = 1e-6
 """A host sample not later than the previous one is moved this much after it, s."""
 
+HOST_SAMPLE_MAX_AHEAD_S = 0.05
+"""Most a host sample may be timed ahead of the frames simulated so far, s (the served
+device's firmware times a FINGER report at its arrival on the wall clock, at most its largest
+catch-up, :data:`hcard_device.firmware.REALTIME_MAX_LAG_S`, ahead); a later time is taken as
+this far ahead."""
+
 OFF_AMPLITUDE_M = 10e-9
 """Plate amplitude counted as off, m (10 nm, a fifth of the loop's 50 nm tolerance)."""
 
@@ -547,8 +553,10 @@ class DeviceSimulation:
         """A finger state from the host (touch sensing on the host side); returns the device
         time (s) the sample was placed at, None when it was rejected.
 
-        ``t_s`` is in the device clock (:attr:`time_s`); a time in the future is taken as now,
-        and one not later than the previous sample is moved just after it. Non-finite values
+        ``t_s`` is in the device clock (:attr:`time_s`); it may lie ahead of the frames
+        simulated so far (at most :data:`HOST_SAMPLE_MAX_AHEAD_S`, a later time is taken as
+        that far ahead): the frames before it keep the previous sample. One not later than the
+        previous sample is moved just after it. Non-finite values
         are rejected (``INVALID_REQUEST``); a negative force counts as 0. ``host_time_s``: the
         host's time of the sample (FINGER.host_time_us): the finger moved between two samples
         in the host's time, so its physical speed is taken over that interval, and the sample
@@ -574,7 +582,7 @@ class DeviceSimulation:
         if host_time_s is not None and math.isfinite(host_time_s):
             t = self._host_clock.device_time(t, host_time_s)
             host_s = self._host_clock.last_host_s
-        t = min(t, self.time_s)
+        t = min(t, self.time_s + HOST_SAMPLE_MAX_AHEAD_S)
         if t <= self._last_placed_s:
             t = self._last_placed_s + HOST_SAMPLE_SPACING_S
         self._last_placed_s = t

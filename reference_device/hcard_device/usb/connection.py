@@ -20,7 +20,12 @@ socket blocked the STATE stream of all of them. :class:`Connection` serves the U
 * IN URBs parked waiting for a report are bounded per connection by the device's view
   (:class:`~hcard_device.usb.device.InPipe`), and so are the control transfers waiting behind
   a slow one (:attr:`ConnectionLimits.max_queued_controls`);
-* the import handshake must arrive within :attr:`ConnectionLimits.handshake_timeout_s`.
+* the import handshake must arrive within :attr:`ConnectionLimits.handshake_timeout_s`;
+* interrupt-OUT URBs complete at most at the bus's rate, one per full-speed frame
+  (:attr:`ConnectionLimits.out_reports_per_s`, after a burst of
+  :attr:`ConnectionLimits.out_report_burst`): a client that submits them faster waits, as it
+  would on a USB bus (its reader thread sleeps, so its socket fills and its own sends block),
+  and its reports cost the device no more than a host streaming at full rate.
 
 Every close says why on the server's log (one line). Requests the device's view calls slow
 (an UPLOAD_END that runs the card check, spec rule PU12) run on a helper thread, so the
@@ -34,6 +39,7 @@ import contextlib
 import socket
 import struct
 import threading
+import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -71,6 +77,11 @@ class ConnectionLimits:
         max_queued_controls: control transfers waiting behind a slow one (an UPLOAD_END
             running the card check); one more closes the connection.
         handshake_timeout_s: longest wait for the OP_REQ_IMPORT (or OP_REQ_DEVLIST), s.
+        out_reports_per_s: interrupt-OUT URBs completed per second at most, 1/s (a
+            full-speed interrupt endpoint of bInterval 1 ms carries one 64-byte report a
+            frame; a host streaming frames sends ~770/s: 667 STREAM and 100 FINGER).
+        out_report_burst: interrupt-OUT URBs completed at once before that rate applies (a
+            host's first STREAM reports come in a burst that fills the device's queue).
     """
 
     max_out_bytes: int = 4096
@@ -79,6 +90,34 @@ class ConnectionLimits:
     max_pending_bytes: int = 64 * 1024
     max_queued_controls: int = 4
     handshake_timeout_s: float = 2.0
+    out_reports_per_s: float = 1000.0
+    out_report_burst: int = 64
+
+
+class ReportPacer:
+    """A token bucket: how long an interrupt-OUT URB must wait to keep a connection within
+    ``rate`` URBs a second after a burst of ``burst``.
+
+    Args:
+        rate: URBs per second, 1/s.
+        burst: URBs that may pass at once, after an idle spell.
+        clock: monotonic time, s.
+    """
+
+    def __init__(self, rate: float, burst: int,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        if not rate > 0 or burst < 1:
+            raise ValueError(f"a pacer needs a rate > 0 and a burst >= 1 ({rate}, {burst})")
+        self.rate, self.burst, self._clock = rate, burst, clock
+        self._tokens = float(burst)
+        self._last = clock()
+
+    def take(self) -> float:
+        """Take the next URB's turn; the time to wait before it completes, s (0: at once)."""
+        now = self._clock()
+        self._tokens = min(self.burst, self._tokens + (now - self._last) * self.rate) - 1.0
+        self._last = now
+        return -self._tokens / self.rate if self._tokens < 0 else 0.0
 
 
 DEFAULT_LIMITS = ConnectionLimits()
@@ -152,6 +191,7 @@ class Connection:
         self._control_lock = threading.Lock()
         self._cancelled: set[int] = set()
         self._closed = threading.Event()
+        self._out_pacer = ReportPacer(limits.out_reports_per_s, limits.out_report_burst)
         self.close_reason = ""
         self.view: DeviceView | None = None
 
@@ -224,6 +264,10 @@ class Connection:
                   bytes(header[40:48]), data)
         if ep == 0 and self._defer_control(urb, view):
             return
+        if ep and direction == OUT:
+            wait_s = self._out_pacer.take()
+            if wait_s and self._closed.wait(wait_s):
+                raise ConnectionClosed(self.close_reason)
         answer = view.submit(urb, self)
         if answer is not None:
             self.answer(answer)

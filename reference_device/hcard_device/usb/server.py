@@ -27,6 +27,7 @@ connections accepted per second           50          the others wait in the lis
 STATE reports queued per connection       32          the oldest is dropped (counted, PT5)
 interrupt-IN URBs parked per connection   64          the connection is closed
 OUT transfer length                       4096 B      the connection is closed, unread
+interrupt-OUT reports per connection      1000 /s     further URBs wait (64 pass at once)
 IN transfer length                        65535 B     the connection is closed
 answers waiting for a non-reading client  64 KiB      the connection is closed
 control transfers behind a slow one       4           the connection is closed
