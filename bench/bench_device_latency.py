@@ -44,9 +44,9 @@ import numpy as np
 from usbip import host as usbip_host
 
 from hcard import build
-from hcard_device.drivers import Driver, open_device
-from hcard_device.protocol import Finger, ReportId, State
-from hcard_device.usb.device import OUT_ENDPOINT
+from hcard.device import Driver, open_device
+from hcard.device.protocol import Finger, ReportId, State
+from hcard.device.protocol.usb_ids import OUT_ENDPOINT
 from hcard_device.usb.server import SWITCH_INTERVAL_S, DeviceServer
 from hcard_device.usb.transport import NoDelayUSBIP
 

@@ -29,7 +29,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 from bench_device_sim import back_and_forth, cards
 
 from hcard.card_io import to_bytes
-from hcard_device.drivers import open_device
+from hcard.device import open_device
 
 DEVICES = {"e-vita, UV grating": "sim://", "coupled, bipolar grating": "sim://coupled"}
 """Bench case -> device URI (the card of the same case in :func:`bench_device_sim.cards`)."""

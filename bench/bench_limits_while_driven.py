@@ -4,7 +4,7 @@ Run from the repository root::
 
     python bench/bench_limits_while_driven.py [--device evita|coupled] [--late]
 
-The reference device (``sim://``, protocol path: :class:`~hcard_device.drivers.sim.SimDriver`
+The reference device (``sim://``, protocol path: :class:`~hcard_device.sim_driver.SimDriver`
 over :class:`~hcard_device.firmware.Firmware`) streams UV 0 (and EV 4 on the coupled device)
 while the host's finger slides at 60 mm/s and 0.5 N, so the plate sits at the amplitude limit
 ``--from-nm`` (set at rest first) and the EV output at its voltage limit. After 80 ms plus
@@ -25,12 +25,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hcard_conformance.controls import LateLimitsSimulation
-from hcard_device.drivers.sim import SimDriver
-from hcard_device.drivers.uri import parse_uri
+from hcard.device.protocol import State
+from hcard.device.uri import parse_uri
+from hcard_device.controls import LateLimitsSimulation
 from hcard_device.firmware import Firmware
-from hcard_device.protocol import State
 from hcard_device.sim import DeviceConfig, DeviceSimulation
+from hcard_device.sim_driver import SimDriver
 
 SET_AT_S = 0.080
 """Device time of the SET before the phase offset, s (the plate has settled at the limit)."""

@@ -33,7 +33,7 @@ MEASURE = (
 PLAY = ("import contextlib, io\n"
         "with contextlib.redirect_stdout(io.StringIO()):\n"
         "    cli(sys.argv[1:], standalone_mode=False)")
-IMPORT_ONLY = "import hcard_device.drivers.play, hcard_device.drivers.recording"
+IMPORT_ONLY = "import hcard.device.play, hcard.device.recording"
 
 
 def write_inputs(folder: Path, seconds: float) -> tuple[Path, Path]:

@@ -43,7 +43,7 @@ from hostile_cards import json_empty_components  # noqa: E402
 from served_device import served_device  # noqa: E402
 
 from hcard.card_io import to_bytes  # noqa: E402
-from hcard_device.protocol.constants import DEFAULT_MAX_CARD_BYTES  # noqa: E402
+from hcard.device.protocol.constants import DEFAULT_MAX_CARD_BYTES  # noqa: E402
 
 SHARE_GOAL = 0.9
 """A well-behaved client keeps at least this share of what it receives alone (section 13)."""

@@ -16,9 +16,9 @@ and a non-zero exit; anything else escaping is a bug. The one hierarchy, by kind
 - :class:`PluginError`: a plugin is missing or unusable.
 - ``physics.predictor.PredictorError``: a model's parameters or inputs (``ProfileError``,
   ``EffectError``).
-- ``hcard_device.drivers.errors.DeviceError``: the device failed (``DeviceTimeout``, also a
+- ``hcard.device.errors.DeviceError``: the device failed (``DeviceTimeout``, also a
   :class:`TimeoutError`; ``DeviceStall``, ``SessionBusy``, ``SessionLost``), and
-  ``hcard_device.protocol.base.ProtocolError`` for malformed reports.
+  ``hcard.device.protocol.base.ProtocolError`` for malformed reports.
 - The conformance suite's ``CannotAssess`` and ``ConformanceFailure``.
 """
 

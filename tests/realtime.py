@@ -26,6 +26,7 @@ from typing import TypeVar
 
 import pytest
 
+from hcard.device.protocol import State
 from hcard_conformance.realtime import (
     ATTEMPTS,
     HostWatch,
@@ -36,7 +37,6 @@ from hcard_conformance.realtime import (
     reasons,
 )
 from hcard_conformance.result import CheckResult
-from hcard_device.protocol import State
 
 __all__ = ["MACHINE", "HostWatch", "NotKept", "assert_conforms", "in_real_time", "kept_run"]
 

@@ -8,6 +8,8 @@ import pytest
 from hcard import build, channels
 from hcard.cli.encode_cmd import encode
 from hcard.describe import CHANNEL_NAMES
+from hcard.device.play_summary import clip_text
+from hcard.device.protocol import ClipReport
 from hcard.preview.periods import channel_label
 from hcard.render.compiled import compile_texture
 from hcard.render.options import RenderOptions
@@ -15,8 +17,6 @@ from hcard.v1 import card_pb2 as pb
 from hcard.validate import validate
 from hcard_builtins.image.encoder import CHANNELS as ENCODER_CHANNELS
 from hcard_builtins.image.encoder import DEFAULT_FRICTION_RANGE
-from hcard_device.drivers.play import clip_text
-from hcard_device.protocol import ClipReport
 
 
 def test_the_table_is_the_card_enum() -> None:

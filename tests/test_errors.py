@@ -40,7 +40,7 @@ def _exception_classes() -> dict[str, type[BaseException]]:
 def test_every_exception_class_derives_from_the_root():
     classes = _exception_classes()
     # The walk reaches all four packages (at least the classes named in hcard.errors' tree).
-    assert {"hcard.errors.CardError", "hcard_device.drivers.errors.DeviceTimeout",
+    assert {"hcard.errors.CardError", "hcard.device.errors.DeviceTimeout",
             "hcard_conformance.result.CannotAssess", "hcard.physics.predictor.PredictorError",
             "hcard_device.sim.hidden.HiddenEffectError"} <= set(classes)
     outside = sorted(name for name, cls in classes.items() if not issubclass(cls, HcardError))
@@ -48,7 +48,7 @@ def test_every_exception_class_derives_from_the_root():
 
 
 def test_device_timeout_is_a_timeout_error():
-    from hcard_device.drivers import DeviceError, DeviceTimeout
+    from hcard.device import DeviceError, DeviceTimeout
 
     message = "usbip://127.0.0.1: GET_REPORT timed out after 1 s"
     with pytest.raises(TimeoutError):
@@ -58,7 +58,7 @@ def test_device_timeout_is_a_timeout_error():
 
 def test_device_timeout_is_one_line_on_the_command_line():
     """A timeout escaping a command is a user error (one line, status 1), not a bug."""
-    from hcard_device.drivers import DeviceTimeout
+    from hcard.device import DeviceTimeout
 
     message = "usbip://127.0.0.1: GET_REPORT timed out after 1 s"
 
@@ -85,7 +85,7 @@ def test_device_timeout_is_one_line_on_the_command_line():
     ("hcard.errors.CardValidationError", InputError, None),
     ("hcard.calibration.plan.PlanError", UsageError, None),
     ("hcard.render.renderer.RenderTooLong", UsageError, None),
-    ("hcard_device.drivers.errors.PlayTooLong", UsageError, None),
+    ("hcard.device.errors.PlayTooLong", UsageError, None),
 ])
 def test_groups_and_the_builtin_bases_callers_catch(
     name: str, group: type[HcardError], builtin: type[Exception] | None

@@ -1,12 +1,12 @@
 """What the suite runs against: the implementation under test and the vectors.
 
 A :class:`Context` names the implementation (``reference``, a device URI such as ``sim://``, or
-a negative-control driver ``control:...``), opens its driver, and renders a card along a finger
-track *the way that implementation does*:
+a negative control of the reference device, ``control:NAME``), opens its driver, and renders a
+card along a finger track *the way that implementation does*:
 
 * ``reference`` renders with :func:`hcard.render.render` itself, at the golden frame times;
 * a driver plays the track through the device as the host's finger
-  (:func:`hcard_device.drivers.play.play`) and returns the targets the device *reports* in its
+  (:func:`hcard.device.play.play`) and returns the targets the device *reports* in its
   STATE input reports (``target_uv``, ``target_ev``), one frame per report, on the track's time
   base (see :func:`reported_frames`).
 
@@ -29,13 +29,11 @@ from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb
 
 if TYPE_CHECKING:
-    from hcard_device.drivers.base import Driver
-    from hcard_device.protocol import State
+    from hcard.device.base import Driver
+    from hcard.device.protocol import State
 
 REFERENCE = "reference"
 """Driver name of the reference implementation (hcard.render, no device)."""
-CONTROL_PREFIX = "control:"
-"""Prefix of the negative-control drivers of :mod:`hcard_conformance.controls`."""
 DEFAULT_VECTORS = Path(__file__).resolve().parents[2] / "spec" / "vectors"
 """The vectors of this repository (``spec/vectors``)."""
 
@@ -64,7 +62,7 @@ def reported_frames(states: Sequence[State], track: FingerTrack,
 
     Each STATE report carries ``host_time_echo_us``, the host time of the last finger sample
     the device applied; ``host_us`` are the host times sent with the track's samples
-    (:attr:`hcard_device.drivers.play.PlayResult.host_us`; by default the track's own times),
+    (:attr:`hcard.device.play.PlayResult.host_us`; by default the track's own times),
     so an echo names the sample of this session it applied, and an echo of an earlier session
     (a device that stays powered between runs) names none. Reports before the first applied
     sample of the session are left out. Report times are those of :func:`session_times`:
@@ -93,9 +91,9 @@ def session_times(states: Sequence[State], track: FingerTrack, host_us: np.ndarr
     are never earlier than the truth and at most about a period plus the transport delay later
     (a lag that the lag search of metric A1 absorbs; see :data:`ECHO_MARGIN_PERIODS`).
     """
-    from hcard_device.drivers.recording import HOST_TIME_MODULO, echoed_samples, unwrapped_times
-    from hcard_device.drivers.state_log import state_field
-    from hcard_device.protocol.constants import ECHO_AGE_UNKNOWN, TIME_UNIT_S
+    from hcard.device.protocol.constants import ECHO_AGE_UNKNOWN, TIME_UNIT_S
+    from hcard.device.recording import HOST_TIME_MODULO, echoed_samples, unwrapped_times
+    from hcard.device.state_log import state_field
 
     if host_us is None:
         host_us = np.rint(track.t * US_PER_S).astype(np.int64) % HOST_TIME_MODULO
@@ -167,7 +165,7 @@ class Context:
             return self.renderer(card, track, options)
         if self.open_driver is None:
             return reference_render(card, track, options)
-        from hcard_device.drivers.play import play
+        from hcard.device.play import play
 
         with self.open_driver() as driver:
             self.cache[REALTIME_KEY] = driver.realtime
@@ -181,7 +179,7 @@ class Context:
     @classmethod
     def for_driver(cls, name: str, *, vectors_root: Path | None = None,
                    options: dict[str, Any] | None = None) -> Context:
-        """A Context for ``reference``, ``control:NAME`` or a device URI (``sim://``, ...).
+        """A Context for ``reference`` or a device URI (``sim://``, ``control:NAME``, ...).
 
         The driver is not opened here; an unknown name fails on first use with the driver's
         own error.
@@ -190,11 +188,6 @@ class Context:
         opts = dict(options or {})
         if name == REFERENCE:
             return cls(REFERENCE, None, root, opts)
-        if name.startswith(CONTROL_PREFIX):
-            from hcard_conformance.controls import open_control
-
-            control = name[len(CONTROL_PREFIX):]
-            return cls(name, lambda: open_control(control), root, opts)
-        from hcard_device.drivers import open_device
+        from hcard.device import open_device
 
         return cls(name, lambda: open_device(name), root, opts)

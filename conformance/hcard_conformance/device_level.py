@@ -49,6 +49,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from hcard import build
+from hcard.device.base import Driver
+from hcard.device.play import play
+from hcard.device.play_result import PlayResult
+from hcard.device.protocol import (
+    Capability,
+    DeviceInfo,
+    DeviceKind,
+    FaultBits,
+    Finger,
+    Limits,
+    State,
+)
+from hcard.device.published_profiles import published_profile
 from hcard.physics.profile import DeviceProfile
 from hcard.quantities import M_PER_MM, MS_PER_S, NM_PER_M, S_PER_MS, S_PER_US, UA_PER_A, US_PER_S
 from hcard.render import render
@@ -67,19 +80,6 @@ from hcard_conformance.realtime import (
 from hcard_conformance.result import CannotAssess, CheckResult, guarded
 from hcard_conformance.streaming import FINGER_PERIOD_S, lead_frames, require_fed, stream_fed
 from hcard_conformance.timing import timing_class
-from hcard_device.drivers.base import Driver
-from hcard_device.drivers.play import PlayResult, play
-from hcard_device.protocol import (
-    Capability,
-    DeviceInfo,
-    DeviceKind,
-    FaultBits,
-    Finger,
-    Limits,
-    State,
-)
-from hcard_device.sim import DeviceConfig
-from hcard_device.sim.models import device_profile
 
 LEVEL = "device"
 FRICTION_JND = 0.08
@@ -176,9 +176,20 @@ def device_class(ctx: Context, info: DeviceInfo) -> str:
 
 
 def device_profile_for(info: DeviceInfo) -> DeviceProfile:
-    """The physics profile of a device: the reference device's models for its kind."""
-    config = DeviceConfig.coupled() if info.capabilities & Capability.EV else DeviceConfig.evita()
-    return device_profile(config)
+    """The physics profile the device ``info`` describes publishes, from its ``device-profile``
+    plugin (:func:`hcard.device.published_profiles.published_profile`; the reference devices'
+    are the firmware's models).
+
+    Raises:
+        CannotAssess: no installed plugin publishes the device's profile.
+    """
+    profile = published_profile(info)
+    if profile is None:
+        raise CannotAssess(
+            f"no installed device-profile plugin publishes the physics of this device (device "
+            f"kind {info.device_kind}, plate {info.plate_frequency_hz} Hz): rendered friction "
+            "is judged through the device's own profile")
+    return profile
 
 
 def _result(name: str, case: str, metric: str, value: float, threshold: float, unit: str,
@@ -262,8 +273,8 @@ def track_speed(track: FingerTrack, t: np.ndarray) -> np.ndarray:
 def speed_known_s(result: PlayResult) -> float:
     """Track time (s) of the first report that echoes a touch sample after the stroke's first:
     from it the device has two samples, so a speed; +inf when no report does."""
-    from hcard_device.drivers.recording import echoed_samples
-    from hcard_device.drivers.state_log import state_field
+    from hcard.device.recording import echoed_samples
+    from hcard.device.state_log import state_field
 
     keep, t = session_times(result.states, result.track, result.host_us)
     echo = state_field(result.states, "host_time_echo_us").astype(np.int64)

@@ -43,21 +43,9 @@ from itertools import pairwise
 
 from hcard import build
 from hcard.card_io import to_bytes
-from hcard.quantities import MS_PER_S, S_PER_US, US_PER_S
-from hcard_conformance.context import Context
-from hcard_conformance.realtime import (
-    NOT_KEPT,
-    NotKept,
-    attempted_case,
-    collection_deferred,
-    device_lag,
-    reasons,
-)
-from hcard_conformance.result import CannotAssess, CheckResult, guarded, measured, unassessed
-from hcard_conformance.timing import REAL_TIME, timing_class
-from hcard_device.drivers.base import Driver
-from hcard_device.drivers.errors import DeviceStall, SessionLost
-from hcard_device.protocol import (
+from hcard.device.base import Driver
+from hcard.device.errors import DeviceStall, SessionLost
+from hcard.device.protocol import (
     FRICTION_SCALE,
     UPLOAD_CHUNK_BYTES,
     Capability,
@@ -77,7 +65,19 @@ from hcard_device.protocol import (
     UploadStatus,
     crc32,
 )
-from hcard_device.protocol.constants import UPLOAD_TIMEOUT_S
+from hcard.device.protocol.constants import UPLOAD_TIMEOUT_S
+from hcard.quantities import MS_PER_S, S_PER_US, US_PER_S
+from hcard_conformance.context import Context
+from hcard_conformance.realtime import (
+    NOT_KEPT,
+    NotKept,
+    attempted_case,
+    collection_deferred,
+    device_lag,
+    reasons,
+)
+from hcard_conformance.result import CannotAssess, CheckResult, guarded, measured, unassessed
+from hcard_conformance.timing import REAL_TIME, timing_class
 
 LEVEL = "device"
 

@@ -29,10 +29,10 @@ import time
 from collections.abc import Callable, Iterable, Sequence
 from typing import TypeVar
 
+from hcard.device.priority import collection_deferred, host_priority
+from hcard.device.protocol import FaultBits, State
 from hcard.quantities import MS_PER_S
 from hcard_conformance.result import CannotAssess, CheckResult, unassessed
-from hcard_device.drivers.priority import collection_deferred, host_priority
-from hcard_device.protocol import FaultBits, State
 
 __all__ = ["ATTEMPTS", "HOST_LATE_S", "NOT_KEPT", "HostWatch", "NotKept", "attempted_case",
            "attempts", "collection_deferred", "device_lag", "host_priority", "not_kept_results",

@@ -10,7 +10,7 @@
     one makes every case UNASSESSED with that reason. Cases:
 
     ``second-host-refused``
-        The first host plays a :data:`PLAY_S` stroke (:func:`hcard_device.drivers.play.play`);
+        The first host plays a :data:`PLAY_S` stroke (:func:`hcard.device.play.play`);
         :data:`INTRUDE_S` after its START, the second host sends START with another token and
         uploads another card. Metric: the intrusions the device carried out (a START not
         refused with SESSION_BUSY or that changed the session, PN3; an upload not refused, its
@@ -23,7 +23,7 @@
     ``takeover-reported``
         As above, but the second host sends TAKE_OVER (PN6) and keeps its session fed. Metric:
         time from the TAKE_OVER to the first host's play raising
-        :class:`~hcard_device.drivers.errors.SessionLost` (PN9), ms (infinite when it never
+        :class:`~hcard.device.errors.SessionLost` (PN9), ms (infinite when it never
         does); threshold :data:`LOSS_THRESHOLD_S`, plus the host read lag of the timing class
         when it does not keep real time (the first host learns of the loss from a report).
     ``released-by-stop``
@@ -42,6 +42,11 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 from hcard import build
+from hcard.device.base import Driver
+from hcard.device.errors import DeviceError, SessionBusy, SessionLost
+from hcard.device.play import play
+from hcard.device.play_result import PlayResult
+from hcard.device.protocol import Command, Control, DeviceInfo, FaultBits, State, StateFlags
 from hcard.quantities import MS_PER_S
 from hcard.track import FingerTrack, straight_stroke
 from hcard.v1 import card_pb2 as pb
@@ -54,10 +59,6 @@ from hcard_conformance.result import (
     measured,
 )
 from hcard_conformance.timing import timing_class
-from hcard_device.drivers.base import Driver
-from hcard_device.drivers.errors import DeviceError, SessionBusy, SessionLost
-from hcard_device.drivers.play import PlayResult, play
-from hcard_device.protocol import Command, Control, DeviceInfo, FaultBits, State, StateFlags
 
 LEVEL = "device"
 CHECK = "device.session-ownership"
@@ -90,7 +91,7 @@ class Background:
 
     On a real-time driver the play runs on a thread and ``intrude`` on the caller's, on the
     wall clock; on ``sim://`` (simulated time) ``intrude`` runs inside the play, between two
-    steps of the shared device (:meth:`hcard_device.drivers.sim.SharedDevice.call_when`)."""
+    steps of the shared device (:meth:`hcard_device.sim_driver.SharedDevice.call_when`)."""
 
     driver: Driver
     card: pb.Card

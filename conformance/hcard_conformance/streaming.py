@@ -19,11 +19,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hcard.device.base import Driver
+from hcard.device.protocol import Capability, State
+from hcard.device.recording import unwrapped_times
 from hcard.quantities import S_PER_US, US_PER_S
 from hcard_conformance.realtime import NOT_KEPT, NotKept, collection_deferred, device_lag
-from hcard_device.drivers.base import Driver
-from hcard_device.drivers.recording import unwrapped_times
-from hcard_device.protocol import Capability, State
 
 LEAD_S = 0.1
 """Longest lead of the streamed frames over the device's playback, s: a host that does not

@@ -497,8 +497,8 @@ def _verify(uri: str, files: tuple[Path, Path], profile: DeviceProfile, timeout:
     go to ``output`` as ``verify-before.csv`` and ``verify-after.csv``."""
     from hcard.calibration.measurement import write_measurement
     from hcard.card_io import load
+    from hcard.device.verify import verify
     from hcard.track import read_track_csv
-    from hcard_device.drivers.verify import verify
 
     card_path, track_path = files
     card, track = load(card_path), read_track_csv(track_path)

@@ -6,7 +6,7 @@ the Protocol of its kind. The Protocols are ``runtime_checkable``, so ``isinstan
 PredictorPlugin)`` checks that the members are there (not their signatures). Base classes with
 shared behaviour implement them and may be subclassed: :class:`Encoder` (here),
 :class:`hcard.physics.Predictor`, :class:`hcard.physics.effects.Effect`,
-``hcard_device.drivers.Driver`` and ``hcard_conformance.registry.Check``.
+``hcard.device.Driver`` and ``hcard_conformance.registry.Check``.
 
 Every kind has ``kind`` (its name in :data:`KINDS`), ``name`` (unique within the kind) and a
 one-line ``description``. This module imports nothing heavy: the types of the members are only
@@ -210,7 +210,7 @@ class EffectPlugin(Plugin, Protocol):
 class DriverPlugin(Plugin, Protocol):
     """Kind ``driver`` (hook ``hcard_drivers``): a transport to devices of some URI schemes.
 
-    The plugin object is usually a class (``hcard_device.drivers.Driver`` subclass) whose
+    The plugin object is usually a class (``hcard.device.Driver`` subclass) whose
     ``open`` returns a connected instance, or a :class:`~hcard.plugins.lazy_plugins.LazyDriver`
     naming that class, imported when a device is first opened (the built-ins).
     """
@@ -225,6 +225,23 @@ class DriverPlugin(Plugin, Protocol):
     def enumerate(self, hosts: Sequence[tuple[str, int]] = ..., *,
                   timeout_s: float = ...) -> list[Any]:
         """``DeviceListing`` of every device it reaches now; never raises for a missing one."""
+
+
+@runtime_checkable
+class DeviceProfilePlugin(Plugin, Protocol):
+    """Kind ``device-profile`` (hook ``hcard_device_profiles``): the physics profile a kind of
+    device renders with and publishes (spec/device-profile.md), recognised from its DEVICE_INFO.
+
+    A host that plays a card on a device with its own profile writes this profile into the
+    recording's sidecar (spec/measurement-format.md MF9), where ``hcard calibrate`` finds the
+    base model to calibrate (:func:`hcard.device.published_profiles.published_profile`).
+    """
+
+    def matches(self, info: Any) -> bool:
+        """True when the device ``info`` (a ``DeviceInfo``) describes renders with it."""
+
+    def profile(self) -> Any:
+        """The profile (:class:`hcard.physics.profile.DeviceProfile`)."""
 
 
 @runtime_checkable
@@ -292,6 +309,8 @@ KIND_TABLE: tuple[Kind, ...] = (
          "physics predictors: actuation and finger state to friction, and back"),
     Kind("driver", "hcard_drivers", DriverPlugin, "drivers",
          "device drivers: transports that upload cards and stream tracks to a device"),
+    Kind("device-profile", "hcard_device_profiles", DeviceProfilePlugin, "device_profiles",
+         "device profiles: the physics a kind of device renders with, from its DEVICE_INFO"),
     Kind("calibration-effect", "hcard_calibration_effects", EffectPlugin, "calibration_effects",
          "calibration effects: physical effects a fitted model may lack"),
     Kind("conformance-check", "hcard_conformance_checks", CheckPlugin, "conformance_checks",
@@ -322,6 +341,7 @@ __all__ = [
     "PROTOCOL_OF_KIND",
     "CheckPlugin",
     "CommandPlugin",
+    "DeviceProfilePlugin",
     "DriverPlugin",
     "EffectPlugin",
     "EncodeResult",

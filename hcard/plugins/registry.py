@@ -301,6 +301,7 @@ class PluginRegistry:
     encoders = _PluginsOfKind()
     predictors = _PluginsOfKind()
     drivers = _PluginsOfKind()
+    device_profiles = _PluginsOfKind()
     calibration_effects = _PluginsOfKind()
     conformance_checks = _PluginsOfKind()
 

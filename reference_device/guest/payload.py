@@ -13,7 +13,7 @@ and exits 0 when the check passed.  Modes:
   echo   the echo device of echo_device.py: raw hidraw ioctls/read/write, then the hidapi
          package's hidraw backend, against the device's known answers
   hcard  the hcard reference device (`python -m hcard_device.usb.server`) through the unmodified
-         hidapi driver (hcard_device.drivers.hidapi_driver): device info, card upload with its
+         hidapi driver (hcard.device.transports.hidapi_driver): device info, card upload with its
          CRC-32 check and commit, host finger track streamed in real time, STATE reports read
 """
 
@@ -299,9 +299,9 @@ def default_track() -> Any:
 
 def mode_hcard(args: argparse.Namespace) -> dict[str, Any]:
     from hcard.card_io import load, to_bytes
+    from hcard.device.protocol import crc32
+    from hcard.device.transports.hidapi_driver import HidapiDriver
     from hcard.track import read_track_csv
-    from hcard_device.drivers.hidapi_driver import HidapiDriver
-    from hcard_device.protocol import crc32
 
     card = load(args.card) if args.card else default_card()
     track = read_track_csv(args.track) if args.track else default_track()
@@ -355,7 +355,7 @@ def play_track(driver: Any, track: Any, boundary_x_mm: float) -> dict[str, Any]:
       target differs by >= FRICTION_STEP_X1E4 from the last one before that sample.
     Targets are summarised per side of the boundary, by the finger position each STATE reports
     (1 mm margin)."""
-    from hcard_device.protocol import Finger, StateFlags
+    from hcard.device.protocol import Finger, StateFlags
 
     margin = 100  # 1 mm in 0.01 mm
     boundary = round(boundary_x_mm * 100)

@@ -38,12 +38,12 @@ from dataclasses import dataclass
 from typing import IO, Protocol
 
 from hcard.card_io import parse_card
+from hcard.device.protocol.upload import failure_detail
 from hcard.errors import HcardError
 from hcard.physics.profile import DeviceProfile
 from hcard.render.compiled import CompiledCard, compile_card
 from hcard.render.options import RenderOptions
 from hcard.v1 import card_pb2 as pb
-from hcard_device.protocol.upload import failure_detail
 from hcard_device.sim.clip import TextureExtremes, card_extremes
 
 CHECK_TIMEOUT_S = 20.0

@@ -1,7 +1,7 @@
 """``hcard device serve|list|synthesize`` and ``hcard play``: the reference device, its host
 drivers, and synthetic tribometer recordings.
 
-The device side lives in :mod:`hcard_device.usb`, the drivers in :mod:`hcard_device.drivers`
+The device side lives in :mod:`hcard_device.usb`, the drivers in :mod:`hcard.device`
 (imported when a command runs). :mod:`hcard_device.commands` contributes the commands to
 ``hcard``, which imports this module only when one of them runs.
 """
@@ -147,7 +147,7 @@ def list_devices(hosts: tuple[str, ...], timeout: float) -> None:
       hcard device list
       hcard device list --host 192.168.1.20 --host lab-pc:3241 --timeout 3
     """
-    from hcard_device.drivers import list_devices as find_devices
+    from hcard.device import list_devices as find_devices
 
     servers = [_host_port(text) for text in (hosts or (DEFAULT_LIST_HOST,))]
     listings = find_devices(servers, timeout_s=timeout)
@@ -205,11 +205,11 @@ def synthesize(device_class: str, uri: str | None, effect_names: tuple[str, ...]
     from hcard.calibration.plan import protocol, verification
     from hcard.cli.calibrate_cmd import write_plan
     from hcard.cli.options import quantity_option
-    from hcard_device.drivers import open_device
-    from hcard_device.drivers.play import play as play_track
-    from hcard_device.drivers.play import summary
-    from hcard_device.drivers.recording import recording
-    from hcard_device.drivers.uri import parse_uri
+    from hcard.device import open_device
+    from hcard.device.play import play as play_track
+    from hcard.device.play_summary import summary
+    from hcard.device.recording import recording
+    from hcard.device.uri import parse_uri
 
     if list_effects:
         echo_hidden_effects()
@@ -284,13 +284,14 @@ def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Pat
       hcard play card.hcard --device sim://evita --track stroke.csv -o rec.csv
       hcard play card.hcard --device usbip://127.0.0.1:3240/1-1 --track stroke.csv -o rec.csv
     """
+    from hcard.device import PlayTooLong, open_device
+    from hcard.device.play import check_play_length
+    from hcard.device.play import play as play_track
+    from hcard.device.play_summary import summary
+    from hcard.device.priority import real_time_host
+    from hcard.device.recording import write_recording
     from hcard.physics.profile import DeviceProfile
     from hcard.physics.profile_format import read_profile_bytes
-    from hcard_device.drivers import PlayTooLong, open_device
-    from hcard_device.drivers.play import check_play_length, summary
-    from hcard_device.drivers.play import play as play_track
-    from hcard_device.drivers.priority import real_time_host
-    from hcard_device.drivers.recording import write_recording
 
     if output.suffix.lower() != ".csv":
         raise click.BadParameter("the recording must end in .csv", param_hint="--output")

@@ -7,7 +7,7 @@
   report or raise :class:`ProtocolError`, which the USB layer turns into a STALL;
 - output reports (:meth:`Firmware.handle_output`) become finger states, streamed frames and
   commands; malformed ones are counted and flagged (fault INVALID_REQUEST), never raised;
-- the card upload runs through :class:`~hcard_device.protocol.upload.UploadStore` (staging
+- the card upload runs through :class:`~hcard.device.protocol.upload.UploadStore` (staging
   buffer, CRC-32, validation, atomic swap);
 - :meth:`Firmware.advance` runs the simulation and produces one STATE report per
   ``frame_rate / 1000`` frames into a bounded queue (the oldest dropped and counted);
@@ -36,13 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hcard.errors import HcardError
-from hcard.physics.profile import DeviceProfile
-from hcard.quantities import MM_PER_M, MS_PER_S
-from hcard.render import Renderer
-from hcard.track import FingerTrack, make_track
-from hcard_device.card_check import Checker, CheckFailed, InlineChecker, assemble_card
-from hcard_device.protocol import (
+from hcard.device.protocol import (
     AMPLITUDE_UNIT_M,
     CURRENT_UNIT_A,
     ECHO_AGE_UNKNOWN,
@@ -83,9 +77,15 @@ from hcard_device.protocol import (
     decode_output,
     report_class,
 )
-from hcard_device.protocol.constants import DEFAULT_MAX_CARD_BYTES
-from hcard_device.protocol.reports import POSITION_RANGE
-from hcard_device.protocol.upload import StagedUpload, UploadStore, detail_text
+from hcard.device.protocol.constants import DEFAULT_MAX_CARD_BYTES
+from hcard.device.protocol.reports import POSITION_RANGE
+from hcard.device.protocol.upload import StagedUpload, UploadStore, detail_text
+from hcard.errors import HcardError
+from hcard.physics.profile import DeviceProfile
+from hcard.quantities import MM_PER_M, MS_PER_S
+from hcard.render import Renderer
+from hcard.track import FingerTrack, make_track
+from hcard_device.card_check import Checker, CheckFailed, InlineChecker, assemble_card
 from hcard_device.sim import TOUCH_DTYPE, DeviceSimulation, SimBlock
 from hcard_device.sim.clip import ClipItem
 from hcard_device.sim.simulation import PreparedCard

@@ -13,12 +13,12 @@ from __future__ import annotations
 
 from collections import deque
 
-from hcard_conformance.controls import DelayedFingerDriver
-from hcard_device.drivers.sim import STEP_S, SimDriver
-from hcard_device.drivers.uri import parse_uri
+from hcard.device.protocol import Finger, ReportId, State
+from hcard.device.uri import parse_uri
+from hcard_device.controls import DelayedFingerDriver
 from hcard_device.firmware import Firmware
-from hcard_device.protocol import Finger, ReportId, State
 from hcard_device.sim import DeviceConfig, DeviceSimulation
+from hcard_device.sim_driver import STEP_S, SimDriver
 
 LATE_S = 0.009
 """Delay of the second FINGER report of each contact, s (within the D3 bound of 10 ms)."""

@@ -12,6 +12,9 @@ import numpy as np
 import pytest
 from plate_loop import plate_loop_bandwidth_hz, plate_loop_db
 
+from hcard.device import open_device
+from hcard.device.protocol import Finger
+from hcard.device.uri import parse_uri
 from hcard_conformance.device_level import (
     BANDWIDTH_FREQUENCIES_HZ,
     BANDWIDTH_REFERENCE_HZ,
@@ -21,11 +24,8 @@ from hcard_conformance.device_level import (
     windowed_gain,
 )
 from hcard_conformance.streaming import FINGER_PERIOD_S, FINGER_SPEED_MM_S, stream
-from hcard_device.drivers import open_device
-from hcard_device.drivers.sim import SimDriver, make_firmware
-from hcard_device.drivers.uri import parse_uri
-from hcard_device.protocol import Finger
 from hcard_device.sim import DeviceConfig
+from hcard_device.sim_driver import SimDriver, make_firmware
 
 
 def test_harmonics_fold_onto_400_hz_and_onto_no_swept_frequency_at_1_khz_reports() -> None:

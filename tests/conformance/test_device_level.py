@@ -10,13 +10,13 @@ import pytest
 from late_transport import LateSecondSampleDriver
 from plate_loop import plate_loop_bandwidth_hz
 
+from hcard.device import open_device
+from hcard.device.play import play
 from hcard_conformance import device_level as dl
 from hcard_conformance.context import Context
 from hcard_conformance.registry import all_checks
 from hcard_conformance.result import CheckResult
 from hcard_conformance.runner import run_suite
-from hcard_device.drivers import open_device
-from hcard_device.drivers.play import play
 from hcard_device.sim import DeviceConfig
 
 DEVICE_CHECKS = {"device.friction", "device.dynamics", "device.latency", "device.safety",

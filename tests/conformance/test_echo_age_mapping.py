@@ -20,10 +20,7 @@ import pytest
 
 from hcard import build
 from hcard.card_io import to_bytes
-from hcard.track import FingerTrack
-from hcard_conformance.context import session_times
-from hcard_device.firmware import Firmware
-from hcard_device.protocol import (
+from hcard.device.protocol import (
     ECHO_AGE_UNKNOWN,
     Command,
     Control,
@@ -32,6 +29,9 @@ from hcard_device.protocol import (
     decode_input,
     upload_reports,
 )
+from hcard.track import FingerTrack
+from hcard_conformance.context import session_times
+from hcard_device.firmware import Firmware
 from hcard_device.sim import DeviceConfig, DeviceSimulation
 
 SPEED_MM_S = 100.0

@@ -88,18 +88,20 @@ def test_every_row_of_the_builtin_table_names_a_check_function_of_its_level() ->
 
 
 def test_listing_the_plugins_imports_no_check_module_and_no_driver() -> None:
-    """``hcard plugins`` lists 17 checks and 4 drivers from their tables (rows, not modules)."""
+    """``hcard plugins`` lists 17 checks and 5 drivers from their tables (rows, not modules)."""
     code = ("import sys, warnings\n"
             "from hcard.plugins.registry import get_registry\n"
             "warnings.simplefilter('ignore')\n"
             "registry = get_registry(); registry.collect()\n"
             "print(len(registry.infos('conformance-check')), len(registry.infos('driver')))\n"
             "print(sorted(m for m in sys.modules if m.startswith(('hcard_conformance.',"
-            " 'hcard_device.drivers.', 'hcard_device.usb', 'hcard_device.firmware'))))\n")
+            " 'hcard.device.base', 'hcard.device.protocol', 'hcard.device.transports',"
+            " 'hcard_device.sim_driver', 'hcard_device.controls', 'hcard_device.usb',"
+            " 'hcard_device.firmware'))))\n")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           check=True)
     counts, imported = done.stdout.splitlines()
-    assert counts.split() == ["17", "4"]
+    assert counts.split() == ["17", "5"]  # usbip, pyusb, hid; sim, control
     assert ast.literal_eval(imported) == ["hcard_conformance.registry", "hcard_conformance.result"]
 
 
@@ -290,8 +292,8 @@ def test_pytest_plugin_makes_one_item_per_case(broken_vectors: Path, tmp_path: P
 def _vanishing_device(after_writes: int):
     """The simulated E-ViTa whose link breaks after ``after_writes`` output reports (a device
     unplugged in the middle of a check): every later write raises DeviceError."""
-    from hcard_device.drivers import open_device
-    from hcard_device.drivers.errors import DeviceError
+    from hcard.device import open_device
+    from hcard.device.errors import DeviceError
 
     driver = open_device("sim://evita")
     write = driver._write_output

@@ -12,12 +12,12 @@ import pytest
 from realtime import assert_conforms
 from served_device import served_device
 
+from hcard.device import open_device
 from hcard_conformance import device_level as dl
 from hcard_conformance.context import Context
-from hcard_conformance.controls import CONTROLS
 from hcard_conformance.result import CheckResult
 from hcard_conformance.runner import run_suite
-from hcard_device.drivers import open_device
+from hcard_device.controls import CONTROLS
 
 CASE = "limits-while-driven"
 

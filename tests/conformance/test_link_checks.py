@@ -14,18 +14,18 @@ import pytest
 from realtime import assert_conforms
 from served_device import served_device
 
+from hcard.device import open_device
+from hcard.device.base import DEFAULT_TIMEOUT_S
+from hcard.device.protocol import State, StateFlags, UploadAction, crc32
+from hcard.device.uri import parse_uri
 from hcard_conformance import link_checks as lc
 from hcard_conformance.context import Context
-from hcard_conformance.controls import DROPPED_FRACTION, LossyFirmware
 from hcard_conformance.registry import all_checks
 from hcard_conformance.result import CheckResult
 from hcard_conformance.runner import run_suite
-from hcard_device.drivers import open_device
-from hcard_device.drivers.base import DEFAULT_TIMEOUT_S
-from hcard_device.drivers.sim import SimDriver
-from hcard_device.drivers.uri import parse_uri
-from hcard_device.protocol import State, StateFlags, UploadAction, crc32
+from hcard_device.controls import DROPPED_FRACTION, LossyFirmware
 from hcard_device.sim import DeviceConfig, DeviceSimulation
+from hcard_device.sim_driver import SimDriver
 
 LINK_CHECKS = ("device.upload-integrity", "device.report-loss")
 REFUSALS = {"bad-crc": "CRC_MISMATCH", "truncated": "SHORT", "out-of-order": "OUT_OF_ORDER",

@@ -8,15 +8,15 @@ import pytest
 from hcard_conformance import device_level as dl
 from hcard_conformance import renderer_level as rl
 from hcard_conformance.context import Context
-from hcard_conformance.controls import (
+from hcard_conformance.registry import all_checks
+from hcard_conformance.result import FAIL, PASS, CheckResult
+from hcard_device.controls import (
     ACTUATOR_GAIN,
     CATCHES,
     CONTROLS,
     FREQUENCY_ERROR,
     open_control,
 )
-from hcard_conformance.registry import all_checks
-from hcard_conformance.result import FAIL, PASS, CheckResult
 
 
 def _run(name: str, check: object, renders: list[str] | None = None) -> dict[str, CheckResult]:

@@ -12,6 +12,8 @@ from dataclasses import replace
 import pytest
 from realtime import MACHINE, assert_conforms, in_real_time, kept_run
 
+from hcard.device.protocol import Counters, FaultBits, State
+from hcard.device.uri import parse_uri
 from hcard_conformance import link_checks as lc
 from hcard_conformance.context import Context
 from hcard_conformance.device_level import check_latency
@@ -26,11 +28,9 @@ from hcard_conformance.realtime import (
     not_kept_results,
 )
 from hcard_conformance.result import FAIL, PASS, UNASSESSED, CannotAssess, CheckResult, unassessed
-from hcard_device.drivers.sim import SimDriver
-from hcard_device.drivers.uri import parse_uri
 from hcard_device.firmware import Firmware
-from hcard_device.protocol import Counters, FaultBits, State
 from hcard_device.sim import DeviceConfig, DeviceSimulation
+from hcard_device.sim_driver import SimDriver
 
 
 def _state(faults: int = 0) -> State:

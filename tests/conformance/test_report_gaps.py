@@ -9,12 +9,12 @@ import dataclasses
 import numpy as np
 import pytest
 
+from hcard.device.play import play
 from hcard_conformance import metrics, renderer_level
 from hcard_conformance.context import Context, reported_frames
 from hcard_conformance.metrics import Signal
 from hcard_conformance.result import UNASSESSED
 from hcard_conformance.runner import run_suite
-from hcard_device.drivers.play import play
 
 CASE = "oriented-gratings@diagonal-stroke"
 

@@ -19,10 +19,10 @@ from plate_loop import plate_loop_bandwidth_hz
 from realtime import assert_conforms
 from served_device import served_device
 
+from hcard.device import open_device
 from hcard_conformance.context import Context
 from hcard_conformance.registry import all_checks
 from hcard_conformance.runner import run_suite
-from hcard_device.drivers import open_device
 from hcard_device.sim import DeviceConfig
 
 

@@ -12,7 +12,6 @@ from realtime import assert_conforms
 from served_device import served_device
 
 from hcard_conformance.context import Context
-from hcard_conformance.controls import CONTROLS
 from hcard_conformance.registry import builtin_checks
 from hcard_conformance.result import FAIL, PASS, UNASSESSED, CheckResult
 from hcard_conformance.session_checks import (
@@ -21,6 +20,7 @@ from hcard_conformance.session_checks import (
     LOSS_THRESHOLD_S,
     check_session_ownership,
 )
+from hcard_device.controls import CONTROLS
 
 
 def run(name: str) -> dict[str, CheckResult]:

@@ -10,6 +10,7 @@ import pytest
 from click.testing import CliRunner
 
 from hcard.cli.main import cli
+from hcard.device.uri import parse_uri
 from hcard_conformance.conformance_cmd import TIMING_NAMES
 from hcard_conformance.context import Context
 from hcard_conformance.device_level import BANDWIDTH_UV_MEAN, BANDWIDTH_UV_SWING, amplitude_gain
@@ -17,8 +18,7 @@ from hcard_conformance.result import CannotAssess
 from hcard_conformance.runner import run_suite
 from hcard_conformance.streaming import FED_ATTEMPTS, STARVED_FRACTION, require_fed, stream
 from hcard_conformance.timing import REAL_TIME, TIMING_CLASSES
-from hcard_device.drivers.sim import SimDriver, make_firmware
-from hcard_device.drivers.uri import parse_uri
+from hcard_device.sim_driver import SimDriver, make_firmware
 
 
 def test_cli_timing_names_are_the_timing_classes_default_first() -> None:

@@ -3,8 +3,8 @@
 Linux turns a hidraw ``write`` into an interrupt OUT transfer, ``HIDIOCSFEATURE`` /
 ``HIDIOCGFEATURE`` into SET_REPORT / GET_REPORT(Feature) and delivers interrupt IN reports to
 ``read``; a STALL surfaces as EPIPE ("Broken pipe"), an unplugged device as ENODEV. This module
-does the same over :class:`~hcard_device.drivers.usbip_link.UsbipLink`, so that
-:class:`~hcard_device.drivers.hidapi_driver.HidapiDriver` runs unmodified against the real
+does the same over :class:`~hcard.device.transports.usbip_link.UsbipLink`, so that
+:class:`~hcard.device.transports.hidapi_driver.HidapiDriver` runs unmodified against the real
 firmware in a separate process. Paths are ``usbip://HOST:PORT/BUSID`` (bytes, as hidapi's).
 The QEMU guest tier (tests/device/test_guest.py) runs the driver on a real ``/dev/hidraw``.
 """
@@ -13,8 +13,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from hcard_device.drivers.errors import DeviceError, DeviceStall
-from hcard_device.drivers.usbip_link import UsbipLink
+from hcard.device.errors import DeviceError, DeviceStall
+from hcard.device.transports.usbip_link import UsbipLink
 
 _TIMEOUT_S = 5.0  # the kernel's USB_CTRL_SET_TIMEOUT
 

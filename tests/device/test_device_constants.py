@@ -12,6 +12,7 @@ import pytest
 from hcard.bounded_read import DEFAULT_MAX_PIXELS
 from hcard.calibration.dataset import ATMOSPHERE_PA
 from hcard.cli.encode_cmd import encode
+from hcard.device.protocol import FaultBits
 from hcard.physics.device_limits import COUPLED_STIMULATOR_LIMITS
 from hcard.rates import DEFAULT_FRAME_RATE_HZ, TOUCH_RATE_HZ
 from hcard.render.options import RenderOptions
@@ -23,7 +24,6 @@ from hcard_builtins.physics.ultrasonic.squeeze_film import ATMOSPHERE as FILM_AT
 from hcard_conformance.vectors.generate import TOLERANCES
 from hcard_conformance.vectors.tracks import TOUCH_RATE_HZ as VECTOR_TOUCH_RATE_HZ
 from hcard_device.firmware import Firmware
-from hcard_device.protocol import FaultBits
 from hcard_device.sim import DeviceSimulation
 from hcard_device.sim.config import DeviceConfig
 from hcard_device.sim.models import device_profile

@@ -19,9 +19,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hcard_conformance.controls import LateLimitsSimulation
-from hcard_device.firmware import LIMIT_SETTLE_MAX_S, Firmware
-from hcard_device.protocol import (
+from hcard.device.protocol import (
     Command,
     Control,
     Finger,
@@ -32,6 +30,8 @@ from hcard_device.protocol import (
     decode_input,
     stream_reports,
 )
+from hcard_device.controls import LateLimitsSimulation
+from hcard_device.firmware import LIMIT_SETTLE_MAX_S, Firmware
 from hcard_device.sim import DeviceConfig, DeviceSimulation
 from hcard_device.sim.plate import (
     DRIVE_SLACK,

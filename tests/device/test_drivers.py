@@ -20,7 +20,7 @@ from realtime import in_real_time, kept_run
 from served_device import served_device
 
 from hcard import build
-from hcard_device.drivers import (
+from hcard.device import (
     DeviceError,
     DeviceStall,
     UriError,
@@ -28,10 +28,7 @@ from hcard_device.drivers import (
     open_device,
     parse_uri,
 )
-from hcard_device.drivers.hidapi_driver import HidapiDriver, hidapi_module
-from hcard_device.drivers.sim import SimDriver
-from hcard_device.drivers.usbip_link import UNLINK_GRACE_S
-from hcard_device.protocol import (
+from hcard.device.protocol import (
     Capability,
     ClipReason,
     DeviceInfo,
@@ -44,7 +41,10 @@ from hcard_device.protocol import (
     UploadResult,
     UploadState,
 )
-from hcard_device.usb.device import PID, VID
+from hcard.device.protocol.usb_ids import PID, VID
+from hcard.device.transports.hidapi_driver import HidapiDriver, hidapi_module
+from hcard.device.transports.usbip_link import UNLINK_GRACE_S
+from hcard_device.sim_driver import SimDriver
 from hcard_device.usb.server import DeviceServer
 
 TIMEOUT_S = 1.0
@@ -439,17 +439,44 @@ def test_unencodable_host_values_are_device_errors():
 
 
 def test_drivers_register_as_a_plugin():
+    from hcard.device import driver_table
     from hcard.plugins.registry import PluginRegistry
-    from hcard_device import driver_plugins as plugin
+    from hcard_device import plugins as reference_plugins
 
     registry = PluginRegistry()
-    infos = registry.register(plugin, name="builtin-drivers")
-    assert sorted(info.name for info in infos) == ["hid", "pyusb", "sim", "usbip"]
-    assert all(info.kind == "driver" and info.description for info in infos)
-    schemes = {scheme for info in infos for scheme in info.obj.schemes}
+    infos = registry.register(driver_table, name="host-drivers")
+    infos += registry.register(reference_plugins, name="reference-device")
+    drivers = [info for info in infos if info.kind == "driver"]
+    assert sorted(info.name for info in drivers) == ["hid", "pyusb", "sim", "usbip"]
+    assert all(info.description for info in infos)
+    schemes = {scheme for info in drivers for scheme in info.obj.schemes}
     assert schemes == {"sim", "usbip", "pyusb", "hid"}
+    assert sorted(info.name for info in infos if info.kind == "device-profile") == [
+        "reference-coupled", "reference-evita"]
     with registry.get("driver", "sim").open("sim://coupled") as driver:
         assert driver.info().device_kind == DeviceKind.COUPLED
+
+
+def test_each_reference_device_publishes_its_own_profile_and_only_it():
+    """The profile a host writes into a sidecar for a device's own profile comes from the
+    device-profile plugins (the host library imports no device): each reference device's is
+    its firmware's model, and a device of another kind or plate frequency has none."""
+    from dataclasses import replace
+
+    from hcard.device.published_profiles import published_profile
+    from hcard_device.plugins import REFERENCE_PROFILES
+    from hcard_device.profiles import variant_config
+    from hcard_device.sim.models import device_profile
+
+    for published in REFERENCE_PROFILES:
+        config = variant_config(published.variant)
+        assert published.plate_frequency_hz == round(config.limits.plate_frequency)
+        with open_device(f"sim://{published.variant}") as driver:
+            info = driver.info()
+        assert info.device_kind == published.device_kind
+        assert published_profile(info).to_dict() == device_profile(config).to_dict()
+        assert published_profile(replace(info, plate_frequency_hz=40_000)) is None
+        assert published_profile(replace(info, device_kind=9)) is None
 
 
 def test_tier2_touch_source_switch_and_counter_clear_twice_on_one_server():

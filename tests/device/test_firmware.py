@@ -15,9 +15,7 @@ from hypothesis import strategies as st
 
 from hcard import build
 from hcard.card_io import to_bytes, to_json
-from hcard.track import make_track
-from hcard_device.firmware import Firmware
-from hcard_device.protocol import (
+from hcard.device.protocol import (
     REPORT_CLASSES,
     ClipReason,
     ClipReport,
@@ -46,6 +44,8 @@ from hcard_device.protocol import (
     stream_reports,
     upload_reports,
 )
+from hcard.track import make_track
+from hcard_device.firmware import Firmware
 from hcard_device.sim import DeviceConfig, DeviceSimulation
 
 UV_HALF = 5000

@@ -113,7 +113,7 @@ def test_guest_hidapi_driver_uploads_card_and_streams_track(tmp_path: Path) -> N
     require_guest()
     payload_module = _load("hcard_guest_payload", GUEST / "payload.py")
     from hcard.card_io import to_bytes
-    from hcard_device.protocol import INPUT_RATE_HZ, DeviceKind, crc32
+    from hcard.device.protocol import INPUT_RATE_HZ, DeviceKind, crc32
 
     summary = run_guest("hcard", tmp_path)
     payload = summary["payload"]

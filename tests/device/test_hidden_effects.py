@@ -12,13 +12,13 @@ from click.testing import CliRunner
 
 from hcard import build
 from hcard.cli.main import cli
+from hcard.device import open_device
+from hcard.device.errors import UriError
+from hcard.device.play import play
+from hcard.device.recording import recording
+from hcard.device.uri import parse_uri
 from hcard.track import make_track
 from hcard_builtins.physics.electrovibration import AirLayer
-from hcard_device.drivers import open_device
-from hcard_device.drivers.errors import UriError
-from hcard_device.drivers.play import play
-from hcard_device.drivers.recording import recording
-from hcard_device.drivers.uri import parse_uri
 from hcard_device.sim.hidden import HiddenEffectError, parse_assignments, resolve
 
 EV_CARD = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[

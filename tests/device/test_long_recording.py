@@ -14,14 +14,15 @@ import pytest
 from hcard import build
 from hcard.calibration.measurement import read_measurement, write_measurement
 from hcard.calibration.rendering import rendering_error
+from hcard.device import open_device
+from hcard.device import recording as recording_module
+from hcard.device.play import play
+from hcard.device.play_result import PlayResult
+from hcard.device.protocol import State
+from hcard.device.protocol.base import I16
+from hcard.device.recording import force_recording, recording, write_recording
+from hcard.device.state_log import STATE_ROW, StateLog
 from hcard.track import make_track
-from hcard_device.drivers import open_device
-from hcard_device.drivers import recording as recording_module
-from hcard_device.drivers.play import PlayResult, play
-from hcard_device.drivers.recording import force_recording, recording, write_recording
-from hcard_device.drivers.state_log import STATE_ROW, StateLog
-from hcard_device.protocol import State
-from hcard_device.protocol.base import I16
 
 CARD = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[
     build.texture(1.0, channel="uv", name="plain"), build.texture(0.5, channel="uv", name="slip")],
@@ -166,7 +167,7 @@ def test_sessions_over_usbip_are_recorded_in_blocks_twice_against_one_server(tmp
     from realtime import in_real_time, kept_run
     from served_device import served_device
 
-    from hcard_device.drivers import recording as recording_module
+    from hcard.device import recording as recording_module
 
     monkeypatch.setattr(recording_module, "BLOCK_REPORTS", 500)  # several blocks per session
     seen: list[list[State]] = []

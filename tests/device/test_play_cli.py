@@ -14,9 +14,9 @@ from hcard import build
 from hcard.calibration.measurement import Measurement, read_measurement
 from hcard.card_io import save
 from hcard.cli.main import cli
+from hcard.device.play import MAX_PLAY_S, TAIL_S
+from hcard.device.protocol import FaultBits
 from hcard.track import straight_stroke, track_to_csv
-from hcard_device.drivers.play import MAX_PLAY_S, TAIL_S
-from hcard_device.protocol import FaultBits
 
 
 @pytest.fixture
@@ -218,9 +218,9 @@ def test_play_refuses_a_track_longer_than_a_session_before_the_device(files):
 
 
 def test_the_play_function_refuses_a_long_track_before_sending_anything():
+    from hcard.device import PlayTooLong, open_device
+    from hcard.device.play import play as play_track
     from hcard.track import make_track
-    from hcard_device.drivers import PlayTooLong, open_device
-    from hcard_device.drivers.play import play as play_track
 
     track = make_track(np.array([0.0, MAX_PLAY_S + 1.0]), np.array([2.0, 3.0]),
                        np.array([5.0, 5.0]), 0.5, True)

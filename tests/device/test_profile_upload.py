@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 
 from hcard import build
+from hcard.device import open_device
+from hcard.device.errors import DeviceError
+from hcard.device.play import play
+from hcard.device.protocol import Capability, StateFlags, UploadResult
+from hcard.device.recording import recording
 from hcard.physics.profile import DeviceProfile
 from hcard.physics.profile_effects import FittedEffect
 from hcard.plugins.registry import get_registry
 from hcard.track import straight_stroke
-from hcard_device.drivers import open_device
-from hcard_device.drivers.errors import DeviceError
-from hcard_device.drivers.play import play
-from hcard_device.drivers.recording import recording
-from hcard_device.protocol import Capability, StateFlags, UploadResult
 from hcard_device.sim.config import DeviceConfig
 from hcard_device.sim.models import device_profile
 

@@ -13,8 +13,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hcard.errors import HcardError
-from hcard_device.protocol import (
+from hcard.device.protocol import (
     ECHO_AGE_UNKNOWN,
     MAX_REPORT_BYTES,
     REPORT_CLASSES,
@@ -51,9 +50,10 @@ from hcard_device.protocol import (
     stream_reports,
     upload_reports,
 )
-from hcard_device.protocol.__main__ import generated_blocks, main, output_for, update_spec
-from hcard_device.protocol.constants import CLIP_NAME_BYTES, UPLOAD_DETAIL_BYTES
-from hcard_device.protocol.descriptor import parse_items, short_item
+from hcard.device.protocol.__main__ import generated_blocks, main, output_for, update_spec
+from hcard.device.protocol.constants import CLIP_NAME_BYTES, UPLOAD_DETAIL_BYTES
+from hcard.device.protocol.descriptor import parse_items, short_item
+from hcard.errors import HcardError
 
 SPEC = Path(__file__).resolve().parents[2] / "spec" / "device-protocol.md"
 
@@ -531,7 +531,7 @@ def test_spec_descriptor_blocks_equal_the_generated_ones() -> None:
 
 def test_update_spec_rewrites_a_stale_block() -> None:
     stale = (
-        "x\n<!-- BEGIN GENERATED: python -m hcard_device.protocol --hex -->\n```text\nold\n"
+        "x\n<!-- BEGIN GENERATED: python -m hcard.device.protocol --hex -->\n```text\nold\n"
         "```\n<!-- END GENERATED -->\n"
     )
     assert update_spec(stale) == stale.replace("old\n", hex_dump(REPORT_DESCRIPTOR))

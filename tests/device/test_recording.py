@@ -15,12 +15,12 @@ from hcard import build
 from hcard.calibration.measurement import read_measurement, write_measurement
 from hcard.calibration.splits import split_by_stroke, stroke_ids
 from hcard.card_io import to_bytes
+from hcard.device import open_device
+from hcard.device.play import play, session_host_times
+from hcard.device.protocol import PROTOCOL_MAJOR, PROTOCOL_MINOR
+from hcard.device.recording import echoed_samples, recording, track_speeds
 from hcard.physics.profile import DeviceProfile
 from hcard.track import make_track, straight_stroke
-from hcard_device.drivers import open_device
-from hcard_device.drivers.play import play, session_host_times
-from hcard_device.drivers.recording import echoed_samples, recording, track_speeds
-from hcard_device.protocol import PROTOCOL_MAJOR, PROTOCOL_MINOR
 
 CARD = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[
     build.texture(1.0, channel="uv", name="plain"), build.texture(0.5, channel="uv", name="slip")],

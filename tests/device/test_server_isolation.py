@@ -34,6 +34,21 @@ from served_device import ServedDevice, served_device
 from hcard import build
 from hcard.calibration.measurement import read_measurement
 from hcard.card_io import save, to_bytes
+from hcard.device import open_device
+from hcard.device.errors import DeviceStall, SessionBusy, SessionLost
+from hcard.device.protocol import (
+    INPUT_RATE_HZ,
+    Command,
+    Control,
+    FaultBits,
+    Finger,
+    Limits,
+    Stream,
+    UploadBegin,
+    UploadResult,
+    UploadState,
+)
+from hcard.device.protocol.constants import DEFAULT_MAX_CARD_BYTES
 from hcard.physics.profile import DeviceProfile
 from hcard.physics.profile_effects import FittedEffect
 from hcard.plugins.registry import get_registry
@@ -47,21 +62,6 @@ from hcard_device.card_check import (
     CheckFailed,
     ProcessChecker,
 )
-from hcard_device.drivers import open_device
-from hcard_device.drivers.errors import DeviceStall, SessionBusy, SessionLost
-from hcard_device.protocol import (
-    INPUT_RATE_HZ,
-    Command,
-    Control,
-    FaultBits,
-    Finger,
-    Limits,
-    Stream,
-    UploadBegin,
-    UploadResult,
-    UploadState,
-)
-from hcard_device.protocol.constants import DEFAULT_MAX_CARD_BYTES
 from hcard_device.usb.connection import DEFAULT_LIMITS, ReportPacer
 from hcard_device.usb.transport import MAX_CONNECTIONS
 

@@ -19,10 +19,9 @@ from served_device import served_device
 from hcard import build
 from hcard.calibration.measurement import read_measurement
 from hcard.card_io import save, to_bytes
-from hcard.track import straight_stroke, track_to_csv
-from hcard_device.drivers import open_device
-from hcard_device.drivers.errors import DeviceError, SessionBusy, SessionLost
-from hcard_device.protocol import (
+from hcard.device import open_device
+from hcard.device.errors import DeviceError, SessionBusy, SessionLost
+from hcard.device.protocol import (
     Command,
     Control,
     FaultBits,
@@ -34,7 +33,8 @@ from hcard_device.protocol import (
     decode_input,
     upload_reports,
 )
-from hcard_device.protocol.constants import ReportId, UploadAction
+from hcard.device.protocol.constants import ReportId, UploadAction
+from hcard.track import straight_stroke, track_to_csv
 from hcard_device.usb.server import make_firmware
 
 CARD = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[
@@ -368,7 +368,7 @@ def test_a_second_hcard_play_is_refused_and_the_first_records_its_whole_track(tm
 
 
 def test_a_driver_refuses_take_over_on_a_device_without_sessions():
-    from hcard_conformance.served_controls import open_no_ownership
+    from hcard_device.served_controls import open_no_ownership
 
     with open_no_ownership() as driver:
         assert not driver.sessions_supported()
@@ -380,7 +380,7 @@ def test_a_host_slower_than_the_report_stream_still_begins_its_session():
     """A host that decodes a report in 2 ms (slower than the device's 1000 reports/s, as a
     Python host under software emulation is) always finds another report waiting; the driver's
     reads are bounded (READ_BATCH_MAX), so start() is granted instead of draining forever."""
-    from hcard_device.drivers.base import READ_BATCH_MAX
+    from hcard.device.base import READ_BATCH_MAX
 
     with served_device() as served:
         for _round in range(2):  # the same running server, twice

@@ -15,9 +15,9 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from hcard import build
+from hcard.device.protocol import FaultBits
 from hcard.limits import RELATIVE_FRICTION_JND
 from hcard.track import FingerTrack, make_track, straight_stroke
-from hcard_device.protocol import FaultBits
 from hcard_device.sim import DeviceConfig, DeviceSimulation, SimBlock
 from hcard_device.sim.amplifier import EVAmplifier
 from hcard_device.sim.plate import (

@@ -21,10 +21,8 @@ from usbip import host as usbip_host
 from usbip.core import Stall
 from usbip.device import In
 
-from hcard_device.drivers import DeviceError, DeviceStall, open_device
-from hcard_device.drivers.pyusb_backend import parse_configuration
-from hcard_device.drivers.usbip_link import UsbipLink
-from hcard_device.protocol import (
+from hcard.device import DeviceError, DeviceStall, in_process, open_device
+from hcard.device.protocol import (
     REPORT_DESCRIPTOR,
     Finger,
     ReportId,
@@ -32,15 +30,10 @@ from hcard_device.protocol import (
     StateFlags,
     decode_input,
 )
-from hcard_device.usb.device import (
-    IN_ENDPOINT,
-    MANUFACTURER,
-    OUT_ENDPOINT,
-    PID,
-    PRODUCTS,
-    VID,
-    BoundedEndpoint,
-)
+from hcard.device.protocol.usb_ids import IN_ENDPOINT, OUT_ENDPOINT, PID, VID
+from hcard.device.transports.pyusb_backend import parse_configuration
+from hcard.device.transports.usbip_link import UsbipLink
+from hcard_device.usb.device import MANUFACTURER, PRODUCTS, BoundedEndpoint
 from hcard_device.usb.server import DeviceServer
 from hcard_device.usb.transport import NoDelayUSBIP
 
@@ -240,7 +233,7 @@ def test_stopping_the_server_closes_connections():
         while True:
             link.read_in(T)
     assert time.monotonic() - t0 < 0.5
-    assert not DeviceServer.running_in_process()
+    assert not in_process.serving_in_process()
     with pytest.raises(DeviceError, match="cannot connect"):
         UsbipLink.open("127.0.0.1", server.port, "1-1", timeout_s=T)
 

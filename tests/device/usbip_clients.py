@@ -9,7 +9,7 @@ reconnecting when the server closes it (so it keeps misbehaving for the whole me
 and counts what it did.
 
 :func:`measure_delivery` is the well-behaved client: the hcard driver's link
-(:class:`~hcard_device.drivers.usbip_link.UsbipLink`, 4 interrupt-IN URBs outstanding, as a
+(:class:`~hcard.device.transports.usbip_link.UsbipLink`, 4 interrupt-IN URBs outstanding, as a
 host's usbhid keeps one or more) reading STATE reports for a while, and what it received.
 """
 
@@ -33,8 +33,7 @@ from dataclasses import dataclass, field
 
 from usbip import protocol
 
-from hcard_device.drivers.usbip_link import UsbipLink
-from hcard_device.protocol import (
+from hcard.device.protocol import (
     INPUT_RATE_HZ,
     Finger,
     UploadAction,
@@ -43,6 +42,7 @@ from hcard_device.protocol import (
     decode_input,
     upload_reports,
 )
+from hcard.device.transports.usbip_link import UsbipLink
 from hcard_device.usb.server import REALTIME_PRIORITY
 
 _SUBMIT = struct.Struct(">IIIIIIiiii8s")

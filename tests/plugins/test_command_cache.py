@@ -101,7 +101,7 @@ FIND_ENCODERS = (
     "import sys\nfrom hcard.plugins.registry import get_registry\n"
     "print(sorted(get_registry().encoders))\n"
     "print(sorted(m for m in ('importlib.metadata', 'hcard_conformance.registry', "
-    "'hcard_device.driver_plugins', 'hcard_builtins.predictors') if m in sys.modules))\n"
+    "'hcard_device.plugins', 'hcard_builtins.predictors') if m in sys.modules))\n"
 )
 """Prints the encoders of the registry, then which modules that only discovery needs (the
 entry-point scan, the plugin modules of other kinds) it imported."""
@@ -152,7 +152,7 @@ def test_the_registry_reuses_the_entry_points_until_a_plugin_module_changes(
     assert first.stdout.splitlines() == [
         "['image', 'vendor-bumps']",
         "['hcard_builtins.predictors', 'hcard_conformance.registry', "
-        "'hcard_device.driver_plugins', 'importlib.metadata']",  # discovered: all imported
+        "'hcard_device.plugins', 'importlib.metadata']",  # discovered: all imported
     ], first.stderr
     assert (cache / ENTRY_POINT_CACHE).exists()
 

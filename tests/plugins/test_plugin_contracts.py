@@ -13,6 +13,7 @@ import click
 import pytest
 
 from hcard.cli.main import contributed_commands
+from hcard.device.driver_table import HOST_DRIVERS
 from hcard.physics.contracts import FrequencyResponse, TwoChannelModel
 from hcard.physics.profile import channels_of
 from hcard.plugins import (
@@ -26,7 +27,7 @@ from hcard.plugins import (
 )
 from hcard.plugins.lazy_plugins import LazyDriver, LazyEncoder
 from hcard_builtins.encoders import BUILTIN_ENCODERS
-from hcard_device.driver_plugins import BUILTIN_DRIVERS
+from hcard_device.plugins import REFERENCE_DRIVERS
 
 _POSITIONAL = (inspect.Parameter.POSITIONAL_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
 
@@ -89,9 +90,9 @@ BUILTINS = _builtin_plugins()
 def test_every_kind_has_builtins_and_a_protocol() -> None:
     assert set(PROTOCOL_OF_KIND) == set(KINDS)
     assert {kind for kind, _, _ in BUILTINS} == set(KINDS)
-    # the 41 built-ins by kind (a new one is counted here on purpose)
+    # the 43 built-ins by kind (a new one is counted here on purpose)
     assert Counter(kind for kind, _, _ in BUILTINS) == {
-        "encoder": 1, "predictor": 10, "driver": 4, "calibration-effect": 9,
+        "encoder": 1, "predictor": 10, "driver": 4, "device-profile": 2, "calibration-effect": 9,
         "conformance-check": 17,
     }
 
@@ -152,7 +153,7 @@ def test_device_profile_contracts_are_implemented_by_the_builtins() -> None:
     assert two_channel == {"coupled"}
 
 
-@pytest.mark.parametrize("lazy", BUILTIN_DRIVERS, ids=lambda lazy: lazy.name)
+@pytest.mark.parametrize("lazy", HOST_DRIVERS + REFERENCE_DRIVERS, ids=lambda lazy: lazy.name)
 def test_a_lazy_builtin_driver_says_what_its_class_says(lazy: LazyDriver) -> None:
     """The built-in drivers are listed without importing them (``hcard plugins`` stays fast);
     what they are listed as is their class's own, which implements the driver Protocol too."""

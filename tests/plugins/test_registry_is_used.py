@@ -17,6 +17,7 @@ from PIL import Image
 from hcard import build
 from hcard.card_io import load
 from hcard.cli.main import cli
+from hcard.device import list_devices, open_device
 from hcard.errors import UsageError
 from hcard.plugins import EncodeResult, hookimpl
 from hcard.plugins import registry as registry_module
@@ -25,10 +26,9 @@ from hcard_builtins.image import ImageEncoder
 from hcard_builtins.physics.coupled import Coupled
 from hcard_builtins.physics.electrovibration import ChargeLeakage
 from hcard_builtins.physics.ultrasonic import DimensionlessGroup
-from hcard_device.drivers import list_devices, open_device
-from hcard_device.drivers.sim import SimDriver
 from hcard_device.sim.config import DeviceConfig
 from hcard_device.sim.models import device_profile
+from hcard_device.sim_driver import SimDriver
 
 
 class CountingEncoder(ImageEncoder):

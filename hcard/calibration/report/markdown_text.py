@@ -69,7 +69,7 @@ def report_markdown(
     """The text of ``report.md`` (``figures``: relative file names to embed; ``rendering``: the
     rendering errors measured on a device without and with the fitted profile, as
     ``hcard calibrate --verify`` gives them: ``Verification.to_dict()`` of
-    :mod:`hcard_device.drivers.verify`, whose ``text`` leads the report)."""
+    :mod:`hcard.device.verify`, whose ``text`` leads the report)."""
     before, after, data = result.before, result.after, result.data
     change = -100.0 * result.improvement
     lines = [

@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from hcard_device.protocol import Counters
+from hcard.device.protocol import Counters
 
 _U16 = 0xFFFF
 _U32 = 0xFFFF_FFFF

@@ -32,7 +32,7 @@ previous one, which the braked plate stays under, is in force). That takes at mo
 amplifier's limiter takes lowered voltage and current limits from the next frame.
 
 Faults per frame are the protocol's STATE.faults bits
-(:class:`~hcard_device.protocol.constants.FaultBits`): condition flags (limits, watchdog,
+(:class:`~hcard.device.protocol.constants.FaultBits`): condition flags (limits, watchdog,
 clipped card) are set on every frame they hold; event flags (``STREAM_OVERRUN``,
 ``INVALID_REQUEST``) on the first frame of the step after the event.
 
@@ -55,6 +55,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from hcard.device.protocol.constants import FaultBits
 from hcard.physics.actuation import actuate
 from hcard.physics.profile import DeviceProfile
 from hcard.physics.profile_error import ProfileError
@@ -62,7 +63,6 @@ from hcard.quantities import M_PER_MM
 from hcard.render import Renderer, RenderOptions, RenderStream
 from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb
-from hcard_device.protocol.constants import FaultBits
 from hcard_device.sim.amplifier import EVAmplifier
 from hcard_device.sim.clip import ClipReport, TextureExtremes, card_extremes, clip_items
 from hcard_device.sim.config import DeviceConfig

@@ -1,7 +1,7 @@
 """The hcard reference device as a USB-HID device on :mod:`usbip` (pinned 0.7.0).
 
 One HID interface (class 0x03, no boot subclass) with the protocol's report descriptor
-(:data:`hcard_device.protocol.REPORT_DESCRIPTOR`) and two interrupt endpoints polled every 1 ms:
+(:data:`hcard.device.protocol.REPORT_DESCRIPTOR`) and two interrupt endpoints polled every 1 ms:
 
 * IN 0x81 (64 bytes): STATE input reports, moved from :meth:`Firmware.take_input_reports` by
   :meth:`HcardHID.pump`. The endpoint holds at most ``in_queue`` reports; when the host does
@@ -38,7 +38,8 @@ from usbip.classes.device import hid
 from usbip.core import CLASS, ENDPOINT, FEATURE_ENDPOINT_HALT, OUT, STANDARD, Setup, Stall, Urb
 from usbip.device import IN, Endpoint, _EPSpec
 
-from hcard_device.protocol import REPORT_DESCRIPTOR, ProtocolError, ReportId, ReportKind
+from hcard.device.protocol import REPORT_DESCRIPTOR, ProtocolError, ReportId, ReportKind
+from hcard.device.protocol.usb_ids import IN_ENDPOINT, OUT_ENDPOINT, PID, VID
 from hcard_device.usb.connection import (
     DEFAULT_LIMITS,
     Connection,
@@ -47,10 +48,6 @@ from hcard_device.usb.connection import (
     ret_submit_in,
 )
 
-VID = 0x1209
-"""pid.codes vendor ID (open-source hardware)."""
-PID = 0x0001
-"""pid.codes test PID: for development and testing only (see the module docstring)."""
 BCD_DEVICE = 0x0100
 """Device release 1.00 (the protocol major version is in DEVICE_INFO)."""
 MANUFACTURER = "hcard project"
@@ -61,10 +58,6 @@ PRODUCTS = {
 """Product string of each device variant."""
 SERIALS = {"evita": "HCARD-EVITA-0001", "coupled": "HCARD-COUPLED-0001"}
 
-IN_ENDPOINT = 0x81
-"""Interrupt IN endpoint address (STATE reports)."""
-OUT_ENDPOINT = 0x01
-"""Interrupt OUT endpoint address (output reports)."""
 MAX_PACKET = 64
 """wMaxPacketSize of both interrupt endpoints, bytes (full speed; every report fits)."""
 INTERVAL_MS = 1

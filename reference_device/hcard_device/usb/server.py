@@ -60,21 +60,16 @@ import threading
 import time
 from collections.abc import Callable, Mapping
 from types import FrameType, TracebackType
-from typing import Any, ClassVar
+from typing import Any
 
 import usbip
 
+from hcard.device import in_process
+from hcard.device.transports.usbip_connect import DEFAULT_BUSID, DEFAULT_HOST, DEFAULT_PORT
 from hcard_device.card_check import CHECK_TIMEOUT_S, Checker, InlineChecker, ProcessChecker
 from hcard_device.usb.device import DEFAULT_IN_QUEUE, PRODUCTS, HcardHID, build_usb_device
 from hcard_device.usb.server_log import DEFAULT_LOG, ServerLog
-from hcard_device.usb.transport import (
-    DEFAULT_BUSID,
-    DEFAULT_HOST,
-    DEFAULT_PORT,
-    MAX_CONNECTIONS,
-    BoundedLoopback,
-    NoDelayUSBIP,
-)
+from hcard_device.usb.transport import MAX_CONNECTIONS, BoundedLoopback, NoDelayUSBIP
 
 SWITCH_INTERVAL_S = 0.0002
 """GIL switch interval of the server process, s (Python's default is 5 ms)."""
@@ -157,8 +152,6 @@ class DeviceServer:
     :class:`~hcard_device.usb.device.ConnectionView`).
     """
 
-    _running: ClassVar[set[DeviceServer]] = set()
-    _running_lock: ClassVar[threading.Lock] = threading.Lock()
 
     def __init__(self, variant: str = "evita", *, host: str = DEFAULT_HOST,
                  port: int = DEFAULT_PORT, seed: int = 0, loopback: bool = False,
@@ -192,12 +185,6 @@ class DeviceServer:
         self._threads: list[threading.Thread] = []
         self.thread_errors: list[BaseException] = []
 
-    @classmethod
-    def running_in_process(cls) -> bool:
-        """True while a device server runs in this process."""
-        with cls._running_lock:
-            return bool(cls._running)
-
     @property
     def port(self) -> int:
         """The TCP port served (0 for a loopback server)."""
@@ -224,8 +211,7 @@ class DeviceServer:
         self.usb_device, self.interface = build_usb_device(self.firmware, self.variant,
                                                            in_queue=self.in_queue)
         self.usb_device.plug(via=self.transport)
-        with self._running_lock:
-            self._running.add(self)
+        in_process.note_serving(self, True)
         thread = threading.Thread(target=self._run_firmware, name="hcard-firmware", daemon=True)
         thread.start()
         self._threads.append(thread)
@@ -265,8 +251,7 @@ class DeviceServer:
         if self.checker is not None:
             self.checker.close()
             self.checker = None
-        with self._running_lock:
-            self._running.discard(self)
+        in_process.note_serving(self, False)
 
     def __enter__(self) -> DeviceServer:
         return self.start() if self.usb_device is None else self

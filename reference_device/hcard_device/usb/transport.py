@@ -34,17 +34,17 @@ from typing import Any
 
 import usbip
 
+from hcard.device.transports.usbip_connect import (
+    DEFAULT_BUSID,
+    DEFAULT_CONNECT_TIMEOUT_S,
+    DEFAULT_HOST,
+    DEFAULT_PORT,
+    UsbipConnector,
+    set_nodelay,
+)
 from hcard_device.usb.connection import DEFAULT_LIMITS, Connection, ConnectionLimits
 from hcard_device.usb.server_log import DEFAULT_LOG
 
-DEFAULT_HOST = "127.0.0.1"
-"""Loopback: the device is not exposed to the network unless asked."""
-DEFAULT_PORT = 3240
-"""The IANA port of USB/IP (what ``usbip attach`` uses)."""
-DEFAULT_BUSID = "1-1"
-"""Bus ID of the one device a server exports."""
-DEFAULT_CONNECT_TIMEOUT_S = 2.0
-"""Longest wait for a TCP connection to a USB/IP server, s."""
 MAX_CONNECTIONS = 8
 """Connections one server serves at once (import handshakes and device lists included); a
 further one is closed when accepted (spec/device-protocol.md section 13)."""
@@ -54,12 +54,6 @@ client that reconnects as fast as it is closed costs the server at most this man
 a second; the others wait in the kernel's listen backlog."""
 ACCEPT_BURST = 16
 """Connections accepted at once before :data:`ACCEPT_RATE_HZ` applies."""
-
-
-def set_nodelay(sock: socket.socket, enabled: bool = True) -> None:
-    """Set (or clear) ``TCP_NODELAY`` on a TCP socket; a no-op on other socket families."""
-    if sock.family in (socket.AF_INET, socket.AF_INET6):
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1 if enabled else 0)
 
 
 class ConnectionTable:
@@ -244,16 +238,9 @@ class NoDelayUSBIP(usbip.USBIP):
     # ------------------------------------------------------------------ client side
 
     def connect(self) -> socket.socket:
-        """A connected TCP socket to the server, ``TCP_NODELAY`` set, in blocking mode.
-
-        Raises:
-            OSError: refused, unreachable, or no answer within :attr:`connect_timeout_s`
-                (``TimeoutError``).
-        """
-        sock = socket.create_connection((self.host, self.port), timeout=self.connect_timeout_s)
-        set_nodelay(sock, self.nodelay)
-        sock.settimeout(None)
-        return sock
+        """A connected TCP socket to the server (:meth:`UsbipConnector.connect`)."""
+        return UsbipConnector(self.host, self.port, nodelay=self.nodelay,
+                              connect_timeout_s=self.connect_timeout_s).connect()
 
 
 class BoundedLoopback(usbip.Loopback):

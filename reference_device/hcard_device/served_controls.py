@@ -1,0 +1,102 @@
+"""Negative controls served over USB/IP in this process, for checks that need two hosts on one
+device (``device.session-ownership``): two drivers opened on ``sim://`` reach two devices,
+two opened on one USB/IP server reach the same one.
+
+``no-ownership``
+    The E-ViTa with the behaviour before protocol 1.2 (it reports protocol 1.1): START and STOP
+    ignore their argument, STATE names no session, TAKE_OVER is refused as unknown, and a
+    second host's START or upload is carried out under the first host's session (spec rules
+    PN1-PN6 broken). Served in this process on 127.0.0.1 (a free port, real time) while any
+    driver of it is open: every :func:`open_no_ownership` is one more client of that one
+    device, and the server stops (the device powers off) when the last one closes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import threading
+
+from hcard.device.protocol import Command, DeviceInfo
+from hcard.device.transports.usbip_client import UsbipDriver
+from hcard_device.firmware import Firmware
+from hcard_device.usb.server import SWITCH_INTERVAL_S, DeviceServer, make_firmware
+
+_servers: dict[str, DeviceServer] = {}
+_clients: dict[str, int] = {}
+_lock = threading.Lock()
+
+
+class NoOwnershipFirmware(Firmware):
+    """Firmware without sessions: protocol 1.1 behaviour (see the module docstring)."""
+
+    def device_info(self) -> DeviceInfo:
+        """DEVICE_INFO of a protocol 1.1 device."""
+        return dataclasses.replace(super().device_info(), protocol_minor=1)
+
+    def _session_command(self, command: int, token: int, origin: object | None = None) -> bool:
+        """START and STOP whatever the token (no session ever begins); TAKE_OVER refused."""
+        if command == Command.TAKE_OVER:
+            return False
+        if command == Command.STOP:
+            self.sim.stop()
+        else:
+            self.sim.start()
+        return True
+
+
+def _no_ownership_firmware() -> Firmware:
+    base = make_firmware("evita")
+    return NoOwnershipFirmware(base.sim)
+
+
+_FACTORIES = {"no-ownership": _no_ownership_firmware}
+
+
+class ServedControlDriver(UsbipDriver):
+    """A USB/IP client of a served control; closing the last one stops its server."""
+
+    control = ""
+
+    def _close(self) -> None:
+        try:
+            super()._close()
+        finally:
+            release(self.control)
+
+
+def lease(name: str) -> DeviceServer:
+    """The in-process server of control ``name``, started when it has no client yet; the
+    caller is one more client until :func:`release`."""
+    with _lock:
+        server = _servers.get(name)
+        if server is None or server.stopped:
+            sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL_S))
+            server = DeviceServer("evita", port=0, firmware_factory=_FACTORIES[name]).start()
+            _servers[name], _clients[name] = server, 0
+        _clients[name] += 1
+        return server
+
+
+def release(name: str) -> None:
+    """One client of control ``name`` is gone; the last one stops the server."""
+    with _lock:
+        _clients[name] = max(_clients.get(name, 0) - 1, 0)
+        server = _servers.get(name) if _clients[name] == 0 else None
+        if server is not None:
+            del _servers[name]
+    if server is not None:
+        server.stop()
+
+
+def open_no_ownership() -> ServedControlDriver:
+    """A new USB/IP client of the ``no-ownership`` device (one device while any is open)."""
+    server = lease("no-ownership")
+    try:
+        driver = ServedControlDriver.open(server.uri)
+        assert isinstance(driver, ServedControlDriver)  # open() makes an instance of cls
+    except BaseException:
+        release("no-ownership")
+        raise
+    driver.control = "no-ownership"
+    return driver
