@@ -29,7 +29,7 @@ import abc
 import contextlib
 import random
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from types import TracebackType
 from typing import TYPE_CHECKING, ClassVar
@@ -198,7 +198,9 @@ class Driver(abc.ABC):
 
     @abc.abstractmethod
     def _set_feature(self, report: bytes) -> None:
-        """SET_REPORT(Feature); raise :class:`DeviceStall` when the device refuses."""
+        """SET_REPORT(Feature), waiting for its answer at most :attr:`timeout_s` as it is when
+        called (longer for the UPLOAD_END that commits, PU12); raise :class:`DeviceStall` when
+        the device refuses."""
 
     @abc.abstractmethod
     def _get_feature(self, report_id: int, size: int) -> bytes:
@@ -320,11 +322,15 @@ class Driver(abc.ABC):
             reports = upload_reports(data, action)
         except ProtocolError as exc:
             raise DeviceError(f"{self.uri}: {exc}") from None
-        for report in reports:
+        for index, report in enumerate(reports):
             try:
                 self._check_open()
                 self._check_session()
-                self._set_feature(report)
+                if index == len(reports) - 1:  # UPLOAD_END: held while the device checks (PU12)
+                    with self._waiting_at_most(max(self.timeout_s, commit_timeout_s)):
+                        self._set_feature(report)
+                else:
+                    self._set_feature(report)
             except DeviceStall:
                 status = self.upload_status()
                 if status.state == UploadState.FAILED:
@@ -333,6 +339,20 @@ class Driver(abc.ABC):
                 raise
         self._wait_committed(commit_timeout_s, what)
         return len(reports)
+
+    @contextlib.contextmanager
+    def _waiting_at_most(self, timeout_s: float) -> Iterator[None]:
+        """Within the block, the transport primitives wait up to ``timeout_s`` (they read
+        :attr:`timeout_s` when called): the UPLOAD_END SET's status stage comes only once the
+        device has checked the card or profile (PU12), which on a loaded machine takes longer
+        than any other answer (a 1 s wait failed `hcard play --profile` beside two busy
+        processes on 2 cores)."""
+        saved = self.timeout_s
+        self.timeout_s = timeout_s
+        try:
+            yield
+        finally:
+            self.timeout_s = saved
 
     def _raise_if_refused_for_a_session(self, what: str) -> None:
         """After a STALLed upload report: raise :class:`SessionBusy` when the device refused it

@@ -44,6 +44,9 @@ from hcard.device.protocol import (
 from hcard.device.protocol.usb_ids import PID, VID
 from hcard.device.transports.hidapi_driver import HidapiDriver, hidapi_module
 from hcard.device.transports.usbip_link import UNLINK_GRACE_S
+from hcard_device.card_check import InlineChecker
+from hcard_device.sim.config import DeviceConfig
+from hcard_device.sim.models import device_profile
 from hcard_device.sim_driver import SimDriver
 from hcard_device.usb.server import DeviceServer
 
@@ -583,3 +586,31 @@ def test_tier2_clipped_cards_are_reported_twice_on_one_server():
                 assert all(s.amplitude_nm <= info.max_amplitude_nm + 1 for s in last)
                 driver.stop()
         assert served.process.poll() is None, "the server died"
+
+
+class SlowChecker(InlineChecker):
+    """Checks as the device does, after 1.5 s: a check on a loaded machine, where the device's
+    worker process (at a low priority) waits for the CPU."""
+
+    def check_card(self, data, options):
+        time.sleep(1.5)
+        return super().check_card(data, options)
+
+    def check_profile(self, data):
+        time.sleep(1.5)
+        return super().check_profile(data)
+
+
+def test_a_commit_whose_check_takes_longer_than_the_drivers_timeout_is_waited_for():
+    """The UPLOAD_END SET is answered once the device has checked the card (PU12): a driver
+    with a 1 s timeout waited 1 s for it and failed an upload (and `hcard play --profile`)
+    the device committed a moment later."""
+    card = build.card(20.0, 20.0, taxtel_mm=10.0, textures=[build.texture(0.5, channel="uv")])
+    with DeviceServer("coupled", port=0, check_in_process=False) as server:
+        server.firmware.checker = SlowChecker()
+        with open_device(server.uri, timeout_s=1.0) as driver:
+            outcome = driver.upload_card(card)
+            assert outcome.status.state == UploadState.COMMITTED
+            assert driver.timeout_s == 1.0  # the longer wait was for the commit only
+            status = driver.upload_profile(device_profile(DeviceConfig.coupled()).to_json())
+            assert status.state == UploadState.COMMITTED
