@@ -450,14 +450,18 @@ def test_drivers_register_as_a_plugin():
     infos = registry.register(driver_table, name="host-drivers")
     infos += registry.register(reference_plugins, name="reference-device")
     drivers = [info for info in infos if info.kind == "driver"]
-    assert sorted(info.name for info in drivers) == ["hid", "pyusb", "sim", "usbip"]
+    assert sorted(info.name for info in drivers) == ["control", "hid", "pyusb", "sim", "usbip"]
     assert all(info.description for info in infos)
     schemes = {scheme for info in drivers for scheme in info.obj.schemes}
-    assert schemes == {"sim", "usbip", "pyusb", "hid"}
+    assert schemes == {"sim", "usbip", "pyusb", "hid", "control"}
     assert sorted(info.name for info in infos if info.kind == "device-profile") == [
         "reference-coupled", "reference-evita"]
     with registry.get("driver", "sim").open("sim://coupled") as driver:
         assert driver.info().device_kind == DeviceKind.COUPLED
+    with registry.get("driver", "control").open("control:no-ev") as driver:
+        assert driver.info().device_kind == DeviceKind.COUPLED  # the coupled device, faulty
+    with pytest.raises(UriError, match="unknown negative control 'bogus'"):
+        open_device("control:bogus")
 
 
 def test_each_reference_device_publishes_its_own_profile_and_only_it():
