@@ -113,6 +113,8 @@ def test_uri_parsing(text, fields):
 
 @pytest.mark.parametrize(("text", "message"), [
     ("127.0.0.1:3240", "has the form SCHEME://"),
+    ("usbip:127.0.0.1:3240/1-1", "has the form SCHEME://"),  # SCHEME:NAME is plugins' only
+    ("ftp:x", "has the form SCHEME://"),
     ("ftp://x", "unknown scheme 'ftp'"),
     ("usbip://127.0.0.1:port/1-1", "port 'port' is not a number"),
     ("usbip://127.0.0.1:70000/1-1", "port '70000' is not a number in 1..65535"),
