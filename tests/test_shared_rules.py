@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from hcard.cli.render_cmd import finger_state
+from hcard.physics.card_clipping import texture_extremes
 from hcard.render.synthesis import channel_targets
 from hcard.render.touch import (
     empty_table,
@@ -23,7 +24,6 @@ from hcard.v1 import card_pb2 as pb
 from hcard_conformance.device_level import track_speed
 from hcard_conformance.metrics import sample_speeds
 from hcard_conformance.vectors.tracks import contact_speeds
-from hcard_device.sim.clip import texture_extremes
 from hcard_device.sim.finger import HostFinger, TrackFinger
 from hcard_device.sim.sensors import TouchSamples
 

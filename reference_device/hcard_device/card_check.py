@@ -40,11 +40,11 @@ from typing import IO, Protocol
 from hcard.card_io import parse_card
 from hcard.device.protocol.upload import failure_detail
 from hcard.errors import HcardError
+from hcard.physics.card_clipping import TextureExtremes, card_extremes
 from hcard.physics.profile import DeviceProfile
 from hcard.render.compiled import CompiledCard, compile_card
 from hcard.render.options import RenderOptions
 from hcard.v1 import card_pb2 as pb
-from hcard_device.sim.clip import TextureExtremes, card_extremes
 
 CHECK_TIMEOUT_S = 20.0
 """Longest wait for the check of one COMMIT or COMMIT_PROFILE, waiting for an earlier check
@@ -68,7 +68,7 @@ class CheckedCard:
         compiled: its compiled form for the renderer (:func:`hcard.render.compiled.compile_card`
             with the options of the check).
         extremes: what each texture the grid uses asks at its extremes (the clip report's card
-            part, :func:`~hcard_device.sim.clip.card_extremes`).
+            part, :func:`~hcard.physics.card_clipping.card_extremes`).
     """
 
     pieces: tuple[bytes, ...]

@@ -77,11 +77,11 @@ from hcard.device.errors import UriError
 from hcard.device.protocol import FaultBits, ReportId, crc32
 from hcard.device.protocol.upload import UploadStore
 from hcard.device.uri import DeviceUri, parse_uri
+from hcard.physics.card_clipping import ClipReport
 from hcard.render import RenderMode, RenderOptions
 from hcard.v1 import card_pb2 as pb
 from hcard_device.firmware import Firmware
 from hcard_device.sim import DeviceConfig, DeviceSimulation
-from hcard_device.sim.clip import ClipReport
 from hcard_device.sim.simulation import Limits, PreparedCard, SimBlock
 from hcard_device.sim_driver import SimDriver
 

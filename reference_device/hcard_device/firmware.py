@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hcard.device.clip_wire import wire_clip_report
 from hcard.device.protocol import (
     AMPLITUDE_UNIT_M,
     CURRENT_UNIT_A,
@@ -51,7 +52,6 @@ from hcard.device.protocol import (
     TIME_UNIT_S,
     VOLTAGE_UNIT_V,
     Capability,
-    ClipReason,
     ClipReport,
     Command,
     Control,
@@ -79,15 +79,14 @@ from hcard.device.protocol import (
 )
 from hcard.device.protocol.constants import DEFAULT_MAX_CARD_BYTES
 from hcard.device.protocol.reports import POSITION_RANGE
-from hcard.device.protocol.upload import StagedUpload, UploadStore, detail_text
+from hcard.device.protocol.upload import StagedUpload, UploadStore
 from hcard.errors import HcardError
 from hcard.physics.profile import DeviceProfile
-from hcard.quantities import MM_PER_M, MS_PER_S
+from hcard.quantities import MS_PER_S
 from hcard.render import Renderer
 from hcard.track import FingerTrack, make_track
 from hcard_device.card_check import Checker, CheckFailed, InlineChecker, assemble_card
 from hcard_device.sim import TOUCH_DTYPE, DeviceSimulation, SimBlock
-from hcard_device.sim.clip import ClipItem
 from hcard_device.sim.simulation import PreparedCard
 
 DEFAULT_INPUT_QUEUE = 128
@@ -749,35 +748,8 @@ class Firmware:
         return len(self.sim.clip_report.items) if self.upload.active else 0
 
     def _clip_report(self) -> ClipReport:
-        report = self.sim.clip_report
-        items: tuple[ClipItem, ...] = report.items if self.upload.active else ()
-        flags = 0
-        for item in items:
-            reason = _clip_reason(item)
-            flags |= 1 << min(reason, 15)
-        common = {
-            "card_generation": self.upload.generation,
-            "item_count": min(len(items), 512),
-            "clipped_textures": len({item.texture for item in items}),
-            "flags": flags,
-            "reference_speed_mm_s": _clamp(report.reference_speed_m_s * MM_PER_M, 0, _U16),
-            "reference_force_mn": _clamp(report.reference_force_n / FORCE_UNIT_N, 0, _U16),
-        }
-        if not items:
-            return ClipReport(**common, item_index=ClipReport.NO_ITEM, texture=-1, channel=0,
-                              reason=0, target_x1e4=0, achievable_x1e4=0, texture_name="")
-        index = min(self._clip_index, len(items) - 1)
-        item = items[index]
-        return ClipReport(
-            **common,
-            item_index=index,
-            texture=item.texture,
-            channel=1 if item.channel == "uv" else 2,
-            reason=_clip_reason(item),
-            target_x1e4=_clamp(item.target * FRICTION_SCALE, 0, 4 * FRICTION_SCALE),
-            achievable_x1e4=_clamp(item.achievable * FRICTION_SCALE, 0, 4 * FRICTION_SCALE),
-            texture_name=detail_text(item.name)[0][:41],
-        )
+        return wire_clip_report(self.sim.clip_report if self.upload.active else None,
+                                self.upload.generation, self._clip_index)
 
     def _arrival_s(self) -> float:
         """The device time of a report arriving now, s: while :meth:`run_realtime` serves, the
@@ -1053,16 +1025,3 @@ class Firmware:
         if self._echo_placed_us is None:
             return ECHO_AGE_UNKNOWN
         return min(max(time_us - self._echo_placed_us, 0), ECHO_AGE_UNKNOWN - 1)
-
-
-def _clip_reason(item: ClipItem) -> int:
-    """CLIP_REPORT reason of one clipped item of the simulation's clip report."""
-    if item.reason.startswith("no UV"):
-        return ClipReason.NO_UV
-    if item.reason.startswith("no EV"):
-        return ClipReason.NO_EV
-    if item.channel == "uv":
-        return ClipReason.AMPLITUDE
-    if item.channel == "ev":
-        return ClipReason.VOLTAGE
-    return ClipReason.OTHER

@@ -17,8 +17,8 @@ import importlib
 from typing import Any
 
 _EXPORTS = {
-    "ClipItem": "hcard_device.sim.clip",
-    "ClipReport": "hcard_device.sim.clip",
+    "ClipItem": "hcard.physics.card_clipping",
+    "ClipReport": "hcard.physics.card_clipping",
     "DeviceConfig": "hcard_device.sim.config",
     "TOUCH_DTYPE": "hcard_device.sim.simulation",
     "DeviceSimulation": "hcard_device.sim.simulation",

@@ -57,6 +57,7 @@ import numpy as np
 
 from hcard.device.protocol.constants import FaultBits
 from hcard.physics.actuation import actuate
+from hcard.physics.card_clipping import ClipReport, TextureExtremes, card_extremes, clip_items
 from hcard.physics.profile import DeviceProfile
 from hcard.physics.profile_error import ProfileError
 from hcard.quantities import M_PER_MM
@@ -64,7 +65,6 @@ from hcard.render import Renderer, RenderOptions, RenderStream
 from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb
 from hcard_device.sim.amplifier import EVAmplifier
-from hcard_device.sim.clip import ClipReport, TextureExtremes, card_extremes, clip_items
 from hcard_device.sim.config import DeviceConfig
 from hcard_device.sim.counters import DeviceCounters
 from hcard_device.sim.finger import FingerPhysics, FingerTruth, HostFinger, TrackFinger
@@ -388,7 +388,7 @@ class DeviceSimulation:
     # -- commands --------------------------------------------------------------------------
     def prepare_card(self, card: pb.Card) -> PreparedCard:
         """Compile ``card`` (validated) for :meth:`load_prepared`: its renderer and the
-        extremes of its textures (:func:`~hcard_device.sim.clip.card_extremes`). Reads nothing
+        extremes of its textures (:func:`~hcard.physics.card_clipping.card_extremes`). Reads nothing
         the simulation changes, so it runs outside the firmware's lock: the largest valid card
         takes 0.2 s, which the device's real-time loop must not wait for (rule PU12).
 

@@ -1,4 +1,5 @@
-"""What a card asks that a device cannot render: the clip report of ``load_card``.
+"""What a card asks that a device profile cannot render: the clip report of a card on a profile
+(the reference firmware's ``load_card`` and the host-rendering frame driver both make it).
 
 For each texture the grid uses, the extreme targets follow from its baseline and component
 amplitudes per channel group (the renderer's split, spec rule R11, Eq. 4.1)::
