@@ -136,6 +136,10 @@ class Driver(abc.ABC):
         schemes: URI schemes this driver opens.
         realtime: True when the device runs on the wall clock; False when the driver advances
             the device itself (``sim://``), so a track is played as fast as the CPU allows.
+        renders_on_host: True when the card is rendered on the host and the device only plays
+            actuator frames (:class:`~hcard.device.frame_driver.FrameDriver`): the wire
+            protocol's upload, report sequence and sessions are then the host's bookkeeping,
+            not the device's, and the conformance checks of them do not apply.
 
     Attributes:
         uri: the URI it was opened with.
@@ -150,6 +154,7 @@ class Driver(abc.ABC):
     description: ClassVar[str] = ""
     schemes: ClassVar[tuple[str, ...]] = ()
     realtime: ClassVar[bool] = True
+    renders_on_host: ClassVar[bool] = False
 
     def __init__(self, uri: DeviceUri, *, timeout_s: float = DEFAULT_TIMEOUT_S) -> None:
         if not timeout_s > 0:
