@@ -245,7 +245,8 @@ def rendered_friction(result: PlayResult,
                       profile: DeviceProfile) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Track time (s), rendered relative friction and contact of each report of the session:
     the measured amplitude and voltage through ``profile.forward`` at the track's speed
-    (:func:`track_speed`) and the measured normal force."""
+    (:func:`track_speed`) and the measured normal force (the track's, the host finger's, on a
+    device without corner force sensors)."""
     track = result.track
     keep, t = session_times(result.states, track, result.host_us)
     applied = [s for s, ok in zip(result.states, keep, strict=True) if ok]
@@ -253,7 +254,10 @@ def rendered_friction(result: PlayResult,
     v = track_speed(track, t)
     amplitude = np.array([s.amplitude_m for s in applied])
     voltage = np.array([s.voltage_v for s in applied])
-    fn = np.array([s.normal_force_n for s in applied])
+    if result.info.capabilities & Capability.CORNER_FORCES:
+        fn = np.array([s.normal_force_n for s in applied])
+    else:
+        fn = np.interp(t, track.t, track.normal_force)
     uv, ev = profile.forward(amplitude, voltage, v, np.maximum(fn, 1e-3))
     contact = np.array([bool(s.contact) for s in applied], dtype=bool) & (fn > 0.05)
     return t, uv * ev, contact

@@ -167,13 +167,16 @@ BUILTIN_CHECKS: tuple[LazyCheck, ...] = (
               "hcard_conformance.device_level:check_watchdog"),
     LazyCheck("device.upload-integrity", "device",
               "refused uploads (CRC, short, order, timeout, size) leave the card playing",
-              "hcard_conformance.link_checks:check_upload_integrity"),
+              "hcard_conformance.link_checks:check_upload_integrity",
+              "hcard_conformance.wire_protocol:speaks_wire_protocol"),
     LazyCheck("device.report-loss", "device",
               "STATE reports arrive in sequence, lose at most 0.1 %, drops are counted",
-              "hcard_conformance.link_checks:check_report_loss"),
+              "hcard_conformance.link_checks:check_report_loss",
+              "hcard_conformance.wire_protocol:speaks_wire_protocol"),
     LazyCheck("device.session-ownership", "device",
               "a second host is refused, a takeover is reported, STOP releases the device",
-              "hcard_conformance.session_checks:check_session_ownership"),
+              "hcard_conformance.session_checks:check_session_ownership",
+              "hcard_conformance.wire_protocol:speaks_wire_protocol"),
 )
 """The built-in checks, in level order: the one place their names, levels and descriptions are
 written."""
