@@ -155,7 +155,9 @@ class FrameDriver(Driver):
     # ------------------------------------------------------------------ what the host knows
 
     def device_profile(self) -> DeviceProfile:
-        """The physics profile the host renders with: the device's published one.
+        """The physics profile the host renders with: the device's published one (a
+        ``device-profile`` plugin that recognises its DEVICE_INFO). A subclass may return its
+        own instead; the conformance suite still judges through the published one.
 
         Raises:
             DeviceError: no installed ``device-profile`` plugin recognises the device.
