@@ -278,7 +278,7 @@ def split_by_time_fraction(m: Measurement, test_fraction: float) -> tuple[np.nda
 
 def _label(m: Measurement, index: int) -> str:
     device = m.conditions.get("device", "?")
-    source = m.conditions.get("_source")
+    source = m.source
     return f"{source} ({device})" if source else f"recording {index} ({device})"
 
 

@@ -93,6 +93,7 @@ class Measurement:
         conditions: the JSON sidecar (device, plate frequency, surface, ...).
         files: the files the sidecar names (rule MF13) by key (``"card.path"``,
             ``"session.track"``), resolved against the sidecar's folder; only those it names.
+        source: the file it was read from, for messages ("" for one made in memory).
     """
 
     t: np.ndarray
@@ -109,6 +110,7 @@ class Measurement:
     device: dict[str, np.ndarray] = field(default_factory=dict)
     conditions: dict[str, Any] = field(default_factory=dict)
     files: dict[str, Path] = field(default_factory=dict, init=False)
+    source: str = field(default="", compare=False)
 
     def __len__(self) -> int:
         return int(self.t.shape[0])
@@ -196,6 +198,7 @@ def read_measurement(path: str | os.PathLike[str]) -> Measurement:
     files = referenced_files(conditions, side)
     measurement = _parse(text, str(file), conditions)
     measurement.files = files
+    measurement.source = str(file)
     return measurement
 
 

@@ -69,7 +69,6 @@ def _without_profiles(conditions: dict[str, Any]) -> dict[str, Any]:
     """A sidecar without the profile content it may embed (the profile is named, by name and
     SHA-256, not nested)."""
     out = dict(conditions)
-    out.pop("_source", None)
     if isinstance(out.get("profile"), dict):
         out["profile"] = {k: v for k, v in out["profile"].items() if k != "content"}
     return out

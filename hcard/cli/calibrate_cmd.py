@@ -233,7 +233,7 @@ def _base_of(measurements: list[Measurement], model_name: str | None,
             raise CalibrateUsageError(
                 "the recordings were made with different device profiles; calibrate them "
                 "apart, or give --profile")
-        source = measurements[0].conditions.get("_source", "recording")
+        source = measurements[0].source or "recording"
         profile = DeviceProfile.from_dict(named[0], source=f"{source}.json: profile.content")
     finger = None if finger_name == "none" else plugin_option("predictor", finger_name,
                                                               "--finger")
@@ -397,11 +397,7 @@ def calibrate_command(
             click.echo(f"[{time.perf_counter() - started:6.1f} s] {text}", err=True)
 
     paths = recording_paths(data)
-    measurements = []
-    for path in paths:
-        measurement = read_measurement(path)
-        measurement.conditions.setdefault("_source", str(path))
-        measurements.append(measurement)
+    measurements = [read_measurement(path) for path in paths]
     base, base_profile, voltage_form = _base_of(measurements, model_name, profile_path,
                                                 finger_name)
     if verify_uri is not None:

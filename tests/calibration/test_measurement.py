@@ -61,7 +61,8 @@ def test_read_converts_units_to_si(tmp_path: Path) -> None:
     np.testing.assert_array_equal(m.stroke, [0, 0, 1])
     assert m.stroke.dtype == np.int64
     assert m.voltage is None and m.x is None and m.plate_frequency is None
-    assert m.conditions == CONDITIONS
+    assert m.conditions == CONDITIONS  # the sidecar as written: nothing added to it
+    assert m.source == str(tmp_path / "rec.csv")
     assert list(m.regressors()) == [
         "t", "amplitude", "speed", "normal_force", "lateral_force", "stroke",
     ]
