@@ -17,6 +17,7 @@ import hcard.limits as limits
 from hcard.atomic import write_atomically
 from hcard.bounded_read import STDIN, InputTooLarge, read_bounded, read_bounded_stream
 from hcard.errors import CardError, CardValidationError
+from hcard.file_errors import read_reason, write_reason
 from hcard.json_card import card_from_json_value
 from hcard.json_text import JsonInputError, parse_json
 from hcard.v1 import card_pb2 as pb
@@ -111,16 +112,11 @@ def read_card_file(path: str | os.PathLike[str]) -> bytes:
             raise CardError(f"{exc} (the card size limit, rule F6)", source="<stdin>") from None
     file = Path(path)
     try:
-        data = read_bounded(file, limits.MAX_CARD_BYTES)
+        return read_bounded(file, limits.MAX_CARD_BYTES)
     except InputTooLarge as exc:
         raise CardError(f"{exc} (the card size limit, rule F6)", source=file) from None
-    except IsADirectoryError:
-        raise CardError("is a directory, not a card file", source=file) from None
-    except FileNotFoundError:
-        raise CardError("no such file", source=file) from None
     except OSError as exc:
-        raise CardError(f"cannot read ({exc.strerror or exc})", source=file) from None
-    return data
+        raise CardError(read_reason(exc, "a card file"), source=file) from None
 
 
 def load(path: str | os.PathLike[str], *, check: bool = True) -> pb.Card:
@@ -190,4 +186,4 @@ def save(
     try:
         write_atomically(path, data)
     except OSError as exc:
-        raise CardError(f"cannot write ({exc.strerror or exc})", source=path) from None
+        raise CardError(write_reason(exc), source=path) from None

@@ -18,6 +18,7 @@ from hcard.bounded_read import DEFAULT_MAX_PIXELS, STDIN
 from hcard.card_io import checked_bytes, format_for_path, parse_card, save, to_bytes
 from hcard.cli.verbosity import quiet, verbosity_options
 from hcard.errors import CardError, HcardError, UsageError
+from hcard.file_errors import write_reason
 
 if TYPE_CHECKING:
     from hcard.plugins.kinds import EncodeResult, EncoderPlugin
@@ -330,7 +331,7 @@ def _write_card_and_preview(card: bytes, card_path: Path, png: bytes, preview: P
     try:
         write_atomically_together([(card_path, card), (preview, png)])
     except OSError as exc:
-        raise CardError(f"cannot write the card and its preview ({exc.strerror or exc})",
+        raise CardError(write_reason(exc, "write the card and its preview"),
                         source=card_path) from None
 
 
@@ -339,7 +340,7 @@ def _write_preview(png: bytes, path: Path) -> None:
     try:
         write_atomically(path, png)
     except OSError as exc:
-        raise CardError(f"cannot write the preview ({exc.strerror or exc})", source=path) from None
+        raise CardError(write_reason(exc, "write the preview"), source=path) from None
 
 
 def summary_lines(s: dict[str, Any]) -> list[str]:

@@ -18,6 +18,7 @@ from hcard.cli.input_files import INPUT_FILE
 from hcard.cli.verbosity import quiet, verbosity_options
 from hcard.csv_rows import format_rows
 from hcard.errors import HcardError
+from hcard.file_errors import write_failure
 from hcard.physics.actuation import (
     ChannelClipping,
     UVModelRange,
@@ -146,7 +147,7 @@ def render(card: Path, track_path: Path, output: Path, frame_rate: float, band_l
                 summary.add(frames, commands)
                 advance(len(frames))
     except OSError as exc:
-        raise HcardError(f"{output}: cannot write ({exc.strerror or exc})") from None
+        raise HcardError(write_failure(output, exc)) from None
     click.echo(
         f"{output}: {summary.frames} frames at {frame_rate:g} Hz over {track.duration_s:.3f} s "
         f"({mode}); finger on a texture {100 * summary.contact_fraction:.0f}% of the time; "
