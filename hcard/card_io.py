@@ -16,12 +16,12 @@ from typing import Literal
 import hcard.limits as limits
 from hcard.atomic import write_atomically
 from hcard.bounded_read import STDIN, InputTooLarge, read_bounded, read_bounded_stream
-from hcard.errors import CardError, CardValidationError
+from hcard.errors import CardError
 from hcard.file_errors import read_reason, write_reason
 from hcard.json_card import card_from_json_value
 from hcard.json_text import JsonInputError, parse_json
 from hcard.v1 import card_pb2 as pb
-from hcard.validate import errors_of, validate
+from hcard.validate import require_valid
 
 CardFormat = Literal["binary", "json"]
 MEDIA_TYPE = "application/vnd.hcard+protobuf"
@@ -95,11 +95,7 @@ def parse_card(
     """Parse card bytes, check the version and (when ``check``) validate; raise on failure."""
     card = card_from_bytes(data, source=source)
     check_version(card, source=source)
-    if check:
-        problems = errors_of(validate(card))
-        if problems:
-            raise CardValidationError(problems, source=source)
-    return card
+    return require_valid(card, source=source) if check else card
 
 
 def read_card_file(path: str | os.PathLike[str]) -> bytes:
@@ -164,9 +160,7 @@ def checked_bytes(card: pb.Card, path: str | os.PathLike[str], *, fmt: CardForma
         CardValidationError: ``check`` and the card is invalid.
     """
     if check:
-        problems = errors_of(validate(card))
-        if problems:
-            raise CardValidationError(problems, source=path)
+        require_valid(card, source=path)
     return dumps(card, fmt or format_for_path(path))
 
 
