@@ -16,11 +16,12 @@ from typing import Literal
 import hcard.limits as limits
 from hcard.atomic import write_atomically
 from hcard.bounded_read import STDIN, InputTooLarge, read_bounded, read_bounded_stream
-from hcard.errors import CardError, CardValidationError
+from hcard.errors import CardError
+from hcard.file_errors import read_reason, write_reason
 from hcard.json_card import card_from_json_value
 from hcard.json_text import JsonInputError, parse_json
 from hcard.v1 import card_pb2 as pb
-from hcard.validate import errors_of, validate
+from hcard.validate import require_valid
 
 CardFormat = Literal["binary", "json"]
 MEDIA_TYPE = "application/vnd.hcard+protobuf"
@@ -94,11 +95,7 @@ def parse_card(
     """Parse card bytes, check the version and (when ``check``) validate; raise on failure."""
     card = card_from_bytes(data, source=source)
     check_version(card, source=source)
-    if check:
-        problems = errors_of(validate(card))
-        if problems:
-            raise CardValidationError(problems, source=source)
-    return card
+    return require_valid(card, source=source) if check else card
 
 
 def read_card_file(path: str | os.PathLike[str]) -> bytes:
@@ -111,16 +108,11 @@ def read_card_file(path: str | os.PathLike[str]) -> bytes:
             raise CardError(f"{exc} (the card size limit, rule F6)", source="<stdin>") from None
     file = Path(path)
     try:
-        data = read_bounded(file, limits.MAX_CARD_BYTES)
+        return read_bounded(file, limits.MAX_CARD_BYTES)
     except InputTooLarge as exc:
         raise CardError(f"{exc} (the card size limit, rule F6)", source=file) from None
-    except IsADirectoryError:
-        raise CardError("is a directory, not a card file", source=file) from None
-    except FileNotFoundError:
-        raise CardError("no such file", source=file) from None
     except OSError as exc:
-        raise CardError(f"cannot read ({exc.strerror or exc})", source=file) from None
-    return data
+        raise CardError(read_reason(exc, "a card file"), source=file) from None
 
 
 def load(path: str | os.PathLike[str], *, check: bool = True) -> pb.Card:
@@ -168,9 +160,7 @@ def checked_bytes(card: pb.Card, path: str | os.PathLike[str], *, fmt: CardForma
         CardValidationError: ``check`` and the card is invalid.
     """
     if check:
-        problems = errors_of(validate(card))
-        if problems:
-            raise CardValidationError(problems, source=path)
+        require_valid(card, source=path)
     return dumps(card, fmt or format_for_path(path))
 
 
@@ -190,4 +180,4 @@ def save(
     try:
         write_atomically(path, data)
     except OSError as exc:
-        raise CardError(f"cannot write ({exc.strerror or exc})", source=path) from None
+        raise CardError(write_reason(exc), source=path) from None

@@ -21,6 +21,7 @@ import numpy as np
 
 from hcard.bounded_read import MAX_TEXT_FILE_BYTES, InputTooLarge, read_bounded, utf8_text
 from hcard.errors import HcardError
+from hcard.file_errors import reading
 
 MAX_FIELD_CHARS = csv.field_size_limit()
 """Longest cell a CSV file may hold, characters (the csv module's limit, 131,072)."""
@@ -193,17 +194,12 @@ def read_csv_text(path: str | os.PathLike[str], error: type[HcardError]) -> str:
     kind of file it is) raises ``error`` naming it."""
     file = Path(path)
     try:
-        return utf8_text(read_bounded(file, MAX_TEXT_FILE_BYTES))
-    except FileNotFoundError:
-        raise error(f"{file}: no such file") from None
-    except IsADirectoryError:
-        raise error(f"{file}: is a directory, not a CSV file") from None
+        with reading(file, error, "a CSV file"):
+            return utf8_text(read_bounded(file, MAX_TEXT_FILE_BYTES))
     except InputTooLarge as exc:
         raise error(f"{file}: {exc}") from None
     except UnicodeDecodeError as exc:
         raise error(f"{file}: cannot read (not UTF-8: {exc.reason} at byte {exc.start})") from None
-    except OSError as exc:
-        raise error(f"{file}: cannot read ({exc.strerror or exc})") from None
 
 
 def format_rows(columns: Sequence[tuple[str, np.ndarray]]) -> str:

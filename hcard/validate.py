@@ -14,11 +14,12 @@ excess is not examined; texture indices are checked with numpy; at most
 from __future__ import annotations
 
 import math
+import os
 from collections import Counter
 
 import hcard.limits as limits
 from hcard.channels import VALUES
-from hcard.errors import Problem
+from hcard.errors import CardValidationError, Problem
 from hcard.terminal_text import clipped
 from hcard.v1 import card_pb2 as pb
 
@@ -78,6 +79,28 @@ def validate(card: pb.Card) -> list[Problem]:
 def errors_of(problems: list[Problem]) -> list[Problem]:
     """The problems of severity ``"error"``."""
     return [p for p in problems if p.severity == "error"]
+
+
+def card_errors(card: pb.Card) -> list[Problem]:
+    """The errors of ``card`` (:func:`validate`'s problems of severity ``"error"``); empty
+    for a valid card."""
+    return errors_of(validate(card))
+
+
+def require_valid(card: pb.Card, *, source: str | os.PathLike[str] | None = None) -> pb.Card:
+    """``card`` itself when it is valid (warnings allowed), else a
+    :class:`~hcard.errors.CardValidationError` listing its errors, naming ``source`` (a file,
+    ``"<stdout>"``) when given.
+
+    The one check of a card a command makes on the host: where a card enters the command
+    (:func:`hcard.card_io.load`, an encoder's result). What it hands the card to afterwards
+    (the renderer, the preview, the writer) is told ``check=False``; a device still checks
+    the card it is sent, as every device must.
+    """
+    problems = card_errors(card)
+    if problems:
+        raise CardValidationError(problems, source=source)
+    return card
 
 
 def _finite(value: float) -> bool:

@@ -10,6 +10,7 @@ import pytest
 
 from hcard.cli.render_cmd import finger_state
 from hcard.physics.card_clipping import texture_extremes
+from hcard.render.finger_speed import TouchSamples, predicted_speed
 from hcard.render.synthesis import channel_targets
 from hcard.render.touch import (
     empty_table,
@@ -25,7 +26,6 @@ from hcard_conformance.device_level import track_speed
 from hcard_conformance.metrics import sample_speeds
 from hcard_conformance.vectors.tracks import contact_speeds
 from hcard_device.sim.finger import HostFinger, TrackFinger
-from hcard_device.sim.sensors import TouchSamples
 
 
 def _rule_r11(d_uv: float, d_ev: float, d_bi: float) -> tuple[float, float]:
@@ -131,15 +131,53 @@ def test_the_renderer_table_and_the_simulated_fingers_use_rule_r4():
     assert track_speed(track, np.array([middle + t[0]]))[0] == pytest.approx(ends, rel=1e-14)
 
 
-def test_the_command_line_and_conformance_speeds_are_rule_r4():
+def _predicted_speed_written_out(t, x, y, contact, times, horizon_s) -> list[float]:
+    """hcard.render.finger_speed.predicted_speed's docstring, written out sample by sample:
+    the R4 speed of the latest sample at or before each time, extrapolated with the slope over
+    two sensor periods (when the last three samples have an R4 estimate) from the middle of
+    its interval over at most the horizon, never negative; 0 before the first sample."""
+    r4 = [math.hypot(vx, vy) for vx, vy in _rule_r4_velocity(t, x, y, contact)]
+    moving = [i > 0 and bool(contact[i] and contact[i - 1]) for i in range(len(t))]
+    out = []
+    for time in times:
+        before = [i for i in range(len(t)) if t[i] <= time]
+        if not before:
+            out.append(0.0)
+            continue
+        i = before[-1]
+        slope = ((r4[i] - r4[i - 2]) / (t[i] - t[i - 2])
+                 if i >= 2 and moving[i] and moving[i - 1] and moving[i - 2] else 0.0)
+        half = (t[i] - t[i - 1]) / 2 if i else 0.0
+        out.append(max(r4[i] + slope * min(time - t[i] + half, horizon_s), 0.0))
+    return out
+
+
+def test_actuation_is_given_one_speed_estimate_by_the_command_line_and_the_device():
+    """``hcard render --profile`` and the simulated device's firmware give actuation the same
+    speed, :func:`hcard.render.finger_speed.predicted_speed`: what a device can know at each
+    frame (the samples up to it), not the speed of the segment the frame falls in."""
+    import hcard_device.sim.simulation as simulation
+
     t, x, y, contact = _track_samples()
     track = make_track(t, x, y, 0.5, contact)
-    middles = (t[:-1] + t[1:]) / 2
-    speed_m_s, _ = finger_state(track, middles)
-    for i, got in enumerate(speed_m_s):  # segment i runs from sample i to i + 1
-        both = contact[i] and contact[i + 1]
-        segment = math.hypot(x[i + 1] - x[i], y[i + 1] - y[i]) / (t[i + 1] - t[i])
-        assert got == pytest.approx(segment * 1e-3 if both else 0.0, rel=1e-14, abs=0)
+    times = np.sort(np.r_[t, (t[:-1] + t[1:]) / 2, t[:-1] + 0.8 * np.diff(t), t[-1] + 0.02])
+    horizon_s = 0.02
+    speed_m_s, _ = finger_state(track, times, horizon_s)
+    expected = _predicted_speed_written_out(t, x, y, contact, times, horizon_s)
+    np.testing.assert_allclose(speed_m_s, np.array(expected) * 1e-3, rtol=1e-12, atol=1e-15)
+    samples = TouchSamples.of_track(track)
+    assert np.array_equal(speed_m_s, predicted_speed(samples, times, horizon_s) * 1e-3)
+    assert simulation.predicted_speed is predicted_speed  # the device's is the same function
+
+    # causal: moving the samples after a frame does not change the speed at that frame
+    later = t > times[20]
+    moved = make_track(t, np.where(later, x + 7.0, x), y, 0.5, contact)
+    assert np.array_equal(finger_state(moved, times[:21], horizon_s)[0], speed_m_s[:21])
+
+
+def test_the_conformance_speeds_are_rule_r4():
+    t, x, y, contact = _track_samples()
+    track = make_track(t, x, y, 0.5, contact)
     backward = np.hypot(np.diff(x), np.diff(y)) / np.diff(t)  # in contact or not
     np.testing.assert_allclose(sample_speeds(track), np.r_[backward[0], backward], rtol=1e-14)
     in_contact = contact[1:] & contact[:-1]

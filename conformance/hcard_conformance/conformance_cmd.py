@@ -17,6 +17,7 @@ import click
 from hcard.bounded_read import STDIN
 from hcard.cli.verbosity import QUIET, VERBOSE, verbosity, verbosity_options
 from hcard.errors import HcardError
+from hcard.file_errors import writing
 
 LEVEL_NAMES = ("format", "renderer", "device")
 TIMING_NAMES = ("real-time", "software-emulation")
@@ -138,10 +139,8 @@ def conformance(driver_name: str, levels: tuple[str, ...], select: tuple[str, ..
         if path is not None and str(path) == STDIN:
             click.echo(text(report).decode(), nl=False)
         elif path is not None:
-            try:
+            with writing(path, HcardError):
                 write(report, path)
-            except OSError as exc:
-                raise HcardError(f"{path}: cannot write ({exc.strerror or exc})") from None
             if not quiet:
                 click.echo(f"wrote {path}", file=sys.stderr)
     if not report.passed:

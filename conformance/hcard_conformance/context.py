@@ -154,17 +154,28 @@ class Context:
             self._manifest = load_manifest(Path(self.vectors_root))
         return self._manifest
 
+    def card(self, name: str) -> pb.Card:
+        """The vectors' card ``name`` (binary form), read and validated once per Context: the
+        render entries that share a card share it (do not modify it)."""
+        key = ("card", name)
+        if key not in self.cache:
+            self.cache[key] = self.manifest.card(name).load_card()
+        card: pb.Card = self.cache[key]
+        return card
+
     def render(self, card: pb.Card, track: FingerTrack, options: RenderOptions) -> Frames:
-        """Target friction of ``card`` along ``track`` as this implementation renders it.
+        """Target friction of ``card`` (validated: :meth:`card`) along ``track`` as this
+        implementation renders it.
 
         Reference: :func:`hcard.render.render` with ``options`` (frames at the golden frame
-        times). A driver: the targets its reports carry (:func:`reported_frames`); ``options``
-        do not apply, the device renders with its own settings.
+        times), the card not validated again. A driver: the targets its reports carry
+        (:func:`reported_frames`); ``options`` do not apply, the device renders with its own
+        settings (and checks the card it is sent).
         """
         if self.renderer is not None:
             return self.renderer(card, track, options)
         if self.open_driver is None:
-            return reference_render(card, track, options)
+            return reference_render(card, track, options, check=False)
         from hcard.device.play import play
 
         with self.open_driver() as driver:

@@ -18,7 +18,7 @@ from collections.abc import Iterator
 
 from hcard.card_io import card_from_bytes, dumps, parse_card, read_card_file, to_bytes
 from hcard.errors import CardError
-from hcard.validate import errors_of, validate
+from hcard.validate import card_errors
 from hcard_conformance.context import Context
 from hcard_conformance.result import CheckResult
 
@@ -40,7 +40,7 @@ def check_parse(ctx: Context) -> Iterator[CheckResult]:
         for form, path in (("binary", entry.binary), ("json", entry.json)):
             try:
                 card = parse_card(read_card_file(path), source=path, check=False)
-                problems = errors_of(validate(card))
+                problems = card_errors(card)
             except CardError as exc:
                 yield CheckResult("format.parse", LEVEL, f"{entry.name}.{form}", False, "Q2",
                                   1.0, 0.0, "errors", f"rejected: {exc}")

@@ -136,7 +136,7 @@ def case(ctx: Context, entry: Any) -> dict[str, Any]:
 def _render_case(ctx: Context, entry: Any) -> dict[str, Any]:
     manifest = ctx.manifest
     card_entry = manifest.card(entry.card)
-    card = card_entry.load_card()
+    card = ctx.card(entry.card)
     track = manifest.track(entry.track).load_track()
     golden = replace(Signal.of(entry.load_arrays()), events=metrics.speed_onsets(track))
     in_contact = max(int(np.count_nonzero(golden.contact)), 1)

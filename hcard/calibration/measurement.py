@@ -22,6 +22,7 @@ from hcard.atomic import atomic_outputs, write_atomically_together
 from hcard.bounded_read import MAX_JSON_FILE_BYTES, InputTooLarge, read_bounded
 from hcard.csv_rows import format_rows, numeric_table, read_csv_text
 from hcard.errors import InputError
+from hcard.file_errors import reading
 from hcard.json_text import JsonInputError, parse_json
 from hcard.quantities import COLUMN_UNITS
 from hcard.terminal_text import clipped
@@ -251,15 +252,11 @@ def _relative_references(conditions: dict[str, Any], sidecar: Path) -> dict[str,
 def _read_sidecar(path: Path) -> dict[str, Any]:
     source = str(path)
     try:
-        raw = read_bounded(path, MAX_JSON_FILE_BYTES)
-    except FileNotFoundError:
-        raise MeasurementError(f"{source}: no such file (the conditions sidecar)") from None
+        with reading(path, MeasurementError, "a conditions sidecar",
+                     missing="the conditions sidecar"):
+            raw = read_bounded(path, MAX_JSON_FILE_BYTES)
     except InputTooLarge as exc:
         raise MeasurementError(f"{source}: {exc} (the conditions sidecar)") from None
-    except IsADirectoryError:
-        raise MeasurementError(f"{source}: is a directory, not a conditions sidecar") from None
-    except OSError as exc:
-        raise MeasurementError(f"{source}: cannot read ({exc.strerror or exc})") from None
     try:
         data = parse_json(raw)
     except JsonInputError as exc:

@@ -38,6 +38,7 @@ from hcard.cli.input_files import INPUT_FILE
 from hcard.cli.options import plugin_option, quantity_option
 from hcard.cli.verbosity import quiet, verbosity_options
 from hcard.errors import HcardError, UsageError
+from hcard.file_errors import writing
 from hcard.physics import Predictor, PredictorError
 from hcard.physics.profile import DeviceProfile
 from hcard.physics.sweep import split_assignment
@@ -132,10 +133,8 @@ def write_plan(directory: Path, device: str, plan: Plan, check: Plan) -> list[Pa
     from hcard.card_io import save
     from hcard.track import track_to_csv
 
-    try:
+    with writing(directory, HcardError, "create"):
         directory.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise HcardError(f"{directory}: cannot create ({exc.strerror or exc})") from None
     written = []
     for card_name, track_name, part in ((PROTOCOL_CARD, PROTOCOL_TRACK, plan),
                                         (VERIFY_CARD, VERIFY_TRACK, check)):

@@ -15,9 +15,11 @@ import hcard.channels as channels
 import hcard.limits as limits
 from hcard.atomic import write_atomically, write_atomically_together
 from hcard.bounded_read import DEFAULT_MAX_PIXELS, STDIN
-from hcard.card_io import checked_bytes, format_for_path, parse_card, save, to_bytes
+from hcard.card_io import checked_bytes, format_for_path, save, to_bytes
 from hcard.cli.verbosity import quiet, verbosity_options
 from hcard.errors import CardError, HcardError, UsageError
+from hcard.file_errors import write_reason
+from hcard.validate import require_valid
 
 if TYPE_CHECKING:
     from hcard.plugins.kinds import EncodeResult, EncoderPlugin
@@ -222,21 +224,22 @@ def encode(
         if preview is not None:
             _check_writable(preview, "preview")
         result = encoder.encode(image, progress=_progress, **options)
+        require_valid(result.card, source=image)  # the one check: written unchecked below
         # The preview is rendered before the card is saved: a preview that cannot be made
         # leaves the previous card in place.
         png = _preview_bytes(result, max_error) if preview is not None else None
         if to_stdout:
             card_bytes = to_bytes(result.card)
-            parse_card(card_bytes, source="<stdout>")  # validated, as save() does
             if preview is not None and png is not None:
                 _write_preview(png, preview)  # before the card goes out: it cannot be taken back
             sys.stdout.flush()  # text already printed goes first
             sys.stdout.buffer.write(card_bytes)
         elif preview is not None and png is not None:
-            _write_card_and_preview(checked_bytes(result.card, output), output, png, preview)
+            _write_card_and_preview(checked_bytes(result.card, output, check=False), output,
+                                    png, preview)
             card_bytes = b""
         else:
-            save(result.card, output)
+            save(result.card, output, check=False)
             card_bytes = b""
     except HcardError as exc:
         raise click.ClickException(str(exc)) from None
@@ -321,7 +324,7 @@ def _preview_bytes(result: EncodeResult, max_error: float | None) -> bytes:
         "error_rms", "RMS error")
     error = result.maps.get(statistic)
     error_map = None if error is None else error / limits.RELATIVE_FRICTION_JND
-    return preview_png(result.card, error_map=error_map, error_label=label)
+    return preview_png(result.card, error_map=error_map, error_label=label, check=False)
 
 
 def _write_card_and_preview(card: bytes, card_path: Path, png: bytes, preview: Path) -> None:
@@ -330,7 +333,7 @@ def _write_card_and_preview(card: bytes, card_path: Path, png: bytes, preview: P
     try:
         write_atomically_together([(card_path, card), (preview, png)])
     except OSError as exc:
-        raise CardError(f"cannot write the card and its preview ({exc.strerror or exc})",
+        raise CardError(write_reason(exc, "write the card and its preview"),
                         source=card_path) from None
 
 
@@ -339,7 +342,7 @@ def _write_preview(png: bytes, path: Path) -> None:
     try:
         write_atomically(path, png)
     except OSError as exc:
-        raise CardError(f"cannot write the preview ({exc.strerror or exc})", source=path) from None
+        raise CardError(write_reason(exc, "write the preview"), source=path) from None
 
 
 def summary_lines(s: dict[str, Any]) -> list[str]:

@@ -27,6 +27,7 @@ from hcard.cli.input_files import INPUT_FILE
 from hcard.cli.options import plugin_option
 from hcard.cli.verbosity import verbosity_options
 from hcard.errors import HcardError, UsageError
+from hcard.file_errors import writing
 from hcard.physics.predictor import Parameter, Predictor, PredictorError, Variable
 from hcard.physics.profile import DeviceProfile
 from hcard.physics.profile_error import ProfileError
@@ -276,10 +277,8 @@ def make_figure(prediction: Prediction) -> Figure:
 
 
 def _write(path: Path, data: bytes) -> None:
-    try:
+    with writing(path, HcardError):
         write_atomically(path, data)
-    except OSError as exc:
-        raise HcardError(f"{path}: cannot write ({exc.strerror or exc})") from None
 
 
 # -- listing -----------------------------------------------------------------------------------

@@ -9,6 +9,8 @@ import click
 from hcard.card_io import load
 from hcard.cli.input_files import INPUT_FILE
 from hcard.cli.verbosity import verbosity_options
+from hcard.errors import HcardError
+from hcard.file_errors import writing
 
 
 @click.command("preview")
@@ -48,10 +50,8 @@ def preview(card: Path, output: Path | None, dpi: int) -> None:
     if out.suffix.lower() != ".png":
         raise click.UsageError(f"output must be a .png file, got '{out}'")
     loaded = load(card)
-    try:
-        render_preview(loaded, out, dpi=dpi)
-    except OSError as exc:
-        raise click.ClickException(f"cannot write {out}: {exc.strerror or exc}") from None
+    with writing(out, HcardError):
+        render_preview(loaded, out, dpi=dpi, check=False)  # load() validated it
     click.echo(f"wrote {out}")
 
 

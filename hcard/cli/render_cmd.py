@@ -18,6 +18,7 @@ from hcard.cli.input_files import INPUT_FILE
 from hcard.cli.verbosity import quiet, verbosity_options
 from hcard.csv_rows import format_rows
 from hcard.errors import HcardError
+from hcard.file_errors import write_failure
 from hcard.physics.actuation import (
     ChannelClipping,
     UVModelRange,
@@ -27,6 +28,7 @@ from hcard.physics.actuation import (
 )
 from hcard.quantities import M_PER_MM, UM_PER_M
 from hcard.render import Frames, Renderer, RenderOptions, RenderTooLong
+from hcard.render.finger_speed import TouchSamples, predicted_speed
 from hcard.render.options import (
     DEFAULT_BAND_LIMIT_HZ,
     DEFAULT_DEAD_RECKONING_S,
@@ -34,7 +36,6 @@ from hcard.render.options import (
     RenderMode,
 )
 from hcard.render.output import frame_writer
-from hcard.render.touch import speed_estimate
 from hcard.track import FingerTrack, read_track_csv
 
 if TYPE_CHECKING:
@@ -44,14 +45,18 @@ PROGRESS_FRAMES = 2_000_000
 """Show a progress bar when a rendering has more frames than this."""
 
 
-def finger_state(track: FingerTrack, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The finger's speed (m/s, of the track segment each frame falls in; 0 out of contact)
-    and normal force (N, interpolated) at the frame times ``t`` (s)."""
-    speed_mm_s = np.zeros(len(track))  # each segment's: rule R4's estimate at its end sample
-    speed_mm_s[:-1] = speed_estimate(track.t, track.x, track.y, track.contact)[1:]
+def finger_state(track: FingerTrack, t: np.ndarray, horizon_s: float, *,
+                 samples: TouchSamples | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The finger's speed (m/s) and normal force (N, interpolated) at the frame times ``t``
+    (s), 0 out of contact. The speed is the one a device whose touch samples are the track's
+    would compensate for: :func:`~hcard.render.finger_speed.predicted_speed` over at most
+    ``horizon_s`` (s, the renderer's dead-reckoning horizon) from the samples up to each frame.
+    ``samples``: the track's :class:`~hcard.render.finger_speed.TouchSamples`, made once for
+    the blocks of a rendering (their speeds are worked out once)."""
+    samples = samples if samples is not None else TouchSamples.of_track(track)
+    speed = predicted_speed(samples, t, horizon_s) * M_PER_MM
     segment = np.clip(np.searchsorted(track.t, t, side="right") - 1, 0, len(track) - 1)
     touching = track.contact[segment]
-    speed = np.where(touching, speed_mm_s[segment] * M_PER_MM, 0.0)
     force = np.where(touching, np.maximum(np.interp(t, track.t, track.normal_force), 0.0), 0.0)
     return speed, force
 
@@ -93,7 +98,8 @@ def frames_to_csv(frames: Frames, commands: ActuatorCommands | None = None) -> b
               show_default=True, help="Hybrid control, or the classic position-only baseline.")
 @click.option("--profile", "profile_path", type=INPUT_FILE,
               help="Device profile (hcard-device-profile/2): add the actuator commands it gives "
-                   "for the targets at the track's speed and force (amplitude_m, voltage_v) and "
+                   "for the targets at the track's force and the finger speed a device predicts "
+                   "from its samples (amplitude_m, voltage_v) and "
                    "the friction it predicts for them (rendered_uv, rendered_ev).")
 def render(card: Path, track_path: Path, output: Path, frame_rate: float, band_limit: float,
            dead_reckoning: float, mode: str, profile_path: Path | None) -> None:
@@ -122,24 +128,26 @@ def render(card: Path, track_path: Path, output: Path, frame_rate: float, band_l
         raise click.UsageError(str(exc)) from None
     loaded = load(card)
     track = read_track_csv(track_path)
-    renderer = Renderer(loaded, options)
+    renderer = Renderer(loaded, options, check=False)  # load() validated it
     try:
         total = renderer.frame_count(track)  # the frame limit, before any work
     except RenderTooLong as exc:  # too large an input, as play says (README: exit status 1)
         raise HcardError(f"{track_path}: t_s: {exc}") from None
     summary = _RenderSummary()
+    samples = TouchSamples.of_track(track)
     try:
         with frame_writer(output) as writer, _progress(total) as advance:
             for frames in renderer.blocks(track):
                 commands = None
                 if profile is not None:
-                    speed, force = finger_state(track, frames.t)
+                    speed, force = finger_state(track, frames.t, options.dead_reckoning_s,
+                                                samples=samples)
                     commands = actuate(profile, frames.uv, frames.ev, speed, force)
                 writer.write(_output_columns(frames, commands, npz=suffix == ".npz"))
                 summary.add(frames, commands)
                 advance(len(frames))
     except OSError as exc:
-        raise HcardError(f"{output}: cannot write ({exc.strerror or exc})") from None
+        raise HcardError(write_failure(output, exc)) from None
     click.echo(
         f"{output}: {summary.frames} frames at {frame_rate:g} Hz over {track.duration_s:.3f} s "
         f"({mode}); finger on a texture {100 * summary.contact_fraction:.0f}% of the time; "

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 from hcard.atomic import write_atomically
 from hcard.bounded_read import MAX_JSON_FILE_BYTES, InputTooLarge, read_bounded
 from hcard.errors import HcardError
+from hcard.file_errors import reading, writing
 from hcard.json_text import JsonInputError, parse_json
 from hcard.physics.device_limits import DeviceLimits
 from hcard.physics.old_formats import refuse_old_format
@@ -82,10 +83,8 @@ def document_json(document: Mapping[str, Any], name: str) -> bytes:
 
 def write_profile_file(path: str | os.PathLike[str], data: bytes) -> None:
     """Write a profile file's bytes, atomically (readers see the old file or the new one)."""
-    try:
+    with writing(path, ProfileError):
         write_atomically(path, data)
-    except OSError as exc:
-        raise ProfileError(f"{path}: cannot write ({exc.strerror or exc})") from None
 
 
 def profile_fields(raw: Any, *, source: str,
@@ -220,12 +219,7 @@ def read_profile_bytes(file: Path) -> bytes:
     """The bytes of a profile file (at most :data:`MAX_JSON_FILE_BYTES`); a missing, too large
     or unreadable file is a :class:`ProfileError` naming it."""
     try:
-        return read_bounded(file, MAX_JSON_FILE_BYTES)
-    except FileNotFoundError:
-        raise ProfileError(f"{file}: no such file") from None
+        with reading(file, ProfileError, "a profile"):
+            return read_bounded(file, MAX_JSON_FILE_BYTES)
     except InputTooLarge as exc:
         raise ProfileError(f"{file}: {exc} (a device profile)") from None
-    except IsADirectoryError:
-        raise ProfileError(f"{file}: is a directory, not a profile") from None
-    except OSError as exc:
-        raise ProfileError(f"{file}: cannot read ({exc.strerror or exc})") from None

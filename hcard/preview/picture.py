@@ -31,12 +31,11 @@ from matplotlib.colors import BoundaryNorm, ListedColormap
 from matplotlib.figure import Figure
 
 from hcard.atomic import write_atomically
-from hcard.errors import CardValidationError
 from hcard.preview.error_map import ErrorPanel, draw_error_map, error_panel
 from hcard.preview.glyph_labels import PathLabels
 from hcard.preview.periods import cells_layout, draw_cells
 from hcard.v1 import card_pb2 as pb
-from hcard.validate import errors_of, validate
+from hcard.validate import require_valid
 from hcard.version import __version__
 
 __all__ = [
@@ -173,6 +172,7 @@ def preview_figure(
     dpi: int = 120,
     error_map: np.ndarray | Sequence[Sequence[float]] | None = None,
     error_label: str = "reconstruction error",
+    check: bool = True,
 ) -> Figure:
     """The preview as a matplotlib figure (Agg canvas attached, not yet drawn).
 
@@ -184,17 +184,19 @@ def preview_figure(
             at the top; NaN for a taxtel without a figure. Drawn under the taxtel map with a
             colour bar in JND and the taxtels above 1 JND outlined.
         error_label: what the error map shows, for its title (for example ``"RMS error"``).
+        check: validate the card first; False for a card the caller has validated
+            (:func:`hcard.card_io.load`, :func:`hcard.validate.require_valid`).
 
     Raises:
-        CardValidationError: the card is invalid (a preview of it would be meaningless).
+        CardValidationError: ``check`` and the card is invalid (a preview of it would be
+            meaningless).
         ValueError: ``dpi`` is not positive, or ``error_map`` does not fit the grid or holds
             negative or infinite values.
     """
     if dpi <= 0:
         raise ValueError(f"dpi must be positive, got {dpi}")
-    problems = errors_of(validate(card))
-    if problems:
-        raise CardValidationError(problems)
+    if check:
+        require_valid(card)
     panel: ErrorPanel | None = None
     if error_map is not None:
         panel = error_panel(error_map, card.grid, error_label)
@@ -262,6 +264,7 @@ def render_preview(
     dpi: int = 120,
     error_map: np.ndarray | Sequence[Sequence[float]] | None = None,
     error_label: str = "reconstruction error",
+    check: bool = True,
 ) -> None:
     """Write the preview of ``card`` as a PNG image to ``path``, atomically.
 
@@ -272,14 +275,15 @@ def render_preview(
         path: output file (PNG bytes whatever the suffix).
         dpi: resolution, dots per inch; the figure is 14 inches wide (1680 pixels at 120 dpi).
         error_map, error_label: an error map in JND and its title (see :func:`preview_figure`).
+        check: validate the card first (see :func:`preview_figure`).
 
     Raises:
-        CardValidationError: the card is invalid.
+        CardValidationError: ``check`` and the card is invalid.
         ValueError: the error map does not fit the card's grid.
         OSError: the file cannot be written.
     """
     write_atomically(path, preview_png(card, dpi=dpi, error_map=error_map,
-                                       error_label=error_label))
+                                       error_label=error_label, check=check))
 
 
 def preview_png(
@@ -288,15 +292,18 @@ def preview_png(
     dpi: int = 120,
     error_map: np.ndarray | Sequence[Sequence[float]] | None = None,
     error_label: str = "reconstruction error",
+    check: bool = True,
 ) -> bytes:
     """The preview of ``card`` as PNG bytes (:func:`render_preview` without the file), so a
-    caller can render it before it replaces anything.
+    caller can render it before it replaces anything; ``check``: validate the card first (see
+    :func:`preview_figure`).
 
     Raises:
-        CardValidationError: the card is invalid.
+        CardValidationError: ``check`` and the card is invalid.
         ValueError: the error map does not fit the card's grid.
     """
-    fig = preview_figure(card, dpi=dpi, error_map=error_map, error_label=error_label)
+    fig = preview_figure(card, dpi=dpi, error_map=error_map, error_label=error_label,
+                         check=check)
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=dpi, metadata={"Software": f"hcard {__version__}"},
                 pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL})

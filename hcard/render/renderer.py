@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hcard.errors import CardValidationError, TrackError, UsageError
+from hcard.errors import TrackError, UsageError
 from hcard.render.clock import FrameClock
 from hcard.render.compiled import CompiledCard, compile_card
 from hcard.render.kernel import Block, Workspace, render_block
@@ -21,7 +21,7 @@ from hcard.render.options import RenderOptions
 from hcard.render.touch import TouchTable, empty_table, extend_table
 from hcard.track import FingerTrack, make_track
 from hcard.v1 import card_pb2 as pb
-from hcard.validate import errors_of, validate
+from hcard.validate import require_valid
 
 BATCH_CHUNK_FRAMES = 1 << 15
 """Frames per block of :meth:`Renderer.blocks` (output of any length in bounded memory)."""
@@ -92,10 +92,14 @@ class Frames:
 class Renderer:
     """Renders one card with fixed options; cheap to reuse for many tracks."""
 
-    def __init__(self, card: pb.Card, options: RenderOptions | None = None) -> None:
-        problems = errors_of(validate(card))
-        if problems:
-            raise CardValidationError(problems)
+    def __init__(self, card: pb.Card, options: RenderOptions | None = None, *,
+                 check: bool = True) -> None:
+        """A renderer of ``card`` with ``options`` (defaults when None). With ``check`` the card
+        is validated first (:class:`~hcard.errors.CardValidationError` when invalid); a caller
+        that validated it already (:func:`hcard.card_io.load`,
+        :func:`hcard.validate.require_valid`) passes ``check=False``."""
+        if check:
+            require_valid(card)
         self.card = card
         self.options = options or RenderOptions()
         self.compiled: CompiledCard = compile_card(card, self.options)
@@ -305,7 +309,9 @@ def _frame_columns(total: int, components: int | None) -> Frames:
 
 
 def render(
-    card: pb.Card, track: FingerTrack, options: RenderOptions | None = None
+    card: pb.Card, track: FingerTrack, options: RenderOptions | None = None, *,
+    check: bool = True,
 ) -> Frames:
-    """Render ``card`` along ``track`` (batch mode)."""
-    return Renderer(card, options).render(track)
+    """Render ``card`` along ``track`` (batch mode); ``check``: validate the card first (see
+    :class:`Renderer`)."""
+    return Renderer(card, options, check=check).render(track)

@@ -18,6 +18,7 @@ from hcard.card_io import load
 from hcard.cli.input_files import INPUT_FILE
 from hcard.cli.verbosity import verbosity_options
 from hcard.errors import HcardError, UsageError
+from hcard.file_errors import write_failure
 from hcard.terminal_text import printable
 from hcard.track import read_track_csv
 
@@ -242,7 +243,7 @@ def synthesize(device_class: str, uri: str | None, effect_names: tuple[str, ...]
         write_measurement(recording(result, track_path=str(output / "protocol.csv"),
                                     card_path=str(output / "protocol.hcard")), path)
     except OSError as exc:
-        raise HcardError(f"{path}: cannot write ({exc.strerror or exc})") from None
+        raise HcardError(write_failure(path, exc)) from None
     click.echo(f"{path}: {len(result.states)} reports")
     for line in summary(result):
         click.echo(printable(f"  {line}"))
@@ -316,7 +317,7 @@ def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Pat
     except ValueError as exc:
         raise HcardError(f"{output}: {exc}") from None
     except OSError as exc:
-        raise HcardError(f"{output}: cannot write ({exc.strerror or exc})") from None
+        raise HcardError(write_failure(output, exc)) from None
     click.echo(f"{output}: {len(result.states)} reports from {uri}")
     for line in summary(result):
         click.echo(printable(f"  {line}"))

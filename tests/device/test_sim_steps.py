@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from hcard import build
+from hcard.render.finger_speed import TouchSamples
 from hcard.track import FingerTrack, make_track
 from hcard_device.sim import DeviceConfig, DeviceSimulation, SimBlock
 from hcard_device.sim.amplifier import EVAmplifier
@@ -24,7 +25,7 @@ from hcard_device.sim.finger import TrackFinger
 from hcard_device.sim.hidden import HiddenPhysics, resolve
 from hcard_device.sim.models import device_profile
 from hcard_device.sim.plate import DRIVE_SLACK, PIGains, PlateLoop, PlateModel
-from hcard_device.sim.sensors import NOISE_BATCH, CornerForceSensors, TouchSamples
+from hcard_device.sim.sensors import NOISE_BATCH, CornerForceSensors
 
 EVITA, COUPLED = DeviceConfig.evita(), DeviceConfig.coupled()
 

@@ -17,6 +17,7 @@ from hcard.calibration.report.files import FIT_PNG, JSON, MARKDOWN, PROFILE, RES
 from hcard.calibration.report.json_document import report_dict
 from hcard.calibration.report.markdown_text import report_markdown
 from hcard.calibration.results import CalibrationResult
+from hcard.file_errors import writing
 from hcard.physics import PredictorError
 from hcard.physics.profile import DeviceProfile
 
@@ -59,10 +60,8 @@ def write_report(
     folder = Path(directory)
     if folder.exists() and not folder.is_dir():
         raise PredictorError(f"{folder}: exists and is not a directory; cannot write a report")
-    try:
+    with writing(folder, PredictorError, "create the report directory"):
         folder.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise PredictorError(f"{folder}: cannot create the report directory ({exc})") from None
     profile = profile if profile is not None else profile_of(result)
 
     written: list[Path] = []

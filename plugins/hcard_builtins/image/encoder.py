@@ -32,10 +32,9 @@ import numpy as np
 from hcard import __version__, build, limits
 from hcard.card_io import to_bytes
 from hcard.channels import NAMES
-from hcard.errors import CardValidationError, UsageError
+from hcard.errors import UsageError
 from hcard.plugins.kinds import Encoder, EncodeResult
 from hcard.v1 import card_pb2 as pb
-from hcard.validate import errors_of, validate
 
 from .analysis import Target, TaxtelTextures, analyse_image
 from .geometry import Geometry, resolve_geometry
@@ -218,6 +217,8 @@ def encode_image(
         (:meth:`.shortfall.Shortfall.figures`). ``maps`` holds per-taxtel ``error_rms``,
         ``error_p95`` and ``error_max`` (relative friction) and, with a target, ``shortfall``
         (reason codes of :data:`.shortfall.REASONS`, 0 where the target is met).
+        The card is not validated here: ``hcard encode`` validates it once, and
+        :func:`hcard.card_io.save` does when it writes it.
 
     Raises:
         ImageError: the image cannot be read or is too large (see :func:`load_gray`), or the
@@ -279,10 +280,7 @@ def encode_image(
     )
     say("rendering the card back to measure the reconstruction error")
     error = reconstruction_error(image.pixels, geometry, palette, mapping)
-    card = make_card(image, geometry, palette, opts)
-    problems = errors_of(validate(card))
-    if problems:
-        raise CardValidationError(problems, source=image.path)
+    card = make_card(image, geometry, palette, opts)  # validated by the caller that keeps it
     stats = _stats(image, geometry, palette, error, card, opts)
     log = [f"physical size {geometry.size_source}"]
     if palette.leaders > len(card.textures):

@@ -30,6 +30,7 @@ from PIL import Image, UnidentifiedImageError
 
 from hcard.bounded_read import DECODE_BYTES_PER_ALLOWED_PIXEL, DEFAULT_MAX_PIXELS
 from hcard.errors import ImageError
+from hcard.file_errors import reading
 
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 _HEADER_BYTES = 64
@@ -248,15 +249,8 @@ def to_gray(image: Image.Image, file: Path) -> tuple[np.ndarray, float]:
 
 
 def _read_head(file: Path) -> bytes:
-    try:
-        with file.open("rb") as stream:
-            head = stream.read(_HEADER_BYTES)
-    except FileNotFoundError:
-        raise ImageError(f"{file}: no such file") from None
-    except IsADirectoryError:
-        raise ImageError(f"{file}: is a directory, not an image") from None
-    except OSError as exc:
-        raise ImageError(f"{file}: cannot read ({exc.strerror or exc})") from None
+    with reading(file, ImageError, "an image"), file.open("rb") as stream:
+        head = stream.read(_HEADER_BYTES)
     if not head:
         raise ImageError(f"{file}: empty file (0 bytes), not an image")
     return head

@@ -9,8 +9,9 @@ One :meth:`DeviceSimulation.step` of ``n`` frames (10 kHz) runs, in order:
    hybrid Position/Texture control on the touch samples), or directly streamed frames;
 4. the firmware's model-based rendering (:func:`hcard.physics.actuation.actuate`): plate
    amplitude and EV envelope commands from the targets at the finger speed predicted from the
-   touch samples (velocity compensation, :func:`.sensors.predicted_speed`) and the force the
-   corner sensors measure, clipped to the limits;
+   touch samples (velocity compensation, :func:`hcard.render.finger_speed.predicted_speed`,
+   the estimate ``hcard render --profile`` uses too) and the force the corner sensors
+   measure, clipped to the limits;
 5. the output gain: 1 while running; a linear ramp to 0 over ``ramp_down_s`` after
    :meth:`DeviceSimulation.stop` or when the watchdog expires;
 6. the physics: the PI amplitude loop over the plate envelope at 60 kHz (:mod:`.plate`), the EV
@@ -62,6 +63,7 @@ from hcard.physics.profile import DeviceProfile
 from hcard.physics.profile_error import ProfileError
 from hcard.quantities import M_PER_MM
 from hcard.render import Renderer, RenderOptions, RenderStream
+from hcard.render.finger_speed import TouchSamples, hold, predicted_speed
 from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb
 from hcard_device.sim.amplifier import EVAmplifier
@@ -72,13 +74,7 @@ from hcard_device.sim.hidden import HiddenPhysics
 from hcard_device.sim.host_clock import HostClock
 from hcard_device.sim.models import device_profile, finger_capacitance
 from hcard_device.sim.plate import PIGains, PlateLoop, PlateModel
-from hcard_device.sim.sensors import (
-    CornerForceSensors,
-    TouchSamples,
-    TouchSensor,
-    hold,
-    predicted_speed,
-)
+from hcard_device.sim.sensors import CornerForceSensors, TouchSensor
 
 TOUCH_DTYPE = np.dtype([("x_mm", "f8"), ("y_mm", "f8"), ("contact", "?"), ("t_s", "f8")])
 """Fields of :attr:`SimBlock.touch`: the held touch sample (position mm, contact, its time s;
