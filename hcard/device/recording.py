@@ -295,7 +295,9 @@ def force_recording(result: PlayResult) -> Measurement:
         kept.append({name: getattr(block, name) for name in FORCE_COLUMNS}
                     | {name: block.device[name] for name in ("target_uv", "target_ev")})
     joined = {name: np.concatenate([part[name] for part in kept]) for name in kept[0]}
-    return Measurement(**{name: joined[name] for name in FORCE_COLUMNS},
+    return Measurement(t=joined["t"], normal_force=joined["normal_force"],
+                       lateral_force=joined["lateral_force"], speed=joined["speed"],
+                       contact=joined["contact"],
                        device={name: joined[name] for name in ("target_uv", "target_ev")},
                        conditions={})
 
