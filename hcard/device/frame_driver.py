@@ -89,7 +89,7 @@ from hcard.physics.card_clipping import ClipReport as CardClipping
 from hcard.physics.card_clipping import clip_report
 from hcard.physics.profile import DeviceProfile
 from hcard.v1 import card_pb2 as pb
-from hcard.validate import errors_of, validate
+from hcard.validate import card_errors
 
 HOST_SILENCE_S = 0.05
 """The host sends frames for this long after the application's last output report, s."""
@@ -249,7 +249,7 @@ class FrameDriver(Driver):
         try:
             message = (card_from_bytes(data, source=str(self.uri)) if isinstance(card, bytes)
                        else card)
-            problems = errors_of(validate(message))
+            problems = card_errors(message)
             reason, where = ((str(problems[0]), str(problems[0].path)) if problems
                              else ("", ""))
         except HcardError as exc:

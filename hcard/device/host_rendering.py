@@ -3,8 +3,10 @@
 What the reference firmware does on the device, done here on the host, with the same core
 code: the card's target friction frame by frame (:class:`hcard.render.RenderStream`, the
 finger samples as the host receives them) or streamed targets, then actuator commands from the
-device's physics profile at the finger's speed and force (:func:`hcard.physics.actuation.actuate`,
-velocity compensation, Eq. 2.30), clamped at the limits in force.
+device's physics profile (:func:`hcard.physics.actuation.actuate`, velocity compensation,
+Eq. 2.30) at the finger speed every host and device uses
+(:func:`hcard.render.finger_speed.predicted_speed`) and the finger's force, clamped at the
+limits in force.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from hcard.physics.actuation import actuate
 from hcard.physics.profile import DeviceProfile
 from hcard.quantities import M_PER_MM
 from hcard.render import Renderer, RenderOptions, RenderStream
-from hcard.render.touch import step_speed
+from hcard.render.finger_speed import TouchSamples, predicted_speed
 from hcard.v1 import card_pb2 as pb
 
 STREAM_CAPACITY_FRAMES = 2000
@@ -37,7 +39,6 @@ class FingerSample:
         x_mm, y_mm: position, mm.
         normal_force_n: normal force, N.
         contact: the finger touches the surface.
-        speed_m_s: rule R4's speed estimate from the previous sample, m/s.
         host_time_us: its time as FINGER carries it (us, modulo 2**32), echoed in STATE.
     """
 
@@ -47,7 +48,6 @@ class FingerSample:
     y_mm: float
     normal_force_n: float
     contact: bool
-    speed_m_s: float
     host_time_us: int
 
 
@@ -93,6 +93,7 @@ class HostRendering:
         self._stream: RenderStream | None = None
         self._fingers: deque[FingerSample] = deque()
         self._applied: FingerSample | None = None
+        self._samples = TouchSamples.empty()  # the last applied ones, for the speed
         self._queue: deque[tuple[float, float]] = deque()
         self.streaming = False
         self._last_pushed = -math.inf
@@ -116,13 +117,8 @@ class HostRendering:
     def finger(self, t_s: float, arrived_s: float, x_mm: float, y_mm: float,
                normal_force_n: float, contact: bool, host_time_us: int) -> None:
         """A finger sample from the host at time ``t_s`` that arrived at ``arrived_s`` (s)."""
-        last = self._fingers[-1] if self._fingers else self._applied
-        speed = 0.0
-        if last is not None:
-            speed = step_speed(x_mm - last.x_mm, y_mm - last.y_mm, t_s - last.t_s,
-                               contact and last.contact) * M_PER_MM
         self._fingers.append(FingerSample(t_s, max(t_s, arrived_s), x_mm, y_mm,
-                                          normal_force_n, contact, speed, host_time_us))
+                                          normal_force_n, contact, host_time_us))
 
     def stream(self, uv: np.ndarray, ev: np.ndarray) -> None:
         """Queue streamed target frames (played from the next frame on, in order)."""
@@ -163,8 +159,8 @@ class HostRendering:
             uv, ev, texture = self._card_frames(first, count, times)
         amplitude, voltage = np.zeros(count), np.zeros(count)
         if running and (np.any(uv < 1.0) or np.any(ev > 1.0)):
-            speed = np.array([f.speed_m_s if f is not None and f.contact else 0.0
-                              for f in applied])
+            speed = predicted_speed(self._samples, times,
+                                    self.options.dead_reckoning_s) * M_PER_MM
             force = np.array([max(f.normal_force_n, 0.0) if f is not None and f.contact
                               else 0.0 for f in applied])
             commands = actuate(self.profile, uv, ev, speed, force)
@@ -186,8 +182,19 @@ class HostRendering:
             while self._fingers and self._fingers[0].placed_s <= t + 1e-12:
                 self._applied = self._fingers.popleft()
                 self._push(self._applied)
+                self._remember(self._applied)
             applied.append(self._applied)
         return applied
+
+    def _remember(self, sample: FingerSample) -> None:
+        """Keep ``sample`` (a repeat of the newest time replaces it) among the last four."""
+        samples = self._samples
+        if len(samples) and sample.t_s <= samples.t[-1]:
+            samples = TouchSamples(samples.t[:-1], samples.x[:-1], samples.y[:-1],
+                                   samples.contact[:-1])
+        new = TouchSamples(np.array([sample.t_s]), np.array([sample.x_mm]),
+                           np.array([sample.y_mm]), np.array([sample.contact]))
+        self._samples = samples.concat(new).tail(4)
 
     def _push(self, sample: FingerSample) -> None:
         if self.renderer is None:
