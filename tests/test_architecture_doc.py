@@ -10,7 +10,8 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import pytest
-from test_spec_rule_ids import SKIPPED_DIRS
+
+from tests.test_spec_rule_ids import SKIPPED_DIRS
 
 ROOT = Path(__file__).resolve().parent.parent
 DOC = ROOT / "ARCHITECTURE.md"

@@ -10,7 +10,6 @@ import threading
 from pathlib import Path
 
 import pytest
-from cards import two_texture_card
 from click.testing import CliRunner
 
 import hcard
@@ -23,6 +22,7 @@ from hcard.errors import CardError
 from hcard.physics.profile import DeviceProfile
 from hcard.physics.profile_error import ProfileError
 from hcard.track import TrackError, read_track_csv
+from tests.helpers.cards import two_texture_card
 
 ZERO = Path("/dev/zero")
 needs_dev_zero = pytest.mark.skipif(not ZERO.exists(), reason="no /dev/zero on this system")

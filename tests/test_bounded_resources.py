@@ -17,9 +17,9 @@ import sys
 from pathlib import Path
 
 import pytest
-from hostile_cards import HOSTILE_CARDS
 
 from hcard import limits
+from tests.helpers.hostile_cards import HOSTILE_CARDS
 
 TIME_BOUND_S = 20
 """Most CPU time a card command may take on any card under the size limit, s (spec/README.md

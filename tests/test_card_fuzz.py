@@ -6,14 +6,14 @@ from __future__ import annotations
 import contextlib
 import time
 
-from cards import two_texture_card
-from hostile_cards import HOSTILE_CARDS
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from hcard.card_io import card_from_bytes, parse_card, to_bytes, to_json
 from hcard.errors import CardError
 from hcard.validate import MAX_LISTED_PROBLEMS, errors_of, validate
+from tests.helpers.cards import two_texture_card
+from tests.helpers.hostile_cards import HOSTILE_CARDS
 
 VALID = to_bytes(two_texture_card())
 VALID_JSON = to_json(two_texture_card()).encode()

@@ -6,13 +6,13 @@ import math
 import os
 
 import pytest
-from cards import two_texture_card
 
 import hcard
 from hcard import build, limits
 from hcard.card_io import card_from_bytes, parse_card, to_bytes, to_json
 from hcard.errors import CardError, CardValidationError
 from hcard.v1 import card_pb2 as pb
+from tests.helpers.cards import two_texture_card
 
 
 def paths_of(card):

@@ -11,7 +11,6 @@ from pathlib import Path
 import click
 import numpy as np
 import pytest
-from cards import two_texture_card
 from click.testing import CliRunner
 
 import hcard
@@ -19,6 +18,7 @@ from hcard.card_io import to_bytes
 from hcard.cli.main import cli
 from hcard.render import render
 from hcard.track import read_track_csv, straight_stroke, track_to_csv
+from tests.helpers.cards import two_texture_card
 
 
 @pytest.fixture()

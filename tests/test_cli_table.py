@@ -12,13 +12,13 @@ from pathlib import Path
 
 import click
 import pytest
-from cards import two_texture_card
 from click.testing import CliRunner
 
 import hcard
 from hcard.cli.errors import EXIT_BROKEN_PIPE, EXIT_USAGE
 from hcard.cli.main import cli
 from hcard.track import straight_stroke, track_to_csv
+from tests.helpers.cards import two_texture_card
 
 ROOT = Path(__file__).resolve().parents[1]
 RECORDING = ROOT / "examples" / "thesis_measurements" / "ev_hover_table3_3_gap0p25mm.csv"

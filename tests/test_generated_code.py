@@ -3,19 +3,17 @@
 from __future__ import annotations
 
 import importlib.util
-import sys
-from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / "scripts"))
+from tests.helpers.repository import REPO as ROOT
+from tests.helpers.repository import import_script
 
 
 def test_generated_code_matches_the_proto(tmp_path):
     if importlib.util.find_spec("grpc_tools") is None:
         pytest.fail("grpcio-tools is missing: install the dev extra (pip install -e '.[dev]')")
-    from generate_proto import generate
+    generate = import_script("scripts/generate_proto.py").generate
 
     for fresh in generate(tmp_path):
         committed = ROOT / fresh.relative_to(tmp_path)

@@ -12,13 +12,13 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
-from hostile_cards import indices_out_of_range
 
 from hcard import build, card_io, track
 from hcard.calibration.measurement import MeasurementError, read_measurement
 from hcard.cli.main import cli
 from hcard.errors import CardError
 from hcard.physics.profile import DeviceProfile, ProfileError
+from tests.helpers.hostile_cards import indices_out_of_range
 
 CARD = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[build.texture(0.5, channel="uv")])
 SIDECAR = {"device": "bench tribometer", "plate_frequency_hz": 30000.0}

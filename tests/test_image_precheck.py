@@ -12,7 +12,6 @@ from pathlib import Path
 import matplotlib
 import pytest
 from click.testing import CliRunner
-from hostile_cards import png_declaring
 from PIL import Image, ImageFile
 
 from hcard.bounded_read import DECODE_BYTES_PER_ALLOWED_PIXEL, DEFAULT_MAX_PIXELS
@@ -20,6 +19,7 @@ from hcard.cli.main import cli
 from hcard.errors import ImageError
 from hcard_builtins.image import loading
 from hcard_builtins.image.loading import ImageHeader, decode_bytes, load_gray
+from tests.helpers.hostile_cards import png_declaring
 
 REAL_PNGS = sorted(Path(matplotlib.get_data_path()).glob("images/*.png"))
 

@@ -19,7 +19,6 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
-from distributions import install_distribution
 
 import hcard
 from hcard.errors import PluginError
@@ -30,6 +29,7 @@ from hcard.plugins import (
     get_registry,
     hookimpl,
 )
+from tests.helpers.distributions import install_distribution
 
 MODULE_PREFIX = "hcardtest_"
 

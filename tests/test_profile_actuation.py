@@ -9,8 +9,6 @@ from typing import ClassVar
 
 import numpy as np
 import pytest
-from cards import two_texture_card
-from test_physics_velocity_compensation import TOLERANCE, spring_slider_device, stepped_friction
 
 from hcard import build
 from hcard.physics import Predictor, PredictorError, Variable
@@ -25,6 +23,12 @@ from hcard.track import straight_stroke
 from hcard_builtins.physics.electrovibration import ChargeLeakage, FingerGeometry, Kaczmarek
 from hcard_builtins.physics.finger import FingerFriction
 from hcard_builtins.physics.ultrasonic import DimensionlessGroup
+from tests.helpers.cards import two_texture_card
+from tests.test_physics_velocity_compensation import (
+    TOLERANCE,
+    spring_slider_device,
+    stepped_friction,
+)
 
 EPS0 = EPSILON_0  # the value the code uses whatever the SciPy (tests/test_quantities.py)
 AREA, D_SC, EPS_SC, D_I, EPS_I = 1e-4, 200e-6, 1560.0, 90e-6, 3.35

@@ -1,19 +1,19 @@
 """Taxtel crossings (hcard/render/crossings.py): the texture of every frame, found from a
 search for the frames where the finger enters another taxtel, against the frame-by-frame lookup
-of an independent double-precision rendering (tests/reference_render.py, spec/README.md R5-R7),
-and the search itself against an exhaustive one from deliberately wrong guesses."""
+of an independent double-precision rendering (tests/helpers/reference_render.py, spec/README.md
+R5-R7), and the search itself against an exhaustive one from deliberately wrong guesses."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from reference_render import reference_render
 
 from hcard import build
 from hcard.render import Renderer, RenderOptions
 from hcard.render.compiled import compile_card
 from hcard.render.crossings import Line, first_reached
 from hcard.track import make_track
+from tests.helpers.reference_render import reference_render
 
 
 def checker_card(taxtel_mm: tuple[float, float], textures: int = 5, seed: int = 0):

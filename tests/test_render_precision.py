@@ -1,5 +1,5 @@
 """The renderer's numbers against an independent double-precision rendering of spec/README.md
-section 6 (tests/reference_render.py), on random cards and strokes and on long tracks whose
+section 6 (tests/helpers/reference_render.py), on random cards and strokes and on long tracks whose
 phases reach millions of turns.
 
 R13 lets a renderer evaluate the cosine in single precision once the phase is reduced to one
@@ -16,12 +16,12 @@ import math
 
 import numpy as np
 import pytest
-from reference_render import reference_render
 
 from hcard import build
 from hcard.render import Renderer, RenderOptions
 from hcard.track import make_track, straight_stroke
 from hcard.v1 import card_pb2 as pb
+from tests.helpers.reference_render import reference_render
 
 ERROR_PER_AMPLITUDE = 7e-7
 """Bound on a component's error, relative friction per unit of its amplitude."""

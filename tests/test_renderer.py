@@ -6,7 +6,6 @@ import math
 
 import numpy as np
 import pytest
-from signals import tone, wrap
 
 from hcard import build
 from hcard.errors import CardValidationError, TrackError
@@ -14,6 +13,7 @@ from hcard.render import Renderer, RenderOptions
 from hcard.render.runs import band_limit_gain
 from hcard.render.touch import _extend_block, empty_table, extend_table
 from hcard.track import make_track, straight_stroke
+from tests.helpers.signals import tone, wrap
 
 FS = 10_000.0
 

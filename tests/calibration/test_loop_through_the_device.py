@@ -20,12 +20,12 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
-from served_device import served_device
 
 from hcard.calibration.measurement import read_measurement
 from hcard.calibration.results import AMBIGUOUS
 from hcard.cli.main import cli
 from hcard.physics.profile import DeviceProfile
+from tests.helpers.served_device import served_device
 
 PLAN_S = "30s"
 """Length of the protocol in these tests (the default is 60 s)."""

@@ -16,10 +16,10 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from distributions import install_distribution
 
 from hcard.plugins import HcardPluginWarning, command_cache
 from hcard.plugins.registry import PluginRegistry
+from tests.helpers.distributions import install_distribution
 
 LIST_COMMANDS = (
     "import sys\nfrom hcard.cli.main import cli\n"

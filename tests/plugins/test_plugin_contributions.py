@@ -19,7 +19,6 @@ import click
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from distributions import install_distribution
 
 from hcard.cli.main import cli
 from hcard.physics import Parameter, Predictor, Variable
@@ -27,6 +26,7 @@ from hcard.physics.device_limits import DeviceLimits
 from hcard.physics.profile import DeviceProfile
 from hcard.plugins import HcardPluginWarning, LazyCommand, hookimpl
 from hcard.plugins.registry import get_command_registry, get_registry
+from tests.helpers.distributions import install_distribution
 
 MODULE = "hcardtest_contrib_commands"
 

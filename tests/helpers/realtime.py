@@ -1,6 +1,6 @@
 """Real-time runs in the tests: repeated while the machine could not keep them, never hidden.
 
-A test that judges a device served in real time (``tests/served_device.py``, ``usbip://``)
+A test that judges a device served in real time (``tests/helpers/served_device.py``, ``usbip://``)
 judges a run of the device and of the test's own process together. On a loaded machine either
 may fall behind; the run then measures the lateness (spec/conformance.md QT3; the device says so
 itself from protocol 1.4, PI4). Such a run is measured again, at most
