@@ -19,6 +19,8 @@ from hcard.cli.main import cli
 from hcard.render import render
 from hcard.track import read_track_csv, straight_stroke, track_to_csv
 from tests.helpers.cards import two_texture_card
+from tests.helpers.cli import assert_one_line_error
+from tests.helpers.cli import run_hcard as run
 
 
 @pytest.fixture()
@@ -34,19 +36,6 @@ def track_file(tmp_path):
     stroke = straight_stroke((1.0, 5.0), (40.0, 0.0), 0.4)
     path.write_text("# a 0.4 s stroke\n" + track_to_csv(stroke))
     return path
-
-
-def run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args])
-
-
-def one_line_error(result, *fragments):
-    assert result.exit_code != 0
-    assert "Traceback" not in result.output
-    lines = [line for line in result.output.splitlines() if line.strip()]
-    assert len(lines) == 1 and lines[0].startswith("Error: ")
-    for fragment in fragments:
-        assert fragment in lines[0]
 
 
 def test_every_command_has_help():
@@ -99,7 +88,7 @@ def test_corrupt_and_missing_cards_give_one_line(command, tmp_path):
             for fragment in fragments:
                 assert fragment in lines[0]
     else:
-        one_line_error = globals()["one_line_error"]
+        one_line_error = assert_one_line_error
     corrupt = tmp_path / "corrupt.hcard"
     corrupt.write_bytes(b"\x0a\xff\x01")
     extra = ["-o", tmp_path / "p.png"] if command == "preview" else []
@@ -157,7 +146,8 @@ def test_bad_tracks_give_one_line(card_file, tmp_path, text, message):
     """(Cases of every bad-input class of the track reader; the huge cell is 200,000 chars.)"""
     track = tmp_path / "bad.csv"
     track.write_text(text)
-    one_line_error(run("render", card_file, "--track", track, "-o", tmp_path / "o.csv"), message)
+    assert_one_line_error(run("render", card_file, "--track", track, "-o", tmp_path / "o.csv"),
+                          message)
 
 
 def test_bad_render_options(card_file, track_file, tmp_path):

@@ -12,13 +12,13 @@ from pathlib import Path
 
 import click
 import pytest
-from click.testing import CliRunner
 
 import hcard
 from hcard.cli.errors import EXIT_BROKEN_PIPE, EXIT_USAGE
 from hcard.cli.main import cli
 from hcard.track import straight_stroke, track_to_csv
 from tests.helpers.cards import two_texture_card
+from tests.helpers.cli import run_hcard as run
 
 ROOT = Path(__file__).resolve().parents[1]
 RECORDING = ROOT / "examples" / "thesis_measurements" / "ev_hover_table3_3_gap0p25mm.csv"
@@ -38,10 +38,6 @@ def every_command(command: click.Command = cli, path: tuple[str, ...] = ()
 
 
 COMMANDS = dict(every_command())
-
-
-def run(*args: object) -> click.testing.Result:
-    return CliRunner().invoke(cli, [str(a) for a in args])
 
 
 @pytest.fixture()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import json
 import struct
 import zlib
@@ -10,7 +11,7 @@ from pathlib import Path
 import click
 import numpy as np
 import pytest
-from click.testing import CliRunner, Result
+from click.testing import CliRunner
 from PIL import Image
 
 import hcard
@@ -19,6 +20,7 @@ from hcard.cli import encode_cmd
 from hcard.cli.main import cli
 from hcard.v1 import card_pb2 as pb
 from hcard_builtins.image import DEFAULT_MAX_PIXELS
+from tests.helpers.cli import assert_one_line_error, run_hcard
 
 
 def grating_png(path: Path, width: int = 300, height: int = 200, period: float = 1.25) -> Path:
@@ -51,22 +53,8 @@ def png_header_only(path: Path, width: int, height: int) -> Path:
     return path
 
 
-def run(*args: str | Path) -> Result:
-    return CliRunner().invoke(cli, ["encode", *map(str, args)])
-
-
-def assert_one_line_error(result: Result, *fragments: str, code: int = 1) -> None:
-    """Non-zero exit, ``Error: ...`` on one line of stderr, nothing on stdout, no traceback."""
-    assert result.exit_code == code, result.output
-    assert isinstance(result.exception, SystemExit)
-    assert result.stdout == ""
-    lines = result.stderr.strip().splitlines()
-    assert lines[-1].startswith("Error: ")
-    if code == 1:
-        assert len(lines) == 1
-    assert "Traceback" not in result.output
-    for fragment in fragments:
-        assert fragment in lines[-1]
+run = functools.partial(run_hcard, "encode")
+"""``hcard encode ARGS``."""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -375,7 +363,7 @@ def test_output_write_failure_leaves_no_file(tmp_path: Path, monkeypatch: pytest
 def test_bad_options_are_usage_errors(tmp_path: Path, args: list[str], message: str):
     image = grating_png(tmp_path / "g.png")
     result = run(image, "-o", tmp_path / "x.hcard", *args)
-    assert_one_line_error(result, message, code=2)
+    assert_one_line_error(result, message, status=2, after_usage=True)
 
 
 def test_missing_output_option_is_a_usage_error(tmp_path: Path):

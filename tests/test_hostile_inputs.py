@@ -18,6 +18,7 @@ from hcard.calibration.measurement import MeasurementError, read_measurement
 from hcard.cli.main import cli
 from hcard.errors import CardError
 from hcard.physics.profile import DeviceProfile, ProfileError
+from tests.helpers.cli import run_hcard
 from tests.helpers.hostile_cards import indices_out_of_range
 
 CARD = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[build.texture(0.5, channel="uv")])
@@ -27,7 +28,7 @@ CSV = "t_s,fn_n,fl_n,amplitude_m\n0,0.5,0.2,1e-6\n0.001,0.5,0.2,1e-6\n"
 
 def run(*args: object) -> tuple[int, str]:
     """Exit status and everything ``hcard ARGS`` printed."""
-    result = CliRunner().invoke(cli, [str(a) for a in args])
+    result = run_hcard(*args)
     return result.exit_code, result.output
 
 

@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import importlib
 import json
-import os
-import subprocess
 import sys
 import types
 import warnings
@@ -29,6 +27,7 @@ from hcard.plugins import (
     get_registry,
     hookimpl,
 )
+from tests.helpers.cli import run_python
 from tests.helpers.distributions import install_distribution
 
 MODULE_PREFIX = "hcardtest_"
@@ -253,16 +252,7 @@ def test_cli_plugins_reports_broken_plugins_and_exits_0(broken_site: Path) -> No
 
 
 def test_cli_plugins_subprocess_with_broken_plugin(broken_site: Path) -> None:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(broken_site), env.get("PYTHONPATH")) if p)
-    done = subprocess.run(
-        [sys.executable, "-m", "hcard", "plugins"],
-        capture_output=True,
-        text=True,
-        env=env,
-        cwd=broken_site,
-        timeout=120,
-    )
+    done = run_python("-m", "hcard", "plugins", site=broken_site)
     assert done.returncode == 0, done.stderr
     assert "warning: plugin 'bad' from package 'broken-vendor' (version 1.2)" in done.stderr
     assert "Traceback" not in done.stderr

@@ -3,21 +3,21 @@
 from __future__ import annotations
 
 import csv
+import functools
 import json
 import math
 
 import click
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
-from hcard.cli.main import cli
 from hcard.cli.predict_cmd import evaluate, make_figure, predict
 from hcard.physics.profile import DeviceProfile
 from hcard.physics.sweep import SweepError, parse_sweep, quantity, split_assignment
 from hcard.plugins.registry import get_registry
 from hcard.quantities import UnitError, display_unit
 from hcard_builtins.physics.ultrasonic import DimensionlessGroup
+from tests.helpers.cli import assert_one_line_error, run_hcard
 
 DIMENSIONLESS = DimensionlessGroup.name
 MU0, NU, PSI_STAR = 0.5, 0.33, 2.38
@@ -29,19 +29,8 @@ def closed_form(w, speed=0.02, f=27_500.0, psi_star=PSI_STAR, mu0=MU0):
     return 1 - np.exp(-psi / psi_star)
 
 
-def run(*args):
-    return CliRunner().invoke(cli, ["predict", *(str(a) for a in args)])
-
-
-def one_line_error(result, *fragments, status=1):
-    """One ``Error:`` line holding each fragment, no traceback, exit ``status`` (1: a file
-    given is wrong; 2: the command line is)."""
-    assert result.exit_code == status, (result.exit_code, result.output)
-    assert "Traceback" not in result.output
-    lines = [line for line in result.output.splitlines() if line.strip()]
-    assert len(lines) == 1 and lines[0].startswith("Error: "), result.output
-    for fragment in fragments:
-        assert fragment in lines[0], lines[0]
+run = functools.partial(run_hcard, "predict")
+"""``hcard predict ARGS``."""
 
 
 def read_csv(path):
@@ -244,28 +233,28 @@ def test_every_option_has_help():
 def test_a_bad_option_value_is_a_one_line_usage_error(tmp_path, monkeypatch, args, fragments):
     """Every value given on the command line that cannot be used exits 2 (README: usage)."""
     monkeypatch.chdir(tmp_path)
-    one_line_error(run(*args), *fragments, status=2)
+    assert_one_line_error(run(*args), *fragments, status=2)
 
 
 def test_a_missing_profile_file_is_invalid_input(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    one_line_error(run(DIMENSIONLESS, "--profile", "missing.json"),
-                   "missing.json: no such file", status=1)
+    assert_one_line_error(run(DIMENSIONLESS, "--profile", "missing.json"),
+                          "missing.json: no such file", status=1)
 
 
 def test_profile_errors_are_one_line(tmp_path):
     wrong_model = tmp_path / "kaczmarek.json"
     DeviceProfile(get_registry().get("predictor", "ev-kaczmarek"), None).save(wrong_model)
-    one_line_error(run(DIMENSIONLESS, "--profile", wrong_model, "--input", "amplitude=1um"),
-                   "holds no parameters for model", "ev-kaczmarek")
+    assert_one_line_error(run(DIMENSIONLESS, "--profile", wrong_model, "--input", "amplitude=1um"),
+                          "holds no parameters for model", "ev-kaczmarek")
     bad = tmp_path / "bad.json"
     raw = DeviceProfile.coupled_stimulator().to_dict()
     raw["limits"]["max_voltage"] = "2 kHz"
     bad.write_text(json.dumps(raw))
-    one_line_error(run("coupled", "--profile", bad), str(bad), "limits.max_voltage")
+    assert_one_line_error(run("coupled", "--profile", bad), str(bad), "limits.max_voltage")
     unknown = tmp_path / "unknown.json"
     unknown.write_text(json.dumps({"format": "something/1"}))
-    one_line_error(run("--profile", unknown), "format: expected")
+    assert_one_line_error(run("--profile", unknown), "format: expected")
 
 
 @pytest.mark.parametrize(("form", "advice"), [
@@ -277,13 +266,13 @@ def test_old_profile_formats_are_a_clear_error(tmp_path, form, advice):
     old = tmp_path / "old.json"
     old.write_text(json.dumps({"format": form, "model": "dimensionless-group",
                                "parameters": {}}))
-    one_line_error(run(DIMENSIONLESS, "--profile", old, "--input", "amplitude=1um"),
-                   f"{old}: format: '{form}' is", advice)
+    assert_one_line_error(run(DIMENSIONLESS, "--profile", old, "--input", "amplitude=1um"),
+                          f"{old}: format: '{form}' is", advice)
 
 
 def test_unwritable_output_is_a_one_line_error(tmp_path):
     result = run(DIMENSIONLESS, "--input", "amplitude=1um", "-o", tmp_path / "no" / "x.csv")
-    one_line_error(result, "cannot write")
+    assert_one_line_error(result, "cannot write")
 
 
 # ---------------------------------------------------------------------- parsing helpers
