@@ -10,8 +10,9 @@ import pytest
 import hcard
 from hcard.card_io import parse_card
 from hcard.track import parse_track_csv
+from tests.helpers.repository import REPO
 
-SPEC = Path(__file__).resolve().parent.parent / "spec"
+SPEC = REPO / "spec"
 
 
 def blocks(path: Path, language: str) -> list[str]:

@@ -80,7 +80,8 @@ def test_single_point_with_parameters_in_units():
     assert result.exit_code == 0, result.output
     header, row = result.output.splitlines()
     assert header.split()[-2:] == ["relative_friction", "[-]"]
-    # the spring-slider's relative friction at w = 2 um (Eqs. 2.19-2.28; tests/test_ultrasonic.py)
+    # the spring-slider's relative friction at w = 2 um (Eqs. 2.19-2.28;
+    # tests/builtins/test_ultrasonic.py)
     assert float(row.split()[-1]) == pytest.approx(0.247, abs=0.01)
 
 

@@ -13,7 +13,8 @@ import re
 from collections import Counter
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+from tests.helpers.repository import REPO
+
 SPEC = REPO / "spec"
 THIS_FILE = Path(__file__).resolve()
 

@@ -21,7 +21,7 @@ from hcard_builtins.physics.coupled import Coupled, coupled_class
 from hcard_builtins.physics.electrovibration import AirLayer, ChargeLeakage, Kaczmarek
 from hcard_builtins.physics.ultrasonic import DimensionlessGroup, SpringSlider
 
-EPS0 = EPSILON_0  # the value the code uses whatever the SciPy (tests/test_quantities.py)
+EPS0 = EPSILON_0  # the value the code uses whatever the SciPy (tests/card/test_quantities.py)
 
 # Section 3.6.1 film of the chapter-4 stimulator and the Fig. 2.24 FE group (defaults).
 AREA, D_SC, EPS_SC, D_I, EPS_I = 1e-4, 200e-6, 1560.0, 90e-6, 3.35

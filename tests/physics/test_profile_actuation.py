@@ -24,13 +24,13 @@ from hcard_builtins.physics.electrovibration import ChargeLeakage, FingerGeometr
 from hcard_builtins.physics.finger import FingerFriction
 from hcard_builtins.physics.ultrasonic import DimensionlessGroup
 from tests.helpers.cards import two_texture_card
-from tests.test_physics_velocity_compensation import (
+from tests.physics.test_physics_velocity_compensation import (
     TOLERANCE,
     spring_slider_device,
     stepped_friction,
 )
 
-EPS0 = EPSILON_0  # the value the code uses whatever the SciPy (tests/test_quantities.py)
+EPS0 = EPSILON_0  # the value the code uses whatever the SciPy (tests/card/test_quantities.py)
 AREA, D_SC, EPS_SC, D_I, EPS_I = 1e-4, 200e-6, 1560.0, 90e-6, 3.35
 K_EV = EPS0 * AREA / (2 * (D_SC / EPS_SC + D_I / EPS_I) * (D_SC + D_I))
 """Eq. 3.12 written out: F_e / v^2 for the section 3.6 film, N/V^2."""
@@ -59,7 +59,7 @@ def stimulator() -> DeviceProfile:
 
 def _uv_card():
     # 0.35-0.75: inside what the spring-slider reaches at 20 mm/s (above 0.798 mu' jumps to 1
-    # at the critical amplitude, tests/test_physics_velocity_compensation.py).
+    # at the critical amplitude, tests/physics/test_physics_velocity_compensation.py).
     grating = build.texture(
         0.55, [build.spatial(0.5, 0.2)], channel="uv", locking="position", name="grating"
     )

@@ -21,6 +21,7 @@ from hcard.cli.main import cli
 from hcard.v1 import card_pb2 as pb
 from hcard_builtins.image import DEFAULT_MAX_PIXELS
 from tests.helpers.cli import assert_one_line_error, run_hcard
+from tests.helpers.repository import REPO
 
 
 def grating_png(path: Path, width: int = 300, height: int = 200, period: float = 1.25) -> Path:
@@ -212,7 +213,7 @@ def test_preview_draws_the_error_map_the_summary_counts(
     monkeypatch.setattr(hcard.preview.picture, "preview_png", recording_preview_png)
     options = [] if target is None else ["--max-error", target]
     out, preview = tmp_path / "b.hcard", tmp_path / "b-preview.png"
-    button = Path(__file__).parents[1] / "examples" / "button.png"
+    button = REPO / "examples" / "button.png"
     result = run(button, "-o", out, "--preview", preview, "--json", *options)
     assert result.exit_code == 0, result.output
     summary = json.loads(result.stdout)

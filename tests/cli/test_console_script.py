@@ -20,8 +20,9 @@ from click.testing import CliRunner
 import hcard
 from hcard.card_io import parse_card
 from hcard.cli.main import cli, main
+from tests.helpers.repository import REPO
 
-BUTTON = Path(__file__).parents[1] / "examples" / "button.png"
+BUTTON = REPO / "examples" / "button.png"
 _HCARD = next(e for e in entry_points(group="console_scripts") if e.name == "hcard")
 CONSOLE_SCRIPT = f"from {_HCARD.module} import {_HCARD.attr}; {_HCARD.attr}()"
 """What the installed ``hcard`` script runs: its entry point's function, called."""

@@ -15,7 +15,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+from tests.helpers.repository import REPO as ROOT
+
 DOC = ROOT / "ARCHITECTURE.md"
 PACKAGE_DIRS = {
     "hcard": ROOT / "hcard",

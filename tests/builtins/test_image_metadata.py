@@ -15,7 +15,7 @@ from hcard.cli.main import cli
 from hcard.errors import ImageError
 from hcard_builtins.image import load_gray
 from hcard_builtins.image.geometry import MAX_DPI, resolve_geometry
-from tests.test_bounded_resources import run_measured
+from tests.card.test_bounded_resources import run_measured
 
 CHECKER = (np.indices((64, 48)).sum(axis=0) % 2 * 255).astype(np.uint8)  # 48 wide, 64 high
 

@@ -17,7 +17,7 @@ from hcard.cli.render_cmd import frames_to_csv
 from hcard.render import MAX_RENDER_FRAMES, Renderer, RenderOptions, RenderTooLong
 from hcard.render.renderer import BATCH_CHUNK_FRAMES
 from hcard.track import make_track, track_to_csv
-from tests.test_bounded_resources import run_measured
+from tests.card.test_bounded_resources import run_measured
 
 CARD = build.card(40.0, 20.0, taxtel_mm=10.0, textures=[
     build.texture(0.6, [build.spatial(1.0, 0.3), build.temporal(120.0, 0.1)], channel="uv"),

@@ -7,13 +7,12 @@ import functools
 import importlib.util
 import re
 from collections.abc import Sequence
-from pathlib import Path
 
 import pytest
 
-from tests.test_spec_rule_ids import SKIPPED_DIRS
+from tests.helpers.repository import REPO as ROOT
+from tests.repository.test_spec_rule_ids import SKIPPED_DIRS
 
-ROOT = Path(__file__).resolve().parent.parent
 DOC = ROOT / "ARCHITECTURE.md"
 PATH_LIKE = re.compile(r"^[\w./-]+\.(py|md|proto|toml)$|^[\w-]+(/[\w-]+)+/$")
 MODULE_LIKE = re.compile(r"^hcard(_builtins|_device|_conformance)?(\.\w+)*$")

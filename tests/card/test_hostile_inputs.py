@@ -1,4 +1,4 @@
-"""Hostile inputs other than the 16 MiB cards of tests/test_bounded_resources.py: each gets one
+"""Hostile inputs other than the 16 MiB cards of tests/card/test_bounded_resources.py: each gets one
 clear line (``Error: FILE: ...``) naming the file, exit status 1 and no traceback: duplicate
 JSON keys (spec/README.md F3, spec/device-profile.md DP1, spec/measurement-format.md MF8), a
 byte-order mark (accepted everywhere), a track whose span is infinitely many frames or that
@@ -20,6 +20,7 @@ from hcard.errors import CardError
 from hcard.physics.profile import DeviceProfile, ProfileError
 from tests.helpers.cli import run_hcard
 from tests.helpers.hostile_cards import indices_out_of_range
+from tests.helpers.repository import REPO
 
 CARD = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[build.texture(0.5, channel="uv")])
 SIDECAR = {"device": "bench tribometer", "plate_frequency_hz": 30000.0}
@@ -139,7 +140,7 @@ def test_a_track_with_more_samples_than_the_limit_is_refused_naming_the_line(
 
 
 def test_the_track_limit_is_the_one_the_spec_states() -> None:
-    text = (Path(__file__).parents[1] / "spec" / "track-format.md").read_text()
+    text = (REPO / "spec" / "track-format.md").read_text()
     assert f"at most {track.MAX_TRACK_SAMPLES:,} (2^22) samples" in text
     assert track.MAX_TRACK_SAMPLES == 2**22
 

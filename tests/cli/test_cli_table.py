@@ -19,8 +19,8 @@ from hcard.cli.main import cli
 from hcard.track import straight_stroke, track_to_csv
 from tests.helpers.cards import two_texture_card
 from tests.helpers.cli import run_hcard as run
+from tests.helpers.repository import REPO as ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 RECORDING = ROOT / "examples" / "thesis_measurements" / "ev_hover_table3_3_gap0p25mm.csv"
 """A recording with its sidecar, for the options of ``calibrate run`` read after the data."""
 
