@@ -4,7 +4,7 @@ against three targets: no wrong effect named, "none" on clean data, and the righ
 
 Run: ``python bench/bench_calibration_hit_rates.py [--quick] [--seeds 2] [--only TEXT]``
 
-The recordings come from ``tests/calibration/independent_recordings.py``: every effect written
+The recordings come from ``tests/helpers/independent_recordings.py``: every effect written
 from the thesis formulas, without the effect plugins' code. The set crosses each scenario (clean,
 each in-library effect alone, pairs, one out-of-library effect) with ``--seeds`` seeds, white
 and coloured (AR(1) 0.9) sensor noise, and no nuisance or all of them (a drifting sensor offset,
@@ -44,13 +44,12 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "calibration"))
-
-import independent_recordings as ir
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the root: tests.helpers
 
 from hcard.calibration.loop import calibrate
 from hcard.calibration.results import NO_EFFECT, NOT_EXPLAINED
 from hcard.plugins.registry import get_registry
+from tests.helpers import independent_recordings as ir
 
 HIT_TARGET = 0.90
 """Share of in-library runs in which the right effect must be named."""

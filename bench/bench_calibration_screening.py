@@ -4,7 +4,7 @@ much faster.
 Run: ``python bench/bench_calibration_screening.py [--seeds 1,2] [--nuisances]
 [--only TEXT] [--screen-samples 4000] [--sessions 10]``
 
-The recordings come from ``tests/calibration/independent_recordings.py`` (every effect written
+The recordings come from ``tests/helpers/independent_recordings.py`` (every effect written
 from the thesis formulas, without the effect plugins' code), ``--sessions`` sessions long (10:
 about 60 s at 1 kHz, as a lab's recording; the loop screens from 16000 training samples on):
 every scenario of its set (clean,
@@ -44,15 +44,15 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "calibration"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the root: tests.helpers
 
-import independent_recordings as ir
 from calibration_answers import differences, runner_up
 
 from hcard.calibration.loop import calibrate
 from hcard.calibration.results import CalibrationResult, LoopSettings
 from hcard.calibration.screening import SCREEN_SAMPLES, SCREEN_TOLERANCE
 from hcard.plugins.registry import get_registry
+from tests.helpers import independent_recordings as ir
 
 
 def rankings(result: CalibrationResult) -> dict[int, list[tuple[float, str]]]:

@@ -6,7 +6,7 @@ Run: ``python bench/bench_hostile_inputs.py [--skip-tracks]``
 Each command runs in a fresh process (the command line run in-process, as a user runs it) that
 prints its exit status, its wall time and its peak memory (max RSS). The bound (spec/README.md
 section 4): 20 s and 32 bytes per input byte plus 250 MB. The inputs are the generators of
-tests/hostile_cards.py: 16 MiB JSON cards of 5.6 million ``{}`` components or textures (and
+tests/helpers/hostile_cards.py: 16 MiB JSON cards of 5.6 million ``{}`` components or textures (and
 their binary equivalents, 8.4 million empty ones), a card whose description is 16 MiB of control
 characters, a track spanning 1e305 s, PNGs declaring 8000 x 8000 pixels of 16-bit RGBA and
 64,000,000 x 1 pixels, and tracks of 10^7 samples (over the limit of spec/track-format.md TK8)
@@ -24,9 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the root: tests.helpers
 
-from hostile_cards import (  # tests/ is put on the path just above
+from tests.helpers.hostile_cards import (
     control_description,
     empty_components,
     empty_textures,

@@ -15,8 +15,8 @@ runs.
 
 Goal: every run passes (``R of R``) with two burners on a 2-core machine: a real-time verdict
 that depends on an idle machine is a defect, and a test that hides one is another (the tests
-retry a run the machine could not keep and fail saying so, ``tests/realtime.py``). The figure
-is the passes per node id; the floor is the same runs with ``--burners 0`` (``--baseline``
+retry a run the machine could not keep and fail saying so, ``tests/helpers/realtime.py``). The
+figure is the passes per node id; the floor is the same runs with ``--burners 0`` (``--baseline``
 measures it first, in the same invocation, and prints the loaded-to-idle time ratio).
 """
 

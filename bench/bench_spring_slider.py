@@ -5,7 +5,7 @@ Run from the repository root, on one core::
     OPENBLAS_NUM_THREADS=1 python bench/bench_spring_slider.py [--points 100000] [--repeats 3]
 
 It draws ``--points`` random points, uniformly in the ranges of the sweep of
-tests/test_ultrasonic.py: peak-to-peak amplitude 1-5 um, frequency 20-60 kHz, sliding speed
+tests/builtins/test_ultrasonic.py: peak-to-peak amplitude 1-5 um, frequency 20-60 kHz, sliding speed
 5-100 mm/s, mu0 0.25-1 and normal force 0.1-1 N (kn = 3.9 MN/m, kl = 1.5 MN/m, instantaneous
 lateral recovery), and evaluates the relative
 friction of all of them in one call of

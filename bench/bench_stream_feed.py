@@ -23,13 +23,13 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from served_device import served_device
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the root: tests.helpers
 
 from hcard.device import open_device
 from hcard.device.protocol import FaultBits
 from hcard_conformance.realtime import HostWatch
 from hcard_conformance.streaming import stream
+from tests.helpers.served_device import served_device
 
 FREQUENCIES_HZ = (25.0, 110.0, 350.0)
 """Sine frequencies streamed, Hz (points of the conformance suite's bandwidth sweep)."""

@@ -58,7 +58,7 @@ ATMOSPHERE_PA = 101_325.0
 EPSILON_0 = 8.8541878188e-12
 """Vacuum permittivity, F/m (CODATA 2022; Table 3.2 of the thesis lists 8.8542e-12). SciPy 1.15
 and later give the same in ``scipy.constants.epsilon_0`` (1.10-1.14: CODATA 2018, 6.8e-10
-lower); tests/test_quantities.py compares. The physical constants are written out here because
+lower); tests/card/test_quantities.py compares. The physical constants are written out here because
 ``import scipy.constants`` takes ~0.1 s, and the hosts that only run predictors (the QEMU
 guest, a conformance run) import the models that use them."""
 

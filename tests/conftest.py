@@ -1,16 +1,18 @@
-"""The run's own cache directory, import path for the test helpers, and the order of the test
-files."""
+"""Hooks of the whole run: its own cache directory, the order of the test files, and the
+helpers' asserts rewritten like a test's. The helpers themselves are modules of
+:mod:`tests.helpers`, imported by name."""
 
 from __future__ import annotations
 
 import shutil
-import sys
 import tempfile
 from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parent))
+# A failing assert in a helper (tests/helpers/cli.py's one-line error, realtime.py's verdicts)
+# shows its values as a failing assert in a test does.
+pytest.register_assert_rewrite("tests.helpers")
 
 FIRST = ("test_guest.py",)
 """Test files run before the others: the QEMU guest tier emulates a whole machine in software,

@@ -17,7 +17,7 @@ cores; the SVDs of a fit's Jacobian come out the same bits on one thread and on 
 (tests/calibration/test_blas_threads.py). A cost that differs in its last bit can end a fit one
 iteration earlier or later, inside its convergence tolerance; on one thread the fits no longer
 depend on the core count. Against the pool on 2 cores, on 10 recordings of
-tests/calibration/independent_recordings.py and 2 of the simulated coupled stimulator, the
+tests/helpers/independent_recordings.py and 2 of the simulated coupled stimulator, the
 final fits, their uncertainties and the bootstrap's refits and intervals were the same bits;
 candidate fits moved their held-out RMSE by up to 4.7e-7 of itself and a weakly determined fit
 its values by up to 9.3e-7 of their uncertainty (tests/calibration/test_blas_threads.py bounds

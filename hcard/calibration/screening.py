@@ -19,7 +19,7 @@ screened RMSE (the start refitted on the same samples), which takes that common 
 model with a 7.7 ms high-pass fitted on one sample in 8 read 4 % high without it). The
 tolerance is the largest relative difference between that estimate
 and the full fit's held-out RMSE that the loop allows for, with a margin; it is measured over
-the independent recordings of tests/calibration/independent_recordings.py by
+the independent recordings of tests/helpers/independent_recordings.py by
 bench/bench_calibration_screening.py.
 """
 

@@ -41,7 +41,7 @@ COMMAND_SUMMARIES = {
     "validate": "Check each CARD against the spec; list problems by rule.",
 }
 """The first sentence of each core command's help, which ``hcard --help`` lists without
-importing any command module (tests/test_cli.py checks them against the commands' own help)."""
+importing any command module (tests/cli/test_cli.py checks them against the commands' own help)."""
 
 
 def contributed_commands() -> dict[str, CommandPlugin]:

@@ -226,7 +226,7 @@ def _extend_by_one(
 ) -> TouchTable:
     """:func:`extend_table` for one sample (a stream pushes them one at a time): the same
     operations on one element each, in floats, without the ~40 array operations of the
-    vectorised form (:func:`_extend_block`); the numbers are the same (tests/test_renderer.py
+    vectorised form (:func:`_extend_block`); the numbers are the same (tests/render/test_renderer.py
     compares them)."""
     time, (x, y), on = float(t[0]), position[0].tolist(), bool(contact[0])
     if len(previous):

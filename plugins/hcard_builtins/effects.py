@@ -485,7 +485,7 @@ class UltrasonicSpeed(Effect):
     ``U_ref``, the speed at which the base model's reduction holds unchanged, is fitted with
     ``a``: the thesis gives the trend, not where a device's power law is anchored, and a fixed
     anchor forces the base model to be exact there. With ``U_ref`` held at 20 mm/s, recordings
-    whose law is anchored at 25 mm/s (tests/calibration/independent_recordings.py) left a
+    whose law is anchored at 25 mm/s (tests/helpers/independent_recordings.py) left a
     structured residual that a wrong load index then half-absorbed, in 8 runs of 8; fitted,
     the effect alone explains them."""
 

@@ -9,10 +9,8 @@ from __future__ import annotations
 
 import contextlib
 import math
-import sys
 import threading
 from collections.abc import Iterator
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,9 +23,7 @@ from hcard.calibration.fit import fit_predictor
 from hcard.calibration.observation import lateral_force_model
 from hcard.physics.effects import augment
 from hcard.plugins.registry import get_registry
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import independent_recordings as ir
+from tests.helpers import independent_recordings as ir
 
 POOL_DEVIATION = 1e-3
 """Largest change of a fitted value, in units of its uncertainty, between a fit on OpenBLAS's

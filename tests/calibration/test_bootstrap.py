@@ -12,7 +12,6 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from test_selection_recordings import Hidden, uv_recording
 
 from hcard.calibration.bootstrap import stroke_bootstrap
 from hcard.calibration.dataset import prepare
@@ -21,6 +20,7 @@ from hcard.calibration.observation import lateral_force_model
 from hcard.physics import PredictorError
 from hcard.physics.effects import augment
 from hcard.plugins.registry import get_registry
+from tests.calibration.test_selection_recordings import Hidden, uv_recording
 
 LOAD = "load-index.load_index"
 FREE = ["mu0", "psi_star", "force_offset", LOAD]

@@ -11,12 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from test_selection_recordings import Hidden, uv_recording
 
 from hcard.calibration.contact import default_contact_threshold, normal_force_noise
 from hcard.calibration.dataset import prepare
 from hcard.calibration.measurement import MeasurementError, write_measurement
 from hcard.cli.main import cli
+from tests.calibration.test_selection_recordings import Hidden, uv_recording
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])

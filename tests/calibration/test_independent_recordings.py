@@ -11,19 +11,15 @@ forces); the loop is then asked to name the hidden effect, or none, on a few sce
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 import scipy.constants
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import independent_recordings as ir
-
 from hcard.calibration.loop import calibrate
 from hcard.calibration.results import NO_EFFECT, NOT_EXPLAINED
 from hcard.plugins.registry import get_registry
+from tests.helpers import independent_recordings as ir
 
 SMALL = ir.Protocol(sessions=2, strokes_per_session=4, stroke_s=0.6)
 """A shorter protocol for the loop tests (2 sessions x 4 strokes of 0.6 s, 9 s at 1 kHz)."""

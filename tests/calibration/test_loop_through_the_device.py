@@ -19,13 +19,12 @@ import json
 from pathlib import Path
 
 import pytest
-from click.testing import CliRunner
-from served_device import served_device
 
 from hcard.calibration.measurement import read_measurement
 from hcard.calibration.results import AMBIGUOUS
-from hcard.cli.main import cli
 from hcard.physics.profile import DeviceProfile
+from tests.helpers.cli import run_hcard
+from tests.helpers.served_device import served_device
 
 PLAN_S = "30s"
 """Length of the protocol in these tests (the default is 60 s)."""
@@ -36,7 +35,7 @@ MIN_CUT = 2.0
 
 
 def invoke(*args: str) -> str:
-    result = CliRunner().invoke(cli, [str(a) for a in args])
+    result = run_hcard(*args)
     assert result.exit_code == 0, result.output
     return result.output
 

@@ -9,7 +9,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 import hcard
 from hcard.calibration.measurement import read_measurement, write_measurement
@@ -25,14 +24,10 @@ from hcard.calibration.plan import (
     protocol,
     verification,
 )
-from hcard.cli.main import cli
 from hcard.physics.profile import DeviceProfile
 from hcard.render import Renderer
 from hcard_device.sim.tribometer import Protocol, synthesize
-
-
-def run(*args: object) -> object:
-    return CliRunner().invoke(cli, [str(a) for a in args])
+from tests.helpers.cli import run_hcard as run
 
 
 @pytest.mark.parametrize(("device", "lanes"), [

@@ -9,14 +9,9 @@ two ways over the whole scenario set, seeds and noise kinds, and times them.
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import independent_recordings as ir
 
 from hcard.calibration.loop import calibrate
 from hcard.calibration.report.json_document import report_dict
@@ -31,6 +26,7 @@ from hcard.calibration.screening import (
     screening_stride,
 )
 from hcard.plugins.registry import get_registry
+from tests.helpers import independent_recordings as ir
 
 SMALL = ir.Protocol(sessions=2, strokes_per_session=4, stroke_s=0.6)
 """9 s at 1 kHz: about 3600 training samples, screened here on a quarter of them."""

@@ -10,13 +10,13 @@ import itertools
 
 import numpy as np
 import pytest
-from test_selection_recordings import Hidden, uv_recording
 
 from hcard.calibration.dataset import prepare
 from hcard.calibration.loop import calibrate
 from hcard.calibration.results import AMBIGUOUS, EXPLAINED
 from hcard.calibration.selection import MEASUREMENTS, separating_regressor
 from hcard.plugins.registry import get_registry
+from tests.calibration.test_selection_recordings import Hidden, uv_recording
 
 UV = "dimensionless-group"
 

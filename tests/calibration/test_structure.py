@@ -10,7 +10,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy import stats
-from test_selection_recordings import Hidden, ar1, uv_recording
 
 from hcard.calibration.dataset import CalibrationData, prepare
 from hcard.calibration.judges import default_free, residual_structure, verdict_of
@@ -20,6 +19,7 @@ from hcard.calibration.noise import detectable_eta2, measure_noise
 from hcard.calibration.results import NO_EFFECT, NOT_EXPLAINED, LoopSettings, ModelFit, Structure
 from hcard.calibration.summary import summarise
 from hcard.plugins.registry import get_registry
+from tests.calibration.test_selection_recordings import Hidden, ar1, uv_recording
 
 BASE = "dimensionless-group"
 

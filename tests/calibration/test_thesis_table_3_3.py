@@ -9,17 +9,15 @@ independent closed-form least-squares fit of Eq. 3.17 written here.
 from __future__ import annotations
 
 import itertools
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 import scipy.constants
 
 from hcard.calibration.results import NOT_EXPLAINED
+from tests.helpers.repository import import_script
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "examples" / "thesis_measurements"))
-import calibrate_table_3_3 as table
+table = import_script("examples/thesis_measurements/calibrate_table_3_3.py")
 
 # Table 3.3 as printed (thesis lines 1436-1446), mN, participants i-xi, typed from the thesis.
 THESIS_COLUMNS_MN = {

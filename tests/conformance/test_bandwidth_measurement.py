@@ -10,7 +10,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-from plate_loop import plate_loop_bandwidth_hz, plate_loop_db
 
 from hcard.device import open_device
 from hcard.device.protocol import Finger
@@ -26,6 +25,7 @@ from hcard_conformance.device_level import (
 from hcard_conformance.streaming import FINGER_PERIOD_S, FINGER_SPEED_MM_S, stream
 from hcard_device.sim import DeviceConfig
 from hcard_device.sim_driver import SimDriver, make_firmware
+from tests.helpers.plate_loop import plate_loop_bandwidth_hz, plate_loop_db
 
 
 def test_harmonics_fold_onto_400_hz_and_onto_no_swept_frequency_at_1_khz_reports() -> None:

@@ -7,8 +7,6 @@ regression in the device or in a check's method shows as a number, not only as a
 from __future__ import annotations
 
 import pytest
-from late_transport import LateSecondSampleDriver
-from plate_loop import plate_loop_bandwidth_hz
 
 from hcard.device import open_device
 from hcard.device.play import play
@@ -18,6 +16,8 @@ from hcard_conformance.registry import all_checks
 from hcard_conformance.result import CheckResult
 from hcard_conformance.runner import run_suite
 from hcard_device.sim import DeviceConfig
+from tests.helpers.late_transport import LateSecondSampleDriver
+from tests.helpers.plate_loop import plate_loop_bandwidth_hz
 
 DEVICE_CHECKS = {"device.friction", "device.dynamics", "device.latency", "device.safety",
                  "device.watchdog", "device.upload-integrity", "device.report-loss",

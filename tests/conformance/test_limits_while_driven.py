@@ -9,8 +9,6 @@ from __future__ import annotations
 import re
 
 import pytest
-from realtime import assert_conforms
-from served_device import served_device
 
 from hcard.device import open_device
 from hcard_conformance import device_level as dl
@@ -18,6 +16,8 @@ from hcard_conformance.context import Context
 from hcard_conformance.result import CheckResult
 from hcard_conformance.runner import run_suite
 from hcard_device.controls import CONTROLS
+from tests.helpers.realtime import assert_conforms
+from tests.helpers.served_device import served_device
 
 CASE = "limits-while-driven"
 

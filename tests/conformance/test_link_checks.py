@@ -11,8 +11,6 @@ without numbering them.
 from __future__ import annotations
 
 import pytest
-from realtime import assert_conforms
-from served_device import served_device
 
 from hcard.device import open_device
 from hcard.device.base import DEFAULT_TIMEOUT_S
@@ -26,6 +24,8 @@ from hcard_conformance.runner import run_suite
 from hcard_device.controls import DROPPED_FRACTION, LossyFirmware
 from hcard_device.sim import DeviceConfig, DeviceSimulation
 from hcard_device.sim_driver import SimDriver
+from tests.helpers.realtime import assert_conforms
+from tests.helpers.served_device import served_device
 
 LINK_CHECKS = ("device.upload-integrity", "device.report-loss")
 REFUSALS = {"bad-crc": "CRC_MISMATCH", "truncated": "SHORT", "out-of-order": "OUT_OF_ORDER",

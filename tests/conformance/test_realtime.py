@@ -1,6 +1,6 @@
 """Runs not kept in real time (spec/conformance.md QT3; device protocol 1.4, PI4): measured again
 at most three times, then UNASSESSED with every reason; never a FAIL of the device, and never a
-pass. The tests' own helper (tests/realtime.py) fails saying the machine could not keep real
+pass. The tests' own helper (tests/helpers/realtime.py) fails saying the machine could not keep real
 time."""
 
 from __future__ import annotations
@@ -10,7 +10,6 @@ import time
 from dataclasses import replace
 
 import pytest
-from realtime import MACHINE, assert_conforms, in_real_time, kept_run
 
 from hcard.device.protocol import Counters, FaultBits, State
 from hcard.device.uri import parse_uri
@@ -31,6 +30,7 @@ from hcard_conformance.result import FAIL, PASS, UNASSESSED, CannotAssess, Check
 from hcard_device.firmware import Firmware
 from hcard_device.sim import DeviceConfig, DeviceSimulation
 from hcard_device.sim_driver import SimDriver
+from tests.helpers.realtime import MACHINE, assert_conforms, in_real_time, kept_run
 
 
 def _state(faults: int = 0) -> State:

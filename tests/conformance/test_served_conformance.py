@@ -15,15 +15,15 @@ across, the safety check leaves the limits as it found them, and no case is drop
 from __future__ import annotations
 
 import pytest
-from plate_loop import plate_loop_bandwidth_hz
-from realtime import assert_conforms
-from served_device import served_device
 
 from hcard.device import open_device
 from hcard_conformance.context import Context
 from hcard_conformance.registry import all_checks
 from hcard_conformance.runner import run_suite
 from hcard_device.sim import DeviceConfig
+from tests.helpers.plate_loop import plate_loop_bandwidth_hz
+from tests.helpers.realtime import assert_conforms
+from tests.helpers.served_device import served_device
 
 
 def test_the_reference_conforms_at_every_level_twice_against_one_running_server():

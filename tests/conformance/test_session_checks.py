@@ -8,8 +8,6 @@ from __future__ import annotations
 import math
 
 import pytest
-from realtime import assert_conforms
-from served_device import served_device
 
 from hcard_conformance.context import Context
 from hcard_conformance.registry import builtin_checks
@@ -21,6 +19,8 @@ from hcard_conformance.session_checks import (
     check_session_ownership,
 )
 from hcard_device.controls import CONTROLS
+from tests.helpers.realtime import assert_conforms
+from tests.helpers.served_device import served_device
 
 
 def run(name: str) -> dict[str, CheckResult]:

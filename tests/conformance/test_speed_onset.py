@@ -9,12 +9,12 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from late_transport import LATE_S, LateSecondSampleDriver
 
 from hcard.track import make_track
 from hcard_conformance import metrics
 from hcard_conformance import renderer_level as rl
 from hcard_conformance.context import Context
+from tests.helpers.late_transport import LATE_S, LateSecondSampleDriver
 
 
 def test_speed_onsets_are_the_second_sample_of_every_contact():

@@ -137,7 +137,7 @@ def test_a_host_reading_late_is_timed_by_the_device_under_software_emulation() -
     report by the device's account (PI3) and measures the device (~1 ms, as with a prompt
     host), while case host-read-lag measures the 300 ms backlog; a real-time host that read
     this late fails both."""
-    from late_transport import READ_LAG_S, LateReaderDriver
+    from tests.helpers.late_transport import READ_LAG_S, LateReaderDriver
 
     prompt = _latency(SimDriver.open("sim://"), "real-time")
     late = _latency(LateReaderDriver(), "software-emulation")

@@ -13,11 +13,8 @@ import time
 
 import numpy as np
 import pytest
-from hid_over_usbip import HidOverUsbip
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from realtime import in_real_time, kept_run
-from served_device import served_device
 
 from hcard import build
 from hcard.device import (
@@ -49,6 +46,9 @@ from hcard_device.sim.config import DeviceConfig
 from hcard_device.sim.models import device_profile
 from hcard_device.sim_driver import SimDriver
 from hcard_device.usb.server import DeviceServer
+from tests.helpers.hid_over_usbip import HidOverUsbip
+from tests.helpers.realtime import in_real_time, kept_run
+from tests.helpers.served_device import served_device
 
 TIMEOUT_S = 1.0
 

@@ -8,9 +8,8 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from served_device import served_device
-
 from hcard.calibration.measurement import read_measurement
+from tests.helpers.served_device import served_device
 
 CLIENT = r'''
 import importlib.abc

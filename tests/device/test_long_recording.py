@@ -164,10 +164,9 @@ def test_sessions_over_usbip_are_recorded_in_blocks_twice_against_one_server(tmp
     """Over USB/IP from a server in another process, in real time, two sessions in a row:
     the packed log holds the reports the driver decoded (every field), and the recording written
     in blocks is the one built whole."""
-    from realtime import in_real_time, kept_run
-    from served_device import served_device
-
     from hcard.device import recording as recording_module
+    from tests.helpers.realtime import in_real_time, kept_run
+    from tests.helpers.served_device import served_device
 
     monkeypatch.setattr(recording_module, "BLOCK_REPORTS", 500)  # several blocks per session
     seen: list[list[State]] = []

@@ -7,8 +7,6 @@ import socket
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from realtime import in_real_time, kept_run
-from served_device import served_device
 
 from hcard import build
 from hcard.calibration.measurement import Measurement, read_measurement
@@ -17,6 +15,8 @@ from hcard.cli.main import cli
 from hcard.device.play import MAX_PLAY_S, TAIL_S
 from hcard.device.protocol import FaultBits
 from hcard.track import straight_stroke, track_to_csv
+from tests.helpers.realtime import in_real_time, kept_run
+from tests.helpers.served_device import served_device
 
 
 @pytest.fixture

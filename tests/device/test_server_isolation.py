@@ -25,11 +25,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import usbip_clients as clients
-from cards import large_valid_card
-from hostile_cards import json_empty_components
-from realtime import NotKept, in_real_time
-from served_device import ServedDevice, served_device
 
 from hcard import build
 from hcard.calibration.measurement import read_measurement
@@ -64,6 +59,11 @@ from hcard_device.card_check import (
 )
 from hcard_device.usb.connection import DEFAULT_LIMITS, ReportPacer
 from hcard_device.usb.transport import MAX_CONNECTIONS
+from tests.helpers import usbip_clients as clients
+from tests.helpers.cards import large_valid_card
+from tests.helpers.hostile_cards import json_empty_components
+from tests.helpers.realtime import NotKept, in_real_time
+from tests.helpers.served_device import ServedDevice, served_device
 
 DELIVERY_SHARE = 0.9
 """Share of the STATE reports a well-behaved client receives alone that it still receives
@@ -247,7 +247,7 @@ def test_a_2_mib_commit_does_not_stop_state(served, card):
     and no report may be lost; at an ordinary priority the gap is the machine's scheduling,
     and only a stop of a second would show. A gap over the bound with every report on time
     (no loss, no stamp gap) is the observer's machine, not the device: measured again, up to
-    3 times (``tests/realtime.py``; one CI run saw 9.2 ms beside a 5.2 ms baseline), as is a
+    3 times (``tests/helpers/realtime.py``; one CI run saw 9.2 ms beside a 5.2 ms baseline), as is a
     report lost or late; a parse under the lock stops STATE every time."""
     data = (json_empty_components(size=DEFAULT_MAX_CARD_BYTES) if card == "json-empty-components"
             else to_bytes(large_valid_card()))

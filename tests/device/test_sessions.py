@@ -13,8 +13,6 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from realtime import NotKept, in_real_time, kept_run
-from served_device import served_device
 
 from hcard import build
 from hcard.calibration.measurement import read_measurement
@@ -36,6 +34,8 @@ from hcard.device.protocol import (
 from hcard.device.protocol.constants import ReportId, UploadAction
 from hcard.track import straight_stroke, track_to_csv
 from hcard_device.usb.server import make_firmware
+from tests.helpers.realtime import NotKept, in_real_time, kept_run
+from tests.helpers.served_device import served_device
 
 CARD = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[
     build.texture(1.0, channel="uv"), build.texture(0.4, channel="uv")], texture_index=[0, 1])

@@ -16,7 +16,6 @@ import struct
 import time
 
 import pytest
-from served_device import served_device
 from usbip import host as usbip_host
 from usbip.core import Stall
 from usbip.device import In
@@ -36,6 +35,7 @@ from hcard.device.transports.usbip_link import UsbipLink
 from hcard_device.usb.device import MANUFACTURER, PRODUCTS, BoundedEndpoint
 from hcard_device.usb.server import DeviceServer
 from hcard_device.usb.transport import NoDelayUSBIP
+from tests.helpers.served_device import served_device
 
 T = 1.0  # transfer timeout, s
 

@@ -16,10 +16,11 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from distributions import install_distribution
 
 from hcard.plugins import HcardPluginWarning, command_cache
 from hcard.plugins.registry import PluginRegistry
+from tests.helpers.cli import run_python
+from tests.helpers.distributions import install_distribution
 
 LIST_COMMANDS = (
     "import sys\nfrom hcard.cli.main import cli\n"
@@ -48,32 +49,25 @@ def greet():
 '''
 
 
-def _run(args: list[str], cache: Path, site: Path) -> subprocess.CompletedProcess[str]:
-    env = dict(os.environ, XDG_CACHE_HOME=str(cache))
-    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(site), env.get("PYTHONPATH")) if p)
-    return subprocess.run([sys.executable, *args], capture_output=True, text=True, env=env,
-                          cwd=site, timeout=120, check=False)
-
-
 def test_help_reuses_the_commands_until_a_distribution_is_installed(tmp_path: Path) -> None:
     cache, site = tmp_path / "cache", tmp_path / "site"
     site.mkdir()
-    first = _run(["-c", LIST_COMMANDS], cache, site)
+    first = run_python("-c", LIST_COMMANDS, site=site, cache=cache)
     assert first.returncode == 0, first.stderr
     assert first.stdout.splitlines()[-1] == "['importlib.metadata', 'pluggy']"  # discovered
     remembered = json.loads((cache / "hcard" / "commands.json").read_text(encoding="utf-8"))
     assert {c["name"] for c in remembered["commands"]} >= {"device", "play", "conformance"}
 
-    second = _run(["-c", LIST_COMMANDS], cache, site)
+    second = run_python("-c", LIST_COMMANDS, site=site, cache=cache)
     assert second.stdout.splitlines()[-1] == "[]"  # no entry-point scan, no pluggy
     assert second.stdout.splitlines()[:-1] == first.stdout.splitlines()[:-1]  # same listing
 
     install_distribution(site, "greeter", "[hcard.commands]\ngreet = hcardtest_greeter\n",
              {"hcardtest_greeter": GREETER, "hcardtest_greet_cmd": GREET_COMMAND})
-    third = _run(["-c", LIST_COMMANDS], cache, site)
+    third = run_python("-c", LIST_COMMANDS, site=site, cache=cache)
     assert third.stdout.splitlines()[-1] == "['importlib.metadata', 'pluggy']"  # found again
     assert "  greet        Greet the user." in third.stdout
-    ran = _run(["-m", "hcard", "greet"], cache, site)
+    ran = run_python("-m", "hcard", "greet", site=site, cache=cache)
     assert (ran.returncode, ran.stdout) == (0, "hello\n"), ran.stderr
 
 
@@ -84,9 +78,9 @@ def test_a_remembered_command_that_no_longer_loads_is_warned_and_forgotten(
     site.mkdir()
     install_distribution(site, "greeter", "[hcard.commands]\ngreet = hcardtest_greeter\n",
              {"hcardtest_greeter": GREETER, "hcardtest_greet_cmd": GREET_COMMAND})
-    assert _run(["-m", "hcard", "greet"], cache, site).stdout == "hello\n"
+    assert run_python("-m", "hcard", "greet", site=site, cache=cache).stdout == "hello\n"
     (site / "hcardtest_greet_cmd.py").unlink()  # the command's module is gone, the plugin not
-    gone = _run(["-m", "hcard", "greet"], cache, site)
+    gone = run_python("-m", "hcard", "greet", site=site, cache=cache)
     assert gone.returncode == 2
     assert ("warning: command 'greet' cannot be loaded: ModuleNotFoundError: No module named "
             "'hcardtest_greet_cmd'") in gone.stderr
@@ -148,7 +142,7 @@ def test_the_registry_reuses_the_entry_points_until_a_plugin_module_changes(
     cache, site = tmp_path / "cache", tmp_path / "site"
     site.mkdir()
     _install_vendor(site)
-    first = _run(["-c", FIND_ENCODERS], cache, site)
+    first = run_python("-c", FIND_ENCODERS, site=site, cache=cache)
     assert first.stdout.splitlines() == [
         "['image', 'vendor-bumps']",
         "['hcard_builtins.predictors', 'hcard_conformance.registry', "
@@ -156,13 +150,13 @@ def test_the_registry_reuses_the_entry_points_until_a_plugin_module_changes(
     ], first.stderr
     assert (cache / ENTRY_POINT_CACHE).exists()
 
-    second = _run(["-c", FIND_ENCODERS], cache, site)
+    second = run_python("-c", FIND_ENCODERS, site=site, cache=cache)
     assert second.stdout.splitlines() == ["['image', 'vendor-bumps']", "[]"], second.stderr
 
     module = site / "hcardtest_vendor_encoder.py"
     module.write_text(vendor_encoder("vendor-ridges"), encoding="utf-8")
     os.utime(module, ns=(module.stat().st_atime_ns, module.stat().st_mtime_ns + 10**9))
-    third = _run(["-c", FIND_ENCODERS], cache, site)
+    third = run_python("-c", FIND_ENCODERS, site=site, cache=cache)
     assert third.stdout.splitlines()[0] == "['image', 'vendor-ridges']", third.stderr
     assert "importlib.metadata" in third.stdout.splitlines()[1]  # found again
 
@@ -173,7 +167,7 @@ def test_a_remembered_plugin_that_no_longer_imports_is_warned_on_every_run(
     cache, site = tmp_path / "cache", tmp_path / "site"
     site.mkdir()
     _install_vendor(site)
-    assert _run(["-c", FIND_ENCODERS], cache, site).returncode == 0
+    assert run_python("-c", FIND_ENCODERS, site=site, cache=cache).returncode == 0
     assert (cache / ENTRY_POINT_CACHE).exists()
     # What the module imports breaks while the module itself keeps its modification time.
     module = site / "hcardtest_vendor_encoder.py"
@@ -183,7 +177,7 @@ def test_a_remembered_plugin_that_no_longer_imports_is_warned_on_every_run(
     warning = ("plugin 'vendor' from package 'vendor' (version 1.0) failed to import "
                "'hcardtest_vendor_encoder': ImportError: vendor toolkit missing")
     for _ in range(2):  # the first run reads the cache, the second discovers
-        run = _run(["-c", FIND_ENCODERS], cache, site)
+        run = run_python("-c", FIND_ENCODERS, site=site, cache=cache)
         assert run.stdout.splitlines()[0] == "['image']", run.stderr
         assert warning in run.stderr
         assert not (cache / ENTRY_POINT_CACHE).exists()  # a plugin with a problem: nothing kept

@@ -6,8 +6,6 @@ of ``hcard`` keeps working."""
 from __future__ import annotations
 
 import math
-import os
-import subprocess
 import sys
 import types
 import warnings
@@ -19,7 +17,6 @@ import click
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from distributions import install_distribution
 
 from hcard.cli.main import cli
 from hcard.physics import Parameter, Predictor, Variable
@@ -27,6 +24,8 @@ from hcard.physics.device_limits import DeviceLimits
 from hcard.physics.profile import DeviceProfile
 from hcard.plugins import HcardPluginWarning, LazyCommand, hookimpl
 from hcard.plugins.registry import get_command_registry, get_registry
+from tests.helpers.cli import run_python
+from tests.helpers.distributions import install_distribution
 
 MODULE = "hcardtest_contrib_commands"
 
@@ -124,10 +123,7 @@ def test_a_broken_command_plugin_is_named_and_hcard_keeps_working(tmp_path: Path
     install_distribution(tmp_path, "broken-cli",
                          "[hcard.commands]\nbroken = hcardtest_broken_cli\n",
                          {"hcardtest_broken_cli": BROKEN_COMMANDS}, version="0.4")
-    env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path / "cache"))
-    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(tmp_path), env.get("PYTHONPATH")) if p)
-    done = subprocess.run([sys.executable, "-m", "hcard", "--help"], capture_output=True,
-                          text=True, env=env, cwd=tmp_path, timeout=120)
+    done = run_python("-m", "hcard", "--help", site=tmp_path, cache=tmp_path / "cache")
     assert done.returncode == 0, done.stderr
     assert ("warning: plugin 'broken' from package 'broken-cli' (version 0.4) failed to import "
             "'hcardtest_broken_cli': ImportError: acme CLI toolkit missing") in done.stderr

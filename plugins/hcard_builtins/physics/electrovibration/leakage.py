@@ -15,10 +15,10 @@ a first-order high pass, and the force is Kaczmarek's law with ``v_e`` (Eq. 3.23
 
 ``F_e = eps0 A v_e^2 / (2 (d_sc/eps_sc + d_i/eps_i)(d_sc + d_i))``.
 
-Consequences (tests/test_electrovibration.py): a DC step gives ``v_e = V exp(-t/tau_d)`` and a
-force ``~ exp(-2 t/tau_d)`` that decays to zero with time constant ``tau_d / 2``, which is why
-electrovibration needs an AC carrier; a sinusoid well above ``1/(2 pi tau_d)`` passes almost
-fully; the force response ``|H(f)|^2`` rises then saturates with frequency (Fig. 3.16).
+Consequences (tests/builtins/test_electrovibration.py): a DC step gives ``v_e = V exp(-t/tau_d)``
+and a force ``~ exp(-2 t/tau_d)`` that decays to zero with time constant ``tau_d / 2``, which is why
+electrovibration needs an AC carrier; a sinusoid well above ``1/(2 pi tau_d)`` passes almost fully;
+the force response ``|H(f)|^2`` rises then saturates with frequency (Fig. 3.16).
 
 Defaults are those of section 3.6.1 (A = 1 cm^2, d_sc = 200 um, eps_sc = 1560, a 90 um film
 of eps_i = 3.35: ``C_i`` = 33 pF, ``C_sc`` = 6.9 nF) and ``tau_d`` = 7.7 ms (section 3.6.3,
@@ -28,7 +28,7 @@ Eq. 3.23 gives 56.6 mN at a steady ``v_e`` = 1000 V (section 3.7: 10-20 % more f
 steady value of these layers (it would need A = 4.4 mm^2 and then C_i = 1.5 pF, not the
 printed 32 pF): it is the peak of the transient, ``v_e = r tau_d (1 - exp(-t/tau_d))`` on a
 rising edge of slope ``r``, which gives 2.5 mN for a 1000 V edge of 36 ms (2-5 mN measured:
-25-41 ms; the thesis does not print the rise time). tests/test_physics_ev_section_3_6_3.py
+25-41 ms; the thesis does not print the rise time). tests/builtins/test_physics_ev_section_3_6_3.py
 checks this reading.
 
 Frequency dependence of ``tau_d`` (Figs. 3.13, 3.16). ``tau_d = eps0 eps_sc rho_sc`` follows

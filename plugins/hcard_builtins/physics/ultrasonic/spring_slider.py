@@ -34,11 +34,11 @@ then the spring sticks once, slips once, and follows ``C`` down. Just above the 
 spring does not get its compression back). ``mu'`` is then lower than with ``min(kl U tau, C)``: by
 up to 0.06 within 10% above the critical amplitude, 3e-3 above ``w/2 = 1.5 Fn/kn`` and 3e-4 above
 ``2 Fn/kn`` (measured over f 20-60 kHz, U 5-100 mm/s, mu0 0.25-1, Fn 0.1-1 N). This reading
-reproduces the values of Eqs. 2.19-2.28 that tests/test_ultrasonic.py checks (0.387, 0.247, 0.135
-at w = 1, 2, 5 um; the frequency and speed series), is the exact solution of the massless Coulomb
-spring-slider, and is the ``v_r -> inf`` limit of the finite-recovery model below. The other
-reading, a lateral force that once slipping is held at the largest value reached, gives 0.447 at 1
-um and ``mu' > 1`` at 100 mm/s, so it is rejected.
+reproduces the values of Eqs. 2.19-2.28 that tests/builtins/test_ultrasonic.py checks (0.387,
+0.247, 0.135 at w = 1, 2, 5 um; the frequency and speed series), is the exact solution of the
+massless Coulomb spring-slider, and is the ``v_r -> inf`` limit of the finite-recovery model
+below. The other reading, a lateral force that once slipping is held at the largest value
+reached, gives 0.447 at 1 um and ``mu' > 1`` at 100 mm/s, so it is rejected.
 
 Finite lateral recovery (Figs. 2.25-2.26, section 2.7.2). The unloading of the lateral spring is
 retarded to a constant speed ``v_r``: with compression ``x``, ``dx/dt = U`` while ``kl x`` is

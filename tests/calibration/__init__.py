@@ -1,0 +1,1 @@
+"""Tests of hcard.calibration: the protocol, the fits, the effects, the search and its report."""

@@ -1,0 +1,1 @@
+"""Tests of hcard_conformance: the suite's checks, its reports and the golden vectors."""

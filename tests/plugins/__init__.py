@@ -1,0 +1,1 @@
+"""Tests of the plugin system (hcard.plugins): the registry, discovery, its cache, contributions."""

@@ -1,0 +1,1 @@
+"""Tests of the renderer (hcard.render): its numbers, its crossings, its streamed output."""
