@@ -27,8 +27,9 @@ from hcard.file_errors import (
 )
 from hcard.physics.profile import DeviceProfile
 from hcard.track import straight_stroke, track_to_csv
+from tests.helpers.repository import REPO
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = REPO
 PACKAGE_DIRS = (ROOT / "hcard", ROOT / "plugins" / "hcard_builtins",
                 ROOT / "reference_device" / "hcard_device",
                 ROOT / "conformance" / "hcard_conformance")
