@@ -1,6 +1,7 @@
 """An image is checked for what its header declares before any pixel is decoded
-(plugins/hcard_builtins/image/loading.py): its pixel count, the memory decoding it takes (the
-bytes a pixel of its mode takes, :func:`decode_bytes`) and the encoder's surface and grid. On
+(builtin_plugins/hcard_builtins/image/loading.py): its pixel count, the memory decoding it
+takes (the bytes a pixel of its mode takes, :func:`decode_bytes`) and the encoder's surface and
+grid. On
 main a 0.5 MB PNG declaring 8000 x 8000 pixels of 16-bit RGBA was decoded (34 s, 1.0 GB) and a
 64,000,000 x 1 PNG was decoded (221 MB) before the surface check refused it. Checked on hostile
 PNGs made here and on the real PNG files matplotlib ships (mpl-data/images)."""

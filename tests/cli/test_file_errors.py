@@ -30,7 +30,7 @@ from hcard.track import straight_stroke, track_to_csv
 from tests.helpers.repository import REPO
 
 ROOT = REPO
-PACKAGE_DIRS = (ROOT / "hcard", ROOT / "plugins" / "hcard_builtins",
+PACKAGE_DIRS = (ROOT / "hcard", ROOT / "builtin_plugins" / "hcard_builtins",
                 ROOT / "reference_device" / "hcard_device",
                 ROOT / "conformance" / "hcard_conformance")
 

@@ -1,7 +1,7 @@
 """Calibration recordings generated independently of the effect plugins.
 
 Every physical effect here is written from the thesis formulas directly, without importing
-``plugins/hcard_builtins/effects.py``, ``hcard.physics.effects`` or any predictor: the base
+``builtin_plugins/hcard_builtins/effects.py``, ``hcard.physics.effects`` or any predictor: the base
 laws, the effects and the sensor are this module's own code. Where the physics puts an effect
 (the dry friction ``mu0`` inside the ultrasonic group Psi, the voltage before the
 electrostatic law, a filter that restarts at touch-down), the generator puts it there, whatever

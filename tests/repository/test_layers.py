@@ -20,7 +20,7 @@ from tests.helpers.repository import REPO as ROOT
 DOC = ROOT / "ARCHITECTURE.md"
 PACKAGE_DIRS = {
     "hcard": ROOT / "hcard",
-    "hcard_builtins": ROOT / "plugins" / "hcard_builtins",
+    "hcard_builtins": ROOT / "builtin_plugins" / "hcard_builtins",
     "hcard_device": ROOT / "reference_device" / "hcard_device",
     "hcard_conformance": ROOT / "conformance" / "hcard_conformance",
 }
