@@ -68,6 +68,13 @@ from hcard.render import render
 from hcard.render.touch import segment_speeds
 from hcard.track import FingerTrack, straight_stroke
 from hcard.v1 import card_pb2 as pb
+from hcard_conformance.check_names import (
+    DEVICE_DYNAMICS,
+    DEVICE_FRICTION,
+    DEVICE_LATENCY,
+    DEVICE_SAFETY,
+    DEVICE_WATCHDOG,
+)
 from hcard_conformance.context import Context, session_times
 from hcard_conformance.realtime import (
     HostWatch,
@@ -343,10 +350,10 @@ def check_friction(ctx: Context) -> Iterator[CheckResult]:
             if m.reports == 0:
                 raise CannotAssess("no settled report in contact echoed a finger sample of "
                                    "the session")
-            yield _result("device.friction", case, "rms_relative_error", m.rms_relative_error,
+            yield _result(DEVICE_FRICTION, case, "rms_relative_error", m.rms_relative_error,
                           FRICTION_JND, "relative", f"{m.reports} settled reports in contact")
 
-        yield from guarded("device.friction", LEVEL, [case], measure)
+        yield from guarded(DEVICE_FRICTION, LEVEL, [case], measure)
 
 
 # ---------------------------------------------------------------------- (b) dynamics
@@ -561,18 +568,18 @@ def check_dynamics(ctx: Context) -> Iterator[CheckResult]:
 
     def bandwidth() -> Iterator[CheckResult]:
         value, underruns = measure_bandwidth(open_driver)
-        yield _result("device.dynamics", "bandwidth", "bandwidth_-3dB", value,
+        yield _result(DEVICE_DYNAMICS, "bandwidth", "bandwidth_-3dB", value,
                       dyn.min_bandwidth_hz * (1.0 - BANDWIDTH_TOLERANCE), "Hz",
                       f"{dyn.why}; stream underruns in the sweep: {underruns}", at_most=False)
 
     def rise_time() -> Iterator[CheckResult]:
         with open_driver() as driver:
             rise = measure_rise_time(driver, dyn.max_rise_s)
-        yield _result("device.dynamics", "rise-time", "rise_10_90", rise * MS_PER_S,
+        yield _result(DEVICE_DYNAMICS, "rise-time", "rise_10_90", rise * MS_PER_S,
                       dyn.max_rise_s * MS_PER_S, "ms", dyn.why)
 
-    yield from guarded("device.dynamics", LEVEL, ["bandwidth"], bandwidth)
-    yield from guarded("device.dynamics", LEVEL, ["rise-time"], rise_time)
+    yield from guarded(DEVICE_DYNAMICS, LEVEL, ["bandwidth"], bandwidth)
+    yield from guarded(DEVICE_DYNAMICS, LEVEL, ["rise-time"], rise_time)
 
 
 # ---------------------------------------------------------------------- (c) latency
@@ -798,7 +805,7 @@ def check_latency(ctx: Context) -> Iterator[CheckResult]:
         left_out = (f"; {len(run.latencies_s) - len(lat)} trials not kept in real time and "
                     f"left out ({run.not_kept[0]}{', ...' if len(run.not_kept) > 1 else ''})"
                     if len(lat) < len(run.latencies_s) else "")
-        yield _result("device.latency", "boundary-move", "median_latency",
+        yield _result(DEVICE_LATENCY, "boundary-move", "median_latency",
                       float(np.median(lat)) * MS_PER_S, timing.latency_s * MS_PER_S, "ms",
                       f"{len(lat)} moves, max {np.nanmax(lat) * MS_PER_S:.1f} ms; {timed}"
                       f"{left_out}; {timing.why}")
@@ -810,7 +817,7 @@ def check_latency(ctx: Context) -> Iterator[CheckResult]:
             raise CannotAssess("the device does not date its reports (echo age, protocol 1.3 "
                                "PI3)")
         lags = np.asarray(runs[0].read_lag_s)
-        yield _result("device.latency", "host-read-lag", "median_read_lag",
+        yield _result(DEVICE_LATENCY, "host-read-lag", "median_read_lag",
                       float(np.median(lags)) * MS_PER_S, timing.read_lag_s * MS_PER_S, "ms",
                       f"{lags.size} {'windows' if timing.keeps_real_time else 'reports'}, "
                       "90th percentile "
@@ -819,8 +826,8 @@ def check_latency(ctx: Context) -> Iterator[CheckResult]:
                       f"{'; the freshest read of each 100 ms' if timing.keeps_real_time else ''}"
                       f"); {timing.why}")
 
-    yield from guarded("device.latency", LEVEL, ["boundary-move"], measure)
-    yield from guarded("device.latency", LEVEL, ["host-read-lag"], read_lag)
+    yield from guarded(DEVICE_LATENCY, LEVEL, ["boundary-move"], measure)
+    yield from guarded(DEVICE_LATENCY, LEVEL, ["host-read-lag"], read_lag)
 
 
 # ---------------------------------------------------------------------- (d) safety
@@ -1094,9 +1101,9 @@ def check_safety(ctx: Context) -> Iterator[CheckResult]:
 
     def measure() -> Iterator[CheckResult]:
         for case, n_over, _worst, detail in measure_safety(open_driver):
-            yield _result("device.safety", case, "n_over", n_over, 0.0, "reports", detail)
+            yield _result(DEVICE_SAFETY, case, "n_over", n_over, 0.0, "reports", detail)
 
-    yield from guarded("device.safety", LEVEL, SAFETY_CASES, measure)
+    yield from guarded(DEVICE_SAFETY, LEVEL, SAFETY_CASES, measure)
 
 
 # ---------------------------------------------------------------------- (e) watchdog
@@ -1174,12 +1181,12 @@ def check_watchdog(ctx: Context) -> Iterator[CheckResult]:
         with open_driver() as driver:
             limit = driver.info().watchdog_ms * S_PER_MS + WATCHDOG_ALLOWANCE_S
             off, reported, driven = measure_watchdog(driver)
-        yield _result("device.watchdog", "host-silent", "time_to_off", off * MS_PER_S,
+        yield _result(DEVICE_WATCHDOG, "host-silent", "time_to_off", off * MS_PER_S,
                       limit * MS_PER_S, "ms",
                       f"plate at {driven * NM_PER_M:.0f} nm before the host went silent; "
                       f"off means <= {OFF_AMPLITUDE_M * NM_PER_M:.0f} nm and <= 1 V")
-        yield CheckResult("device.watchdog", LEVEL, "fault-reported", reported,
+        yield CheckResult(DEVICE_WATCHDOG, LEVEL, "fault-reported", reported,
                           "watchdog_fault", float(reported), 1.0, "bool",
                           "fault WATCHDOG in STATE")
 
-    yield from guarded("device.watchdog", LEVEL, ["host-silent", "fault-reported"], measure)
+    yield from guarded(DEVICE_WATCHDOG, LEVEL, ["host-silent", "fault-reported"], measure)

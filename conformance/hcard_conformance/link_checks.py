@@ -67,6 +67,7 @@ from hcard.device.protocol import (
 )
 from hcard.device.protocol.constants import UPLOAD_TIMEOUT_S
 from hcard.quantities import MS_PER_S, S_PER_US, US_PER_S
+from hcard_conformance.check_names import DEVICE_REPORT_LOSS, DEVICE_UPLOAD_INTEGRITY
 from hcard_conformance.context import Context
 from hcard_conformance.realtime import (
     NOT_KEPT,
@@ -542,7 +543,7 @@ def judge_refusal(case: str, attempt: Attempt, expected: UploadResult, card_a: L
                  + _excused_text(attempt, excused))
     if attempt.stalls:
         parts.append(f"STALL on {', '.join(attempt.stalls)} (PU6)")
-    return CheckResult("device.upload-integrity", LEVEL, case, passed, "reports_off_card_a",
+    return CheckResult(DEVICE_UPLOAD_INTEGRITY, LEVEL, case, passed, "reports_off_card_a",
                        float(off), 0.0, "reports", "; ".join(parts))
 
 
@@ -572,7 +573,7 @@ def judge_commit(attempt: Attempt, card_b: LinkCard, generation_a: int,
               + _excused_text(attempt, excused))
     if attempt.stalls:
         detail += f"; STALL on {', '.join(attempt.stalls)}"
-    return CheckResult("device.upload-integrity", LEVEL, "valid-after", passed,
+    return CheckResult(DEVICE_UPLOAD_INTEGRITY, LEVEL, "valid-after", passed,
                        "reports_off_card", float(wrong), 0.0, "reports", detail)
 
 
@@ -589,7 +590,7 @@ def measure_upload_integrity(driver: Driver) -> Iterator[CheckResult]:
         uploads = bad_uploads(card_b.data, info.max_card_bytes)
         for case, (steps, expected) in uploads.items():
             if case == "oversize" and info.max_card_bytes >= 0xFFFF_FFFF:
-                yield unassessed("device.upload-integrity", LEVEL, case, "max_card_bytes is "
+                yield unassessed(DEVICE_UPLOAD_INTEGRITY, LEVEL, case, "max_card_bytes is "
                                  "the largest u32: no announced size is above it")
                 continue
 
@@ -599,7 +600,7 @@ def measure_upload_integrity(driver: Driver) -> Iterator[CheckResult]:
                 attempt = run_attempt(session, steps)
                 return kept(judge_refusal(case, attempt, expected, card_a, generation), attempt)
 
-            yield attempted_case("device.upload-integrity", LEVEL, case, refusal)
+            yield attempted_case(DEVICE_UPLOAD_INTEGRITY, LEVEL, case, refusal)
 
         def commit() -> CheckResult:
             generation = ensure_card(session, card_a)
@@ -608,7 +609,7 @@ def measure_upload_integrity(driver: Driver) -> Iterator[CheckResult]:
                 attempt.states += play_until_shown(session, card_b, next_generation(generation))
             return kept(judge_commit(attempt, card_b, generation, card_a), attempt)
 
-        yield attempted_case("device.upload-integrity", LEVEL, "valid-after", commit)
+        yield attempted_case(DEVICE_UPLOAD_INTEGRITY, LEVEL, "valid-after", commit)
         ensure_card(session, card_a)  # leave card A in force (module docstring)
     finally:
         session.restore()
@@ -639,7 +640,7 @@ def check_upload_integrity(ctx: Context) -> Iterator[CheckResult]:
         with open_driver() as driver:
             yield from measure_upload_integrity(driver)
 
-    yield from guarded("device.upload-integrity", LEVEL, UPLOAD_CASES, measure)
+    yield from guarded(DEVICE_UPLOAD_INTEGRITY, LEVEL, UPLOAD_CASES, measure)
 
 
 # ---------------------------------------------------------------------- (g) report loss
@@ -971,23 +972,23 @@ def check_report_loss(ctx: Context) -> Iterator[CheckResult]:
             m = measure_loss_sessions(driver, sessions)
         s = m.stats
         not_kept = loss_not_kept(m, sessions) if timing.keeps_real_time else ""
-        yield measured("device.report-loss", LEVEL, "sequence-gaps", "n_anomalies",
+        yield measured(DEVICE_REPORT_LOSS, LEVEL, "sequence-gaps", "n_anomalies",
                        s.duplicates + s.reordered + s.misnumbered, 0.0, unit="reports",
                        detail=f"{s.duplicates} duplicated, {s.reordered} reordered, "
                        f"{s.misnumbered} misnumbered (sequence step != timestamp step) of "
                        f"{s.received} reports; {m.conditions()}")
         if not_kept:
-            yield unassessed("device.report-loss", LEVEL, "loss-fraction", not_kept)
-            yield unassessed("device.report-loss", LEVEL, "drops-counted", not_kept)
+            yield unassessed(DEVICE_REPORT_LOSS, LEVEL, "loss-fraction", not_kept)
+            yield unassessed(DEVICE_REPORT_LOSS, LEVEL, "drops-counted", not_kept)
             return
-        yield measured("device.report-loss", LEVEL, "loss-fraction", "loss_fraction",
+        yield measured(DEVICE_REPORT_LOSS, LEVEL, "loss-fraction", "loss_fraction",
                        s.loss_fraction * 100, timing.host_report_loss * 100, unit="%",
                        detail=f"{s.unexcused} of {s.expected} reports lost while the host "
                        f"read ({s.lost} missing, {s.excused} at its own pauses; longest gap "
                        f"{s.longest_gap}) over {m.duration_s:.2f} s; {m.conditions()}; timing "
                        f"class {timing.name}")
         counted = m.counters.input_dropped
-        yield measured("device.report-loss", LEVEL, "drops-counted", "count_error",
+        yield measured(DEVICE_REPORT_LOSS, LEVEL, "drops-counted", "count_error",
                        count_error(s, counted),
                        drop_count_limit(s.expected, timing.host_report_loss), unit="reports",
                        detail=f"host saw {s.lost} missing ({s.excused} at its own pauses), "
@@ -996,5 +997,5 @@ def check_report_loss(ctx: Context) -> Iterator[CheckResult]:
                        f"INPUT_DROPPED, input_reports {m.counters.input_reports}); "
                        f"{m.conditions()}")
 
-    yield from guarded("device.report-loss", LEVEL, LOSS_CASES, measure)
+    yield from guarded(DEVICE_REPORT_LOSS, LEVEL, LOSS_CASES, measure)
 

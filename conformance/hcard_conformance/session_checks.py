@@ -50,6 +50,7 @@ from hcard.device.protocol import Command, Control, DeviceInfo, FaultBits, State
 from hcard.quantities import MS_PER_S
 from hcard.track import FingerTrack, straight_stroke
 from hcard.v1 import card_pb2 as pb
+from hcard_conformance.check_names import DEVICE_SESSION_OWNERSHIP as CHECK
 from hcard_conformance.context import Context
 from hcard_conformance.realtime import HostWatch, NotKept, attempted_case, device_lag, reasons
 from hcard_conformance.result import (
@@ -61,7 +62,6 @@ from hcard_conformance.result import (
 from hcard_conformance.timing import timing_class
 
 LEVEL = "device"
-CHECK = "device.session-ownership"
 CASES = ("second-host-refused", "takeover-reported", "released-by-stop")
 PROBE_KEEPALIVES = 5
 """KEEPALIVEs the first driver sends to show the second one shares its device."""

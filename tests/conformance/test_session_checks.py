@@ -16,7 +16,6 @@ from hcard_conformance.registry import builtin_checks
 from hcard_conformance.result import FAIL, PASS, UNASSESSED, CheckResult
 from hcard_conformance.session_checks import (
     CASES,
-    CHECK,
     LOSS_THRESHOLD_S,
     check_session_ownership,
 )
@@ -29,9 +28,9 @@ def run(name: str) -> dict[str, CheckResult]:
 
 def test_the_check_is_built_in_after_the_device_level() -> None:
     names = [c.name for c in builtin_checks()]
-    assert names.index(CHECK) > names.index("device.watchdog")
+    assert names.index("device.session-ownership") > names.index("device.watchdog")
     found = {c.name: c for c in builtin_checks()}
-    assert found[CHECK].level == "device"
+    assert found["device.session-ownership"].level == "device"
     assert "no-ownership" in CONTROLS
 
 
