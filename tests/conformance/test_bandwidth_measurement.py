@@ -15,7 +15,7 @@ from plate_loop import plate_loop_bandwidth_hz, plate_loop_db
 from hcard.device import open_device
 from hcard.device.protocol import Finger
 from hcard.device.uri import parse_uri
-from hcard_conformance.device_level import (
+from hcard_conformance.device_checks.dynamics import (
     BANDWIDTH_FREQUENCIES_HZ,
     BANDWIDTH_REFERENCE_HZ,
     amplitude_gain,

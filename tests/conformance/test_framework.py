@@ -331,7 +331,7 @@ def _vanishing_device(after_writes: int):
 
 
 def test_a_check_that_raises_is_an_error_per_case_in_table_json_and_junit() -> None:
-    from hcard_conformance.device_level import SAFETY_CASES
+    from hcard_conformance.device_checks.safety import SAFETY_CASES
 
     ctx = Context("vanishing", lambda: _vanishing_device(after_writes=5))
     report = run_suite(ctx, ("device",), select=("device.safety", "device.dynamics"))

@@ -12,13 +12,13 @@ from realtime import assert_conforms
 from served_device import served_device
 
 from hcard_conformance.context import Context
-from hcard_conformance.registry import builtin_checks
-from hcard_conformance.result import FAIL, PASS, UNASSESSED, CheckResult
-from hcard_conformance.session_checks import (
+from hcard_conformance.device_checks.session_ownership import (
     CASES,
     LOSS_THRESHOLD_S,
     check_session_ownership,
 )
+from hcard_conformance.registry import builtin_checks
+from hcard_conformance.result import FAIL, PASS, UNASSESSED, CheckResult
 from hcard_device.controls import CONTROLS
 
 
