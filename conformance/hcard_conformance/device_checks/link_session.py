@@ -1,22 +1,16 @@
 """The session of the link checks (``device.upload-integrity``, ``device.report-loss``): the
-host's finger circling on the surface while every STATE report is read, and the host's own
-pauses timed (s).
+host's finger (:class:`~.host_finger.HostFinger`) circling on the surface while every STATE
+report is read, and the host's own pauses timed (s).
 """
 
 from __future__ import annotations
 
-import math
-
 from hcard.device.base import Driver
-from hcard.device.protocol import Capability, Command, State, StateFlags
+from hcard.device.protocol import Command, State, StateFlags
+from hcard_conformance.device_checks.host_finger import HostFinger, circling
 
-FINGER_PERIOD_S = 0.01
-"""Host finger reports while a link check works, s (a 100 Hz touch screen; ten per watchdog
-period of the reference device, so the outputs never ramp down during an upload)."""
 FINGER_SPEED_MM_S = 30.0
 """Speed of the host finger circling on the surface, mm/s."""
-FINGER_FORCE_N = 0.5
-"""Normal force of the host finger, N."""
 POLL_S = 0.001
 """Time the host drives and reads between two upload reports, s (one STATE period)."""
 HOST_PAUSE_MAX_S = 0.02
@@ -27,31 +21,26 @@ TIME_MODULO = 1 << 32
 """STATE ``timestamp_us`` wraps at 2**32 us."""
 
 
-class FingerSession:
+class LinkSession:
     """The host's finger circling on the surface (radius a quarter of the smaller side) while a
-    check works: a FINGER report every :data:`FINGER_PERIOD_S` (CONTROL KEEPALIVE on a device
-    without HOST_FINGER), every STATE report collected in :attr:`states`.
+    check works: a FINGER report every :data:`~.host_finger.FINGER_PERIOD_S` (CONTROL KEEPALIVE
+    on a device without HOST_FINGER), every STATE report collected in :attr:`states`.
 
     Attributes:
         driver: the open driver.
+        finger: the host's finger.
         states: every STATE report read so far, in arrival order.
         found: the state flags of the first report, read before changing anything (for
             :meth:`restore`).
     """
 
     def __init__(self, driver: Driver) -> None:
-        info = driver.info()
         self.driver = driver
-        self.host_finger = bool(info.capabilities & Capability.HOST_FINGER)
-        width, height = info.surface_width_10um * 0.01, info.surface_height_10um * 0.01
-        self._centre = (width / 2, height / 2)
-        self._radius = min(width, height) / 4
         self.states: list[State] = []
         first = driver.read_inputs(max_count=1)
         self.found = first[0].flags if first else 0
-        self._start = driver.clock()
-        self._next = self._start
-        self._last_read = self._start
+        self.finger = HostFinger(driver, circling(driver.info(), FINGER_SPEED_MM_S))
+        self._last_read = self.finger.start_s
         self.longest_pause_s = 0.0
         """Longest driver-clock time between two reads of the host since :meth:`mark`, s (a
         host that stalls leaves the device's queue to fill and its finger samples late)."""
@@ -75,34 +64,20 @@ class FingerSession:
         check_free = getattr(self.driver, "check_free", None)
         if anonymous and check_free is not None:
             check_free()  # a session an earlier host left must end first (SessionBusy if fed)
-        if self.host_finger:
+        if self.finger.host_finger:
             self.driver.set_touch_source(host=True)
         if anonymous:
             self.driver.command(Command.START)
         else:
             self.driver.start()
-        self._feed()
-
-    def _feed(self) -> None:
-        """Send the finger sample (or KEEPALIVE) when one is due."""
-        now = self.driver.clock()
-        if now < self._next:
-            return
-        if self.host_finger:
-            angle = FINGER_SPEED_MM_S * (now - self._start) / self._radius
-            self.driver.send_finger(now, self._centre[0] + self._radius * math.cos(angle),
-                                    self._centre[1] + self._radius * math.sin(angle),
-                                    FINGER_FORCE_N, True)
-        else:
-            self.driver.keepalive()
-        self._next = max(self._next + FINGER_PERIOD_S, now)
+        self.finger.feed()
 
     def run(self, seconds: float) -> list[State]:
         """Drive the finger and read STATE reports for ``seconds`` (s); the reports read."""
         end = self.driver.clock() + seconds
         got: list[State] = []
         while True:
-            self._feed()
+            self.finger.feed()
             now = self.driver.clock()
             if now - self._last_read > HOST_PAUSE_MAX_S:
                 self.pauses.append((self._last_read, now))
@@ -121,5 +96,5 @@ class FingerSession:
         internal sensor when it had it."""
         if not self.found & StateFlags.RUNNING:
             self.driver.stop()
-        if self.host_finger and not self.found & StateFlags.HOST_FINGER:
+        if self.finger.host_finger and not self.found & StateFlags.HOST_FINGER:
             self.driver.set_touch_source(host=False)

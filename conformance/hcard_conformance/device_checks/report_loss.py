@@ -34,7 +34,7 @@ from hcard_conformance.device_checks.common import LEVEL
 from hcard_conformance.device_checks.link_session import (
     HOST_PAUSE_MAX_S,
     TIME_MODULO,
-    FingerSession,
+    LinkSession,
 )
 from hcard_conformance.realtime import NOT_KEPT, NotKept, collection_deferred
 from hcard_conformance.result import CannotAssess, CheckResult, guarded, measured, unassessed
@@ -241,7 +241,7 @@ def measure_report_loss(driver: Driver, session_s: float = LOSS_SESSION_S) -> Lo
     """Warm up, CLEAR_COUNTERS, play ``session_s`` (s) reading every STATE report, GET
     COUNTERS, read :data:`TAIL_S` more, restore the touch source and RUNNING."""
     info = driver.info()
-    session = FingerSession(driver)
+    session = LinkSession(driver)
     session.begin()
     try:
         session.run(WARM_UP_S)

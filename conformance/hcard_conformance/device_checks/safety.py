@@ -21,11 +21,12 @@ from hcard import build
 from hcard.device.base import Driver
 from hcard.device.play import play
 from hcard.device.protocol import Capability, FaultBits, Limits, State
-from hcard.quantities import NM_PER_M, S_PER_US, UA_PER_A, US_PER_S
+from hcard.quantities import NM_PER_M, UA_PER_A
 from hcard.track import straight_stroke
 from hcard_conformance.check_names import DEVICE_SAFETY as CHECK
 from hcard_conformance.context import Context
 from hcard_conformance.device_checks.common import LEVEL, OFF_AMPLITUDE_M, STROKE_SPEED_MM_S, judged
+from hcard_conformance.device_checks.host_finger import HostFinger, stroke
 from hcard_conformance.realtime import (
     HostWatch,
     NotKept,
@@ -35,7 +36,7 @@ from hcard_conformance.realtime import (
     reasons,
 )
 from hcard_conformance.result import CannotAssess, CheckResult, guarded
-from hcard_conformance.streaming import FINGER_PERIOD_S, lead_frames, require_fed
+from hcard_conformance.streaming import lead_frames, require_fed
 
 
 def _over(states: Sequence[State], driver: Driver) -> tuple[int, float]:
@@ -125,32 +126,6 @@ class LimitsChange:
                 f"new limit (tolerance one report count)")
 
 
-class _Finger:
-    """FINGER reports of a stroke at :data:`STROKE_SPEED_MM_S` and 0.5 N, each with a host time
-    (us) later than the previous one's, remembering those sent after :meth:`mark`."""
-
-    def __init__(self, driver: Driver, x0_mm: float, y_mm: float) -> None:
-        self.driver, self.x0_mm, self.y_mm = driver, x0_mm, y_mm
-        self.start_s = driver.clock()
-        self.last_us = -1
-        self.marked = False
-        self.after_us: set[int] = set()
-
-    def send(self) -> None:
-        """Send the finger where the stroke is now."""
-        now = self.driver.clock()
-        host_us = max(round(now * US_PER_S), self.last_us + 1)
-        x = self.x0_mm + STROKE_SPEED_MM_S * (now - self.start_s)
-        self.driver.send_finger(host_us * S_PER_US, x, self.y_mm, 0.5, True)
-        self.last_us = host_us
-        if self.marked:
-            self.after_us.add(host_us % (1 << 32))
-
-    def mark(self) -> None:
-        """From now on, reports echoing a FINGER sent are after the change."""
-        self.marked = True
-
-
 def _over_new_limits(states: list[State], new: Limits) -> tuple[int, float]:
     """Reports with an output above its limit in ``new`` plus :data:`REPORT_QUANTA`, and the
     largest output / limit."""
@@ -190,7 +165,8 @@ def measure_limits_while_driven(driver: Driver, base: Limits) -> LimitsChange:
     lowered = Limits.from_si(base.max_amplitude_m * LOWERED_FRACTION,
                              base.max_voltage_v * LOWERED_FRACTION,
                              base.max_current_a * LOWERED_FRACTION)
-    finger = _Finger(driver, info.surface_width_10um * 0.0025, info.surface_height_10um * 0.005)
+    finger = HostFinger(driver, stroke(info.surface_width_10um * 0.0025,
+                                       info.surface_height_10um * 0.005, STROKE_SPEED_MM_S))
     watch = HostWatch(clock=driver.clock)
     driver.set_touch_source(host=True)
     driver.start()
@@ -198,14 +174,12 @@ def measure_limits_while_driven(driver: Driver, base: Limits) -> LimitsChange:
     states: list[State] = []
     before: list[State] = []
     read_back: Limits | None = None
-    sent, next_finger, end, timeout, n_after = 0, start, math.inf, math.inf, 0
+    sent, end, timeout, n_after = 0, math.inf, math.inf, 0
     while driver.clock() < timeout and (driver.clock() < end or n_after < MIN_REPORTS_AFTER):
         now = driver.clock()
         if read_back is None:
             watch.tick()  # the host's loop before the change: a late one starves the plate
-        if now >= next_finger:
-            finger.send()
-            next_finger += FINGER_PERIOD_S
+        finger.feed()
         due = lead + int((now - start) * rate)
         if due > sent:
             driver.stream_frames(np.zeros(due - sent), np.full(due - sent, ev))
@@ -219,7 +193,6 @@ def measure_limits_while_driven(driver: Driver, base: Limits) -> LimitsChange:
             finger.mark()
             finger.send()  # the first FINGER after the change, as soon as the SET returned
             read_back = driver.limits()
-            next_finger = driver.clock() + FINGER_PERIOD_S
             end = driver.clock() + AFTER_CHANGE_S
             timeout = driver.clock() + AFTER_CHANGE_TIMEOUT_S
     driver.stop()

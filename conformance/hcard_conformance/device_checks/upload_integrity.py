@@ -18,7 +18,7 @@ keeps no copy of the card it had that the host could read back), its limits unto
 the touch source and RUNNING state as it found them.
 
 The check works through the driver's raw reports while the host's finger plays on the surface
-(:class:`~.link_session.FingerSession`) and is session-relative: it needs neither a fresh device
+(:class:`~.link_session.LinkSession`) and is session-relative: it needs neither a fresh device
 nor its uptime, so it passes twice in a row against one device that stays powered.
 """
 
@@ -54,12 +54,12 @@ from hcard.quantities import MS_PER_S, S_PER_US, US_PER_S
 from hcard_conformance.check_names import DEVICE_UPLOAD_INTEGRITY as CHECK
 from hcard_conformance.context import Context
 from hcard_conformance.device_checks.common import LEVEL
+from hcard_conformance.device_checks.host_finger import FINGER_PERIOD_S
 from hcard_conformance.device_checks.link_session import (
-    FINGER_PERIOD_S,
     HOST_PAUSE_MAX_S,
     POLL_S,
     TIME_MODULO,
-    FingerSession,
+    LinkSession,
 )
 from hcard_conformance.realtime import NotKept, attempted_case, device_lag, reasons
 from hcard_conformance.result import CannotAssess, CheckResult, guarded, unassessed
@@ -192,7 +192,7 @@ class Attempt:
         return late_finger(self.states)
 
 
-def run_attempt(session: FingerSession, steps: Sequence[Step]) -> Attempt:
+def run_attempt(session: LinkSession, steps: Sequence[Step]) -> Attempt:
     """SET each upload report of ``steps`` (driving the finger for :data:`POLL_S` after each),
     keep the upload channel silent for the float steps, GET UPLOAD_STATUS at the probes; then
     read :data:`AFTER_S` of reports and UPLOAD_STATUS."""
@@ -218,8 +218,8 @@ def run_attempt(session: FingerSession, steps: Sequence[Step]) -> Attempt:
     return Attempt(status, probes, stalls, session.states[first:], session.longest_pause_s)
 
 
-def run_quiet(session: FingerSession, seconds: float) -> list[State]:
-    """:meth:`FingerSession.run` for ``seconds`` of the host's clock and of the device's: a
+def run_quiet(session: LinkSession, seconds: float) -> list[State]:
+    """:meth:`LinkSession.run` for ``seconds`` of the host's clock and of the device's: a
     device that fell behind its real-time clock (device protocol PI4) counts less time than the
     host, and an upload silence must last ``seconds`` on the clock of the device's timeout (PU4:
     "2 s of device time"). The device's time is that of the reports read, from the newest one
@@ -234,7 +234,7 @@ def run_quiet(session: FingerSession, seconds: float) -> list[State]:
     return got
 
 
-def upload(session: FingerSession, card: LinkCard) -> Attempt:
+def upload(session: LinkSession, card: LinkCard) -> Attempt:
     """Upload and commit ``card`` with good reports, the finger playing."""
     return run_attempt(session, [UploadBegin(len(card.data), card.crc), *chunks(card.data),
                                  UploadEnd(UploadAction.COMMIT)])
@@ -332,7 +332,7 @@ def from_generation(states: Sequence[State], generation: int) -> list[State]:
     return list(states[first:])
 
 
-def play_until_shown(session: FingerSession, card: LinkCard, generation: int) -> list[State]:
+def play_until_shown(session: LinkSession, card: LinkCard, generation: int) -> list[State]:
     """Play until :data:`MIN_PLAYING_REPORTS` reports show ``card`` (of ``generation``), or
     one from the first of that generation on does not, at most :data:`SEE_TIMEOUT_S`; every
     report read."""
@@ -346,12 +346,12 @@ def play_until_shown(session: FingerSession, card: LinkCard, generation: int) ->
     return states
 
 
-def see_playing(session: FingerSession, card: LinkCard, generation: int) -> list[State]:
+def see_playing(session: LinkSession, card: LinkCard, generation: int) -> list[State]:
     """:func:`play_until_shown`, from the first report of ``generation`` on."""
     return from_generation(play_until_shown(session, card, generation), generation)
 
 
-def ensure_card(session: FingerSession, card: LinkCard) -> int:
+def ensure_card(session: LinkSession, card: LinkCard) -> int:
     """Make ``card`` the card in force and see it play; its generation.
 
     When UPLOAD_STATUS already names its CRC-32 and the reports show it playing
@@ -449,7 +449,7 @@ def measure_upload_integrity(driver: Driver) -> Iterator[CheckResult]:
     if info.max_card_bytes < len(card_b.data):
         raise CannotAssess(f"the test card ({len(card_b.data)} B) is larger than "
                            f"max_card_bytes {info.max_card_bytes}")
-    session = FingerSession(driver)
+    session = LinkSession(driver)
     session.begin(anonymous=True)
     try:
         uploads = bad_uploads(card_b.data, info.max_card_bytes)
