@@ -19,7 +19,7 @@ def run_conditions(ctx: Context, levels: tuple[str, ...]) -> dict[str, str]:
     ``unknown`` with the reason (the checks report the failure themselves)."""
     if "device" not in levels or ctx.open_driver is None:
         return {}
-    from hcard_conformance.device_level import CLASS_DYNAMICS, device_class
+    from hcard_conformance.device_checks.device_classes import CLASS_DYNAMICS, device_class
 
     timing = timing_class(ctx)
     found = {"timing_class": timing.name, "timing_class_why": timing.why}

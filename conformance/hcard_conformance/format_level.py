@@ -19,6 +19,7 @@ from collections.abc import Iterator
 from hcard.card_io import card_from_bytes, dumps, parse_card, read_card_file, to_bytes
 from hcard.errors import CardError
 from hcard.validate import card_errors
+from hcard_conformance.check_names import FORMAT_PARSE, FORMAT_REJECT, FORMAT_ROUND_TRIP
 from hcard_conformance.context import Context
 from hcard_conformance.result import CheckResult
 
@@ -42,12 +43,12 @@ def check_parse(ctx: Context) -> Iterator[CheckResult]:
                 card = parse_card(read_card_file(path), source=path, check=False)
                 problems = card_errors(card)
             except CardError as exc:
-                yield CheckResult("format.parse", LEVEL, f"{entry.name}.{form}", False, "Q2",
+                yield CheckResult(FORMAT_PARSE, LEVEL, f"{entry.name}.{form}", False, "Q2",
                                   1.0, 0.0, "errors", f"rejected: {exc}")
                 continue
             detail = ("parses and validates" if not problems
                       else "; ".join(str(p) for p in problems[:3]))
-            yield CheckResult("format.parse", LEVEL, f"{entry.name}.{form}", not problems,
+            yield CheckResult(FORMAT_PARSE, LEVEL, f"{entry.name}.{form}", not problems,
                               "Q2", float(len(problems)), 0.0, "errors", detail)
 
 
@@ -65,7 +66,7 @@ def check_round_trip(ctx: Context) -> Iterator[CheckResult]:
         }
         bad = [f"{name}: {_first_difference(got, want)}"
                for name, (got, want) in trips.items() if got != want]
-        yield CheckResult("format.round_trip", LEVEL, entry.name, not bad, "Q3",
+        yield CheckResult(FORMAT_ROUND_TRIP, LEVEL, entry.name, not bad, "Q3",
                           float(len(bad)), 0.0, "mismatches",
                           "; ".join(bad) or f"{len(binary)} bytes, 3 round trips bit exact")
 
@@ -84,12 +85,12 @@ def check_reject(ctx: Context) -> Iterator[CheckResult]:
                 detail += f" (expected the error to contain {entry.error!r})"
             if not field_ok:
                 detail += f" (field {exc.field_path!r}, expected {entry.field!r})"
-            yield CheckResult("format.reject", LEVEL, entry.name, passed, "Q4",
+            yield CheckResult(FORMAT_REJECT, LEVEL, entry.name, passed, "Q4",
                               0.0 if passed else 1.0, 0.0, "", detail)
             continue
         except Exception as exc:  # a reader crash is a failure, not a rejection
-            yield CheckResult("format.reject", LEVEL, entry.name, False, "Q4", 1.0, 0.0, "",
+            yield CheckResult(FORMAT_REJECT, LEVEL, entry.name, False, "Q4", 1.0, 0.0, "",
                               f"reader raised {type(exc).__name__} instead of CardError: {exc}")
             continue
-        yield CheckResult("format.reject", LEVEL, entry.name, False, "Q4", 1.0, 0.0, "",
+        yield CheckResult(FORMAT_REJECT, LEVEL, entry.name, False, "Q4", 1.0, 0.0, "",
                           f"accepted; expected rejection: {entry.error} ({entry.rule})")

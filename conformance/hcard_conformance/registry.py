@@ -3,12 +3,13 @@ plugin-provided checks.
 
 A check is a function ``(ctx: Context) -> Iterable[CheckResult]``; it yields one result per case
 (vector, track, fault...). The built-in checks are the rows of :data:`BUILTIN_CHECKS`, each a
-:class:`LazyCheck`: name, level and description there and only there, the function named by
-import path and imported when the check runs (``hcard plugins`` lists the checks without
-importing a check module, a driver or the reference device). A vendor adds checks with a plugin
-implementing the hook ``hcard_conformance_checks`` (entry-point group ``hcard.plugins``) that
-returns :class:`Check` objects, :class:`LazyCheck` rows, or any object with ``name``,
-``level``, ``description`` and ``run(ctx)``::
+:class:`LazyCheck`: name, level and description there and only there (the name's spelling is a
+constant of :mod:`hcard_conformance.check_names`, which the check's own results use too), the
+function named by import path and imported when the check runs (``hcard plugins`` lists the
+checks without importing a check module, a driver or the reference device). A vendor adds checks
+with a plugin implementing the hook ``hcard_conformance_checks`` (entry-point group
+``hcard.plugins``) that returns :class:`Check` objects, :class:`LazyCheck` rows, or any object
+with ``name``, ``level``, ``description`` and ``run(ctx)``::
 
     from hcard.plugins import hookimpl
     from hcard_conformance.registry import check
@@ -34,6 +35,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 from hcard.plugins.hookspecs import hookimpl
+from hcard_conformance import check_names
 from hcard_conformance.result import LEVELS, CheckResult, level_index
 
 if TYPE_CHECKING:
@@ -120,66 +122,66 @@ class LazyCheck(NamedTuple):  # a row of the table: defined in microseconds, not
 
 
 BUILTIN_CHECKS: tuple[LazyCheck, ...] = (
-    LazyCheck("format.parse", "format",
+    LazyCheck(check_names.FORMAT_PARSE, "format",
               "Q2: every vector card parses and validates, binary and JSON",
               "hcard_conformance.format_level:check_parse"),
-    LazyCheck("format.round_trip", "format",
+    LazyCheck(check_names.FORMAT_ROUND_TRIP, "format",
               "Q3: binary and JSON round trips are bit exact",
               "hcard_conformance.format_level:check_round_trip"),
-    LazyCheck("format.reject", "format",
+    LazyCheck(check_names.FORMAT_REJECT, "format",
               "Q4: every invalid vector is rejected with its documented error",
               "hcard_conformance.format_level:check_reject"),
-    LazyCheck("renderer.exact", "renderer",
+    LazyCheck(check_names.RENDERER_EXACT, "renderer",
               "A0: every golden render reproduced frame for frame within 1e-5",
               "hcard_conformance.renderer_level:check_exact",
               "hcard_conformance.renderer_level:frame_exact"),
-    LazyCheck("renderer.friction_error", "renderer",
+    LazyCheck(check_names.RENDERER_FRICTION_ERROR, "renderer",
               "A1: RMS relative friction error within the 8% JND on every golden render",
               "hcard_conformance.renderer_level:check_friction_error"),
-    LazyCheck("renderer.component_amplitude", "renderer",
+    LazyCheck(check_names.RENDERER_COMPONENT_AMPLITUDE, "renderer",
               "A2: amplitude of each golden spectral peak within 8% of the mean friction",
               "hcard_conformance.renderer_level:check_component_amplitude"),
-    LazyCheck("renderer.component_frequency", "renderer",
+    LazyCheck(check_names.RENDERER_COMPONENT_FREQUENCY, "renderer",
               "A3: frequency of each golden spectral peak within 5%",
               "hcard_conformance.renderer_level:check_component_frequency"),
-    LazyCheck("renderer.spatial_phase", "renderer",
+    LazyCheck(check_names.RENDERER_SPATIAL_PHASE, "renderer",
               "A4: position-locked features within 2.5 mm of where they are drawn",
               "hcard_conformance.renderer_level:check_spatial_phase"),
-    LazyCheck("renderer.boundary", "renderer",
+    LazyCheck(check_names.RENDERER_BOUNDARY, "renderer",
               "A5: taxtel boundaries within 2.5 mm of where they are drawn",
               "hcard_conformance.renderer_level:check_boundary"),
-    LazyCheck("device.friction", "device",
+    LazyCheck(check_names.DEVICE_FRICTION, "device",
               "rendered friction (measured actuation) matches the card's target",
-              "hcard_conformance.device_level:check_friction",
+              "hcard_conformance.device_checks.friction:check_friction",
               "hcard_conformance.timing:needs_real_time_host"),
-    LazyCheck("device.dynamics", "device",
+    LazyCheck(check_names.DEVICE_DYNAMICS, "device",
               "plate amplitude -3 dB bandwidth and rise time meet the device class",
-              "hcard_conformance.device_level:check_dynamics",
+              "hcard_conformance.device_checks.dynamics:check_dynamics",
               "hcard_conformance.timing:needs_real_time_host"),
-    LazyCheck("device.latency", "device",
+    LazyCheck(check_names.DEVICE_LATENCY, "device",
               "finger move to friction change, median within 10 ms (real-time host)",
-              "hcard_conformance.device_level:check_latency"),
-    LazyCheck("device.safety", "device",
+              "hcard_conformance.device_checks.latency:check_latency"),
+    LazyCheck(check_names.DEVICE_SAFETY, "device",
               "measured amplitude, voltage and current never exceed the limits",
-              "hcard_conformance.device_level:check_safety"),
-    LazyCheck("device.watchdog", "device",
+              "hcard_conformance.device_checks.safety:check_safety"),
+    LazyCheck(check_names.DEVICE_WATCHDOG, "device",
               "outputs ramp to zero and WATCHDOG is reported when the host goes silent",
-              "hcard_conformance.device_level:check_watchdog"),
-    LazyCheck("device.upload-integrity", "device",
+              "hcard_conformance.device_checks.watchdog:check_watchdog"),
+    LazyCheck(check_names.DEVICE_UPLOAD_INTEGRITY, "device",
               "refused uploads (CRC, short, order, timeout, size) leave the card playing",
-              "hcard_conformance.link_checks:check_upload_integrity",
+              "hcard_conformance.device_checks.upload_integrity:check_upload_integrity",
               "hcard_conformance.wire_protocol:speaks_wire_protocol"),
-    LazyCheck("device.report-loss", "device",
+    LazyCheck(check_names.DEVICE_REPORT_LOSS, "device",
               "STATE reports arrive in sequence, lose at most 0.1 %, drops are counted",
-              "hcard_conformance.link_checks:check_report_loss",
+              "hcard_conformance.device_checks.report_loss:check_report_loss",
               "hcard_conformance.wire_protocol:speaks_wire_protocol"),
-    LazyCheck("device.session-ownership", "device",
+    LazyCheck(check_names.DEVICE_SESSION_OWNERSHIP, "device",
               "a second host is refused, a takeover is reported, STOP releases the device",
-              "hcard_conformance.session_checks:check_session_ownership",
+              "hcard_conformance.device_checks.session_ownership:check_session_ownership",
               "hcard_conformance.wire_protocol:speaks_wire_protocol"),
 )
-"""The built-in checks, in level order: the one place their names, levels and descriptions are
-written."""
+"""The built-in checks, in level order: the one place their names (spelled in
+:mod:`~hcard_conformance.check_names`), levels and descriptions are given."""
 
 
 def check(*, name: str, level: str, description: str = "",

@@ -35,6 +35,14 @@ import numpy as np
 
 from hcard.render import Frames
 from hcard_conformance import metrics
+from hcard_conformance.check_names import (
+    RENDERER_BOUNDARY,
+    RENDERER_COMPONENT_AMPLITUDE,
+    RENDERER_COMPONENT_FREQUENCY,
+    RENDERER_EXACT,
+    RENDERER_FRICTION_ERROR,
+    RENDERER_SPATIAL_PHASE,
+)
 from hcard_conformance.context import DEVICE_LAG_KEY, REALTIME_KEY, Context
 from hcard_conformance.metrics import Metric, Signal, Tolerances
 from hcard_conformance.realtime import NOT_KEPT, HostWatch, reasons
@@ -260,12 +268,12 @@ def check_exact(ctx: Context) -> Iterator[CheckResult]:
         data = case(ctx, entry)
         tol = tolerances(ctx, entry)
         metric, passed = metrics.exact_error(data["impl"], data["golden"], tol)
-        result = _result("renderer.exact", entry, "A0", metric, tol.friction_abs,
+        result = _result(RENDERER_EXACT, entry, "A0", metric, tol.friction_abs,
                          "relative friction")
         result.passed = passed
         return result
 
-    yield from _each_entry(ctx, "renderer.exact", _entries(ctx), judge)
+    yield from _each_entry(ctx, RENDERER_EXACT, _entries(ctx), judge)
 
 
 def check_friction_error(ctx: Context) -> Iterator[CheckResult]:
@@ -280,11 +288,11 @@ def check_friction_error(ctx: Context) -> Iterator[CheckResult]:
 
         metric = metric_of(data["impl"])
         if not metric.applicable:
-            return _unmeasured("renderer.friction_error", entry, data, metric_of, metric)
-        return _result("renderer.friction_error", entry, "A1", metric,
+            return _unmeasured(RENDERER_FRICTION_ERROR, entry, data, metric_of, metric)
+        return _result(RENDERER_FRICTION_ERROR, entry, "A1", metric,
                        tol.friction_rel_jnd, "relative friction")
 
-    yield from _each_entry(ctx, "renderer.friction_error", _entries(ctx), judge)
+    yield from _each_entry(ctx, RENDERER_FRICTION_ERROR, _entries(ctx), judge)
 
 
 def _tags(ctx: Context, entry: Any) -> set[str]:
@@ -319,20 +327,20 @@ def check_component_amplitude(ctx: Context) -> Iterator[CheckResult]:
     """A2 on dense, oriented, temporal and bipolar cards."""
 
     def judge(entry: Any) -> CheckResult | None:
-        return _components(ctx, entry, 0, "renderer.component_amplitude", "A2",
+        return _components(ctx, entry, 0, RENDERER_COMPONENT_AMPLITUDE, "A2",
                            tolerances(ctx, entry).component_amplitude_rel, "relative friction")
 
-    yield from _each_entry(ctx, "renderer.component_amplitude", _entries(ctx), judge)
+    yield from _each_entry(ctx, RENDERER_COMPONENT_AMPLITUDE, _entries(ctx), judge)
 
 
 def check_component_frequency(ctx: Context) -> Iterator[CheckResult]:
     """A3 on dense, oriented, temporal and bipolar cards."""
 
     def judge(entry: Any) -> CheckResult | None:
-        return _components(ctx, entry, 1, "renderer.component_frequency", "A3",
+        return _components(ctx, entry, 1, RENDERER_COMPONENT_FREQUENCY, "A3",
                            tolerances(ctx, entry).component_frequency_rel, "fraction")
 
-    yield from _each_entry(ctx, "renderer.component_frequency", _entries(ctx), judge)
+    yield from _each_entry(ctx, RENDERER_COMPONENT_FREQUENCY, _entries(ctx), judge)
 
 
 def check_spatial_phase(ctx: Context) -> Iterator[CheckResult]:
@@ -348,12 +356,12 @@ def check_spatial_phase(ctx: Context) -> Iterator[CheckResult]:
 
         metric = metric_of(data["impl"])
         if not metric.applicable:
-            return _unmeasured("renderer.spatial_phase", entry, data, metric_of, metric)
-        return _result("renderer.spatial_phase", entry, "A4", metric, tol.spatial_phase_mm,
+            return _unmeasured(RENDERER_SPATIAL_PHASE, entry, data, metric_of, metric)
+        return _result(RENDERER_SPATIAL_PHASE, entry, "A4", metric, tol.spatial_phase_mm,
                        "mm")
 
     entries = [e for e in _entries(ctx) if _tags(ctx, e) & PHASE_TAGS]
-    yield from _each_entry(ctx, "renderer.spatial_phase", entries, judge)
+    yield from _each_entry(ctx, RENDERER_SPATIAL_PHASE, entries, judge)
 
 
 def check_boundary(ctx: Context) -> Iterator[CheckResult]:
@@ -368,8 +376,8 @@ def check_boundary(ctx: Context) -> Iterator[CheckResult]:
 
         metric = metric_of(data["impl"])
         if not metric.applicable:
-            return _unmeasured("renderer.boundary", entry, data, metric_of, metric)
-        return _result("renderer.boundary", entry, "A5", metric, tol.boundary_mm, "mm")
+            return _unmeasured(RENDERER_BOUNDARY, entry, data, metric_of, metric)
+        return _result(RENDERER_BOUNDARY, entry, "A5", metric, tol.boundary_mm, "mm")
 
     entries = [e for e in _entries(ctx) if _changes_texture_in_contact(ctx, e)]
-    yield from _each_entry(ctx, "renderer.boundary", entries, judge)
+    yield from _each_entry(ctx, RENDERER_BOUNDARY, entries, judge)

@@ -80,6 +80,7 @@ from hcard.device.uri import DeviceUri, parse_uri
 from hcard.physics.card_clipping import ClipReport
 from hcard.render import RenderMode, RenderOptions
 from hcard.v1 import card_pb2 as pb
+from hcard_conformance import check_names
 from hcard_device.firmware import Firmware
 from hcard_device.sim import DeviceConfig, DeviceSimulation
 from hcard_device.sim.simulation import Limits, PreparedCard, SimBlock
@@ -334,19 +335,19 @@ CONTROLS: dict[str, Callable[[], SimDriver]] = {
 """The negative controls by name (see the module docstring)."""
 
 CATCHES: dict[str, tuple[str, str]] = {
-    "position-only": ("device.friction", "dense-grating"),
-    "latency-30ms": ("device.latency", "boundary-move"),
-    "no-ev": ("device.friction", "bipolar"),
-    "over-limit": ("device.safety", "host-limits"),
-    "swapped-channels": ("device.friction", "bipolar"),
-    "inverted-phase": ("renderer.spatial_phase", "coarse-grating@moderate-stroke"),
-    "frequency-off": ("renderer.component_frequency", "single-grating@moderate-stroke"),
-    "weak-actuator": ("device.dynamics", "rise-time"),
-    "ignored-watchdog": ("device.watchdog", "host-silent"),
-    "late-limits": ("device.safety", "limits-while-driven"),
-    "no-ownership": ("device.session-ownership", "second-host-refused"),
-    "accepts-bad-crc": ("device.upload-integrity", "bad-crc"),
-    "drops-reports": ("device.report-loss", "loss-fraction"),
+    "position-only": (check_names.DEVICE_FRICTION, "dense-grating"),
+    "latency-30ms": (check_names.DEVICE_LATENCY, "boundary-move"),
+    "no-ev": (check_names.DEVICE_FRICTION, "bipolar"),
+    "over-limit": (check_names.DEVICE_SAFETY, "host-limits"),
+    "swapped-channels": (check_names.DEVICE_FRICTION, "bipolar"),
+    "inverted-phase": (check_names.RENDERER_SPATIAL_PHASE, "coarse-grating@moderate-stroke"),
+    "frequency-off": (check_names.RENDERER_COMPONENT_FREQUENCY, "single-grating@moderate-stroke"),
+    "weak-actuator": (check_names.DEVICE_DYNAMICS, "rise-time"),
+    "ignored-watchdog": (check_names.DEVICE_WATCHDOG, "host-silent"),
+    "late-limits": (check_names.DEVICE_SAFETY, "limits-while-driven"),
+    "no-ownership": (check_names.DEVICE_SESSION_OWNERSHIP, "second-host-refused"),
+    "accepts-bad-crc": (check_names.DEVICE_UPLOAD_INTEGRITY, "bad-crc"),
+    "drops-reports": (check_names.DEVICE_REPORT_LOSS, "loss-fraction"),
 }
 """The (check, case) each negative control exists to fail (spec/conformance.md section 6, QN1):
 the proof that the threshold of that check bites.

@@ -14,7 +14,7 @@ import pytest
 from hcard.device import open_device
 from hcard.device.protocol import Finger
 from hcard.device.uri import parse_uri
-from hcard_conformance.device_level import (
+from hcard_conformance.device_checks.dynamics import (
     BANDWIDTH_FREQUENCIES_HZ,
     BANDWIDTH_REFERENCE_HZ,
     amplitude_gain,

@@ -87,6 +87,26 @@ def test_every_row_of_the_builtin_table_names_a_check_function_of_its_level() ->
         assert found <= targets, found - targets
 
 
+def test_each_builtin_check_name_is_spelled_once() -> None:
+    """A built-in check's name is a string in ``check_names.py`` only: the registry's rows, the
+    checks' results and the negative controls refer to its constant (a name typed twice could
+    drift apart, and a verdict would then name a check the registry does not list)."""
+    from hcard_conformance import check_names
+
+    names = {row.name for row in BUILTIN_CHECKS}
+    assert names == {value for key, value in vars(check_names).items() if key.isupper()}
+    conformance = Path(check_names.__file__).parent
+    reference = Path(importlib.import_module("hcard_device").__file__ or "").parent
+    spelled = []
+    for path in [*conformance.rglob("*.py"), *reference.rglob("*.py")]:
+        if path.name == "check_names.py":
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Constant) and node.value in names:
+                spelled.append(f"{path.name}:{node.lineno} {node.value}")
+    assert spelled == []
+
+
 def test_listing_the_plugins_imports_no_check_module_and_no_driver() -> None:
     """``hcard plugins`` lists 17 checks and 5 drivers from their tables (rows, not modules)."""
     code = ("import sys, warnings\n"
@@ -102,7 +122,8 @@ def test_listing_the_plugins_imports_no_check_module_and_no_driver() -> None:
                           check=True)
     counts, imported = done.stdout.splitlines()
     assert counts.split() == ["17", "5"]  # usbip, pyusb, hid; sim, control
-    assert ast.literal_eval(imported) == ["hcard_conformance.registry", "hcard_conformance.result"]
+    assert ast.literal_eval(imported) == ["hcard_conformance.check_names",
+                                          "hcard_conformance.registry", "hcard_conformance.result"]
 
 
 def test_plugin_checks_join_the_suite() -> None:
@@ -310,7 +331,7 @@ def _vanishing_device(after_writes: int):
 
 
 def test_a_check_that_raises_is_an_error_per_case_in_table_json_and_junit() -> None:
-    from hcard_conformance.device_level import SAFETY_CASES
+    from hcard_conformance.device_checks.safety import SAFETY_CASES
 
     ctx = Context("vanishing", lambda: _vanishing_device(after_writes=5))
     report = run_suite(ctx, ("device",), select=("device.safety", "device.dynamics"))

@@ -11,8 +11,8 @@ import re
 import pytest
 
 from hcard.device import open_device
-from hcard_conformance import device_level as dl
 from hcard_conformance.context import Context
+from hcard_conformance.device_checks import safety
 from hcard_conformance.result import CheckResult
 from hcard_conformance.runner import run_suite
 from hcard_device.controls import CONTROLS
@@ -23,7 +23,7 @@ CASE = "limits-while-driven"
 
 
 def _safety(name: str) -> dict[str, CheckResult]:
-    return {r.case: r for r in dl.check_safety(Context.for_driver(name))}
+    return {r.case: r for r in safety.check_safety(Context.for_driver(name))}
 
 
 def _reports_after(result: CheckResult) -> tuple[int, int, float]:
@@ -35,7 +35,7 @@ def _reports_after(result: CheckResult) -> tuple[int, int, float]:
 
 
 def test_the_case_is_part_of_the_safety_check() -> None:
-    assert dl.SAFETY_CASES[-1] == CASE and "late-limits" in CONTROLS
+    assert safety.SAFETY_CASES[-1] == CASE and "late-limits" in CONTROLS
 
 
 @pytest.mark.parametrize("uri", ["sim://", "sim://coupled"])
@@ -79,7 +79,7 @@ def test_served_device_passes_the_case_twice_against_one_running_server() -> Non
     assert after == hardware  # the case restored the limits it lowered
     for report in runs:
         results = {r.case: r for r in report.results}
-        assert set(results) == set(dl.SAFETY_CASES)
+        assert set(results) == set(safety.SAFETY_CASES)
         assert_conforms(report.results)  # the machine's lateness fails saying so
         over, reports, ratio = _reports_after(results[CASE])
         assert over == 0 and reports >= 30 and ratio <= 1.0 + 1e-3

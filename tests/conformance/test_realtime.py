@@ -11,11 +11,11 @@ from dataclasses import replace
 
 import pytest
 
-from hcard.device.protocol import Counters, FaultBits, State
+from hcard.device.protocol import Counters, FaultBits, State, UploadStatus
 from hcard.device.uri import parse_uri
-from hcard_conformance import link_checks as lc
 from hcard_conformance.context import Context
-from hcard_conformance.device_level import check_latency
+from hcard_conformance.device_checks import report_loss, upload_integrity
+from hcard_conformance.device_checks.latency import check_latency
 from hcard_conformance.realtime import (
     ATTEMPTS,
     NOT_KEPT,
@@ -124,31 +124,31 @@ def test_host_watch_sees_its_loop_and_a_process_that_did_not_run() -> None:
 def test_an_upload_case_that_failed_while_disturbed_is_measured_again() -> None:
     failed = CheckResult("device.upload-integrity", "device", "bad-crc", False,
                          detail="expected FAILED CRC_MISMATCH, device said COMMITTED")
-    status = lc.UploadStatus(2, 0, 0, 10, 10, 0, 1, "")
-    paused = lc.Attempt(status, longest_pause_s=0.05)
+    status = UploadStatus(2, 0, 0, 10, 10, 0, 1, "")
+    paused = upload_integrity.Attempt(status, longest_pause_s=0.05)
     with pytest.raises(NotKept, match="the host paused 50 ms"):
-        lc.kept(failed, paused)
-    lagging = lc.Attempt(status, states=[_state(int(FaultBits.REALTIME_LAG))])
+        upload_integrity.kept(failed, paused)
+    lagging = upload_integrity.Attempt(status, states=[_state(int(FaultBits.REALTIME_LAG))])
     with pytest.raises(NotKept, match="REALTIME_LAG"):
-        lc.kept(failed, lagging)
-    on_time = lc.Attempt(status, longest_pause_s=0.005, states=[_state()])
-    assert lc.kept(failed, on_time) is failed  # kept: the device fails
+        upload_integrity.kept(failed, lagging)
+    on_time = upload_integrity.Attempt(status, longest_pause_s=0.005, states=[_state()])
+    assert upload_integrity.kept(failed, on_time) is failed  # kept: the device fails
     passed = replace(failed, passed=True, outcome="")
-    assert lc.kept(passed, paused).status == PASS
+    assert upload_integrity.kept(passed, paused).status == PASS
 
 
-def _session(unexcused: int, *, pause_s: float = 0.0, late: int = 0) -> lc.LossSession:
-    stats = lc.SequenceStats(3000 - unexcused, 3000, unexcused, 0, 0, 0, unexcused)
-    return lc.LossSession(stats, Counters(3000, 0, 0, 0, 0, 0, 0, 0), 0, 0, 3.0, 1.0, pause_s,
-                          device_late=late)
+def _session(unexcused: int, *, pause_s: float = 0.0, late: int = 0) -> report_loss.LossSession:
+    stats = report_loss.SequenceStats(3000 - unexcused, 3000, unexcused, 0, 0, 0, unexcused)
+    return report_loss.LossSession(stats, Counters(3000, 0, 0, 0, 0, 0, 0, 0), 0, 0, 3.0, 1.0,
+                                   pause_s, device_late=late)
 
 
 def test_report_loss_of_a_session_not_kept_is_not_judged() -> None:
-    assert lc.loss_not_kept(_session(0, pause_s=0.05), 3) == ""  # nothing lost: judged
-    assert lc.loss_not_kept(_session(40), 3) == ""  # kept, lost 40: judged (a FAIL)
-    why = lc.loss_not_kept(_session(40, pause_s=0.05), 3)
+    assert report_loss.loss_not_kept(_session(0, pause_s=0.05), 3) == ""  # nothing lost: judged
+    assert report_loss.loss_not_kept(_session(40), 3) == ""  # kept, lost 40: judged (a FAIL)
+    why = report_loss.loss_not_kept(_session(40, pause_s=0.05), 3)
     assert NOT_KEPT in why and "paused 50 ms" in why
-    why = lc.loss_not_kept(_session(40, late=12), 3)
+    why = report_loss.loss_not_kept(_session(40, late=12), 3)
     assert "12 reports late" in why and "REALTIME_LAG" in why
 
 

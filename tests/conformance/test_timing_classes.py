@@ -13,7 +13,11 @@ from hcard.cli.main import cli
 from hcard.device.uri import parse_uri
 from hcard_conformance.conformance_cmd import TIMING_NAMES
 from hcard_conformance.context import Context
-from hcard_conformance.device_level import BANDWIDTH_UV_MEAN, BANDWIDTH_UV_SWING, amplitude_gain
+from hcard_conformance.device_checks.dynamics import (
+    BANDWIDTH_UV_MEAN,
+    BANDWIDTH_UV_SWING,
+    amplitude_gain,
+)
 from hcard_conformance.result import CannotAssess
 from hcard_conformance.runner import run_suite
 from hcard_conformance.streaming import FED_ATTEMPTS, STARVED_FRACTION, require_fed, stream
@@ -124,12 +128,12 @@ def test_a_stream_the_host_let_run_dry_is_played_again() -> None:
 
 
 def _latency(driver: SimDriver, timing: str) -> dict[str, Any]:
-    from hcard_conformance import device_level
+    from hcard_conformance.device_checks.latency import check_latency
 
     ctx = Context.for_driver("sim://")
     ctx.open_driver = lambda: driver
     ctx.options["timing"] = timing
-    return {r.case: r for r in device_level.check_latency(ctx)}
+    return {r.case: r for r in check_latency(ctx)}
 
 
 def test_a_host_reading_late_is_timed_by_the_device_under_software_emulation() -> None:

@@ -8,7 +8,7 @@ import math
 import numpy as np
 from scipy.optimize import brentq
 
-from hcard_conformance.device_level import BANDWIDTH_REFERENCE_HZ
+from hcard_conformance.device_checks.dynamics import BANDWIDTH_REFERENCE_HZ
 from hcard_device.sim import DeviceConfig
 from hcard_device.sim.plate import PIGains, PlateModel
 

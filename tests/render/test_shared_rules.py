@@ -22,7 +22,7 @@ from hcard.render.touch import (
 )
 from hcard.track import make_track
 from hcard.v1 import card_pb2 as pb
-from hcard_conformance.device_level import track_speed
+from hcard_conformance.device_checks.friction import track_speed
 from hcard_conformance.metrics import sample_speeds
 from hcard_conformance.vectors.tracks import contact_speeds
 from hcard_device.sim.finger import HostFinger, TrackFinger

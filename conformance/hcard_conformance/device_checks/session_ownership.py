@@ -1,4 +1,5 @@
-"""Device-level conformance check of session ownership (spec/device-protocol.md section 14).
+"""Check ``device.session-ownership`` (O1-O3): session ownership between two hosts on one
+device (spec/device-protocol.md section 14).
 
 ``device.session-ownership``
     Two hosts on one device. The check opens two drivers on the implementation's URI and first
@@ -50,18 +51,13 @@ from hcard.device.protocol import Command, Control, DeviceInfo, FaultBits, State
 from hcard.quantities import MS_PER_S
 from hcard.track import FingerTrack, straight_stroke
 from hcard.v1 import card_pb2 as pb
+from hcard_conformance.check_names import DEVICE_SESSION_OWNERSHIP as CHECK
 from hcard_conformance.context import Context
+from hcard_conformance.device_checks.common import LEVEL
 from hcard_conformance.realtime import HostWatch, NotKept, attempted_case, device_lag, reasons
-from hcard_conformance.result import (
-    CannotAssess,
-    CheckResult,
-    guarded,
-    measured,
-)
+from hcard_conformance.result import CannotAssess, CheckResult, guarded, measured
 from hcard_conformance.timing import timing_class
 
-LEVEL = "device"
-CHECK = "device.session-ownership"
 CASES = ("second-host-refused", "takeover-reported", "released-by-stop")
 PROBE_KEEPALIVES = 5
 """KEEPALIVEs the first driver sends to show the second one shares its device."""

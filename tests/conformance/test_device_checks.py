@@ -10,8 +10,8 @@ import pytest
 
 from hcard.device import open_device
 from hcard.device.play import play
-from hcard_conformance import device_level as dl
 from hcard_conformance.context import Context
+from hcard_conformance.device_checks import friction
 from hcard_conformance.registry import all_checks
 from hcard_conformance.result import CheckResult
 from hcard_conformance.runner import run_suite
@@ -87,8 +87,8 @@ def test_rendered_friction_follows_the_measured_plate() -> None:
     """The rendered friction comes from the measured amplitude: a dense grating swings with
     the target, not at the reported target's values copied."""
     with open_device("sim://") as driver:
-        _, card, track = dl.friction_cases(driver.info())[1]
-        m = dl.measure_friction(driver, card, track)
+        _, card, track = friction.friction_cases(driver.info())[1]
+        m = friction.measure_friction(driver, card, track)
     assert m.reports > 400
     assert m.rendered.min() < 0.45 and m.rendered.max() > 0.75  # the 0.35-0.85 grating
     assert abs(m.rendered.mean() - m.target.mean()) < 0.02
@@ -100,17 +100,18 @@ def test_a_crossing_a_report_early_is_placement_not_a_friction_error() -> None:
     a crossing falls; 30 ms early (1.8 mm at 60 mm/s) still fails."""
     with open_device("sim://") as driver:
         info = driver.info()
-        _, card, track = dl.friction_cases(info)[0]
-        result = dl.play(driver, card, track)
-    t, rendered, contact = dl.rendered_friction(result, dl.device_profile_for(info))
-    exact = dl.friction_error(t, rendered, contact, card, track)
-    early = dl.friction_error(t - 0.001, rendered, contact, card, track)
+        _, card, track = friction.friction_cases(info)[0]
+        result = play(driver, card, track)
+    t, rendered, contact = friction.rendered_friction(result, friction.device_profile_for(info))
+    exact = friction.friction_error(t, rendered, contact, card, track)
+    early = friction.friction_error(t - 0.001, rendered, contact, card, track)
     assert exact.rms_relative_error < 0.02
     assert early.rms_relative_error < 0.02
     # without the lead the report before each step counts, about 0.5 relative each
-    unguarded = dl.friction_error(t - 0.001, rendered, contact, card, track, lead_s=0.0)
+    unguarded = friction.friction_error(t - 0.001, rendered, contact, card, track, lead_s=0.0)
     assert unguarded.rms_relative_error > early.rms_relative_error + 0.01
-    assert dl.friction_error(t - 0.030, rendered, contact, card, track).rms_relative_error > 0.08
+    late = friction.friction_error(t - 0.030, rendered, contact, card, track)
+    assert late.rms_relative_error > 0.08
 
 
 def test_no_driver_means_no_device_results() -> None:
@@ -126,21 +127,21 @@ def test_a_late_second_sample_is_latency_not_a_friction_error() -> None:
     transport delay (judged by device.latency) does not count as a friction error, while the
     friction once the speed is known is still measured against the card."""
     driver = LateSecondSampleDriver("sim://")
-    cases = {name: (card, track) for name, card, track in dl.friction_cases(driver.info())}
+    cases = {name: (card, track) for name, card, track in friction.friction_cases(driver.info())}
     card, track = cases["coarse-taxtels"]
-    profile = dl.device_profile_for(driver.info())
+    profile = friction.device_profile_for(driver.info())
     with driver:
         result = play(driver, card, track)
-    t, rendered, contact = dl.rendered_friction(result, profile)
-    known = dl.speed_known_s(result)
+    t, rendered, contact = friction.rendered_friction(result, profile)
+    known = friction.speed_known_s(result)
     # the second sample (taken at 20 ms) reaches the device 9 ms late: the first report that
     # echoes it comes a report period or less after that
     assert 0.029 <= known <= 0.0305
     # counted from touch-down alone, the 20 ms sample interval plus 5 ms of settling, the
     # reports of a plate still driven for a finger at rest (about twice the friction) count
-    naive = dl.friction_error(t, rendered, contact, card, track)
-    assert naive.rms_relative_error > dl.FRICTION_JND
-    measured = dl.friction_error(t, rendered, contact, card, track,
-                                 start_s=known + dl.PLATE_SETTLE_S)
+    naive = friction.friction_error(t, rendered, contact, card, track)
+    assert naive.rms_relative_error > friction.FRICTION_JND
+    measured = friction.friction_error(t, rendered, contact, card, track,
+                                 start_s=known + friction.PLATE_SETTLE_S)
     assert measured.rms_relative_error < 0.01
     assert measured.reports >= naive.reports - 10  # only the unsettled start is left out

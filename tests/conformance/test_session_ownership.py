@@ -10,14 +10,13 @@ import math
 import pytest
 
 from hcard_conformance.context import Context
-from hcard_conformance.registry import builtin_checks
-from hcard_conformance.result import FAIL, PASS, UNASSESSED, CheckResult
-from hcard_conformance.session_checks import (
+from hcard_conformance.device_checks.session_ownership import (
     CASES,
-    CHECK,
     LOSS_THRESHOLD_S,
     check_session_ownership,
 )
+from hcard_conformance.registry import builtin_checks
+from hcard_conformance.result import FAIL, PASS, UNASSESSED, CheckResult
 from hcard_device.controls import CONTROLS
 from tests.helpers.realtime import assert_conforms
 from tests.helpers.served_device import served_device
@@ -29,9 +28,9 @@ def run(name: str) -> dict[str, CheckResult]:
 
 def test_the_check_is_built_in_after_the_device_level() -> None:
     names = [c.name for c in builtin_checks()]
-    assert names.index(CHECK) > names.index("device.watchdog")
+    assert names.index("device.session-ownership") > names.index("device.watchdog")
     found = {c.name: c for c in builtin_checks()}
-    assert found[CHECK].level == "device"
+    assert found["device.session-ownership"].level == "device"
     assert "no-ownership" in CONTROLS
 
 

@@ -16,8 +16,8 @@ from hcard.device import open_device
 from hcard.device.base import DEFAULT_TIMEOUT_S
 from hcard.device.protocol import State, StateFlags, UploadAction, crc32
 from hcard.device.uri import parse_uri
-from hcard_conformance import link_checks as lc
 from hcard_conformance.context import Context
+from hcard_conformance.device_checks import report_loss, upload_integrity
 from hcard_conformance.registry import all_checks
 from hcard_conformance.result import CheckResult
 from hcard_conformance.runner import run_suite
@@ -43,34 +43,34 @@ def _failures(results: dict[str, CheckResult]) -> list[tuple[str, str, str]]:
 # ---------------------------------------------------------------------- the analysis alone
 
 def test_sequence_stats_counts_a_gap_across_the_u16_wrap() -> None:
-    stats = lc.sequence_stats([65533, 65534, 65535, 0, 2, 3])
+    stats = report_loss.sequence_stats([65533, 65534, 65535, 0, 2, 3])
     assert (stats.received, stats.expected, stats.lost, stats.longest_gap) == (6, 7, 1, 1)
     assert (stats.duplicates, stats.reordered, stats.misnumbered) == (0, 0, 0)
     assert stats.loss_fraction == pytest.approx(1 / 7)
 
 
 def test_sequence_stats_finds_duplicates_reordering_and_misnumbering() -> None:
-    stats = lc.sequence_stats([10, 11, 11, 13, 12, 14])
+    stats = report_loss.sequence_stats([10, 11, 11, 13, 12, 14])
     assert (stats.duplicates, stats.reordered, stats.lost) == (1, 1, 0)
     # a device that numbers only what it sends: 1 ms steps in sequence, a 2 ms step in time
-    hidden = lc.sequence_stats([1, 2, 3, 4], [1000, 2000, 4000, 5000], 1000.0)
+    hidden = report_loss.sequence_stats([1, 2, 3, 4], [1000, 2000, 4000, 5000], 1000.0)
     assert (hidden.lost, hidden.misnumbered) == (0, 1)
     # time stamps wrap at 2^32 us without a false step
-    wrapped = lc.sequence_stats([7, 8], [0xFFFF_FC18, 0], 1000.0)
+    wrapped = report_loss.sequence_stats([7, 8], [0xFFFF_FC18, 0], 1000.0)
     assert wrapped.misnumbered == 0
-    assert lc.sequence_stats([]).received == 0
+    assert report_loss.sequence_stats([]).received == 0
 
 
 def test_gaps_at_the_hosts_own_pauses_are_excused() -> None:
     sequences = [1, 2, 3, 9, 10, 12]
     arrivals = [0.001, 0.002, 0.003, 0.060, 0.061, 0.062]  # s: the host paused 3 -> 60 ms
-    stats = lc.sequence_stats(sequences, None, 1000.0, arrivals, [(0.003, 0.060)])
+    stats = report_loss.sequence_stats(sequences, None, 1000.0, arrivals, [(0.003, 0.060)])
     assert (stats.lost, stats.excused, stats.unexcused) == (6, 5, 1)  # 11 lost while reading
     assert stats.loss_fraction == pytest.approx(1 / 12)
-    assert lc.count_error(stats, 5) == 0  # the device counted the 5 it could not deliver
-    assert lc.count_error(stats, 0) == 1  # ... but not the one lost while the host read
-    assert lc.count_error(stats, 9) == 3  # it claims more drops than were missing
-    assert lc.sequence_stats(sequences, None, 1000.0, arrivals, []).excused == 0
+    assert report_loss.count_error(stats, 5) == 0  # the device counted the 5 it could not deliver
+    assert report_loss.count_error(stats, 0) == 1  # ... but not the one lost while the host read
+    assert report_loss.count_error(stats, 9) == 3  # it claims more drops than were missing
+    assert report_loss.sequence_stats(sequences, None, 1000.0, arrivals, []).excused == 0
 
 
 def _state(timestamp_us: int, echo_us: int, target_uv: int, texture: int) -> State:
@@ -83,24 +83,25 @@ def _state(timestamp_us: int, echo_us: int, target_uv: int, texture: int) -> Sta
 
 
 def test_neutral_frames_count_against_the_card_unless_the_finger_came_late() -> None:
-    card = lc.LinkCard(b"", (4500, 10000))
+    card = upload_integrity.LinkCard(b"", (4500, 10000))
     on_time = [_state(1000 * k, 10_000 * (k // 10), 4500, 0) for k in range(40)]
-    assert lc.off_card(on_time, card, 3) == (40, 0, 0)
-    assert lc.off_card(on_time, card, 4) == (0, 0, 40)  # another generation
+    assert upload_integrity.off_card(on_time, card, 3) == (40, 0, 0)
+    assert upload_integrity.off_card(on_time, card, 4) == (0, 0, 40)  # another generation
     # a device that renders nothing for 10 ms while the finger samples come every 10 ms
     stopped = [*on_time[:20], *(_state(1000 * k, 10_000 * (k // 10), 10000, -1)
                                 for k in range(20, 30)), *on_time[30:]]
-    assert lc.off_card(stopped, card, 3) == (30, 0, 10)
+    assert upload_integrity.off_card(stopped, card, 3) == (30, 0, 10)
     # the same neutral frames after an 80 ms gap in the finger stream: the renderer's answer
     late = [*on_time[:20], *(_state(1000 * k, 95_000, 10000, -1) for k in range(100, 110)),
             *(_state(1000 * k, 105_000, 4500, 0) for k in range(110, 120))]
-    assert lc.late_finger(late)[20:22] == [True, True] and not any(lc.late_finger(late)[:20])
-    assert lc.off_card(late, card, 3) == (30, 10, 0)
+    late_samples = upload_integrity.late_finger(late)
+    assert late_samples[20:22] == [True, True] and not any(late_samples[:20])
+    assert upload_integrity.off_card(late, card, 3) == (30, 10, 0)
 
 
 def test_bad_uploads_end_with_commit_and_name_their_result() -> None:
     data = bytes(range(256)) * 5  # 1280 B: 23 chunks
-    uploads = lc.bad_uploads(data, 4096)
+    uploads = upload_integrity.bad_uploads(data, 4096)
     assert {case: r.name for case, (_steps, r) in uploads.items()} == REFUSALS
     for steps, _result in uploads.values():
         assert getattr(steps[-1], "action", None) == UploadAction.COMMIT
@@ -108,15 +109,15 @@ def test_bad_uploads_end_with_commit_and_name_their_result() -> None:
     assert uploads["bad-crc"][0][0].crc32 == crc32(data) ^ 1  # one bit off
     assert uploads["truncated"][0][0].crc32 == crc32(data)  # the others declare it right
     with pytest.raises(ValueError, match="too short"):
-        lc.bad_uploads(b"x" * 100, 4096)
+        upload_integrity.bad_uploads(b"x" * 100, 4096)
 
 
 def test_link_checks_are_registered_and_need_a_driver() -> None:
     names = [c.name for c in all_checks(("device",), plugins=False)]
     assert set(LINK_CHECKS) <= set(names)
     reference = Context.for_driver("reference")
-    assert list(lc.check_upload_integrity(reference)) == []
-    assert list(lc.check_report_loss(reference)) == []
+    assert list(upload_integrity.check_upload_integrity(reference)) == []
+    assert list(report_loss.check_report_loss(reference)) == []
 
 
 # ---------------------------------------------------------------------- the reference device
@@ -132,7 +133,7 @@ def test_reference_passes_both_checks_on_sim(
     failed = [(k, r.detail) for k, r in sim_results.items() if not r.passed]
     assert not failed, failed
     assert {case for check, case in sim_results if check == "device.upload-integrity"} == \
-        set(lc.UPLOAD_CASES)
+        set(upload_integrity.UPLOAD_CASES)
     for case, reason in REFUSALS.items():
         result = sim_results["device.upload-integrity", case]
         assert result.value == 0
@@ -157,19 +158,21 @@ def test_reference_passes_twice_over_usbip_served_by_another_process() -> None:
     for report in runs:
         assert_conforms(report.results)  # a run the machine could not keep fails saying so
         cases = {(r.check, r.case) for r in report.results}
-        assert cases == {("device.upload-integrity", c) for c in lc.UPLOAD_CASES} | \
-            {("device.report-loss", c) for c in lc.LOSS_CASES}
+        assert cases == {("device.upload-integrity", c) for c in upload_integrity.UPLOAD_CASES} | \
+            {("device.report-loss", c) for c in report_loss.LOSS_CASES}
         loss = next(r for r in report.results if r.case == "loss-fraction")
         print(f"usbip: {loss.detail}")
     assert after == hardware  # the checks leave the limits alone
-    assert status.active_crc32 == lc.link_card(info, lc.CARD_A_FRICTION).crc  # card A left
+    card_a = upload_integrity.link_card(info, upload_integrity.CARD_A_FRICTION)
+    assert status.active_crc32 == card_a.crc  # card A left
     assert not flags & StateFlags.RUNNING  # stopped, as found
 
 
 # ---------------------------------------------------------------------- negative controls
 
 def test_accepts_bad_crc_fails_the_bad_crc_case_only() -> None:
-    results = _cases(Context.for_driver("control:accepts-bad-crc"), lc.check_upload_integrity)
+    results = _cases(Context.for_driver("control:accepts-bad-crc"),
+                     upload_integrity.check_upload_integrity)
     bad = results["bad-crc"]
     assert not bad.passed and bad.outcome == "FAIL"
     assert "expected FAILED CRC_MISMATCH, device said COMMITTED" in bad.detail
@@ -179,14 +182,14 @@ def test_accepts_bad_crc_fails_the_bad_crc_case_only() -> None:
 
 
 def test_drops_reports_fails_the_loss_fraction_only() -> None:
-    results = _cases(Context.for_driver("control:drops-reports"), lc.check_report_loss)
+    results = _cases(Context.for_driver("control:drops-reports"), report_loss.check_report_loss)
     loss = results["loss-fraction"]
     assert not loss.passed
     assert 4.0 <= loss.value <= 6.0  # %, 5 % dropped at random over ~3050 reports
     assert DROPPED_FRACTION == 0.05
     assert results["sequence-gaps"].passed and results["sequence-gaps"].value == 0
     counted = results["drops-counted"]
-    assert counted.passed and counted.value <= lc.DROP_COUNT_SLACK  # counted honestly
+    assert counted.passed and counted.value <= report_loss.DROP_COUNT_SLACK  # counted honestly
 
 
 class SilentLossFirmware(LossyFirmware):
@@ -216,7 +219,7 @@ def _firmware_context(name: str, firmware_cls: type[LossyFirmware]) -> Context:
 
 def test_uncounted_loss_fails_drops_counted() -> None:
     results = _cases(_firmware_context("test:silent-loss", SilentLossFirmware),
-                     lc.check_report_loss)
+                     report_loss.check_report_loss)
     counted = results["drops-counted"]
     assert not counted.passed and counted.value > 100  # ~150 lost, 0 counted
     assert "COUNTERS input_dropped 0" in counted.detail
@@ -226,7 +229,7 @@ def test_uncounted_loss_fails_drops_counted() -> None:
 
 def test_unnumbered_loss_fails_sequence_gaps() -> None:
     results = _cases(_firmware_context("test:unnumbered-loss", UnnumberedLossFirmware),
-                     lc.check_report_loss)
+                     report_loss.check_report_loss)
     gaps = results["sequence-gaps"]
     assert not gaps.passed and gaps.value > 100  # misnumbered: time steps of 2 ms, seq of 1
     assert results["loss-fraction"].passed  # the sequence alone shows no gap

@@ -1,0 +1,27 @@
+"""What several device-level checks share: the level, how a measured metric is judged against
+its threshold, and conventions of the measurements (stroke speed in mm/s, read catch-up in s,
+the plate amplitude counted as off in m)."""
+
+from __future__ import annotations
+
+import math
+
+from hcard_conformance.result import CheckResult
+
+LEVEL = "device"
+"""The level of every check of :mod:`hcard_conformance.device_checks`."""
+STROKE_SPEED_MM_S = 60.0
+"""Speed of the device-level strokes (moderate class of section 5.4), mm/s."""
+READ_CATCH_UP_S = 5.0
+"""Longest a measurement reads on while the host catches up with its reports, s."""
+OFF_AMPLITUDE_M = 50e-9
+"""Plate amplitude counted as off, m (the E-ViTa loop's 50 nm amplitude tolerance)."""
+
+
+def judged(check: str, case: str, metric: str, value: float, threshold: float, unit: str,
+           detail: str, *, at_most: bool = True) -> CheckResult:
+    """The result of ``check`` on ``case``: ``metric`` measured ``value`` against
+    ``threshold`` (both in ``unit``); it passes when ``value`` is finite and at most the
+    threshold (at least, with ``at_most=False``)."""
+    passed = math.isfinite(value) and (value <= threshold if at_most else value >= threshold)
+    return CheckResult(check, LEVEL, case, passed, metric, value, threshold, unit, detail)
