@@ -19,7 +19,10 @@ from acme_haptics.driver import AcmeDriver
 
 def test_the_entry_point_registers_the_driver_and_the_profile() -> None:
     registry = get_registry()
-    assert registry.drivers["acme"] is AcmeDriver
+    row = registry.drivers["acme"]
+    assert row.load() is AcmeDriver
+    assert (row.name, row.description, row.schemes) == \
+        (AcmeDriver.name, AcmeDriver.description, AcmeDriver.schemes)
     assert "acme-tx1" in registry.device_profiles
     with open_device("acme://tx1") as driver:
         assert isinstance(driver, AcmeDriver)
