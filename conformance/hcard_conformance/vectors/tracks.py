@@ -22,6 +22,13 @@ SLOW_MAX_MM_S = 30.0
 """Upper bound of the slow class, mm/s (thesis 5.4)."""
 FAST_MIN_MM_S = 180.0
 """Lower bound of the fast class, mm/s (thesis 5.4)."""
+STROKE_Y_MM = 35.0
+"""The line of the strokes along x, mm: mid-taxtel on every vector grid (10, 15, 20, 40 mm
+pitches: 5 mm from a boundary; 2 mm: 1 mm), never on a boundary, where a touch one protocol
+count (10 um) off plays the neighbouring row (tests/conformance/test_vector_boundaries.py)."""
+NOISY_Y_MM = 55.0
+"""The line of the noisy stroke, mm: as :data:`STROKE_Y_MM`, 5 mm or more from the boundaries
+of 10, 15, 20 and 40 mm pitches."""
 NOISE_SEED = 20260601
 """Seed of the only random track (sensor noise), fixed so that generation is deterministic."""
 
@@ -49,20 +56,21 @@ def _stroke(start: tuple[float, float], velocity: tuple[float, float],
 
 
 def slow_stroke() -> VectorTrack:
-    """25 mm/s along +x at y = 30 mm, 1.2 s, crossing x = 60 mm."""
-    return VectorTrack("slow-stroke", "slow", ("stroke",), _stroke((45.0, 30.0), (25.0, 0.0), 1.2))
+    """25 mm/s along +x at y = 35 mm, 1.2 s, crossing x = 60 mm."""
+    return VectorTrack("slow-stroke", "slow", ("stroke",),
+                       _stroke((45.0, STROKE_Y_MM), (25.0, 0.0), 1.2))
 
 
 def moderate_stroke() -> VectorTrack:
-    """100 mm/s along +x at y = 30 mm from x = 5 to 115 mm, 1.1 s."""
+    """100 mm/s along +x at y = 35 mm from x = 5 to 115 mm, 1.1 s."""
     return VectorTrack("moderate-stroke", "moderate", ("stroke",),
-                       _stroke((5.0, 30.0), (100.0, 0.0), 1.1))
+                       _stroke((5.0, STROKE_Y_MM), (100.0, 0.0), 1.1))
 
 
 def fast_stroke() -> VectorTrack:
-    """250 mm/s along +x at y = 30 mm from x = 5 to 115 mm, 0.44 s."""
+    """250 mm/s along +x at y = 35 mm from x = 5 to 115 mm, 0.44 s."""
     return VectorTrack("fast-stroke", "fast", ("stroke",),
-                       _stroke((5.0, 30.0), (250.0, 0.0), 0.44))
+                       _stroke((5.0, STROKE_Y_MM), (250.0, 0.0), 0.44))
 
 
 def diagonal_stroke() -> VectorTrack:
@@ -74,35 +82,36 @@ def diagonal_stroke() -> VectorTrack:
 
 
 def reversal() -> VectorTrack:
-    """80 mm/s back and forth between x = 44 and 76 mm at y = 30 mm: reversals at 0.4 and
+    """80 mm/s back and forth between x = 44 and 76 mm at y = 35 mm: reversals at 0.4 and
     0.8 s, 1.2 s; crosses x = 60 mm (the ``edge`` card) three times."""
     t = _times(1.2)
     period = 0.8
     phase = np.mod(t, period) / period
     x = 44.0 + 32.0 * np.where(phase < 0.5, 2.0 * phase, 2.0 - 2.0 * phase)
     return VectorTrack("reversal", "moderate", ("reversal",),
-                       make_track(t, x, np.full_like(t, 30.0)))
+                       make_track(t, x, np.full_like(t, STROKE_Y_MM)))
 
 
 def liftoff() -> VectorTrack:
-    """60 mm/s along +x; lift-off at 0.5 s, touch-down 0.2 s later 30 mm further on; 1.2 s."""
+    """60 mm/s along +x at y = 35 mm; lift-off at 0.5 s, touch-down 0.2 s later 30 mm further
+    on; 1.2 s."""
     t = _times(1.2)
     x = 10.0 + 60.0 * t
     lifted = (t > 0.5 + 1e-9) & (t < 0.7 - 1e-9)
     x = np.where(t >= 0.7 - 1e-9, 70.0 + 60.0 * (t - 0.7), x)
     fn = np.where(lifted, 0.0, 0.5)
     return VectorTrack("liftoff", "moderate", ("liftoff", "touchdown"),
-                       make_track(t, x, np.full_like(t, 30.0), fn, ~lifted))
+                       make_track(t, x, np.full_like(t, STROKE_Y_MM), fn, ~lifted))
 
 
 def noisy_stroke() -> VectorTrack:
-    """60 mm/s along +x at y = 50 mm with seeded sensor noise: 0.05 mm position noise (normal)
+    """60 mm/s along +x at y = 55 mm with seeded sensor noise: 0.05 mm position noise (normal)
     and +-1 ms time-stamp jitter (uniform), 1.0 s."""
     rng = np.random.default_rng(NOISE_SEED)
     t = _times(1.0)
     t = t + rng.uniform(-0.001, 0.001, t.shape)
     x = 20.0 + 60.0 * t + rng.normal(0.0, 0.05, t.shape)
-    y = 50.0 + rng.normal(0.0, 0.05, t.shape)
+    y = NOISY_Y_MM + rng.normal(0.0, 0.05, t.shape)
     return VectorTrack("noisy-stroke", "moderate", ("noise",), make_track(t, x, y))
 
 
