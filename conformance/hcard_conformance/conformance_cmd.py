@@ -94,8 +94,16 @@ def conformance(driver_name: str, levels: tuple[str, ...], select: tuple[str, ..
       hcard conformance --driver usbip://127.0.0.1:3240/1-1 --junit results.xml
       hcard conformance --driver sim:// --level format --json - | jq .totals
     """
+    from hcard.atomic import write_atomically
     from hcard_conformance.context import Context
-    from hcard_conformance.report import json_bytes, junit_xml, table, write_json, write_junit
+    from hcard_conformance.report import (
+        json_bytes,
+        junit_setup_error,
+        junit_xml,
+        table,
+        write_json,
+        write_junit,
+    )
     from hcard_conformance.runner import run_suite
 
     quiet, verbose = verbosity() == QUIET, verbosity() == VERBOSE
@@ -106,15 +114,26 @@ def conformance(driver_name: str, levels: tuple[str, ...], select: tuple[str, ..
         raise click.BadParameter(f"unknown timing class {options['timing']!r}; known: "
                                  f"{', '.join(TIMING_NAMES)}", param_hint="--option timing")
     ctx = Context.for_driver(driver_name, vectors_root=vectors_dir, options=options)
+
+    def cannot_start(message: str) -> click.UsageError:
+        """The usage error of a run that cannot start, after writing its JUnit file (one
+        error case), so that CI shows why (exit 2)."""
+        if junit_path is not None and str(junit_path) != STDIN:
+            with writing(junit_path, HcardError):
+                write_atomically(junit_path, junit_setup_error(driver_name, message))
+        elif junit_path is not None:
+            click.echo(junit_setup_error(driver_name, message).decode(), nl=False)
+        return click.UsageError(message)
+
     try:
         ctx.manifest  # noqa: B018 - load now: missing vectors are a usage error (exit 2)
     except (OSError, ValueError, KeyError) as exc:
-        raise click.UsageError(f"cannot read the vectors in {ctx.vectors_root}: {exc}") from None
+        raise cannot_start(f"cannot read the vectors in {ctx.vectors_root}: {exc}") from None
     if ctx.open_driver is not None:
         try:
             ctx.open_driver().close()
         except (HcardError, OSError, ValueError) as exc:
-            raise click.UsageError(f"cannot open driver {driver_name!r}: {exc}") from None
+            raise cannot_start(f"cannot open driver {driver_name!r}: {exc}") from None
 
     started = time.perf_counter()
 
@@ -128,7 +147,7 @@ def conformance(driver_name: str, levels: tuple[str, ...], select: tuple[str, ..
 
     report = run_suite(ctx, levels or LEVEL_NAMES, select=select, check_done=check_done)
     if not report.results:
-        raise click.UsageError(
+        raise cannot_start(
             f"no check of level(s) {', '.join(report.levels)} applies to {driver_name!r}"
             + (f" (not applicable: {', '.join(report.not_applicable)})"
                if report.not_applicable else ""))

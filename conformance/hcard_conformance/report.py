@@ -3,9 +3,15 @@
 JUnit XML has one ``<testsuite>`` per level (``name`` = the level) and one
 ``<testcase>`` per (check, case): ``classname`` is the check, ``name`` the case. A failed case
 has a ``<failure>`` whose ``message`` gives metric, value and threshold; every case carries
-them as ``<properties>`` too. JSON (:data:`JSON_FORMAT`, spec QP4) holds the run, the
-thresholds and every result (:meth:`CheckResult.to_dict`); non-finite numbers are written as
-the strings ``"inf"``, ``"-inf"``, ``"nan"``.
+them as ``<properties>`` too; an UNASSESSED case is ``<skipped>`` with its reason, an ERROR an
+``<error>``. A last ``<testsuite name="verdict">`` holds one case, ``hcard-conformance.conforms``,
+that fails when the run does not conform: a run whose cases are all skipped never reads green
+on a dashboard (spec/conformance.md section 7). A run that could not start (an unreachable
+device, unreadable vectors) is one ``<error>`` case (:func:`junit_setup_error`).
+
+JSON (:data:`JSON_FORMAT`, spec QP4) holds the run, the thresholds and every result
+(:meth:`CheckResult.to_dict`); non-finite numbers are written as the strings ``"inf"``,
+``"-inf"``, ``"nan"``.
 """
 
 from __future__ import annotations
@@ -76,12 +82,7 @@ def table(report: SuiteReport, *, verbose: bool = False) -> str:
         lines.append(f"level {level:9} {counts[PASS]:4} passed {counts[FAIL]:4} failed "
                      f"{counts[ERROR]:4} errors {counts[UNASSESSED]:4} unassessed "
                      f"in {seconds:7.2f} s")
-    total = len(report.results)
-    counts = outcome_counts(report.results)
-    verdict = "CONFORMS" if report.passed else "DOES NOT CONFORM"
-    lines.append(f"{verdict}: {counts[PASS]} of {total} cases pass, {counts[FAIL]} fail, "
-                 f"{counts[ERROR]} errors, {counts[UNASSESSED]} not assessed "
-                 f"({report.duration_s:.2f} s)")
+    lines.append(f"{verdict_line(report)} ({report.duration_s:.2f} s)")
     return "\n".join(lines) + "\n"
 
 
@@ -115,11 +116,25 @@ def _worst(results: list[CheckResult]) -> str:
             f"(limit {_number(worst.threshold)}) on {worst.case}").replace("  ", " ")
 
 
+VERDICT_CLASS = "hcard-conformance"
+"""``classname`` of the cases about the run itself (its verdict, a run that could not start)."""
+
+
+def verdict_line(report: SuiteReport) -> str:
+    """One line: CONFORMS or DOES NOT CONFORM, with the counts of each outcome."""
+    counts = outcome_counts(report.results)
+    head = "CONFORMS" if report.passed else "DOES NOT CONFORM"
+    return (f"{head}: {counts[PASS]} of {len(report.results)} cases pass, {counts[FAIL]} fail, "
+            f"{counts[ERROR]} errors, {counts[UNASSESSED]} not assessed")
+
+
 def junit_xml(report: SuiteReport) -> bytes:
     """JUnit XML bytes (see the module docstring)."""
     totals = outcome_counts(report.results)
+    verdict_failed = 0 if report.passed else 1
     root = ET.Element("testsuites", name=f"hcard-conformance {report.driver}",
-                      tests=str(len(report.results)), failures=str(totals[FAIL]),
+                      tests=str(len(report.results) + 1),
+                      failures=str(totals[FAIL] + verdict_failed),
                       errors=str(totals[ERROR]), skipped=str(totals[UNASSESSED]),
                       time=f"{report.duration_s:.3f}")
     for level in report.levels:
@@ -153,6 +168,29 @@ def junit_xml(report: SuiteReport) -> bytes:
                 failure = ET.SubElement(case, "failure", message=failure_message(r),
                                         type=r.metric or "failure")
                 failure.text = r.detail
+    verdict = ET.SubElement(root, "testsuite", name="verdict", tests="1",
+                            failures=str(verdict_failed), errors="0", skipped="0",
+                            time=f"{report.duration_s:.3f}")
+    case = ET.SubElement(verdict, "testcase", classname=VERDICT_CLASS, name="conforms",
+                         time=f"{report.duration_s:.6f}")
+    if verdict_failed:
+        failure = ET.SubElement(case, "failure", message=verdict_line(report),
+                                type="does-not-conform")
+        failure.text = verdict_line(report)
+    ET.indent(root)
+    return ET.tostring(root, encoding="utf-8", xml_declaration=True) + b"\n"
+
+
+def junit_setup_error(driver: str, message: str) -> bytes:
+    """JUnit XML of a run that could not start: one ``<error>`` case naming why."""
+    root = ET.Element("testsuites", name=f"hcard-conformance {driver}", tests="1",
+                      failures="0", errors="1", skipped="0", time="0.000")
+    suite = ET.SubElement(root, "testsuite", name="setup", tests="1", failures="0",
+                          errors="1", skipped="0", time="0.000")
+    case = ET.SubElement(suite, "testcase", classname=VERDICT_CLASS, name="setup",
+                         time="0.000000")
+    error = ET.SubElement(case, "error", message=message, type="setup")
+    error.text = message
     ET.indent(root)
     return ET.tostring(root, encoding="utf-8", xml_declaration=True) + b"\n"
 

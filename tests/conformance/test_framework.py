@@ -210,9 +210,9 @@ def _sample_report() -> SuiteReport:
 def test_junit_xml_has_one_suite_per_level_with_failures() -> None:
     root = ET.fromstring(junit_xml(_sample_report()))
     assert root.tag == "testsuites"
-    assert (root.get("tests"), root.get("failures")) == ("5", "2")
+    assert (root.get("tests"), root.get("failures")) == ("6", "3")  # and the verdict's case
     suites = {s.get("name"): s for s in root.findall("testsuite")}
-    assert set(suites) == {"format", "renderer"}
+    assert set(suites) == {"format", "renderer", "verdict"}
     assert (suites["format"].get("tests"), suites["format"].get("failures")) == ("2", "0")
     assert (suites["renderer"].get("tests"), suites["renderer"].get("failures")) == ("3", "2")
     cases = suites["renderer"].findall("testcase")
@@ -273,7 +273,7 @@ def test_cli_writes_reports_and_exits_zero_for_the_reference(tmp_path: Path) -> 
     cases = 2 * len(MANIFEST.cards) + len(MANIFEST.cards) + len(MANIFEST.invalid)
     assert data["totals"] == {"cases": cases, "failed": 0, "pass": cases, "fail": 0, "error": 0,
                               "unassessed": 0}
-    assert ET.parse(junit).getroot().get("tests") == str(cases)
+    assert ET.parse(junit).getroot().get("tests") == str(cases + 1)  # and the verdict
 
 
 def test_cli_exits_one_on_a_failure(broken_vectors: Path, tmp_path: Path) -> None:
@@ -283,7 +283,7 @@ def test_cli_exits_one_on_a_failure(broken_vectors: Path, tmp_path: Path) -> Non
                                       "--junit", str(junit)])
     assert result.exit_code == 1, result.output
     assert "DOES NOT CONFORM" in result.output
-    assert ET.parse(junit).getroot().get("failures") == "1"
+    assert ET.parse(junit).getroot().get("failures") == "2"  # the case and the verdict
 
 
 @pytest.mark.parametrize("args", [["--driver", "nope://x"],
@@ -346,7 +346,8 @@ def test_a_check_that_raises_is_an_error_per_case_in_table_json_and_junit() -> N
     assert all("DeviceError" in r.detail and "vanished" in r.detail for r in report.results)
     n = len(SAFETY_CASES) + 2
     root = ET.fromstring(junit_xml(report))
-    assert (root.get("errors"), root.get("failures"), root.get("tests")) == (str(n), "0", str(n))
+    assert (root.get("errors"), root.get("failures"), root.get("tests")) == \
+        (str(n), "1", str(n + 1))  # the verdict fails
     assert len(root.findall(".//testcase/error")) == n
     data = json.loads(json_bytes(report))
     assert data["totals"]["error"] == n and data["passed"] is False
@@ -367,7 +368,7 @@ def test_a_case_that_cannot_be_assessed_is_reported_not_dropped() -> None:
     report = SuiteReport("demo", ("device",), results=results)
     assert not report.passed
     root = ET.fromstring(junit_xml(report))
-    assert (root.get("skipped"), root.get("errors"), root.get("failures")) == ("2", "0", "0")
+    assert (root.get("skipped"), root.get("errors"), root.get("failures")) == ("2", "0", "1")
 
 
 def test_a_result_failed_after_it_was_built_is_counted_as_failed() -> None:
@@ -377,4 +378,4 @@ def test_a_result_failed_after_it_was_built_is_counted_as_failed() -> None:
     report = SuiteReport("demo", ("renderer",), results=[result])
     assert result.status == "FAIL" and result.to_dict()["outcome"] == "FAIL"
     assert "0 of 1 cases pass, 1 fail" in table(report)
-    assert ET.fromstring(junit_xml(report)).get("failures") == "1"
+    assert ET.fromstring(junit_xml(report)).get("failures") == "2"  # and the verdict
