@@ -50,6 +50,9 @@ REALTIME_KEY = "driver-realtime"
 runs on the wall clock (a host's lateness matters, spec QT3) or in simulated time."""
 
 DEVICE_LAG_KEY = "device-lag"
+CLOCK_MISMATCH_KEY = "clock-mismatch"
+"""``Context.cache`` key: why the last play's reports leave gaps on the host's time line
+though none was lost (:func:`~hcard_conformance.realtime.clock_mismatch`), or empty."""
 """:attr:`Context.cache` key: why the device did not keep real time in the last play of
 :meth:`Context.render` (REALTIME_LAG, device protocol PI4); empty when it did."""
 
@@ -182,9 +185,10 @@ class Context:
             self.cache[REALTIME_KEY] = driver.realtime
             result = play(driver, card, track, **({"tail_s": self.options["tail_s"]}
                                                   if "tail_s" in self.options else {}))
-        from hcard_conformance.realtime import device_lag
+        from hcard_conformance.realtime import clock_mismatch, device_lag
 
         self.cache[DEVICE_LAG_KEY] = device_lag(result.states)
+        self.cache[CLOCK_MISMATCH_KEY] = clock_mismatch(result.states)
         return reported_frames(result.states, track, result.host_us)
 
     @classmethod

@@ -29,6 +29,8 @@ import time
 from collections.abc import Callable, Iterable, Sequence
 from typing import TypeVar
 
+import numpy as np
+
 from hcard.device.priority import collection_deferred, host_priority
 from hcard.device.protocol import FaultBits, State
 from hcard.quantities import MS_PER_S
@@ -67,6 +69,50 @@ def device_lag(states: Sequence[State]) -> str:
         return ""
     return (f"the device flagged {late} of {len(states)} reports REALTIME_LAG (it produced them "
             "late on its real-time clock, device protocol PI4)")
+
+
+CLOCK_RATE_TOLERANCE = 0.01
+"""A device clock whose rate differs from the host's by more than this fraction is named in
+the diagnosis of gaps between reports (:func:`clock_mismatch`)."""
+_U16, _U32 = 1 << 16, 1 << 32
+
+
+def clock_rate(states: Sequence[State]) -> float | None:
+    """The device clock's rate against the host's over ``states``: the slope of the echoed
+    samples' placements on the device clock (report timestamp less echo age, PI3) against their
+    host times (``host_time_echo_us``), by least squares over the distinct echoes; None when
+    fewer than three samples were echoed with an age. 1.0: the clocks agree; 0.9: the device's
+    runs 10 % slow."""
+    placed: dict[int, int] = {}
+    for s in states:
+        if s.host_time_echo_us and s.echo_age_s is not None:
+            placed.setdefault(s.host_time_echo_us, s.timestamp_us - s.echo_age_us)
+    if len(placed) < 3:
+        return None
+    host = np.unwrap(np.array(list(placed), dtype=float), period=_U32)
+    device = np.unwrap(np.array(list(placed.values()), dtype=float), period=_U32)
+    if np.ptp(host) <= 0:
+        return None
+    return float(np.polyfit(host - host[0], device - device[0], 1)[0])
+
+
+def sequence_gaps(states: Sequence[State]) -> int:
+    """STATE reports missing from ``states`` by their sequence numbers (wrapping u16)."""
+    steps = np.mod(np.diff(np.array([s.sequence for s in states], dtype=np.int64)), _U16)
+    return int(np.sum(steps[(steps > 1) & (steps < _U16 // 2)] - 1))
+
+
+def clock_mismatch(states: Sequence[State]) -> str:
+    """Why reports leave gaps on the host's time line though none was lost: the device's clock
+    runs at another rate than the host's (more than :data:`CLOCK_RATE_TOLERANCE`) and the
+    sequence numbers show no report missing; empty otherwise."""
+    rate = clock_rate(states)
+    if rate is None or abs(rate - 1.0) <= CLOCK_RATE_TOLERANCE or sequence_gaps(states):
+        return ""
+    pace = f"{abs(rate - 1.0):.1%} {'slow' if rate < 1.0 else 'fast'}"
+    return (f"no report was lost (their sequence numbers run without a gap): the device's clock "
+            f"runs {pace} against the host's (placements of the echoed samples, PI3, against "
+            "their host times), so its reports' times on the host clock leave gaps")
 
 
 class HostWatch:

@@ -43,7 +43,7 @@ from hcard_conformance.check_names import (
     RENDERER_FRICTION_ERROR,
     RENDERER_SPATIAL_PHASE,
 )
-from hcard_conformance.context import DEVICE_LAG_KEY, REALTIME_KEY, Context
+from hcard_conformance.context import CLOCK_MISMATCH_KEY, DEVICE_LAG_KEY, REALTIME_KEY, Context
 from hcard_conformance.metrics import Metric, Signal, Tolerances
 from hcard_conformance.realtime import NOT_KEPT, HostWatch, reasons
 from hcard_conformance.result import CannotAssess, CheckResult, guarded, measured, unassessed
@@ -171,6 +171,11 @@ def _render_case(ctx: Context, entry: Any) -> dict[str, Any]:
             # device's, which device.report-loss judges
             why = (f"; the plays {NOT_KEPT}: " + "; ".join(x for x in late if x)
                    if any(late) else "")
+            clock = ctx.cache.get(CLOCK_MISMATCH_KEY, "")
+            if clock:  # nothing was lost: the device's clock is not the host's
+                raise CannotAssess(
+                    f"{_counts(losses)} of {in_contact} golden frames in contact fell between "
+                    f"reports in {RENDER_PLAYS} plays, but {clock}{why}")
             raise CannotAssess(
                 f"{_counts(losses)} of {in_contact} golden frames in contact fell in gaps of "
                 f"lost STATE reports in {RENDER_PLAYS} plays (more than "
