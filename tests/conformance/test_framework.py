@@ -307,9 +307,11 @@ def test_pytest_plugin_makes_one_item_per_case(broken_vectors: Path, tmp_path: P
     assert run.returncode == 1, run.stdout + run.stderr
     assert f"1 failed, {cases - 1} passed" in run.stdout
     victim = MANIFEST.invalid[0].name
-    assert f"format.reject[{victim}]" in run.stdout
+    assert f"format.reject::{victim}" in run.stdout
     suite = ET.parse(junit).getroot().find("testsuite")
     assert suite is not None and suite.get("tests") == str(cases)
+    failed = [c for c in suite.iter("testcase") if c.find("failure") is not None]
+    assert [(c.get("classname"), c.get("name")) for c in failed] == [("format.reject", victim)]
 
 
 def _vanishing_device(after_writes: int):

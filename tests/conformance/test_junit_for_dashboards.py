@@ -4,6 +4,8 @@ case is red (how Jenkins, GitLab and GitHub's test reporters count)."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -59,3 +61,39 @@ def test_an_unreachable_device_still_writes_one_error(tmp_path: Path) -> None:
     error = ET.fromstring(xml).find(".//error")
     assert error is not None and "cannot open driver 'usbip://127.0.0.1:9/1-1'" in error.get(
         "message", "")
+
+
+def pytest_run(tmp_path: Path, *args: str) -> tuple[subprocess.CompletedProcess[str], bytes]:
+    """pytest with the conformance plugin in an empty folder; its output and JUnit XML."""
+    junit = tmp_path / "plugin.xml"
+    run = subprocess.run([sys.executable, "-m", "pytest", "-p", "hcard_conformance.pytest_plugin",
+                          "-p", "no:cacheprovider", "-q", f"--junitxml={junit}", *args,
+                          str(tmp_path)], capture_output=True, text=True, cwd=tmp_path,
+                         timeout=600)
+    return run, junit.read_bytes() if junit.exists() else b""
+
+
+def test_the_pytest_plugin_skips_unassessed_cases_with_their_reason(tmp_path: Path) -> None:
+    run, xml = pytest_run(tmp_path, "--hcard-driver=control:drops-reports",
+                          "--hcard-check=renderer.boundary")
+    colours = dashboard(xml)
+    assert colours["red"] == [] and colours["green"] == [], run.stdout[-2000:]
+    assert len(colours["skipped"]) == 11
+    assert all(name.startswith("renderer.boundary.") for name in colours["skipped"])
+    reasons = [s.get("message", "") for s in ET.fromstring(xml).iter("skipped")]
+    assert all("UNASSESSED" in reason and "lost" in reason for reason in reasons), reasons[0]
+    times = [float(c.get("time", "0")) for c in ET.fromstring(xml).iter("testcase")]
+    assert sum(times) > 0.1                        # the cases' own durations, not 0.000
+
+
+def test_the_pytest_plugin_makes_an_unreachable_device_one_error(tmp_path: Path) -> None:
+    run, xml = pytest_run(tmp_path, "--hcard-driver=usbip://127.0.0.1:9/1-1")
+    assert run.returncode == 1 and "1 error" in run.stdout, run.stdout[-2000:]
+    assert dashboard(xml)["red"] == ["hcard-conformance.setup"]
+
+
+def test_the_pytest_plugin_collects_without_running(tmp_path: Path) -> None:
+    run, _ = pytest_run(tmp_path, "--hcard-driver=control:drops-reports", "--collect-only")
+    assert run.returncode == 0, run.stdout[-2000:]
+    assert "17 tests collected" in run.stdout
+    assert "device.safety::cases" in run.stdout and "passed" not in run.stdout
