@@ -332,10 +332,55 @@ def position_locked_textures(card: pb.Card, options: RenderOptions) -> set[int]:
     return out
 
 
+def phase_correlation(impl: Signal, gold: np.ndarray, start: int, window: int) -> np.ndarray:
+    """A4's correlation coefficient of the golden segment ``gold`` (frames ``start`` on) with the
+    implementation's friction ``d`` frames later, for ``d = -window..window``.
+
+    Only the implementation's frames in contact take part: after a lift-off (or before a touch)
+    a renderer outputs neutral friction, and that step is no feature of the texture. Each lag is
+    the Pearson coefficient over the frames it pairs, so the golden render against itself is 1
+    at lag 0 and no more anywhere (Cauchy-Schwarz): an unnormalised sum once preferred a lag
+    that brought the neutral friction after a lift-off into the window (3 mm on the golden
+    render of ``coarse-grating`` along ``liftoff`` against itself). A lag that pairs fewer than
+    half of the segment's frames is NaN, as is a lag where either side has no variance."""
+    n = gold.size
+    total = len(impl)
+    lo = start - window
+    index = np.arange(lo, start + n + window)
+    inside = (index >= 0) & (index < total)
+    usable = np.zeros(index.size)
+    usable[inside] = impl.contact[index[inside]]
+    x = np.zeros(index.size)
+    centre = float(np.mean(impl.m[start:start + n]))
+    x[inside] = impl.m[index[inside]] - centre
+    x *= usable
+    y = gold - float(np.mean(gold))
+    ones = np.ones(n)
+    count = np.correlate(usable, ones, mode="valid")
+    sum_x = np.correlate(x, ones, mode="valid")
+    sum_xx = np.correlate(x * x, ones, mode="valid")
+    sum_y = np.correlate(usable, y, mode="valid")
+    sum_yy = np.correlate(usable, y * y, mode="valid")
+    sum_xy = np.correlate(x, y, mode="valid")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cov = sum_xy - sum_x * sum_y / count
+        var = (sum_xx - sum_x * sum_x / count) * (sum_yy - sum_y * sum_y / count)
+        r = cov / np.sqrt(var)
+    r[(count < 0.5 * n) | ~(var > 0)] = np.nan
+    return np.asarray(r)
+
+
+PHASE_TIE = 1e-9
+"""Correlation coefficients of A4 this close to the largest count as equal to it (rounding):
+the smallest lag among them is taken."""
+
+
 def spatial_phase_error(impl: Signal, golden: Signal, tol: Tolerances, track: FingerTrack,
                         locked: set[int]) -> Metric:
-    """A4: the displacement (mm) of position-locked features, from the cross-correlation
-    lag, worst over segments."""
+    """A4: the displacement (mm) of position-locked features, from the lag of the largest
+    correlation coefficient (:func:`phase_correlation`), worst over segments; a segment where
+    the implementation's frames have no variance at any lag counts as not displaced (A1/A2
+    judge a missing texture)."""
     fs = frame_rate(golden)
     window = round(tol.correlation_window_s * fs)
     speeds = sample_speeds(track)
@@ -352,14 +397,13 @@ def spatial_phase_error(impl: Signal, golden: Signal, tol: Tolerances, track: Fi
         vbar = float(np.mean(speeds[inside]))
         if vbar < tol.speed_min_mm_s:
             continue
-        mine = impl.m - float(np.mean(impl.m[start:stop]))
-        padded = np.zeros(stop - start + 2 * window)
-        lo, hi = max(start - window, 0), min(stop + window, len(impl))
-        padded[lo - (start - window): hi - (start - window)] = mine[lo:hi]
-        c = np.correlate(padded, gold - gold.mean(), mode="valid")
+        r = phase_correlation(impl, gold, start, window)
         lags = np.arange(-window, window + 1)
-        top = np.flatnonzero(c == c.max())
-        d = int(lags[top[np.argmin(np.abs(lags[top]))]])
+        if np.all(np.isnan(r)):
+            d = 0
+        else:
+            top = np.flatnonzero(r >= np.nanmax(r) - PHASE_TIE)
+            d = int(lags[top[np.argmin(np.abs(lags[top]))]])
         dx = vbar * abs(d) / fs
         if worst is None or dx > worst[0]:
             worst = (dx, f"features displaced {dx:.2f} mm (lag {MS_PER_S * d / fs:.1f} ms at "

@@ -25,6 +25,12 @@ OUTCOMES = (PASS, FAIL, ERROR, UNASSESSED)
 """Outcomes of a case; only PASS passes."""
 
 
+STOPS_THE_RUN: tuple[type[BaseException], ...] = (KeyboardInterrupt, GeneratorExit)
+"""Exceptions raised inside a check that stop the run (the user's interrupt, a generator being
+closed); any other, even ``SystemExit`` or a test framework's outcome exception (both
+BaseException subclasses), is the check's ERROR."""
+
+
 class CannotAssess(HcardError):
     """Raised by a measurement that cannot assess its case (the reason is the message): the
     case is reported UNASSESSED, never dropped."""
@@ -132,15 +138,19 @@ def measured(check: str, level: str, case: str, metric: str, value: float, thres
     return CheckResult(check, level, case, passed, metric, value, threshold, unit, detail)
 
 
-def error_result(check: str, level: str, case: str, exc: BaseException) -> CheckResult:
-    """A failed result for a check that raised: the exception type, message and location."""
+def error_result(check: str, level: str, case: str, exc: BaseException,
+                 during: str = "") -> CheckResult:
+    """An ERROR result for a check that raised, naming the check and the cause: the exception
+    type, message and where it was raised (file:line); ``during``: what the check was doing,
+    when not measuring (``"deciding whether it applies"``)."""
     message = " ".join(str(exc).split())
     text = f"{type(exc).__name__}: {message}" if message else type(exc).__name__
     frames = traceback.extract_tb(exc.__traceback__)
     if frames:
         text += f" (at {frames[-1].filename}:{frames[-1].lineno})"
-    return CheckResult(check, level, case, False, "error", detail=f"check raised {text}",
-                       outcome=ERROR)
+    when = f" while {during}" if during else ""
+    return CheckResult(check, level, case, False, "error",
+                       detail=f"check {check} raised {text}{when}", outcome=ERROR)
 
 
 def unassessed(check: str, level: str, case: str, reason: str) -> CheckResult:
@@ -154,13 +164,16 @@ def guarded(check: str, level: str, cases: Iterable[str],
     """Run ``measure``, which yields the results of ``cases``; when it raises, every case it
     has not yet reported becomes ERROR (UNASSESSED for :class:`CannotAssess`), one result
     each, so a broken measurement never hides its cases."""
+    cases = list(cases)
     results: list[CheckResult] = []
     try:
         results.extend(measure())
     except CannotAssess as exc:
         done = {r.case for r in results}
         results += [unassessed(check, level, c, str(exc)) for c in cases if c not in done]
-    except Exception as exc:
+    except STOPS_THE_RUN:
+        raise
+    except BaseException as exc:  # a measurement never stops the run
         done = {r.case for r in results}
         results += [error_result(check, level, c, exc) for c in cases if c not in done]
     return results

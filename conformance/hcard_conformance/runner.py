@@ -1,9 +1,11 @@
-"""Running checks: every result is kept, every exception becomes a failed result.
+"""Running checks: every result is kept, every exception becomes an ERROR result.
 
 :func:`run_suite` runs the checks of the chosen levels on a :class:`Context` and returns a
-:class:`SuiteReport`. A check that raises (before its first case or between cases) yields a
-failed result carrying the error, and the suite carries on with the next check: the suite
-itself never crashes because of the implementation under test.
+:class:`SuiteReport`. A check that raises, built-in or a plugin's, wherever it raises (its
+``applies`` predicate, importing it, building its generator, before its first case or between
+cases), yields an ERROR result naming the check and the cause (exception type, message,
+file:line), and the suite carries on with the next check: neither the implementation under
+test nor a broken check crashes the run. Only an interrupt (Ctrl-C) stops it.
 """
 
 from __future__ import annotations
@@ -19,7 +21,15 @@ from hcard_conformance.conditions import run_conditions
 from hcard_conformance.context import Context
 from hcard_conformance.realtime import host_priority
 from hcard_conformance.registry import all_checks, applies_to
-from hcard_conformance.result import LEVELS, CheckResult, error_result, level_index
+from hcard_conformance.result import (
+    LEVELS,
+    STOPS_THE_RUN,
+    CannotAssess,
+    CheckResult,
+    error_result,
+    level_index,
+    unassessed,
+)
 from hcard_conformance.timing import timing_class
 
 Progress = Callable[[Any, CheckResult], None]
@@ -78,10 +88,16 @@ class SuiteReport:
 
 def run_check(chk: Any, ctx: Context, progress: Progress | None = None) -> list[CheckResult]:
     """Run one check; each result is timed (time since the previous one) and an exception
-    anywhere becomes a failed result for case ``(error)``, or for the case after the last one
-    reported."""
+    anywhere becomes an ERROR result for case ``(error)``, or for the case after the last one
+    reported (:class:`~hcard_conformance.result.CannotAssess`: UNASSESSED with its reason)."""
     results: list[CheckResult] = []
     last = time.perf_counter()
+
+    def report(result: CheckResult) -> None:
+        results.append(result)
+        if progress is not None:
+            progress(chk, result)
+
     try:
         iterator: Iterable[CheckResult] = chk.run(ctx)
         for result in iterator:
@@ -91,23 +107,33 @@ def run_check(chk: Any, ctx: Context, progress: Progress | None = None) -> list[
             if not result.duration_s:
                 result.duration_s = now - last
             last = now
-            results.append(result)
-            if progress is not None:
-                progress(chk, result)
-    except Exception as exc:
+            report(result)
+    except STOPS_THE_RUN:
+        raise
+    except BaseException as exc:  # a check never stops the run
         case = "(error)" if not results else f"(error after {results[-1].case})"
-        failed = error_result(chk.name, chk.level, case, exc)
+        if isinstance(exc, CannotAssess):
+            failed = unassessed(chk.name, chk.level, case, str(exc))
+        else:
+            failed = error_result(chk.name, chk.level, case, exc)
         failed.duration_s = time.perf_counter() - last
-        results.append(failed)
-        if progress is not None:
-            progress(chk, failed)
+        report(failed)
     if not results:
-        empty = CheckResult(chk.name, chk.level, "(none)", False, "cases", 0.0, 1.0,
-                            detail="the check produced no results (no vectors?)")
-        results.append(empty)
-        if progress is not None:
-            progress(chk, empty)
+        report(CheckResult(chk.name, chk.level, "(none)", False, "cases", 0.0, 1.0,
+                           detail="the check produced no results (no vectors?)"))
     return results
+
+
+def check_applies(chk: Any, ctx: Context) -> bool | CheckResult:
+    """:func:`~hcard_conformance.registry.applies_to`, or, when deciding raises (a broken
+    ``applies`` predicate, or one that cannot be imported), the ERROR result saying so."""
+    try:
+        return applies_to(chk, ctx)
+    except STOPS_THE_RUN:
+        raise
+    except BaseException as exc:  # a check never stops the run
+        return error_result(chk.name, chk.level, "(error)", exc,
+                            "deciding whether it applies")
 
 
 def run_suite(ctx: Context, levels: Sequence[str] = LEVELS, *, checks: Sequence[Any] | None = None,
@@ -154,11 +180,18 @@ def _run_chosen(chosen: Sequence[Any], ctx: Context, report: SuiteReport,
                 check_done: Callable[[Any, list[CheckResult], float], None] | None) -> None:
     """Run each chosen check on ``ctx`` into ``report`` (not applicable ones listed)."""
     for chk in chosen:
-        if not applies_to(chk, ctx):
+        began = time.perf_counter()
+        applies = check_applies(chk, ctx)
+        if applies is False:
             report.not_applicable.append(chk.name)
             continue
-        began = time.perf_counter()
-        results = run_check(chk, ctx, progress)
+        if isinstance(applies, CheckResult):
+            applies.duration_s = time.perf_counter() - began
+            results = [applies]
+            if progress is not None:
+                progress(chk, applies)
+        else:
+            results = run_check(chk, ctx, progress)
         report.results += results
         report.check_durations_s[chk.name] = time.perf_counter() - began
         if check_done is not None:

@@ -54,6 +54,12 @@ name:
     The E-ViTa whose upload store never compares the CRC-32 of the received bytes with the one
     UPLOAD_BEGIN declared (protocol PU3, 9.3): a card whose CRC is wrong is committed, as long
     as its length is right and it parses. Fails ``device.upload-integrity`` case ``bad-crc``.
+``unplayed-commit``
+    The E-ViTa whose renderer never takes the card a COMMIT puts in force: the upload is
+    checked and committed as PU3 asks (UPLOAD_STATUS COMMITTED with its CRC-32 and the next
+    generation, STATE CARD_LOADED and that generation), but the plate goes on rendering what it
+    rendered before (nothing, neutral friction, on a fresh device). Fails
+    ``device.upload-integrity`` (U2, U3: every case, its card A never plays).
 ``drops-reports``
     The E-ViTa whose firmware loses :data:`DROPPED_FRACTION` of its STATE reports at random as
     it produces them (an IN endpoint starved by the firmware's main loop), and counts them
@@ -230,6 +236,15 @@ class LateLimitsSimulation(DeviceSimulation):
         return limits
 
 
+class UnplayedCardSimulation(DeviceSimulation):
+    """A renderer that never takes a card (``unplayed-commit``): every card goes into force
+    through :meth:`load_prepared`, which here leaves the one rendered before."""
+
+    def load_prepared(self, prepared: PreparedCard) -> ClipReport:
+        """Nothing changes: the card is reported committed and never played."""
+        return self.clip_report
+
+
 class DelayedFingerDriver(SimDriver):
     """``sim://`` with every FINGER report held for :data:`ADDED_LATENCY_S` of device time."""
 
@@ -331,6 +346,8 @@ CONTROLS: dict[str, Callable[[], SimDriver]] = {
         _no_crc_firmware(DeviceSimulation(DeviceConfig.evita())), "sim://"),
     "drops-reports": lambda: _firmware_driver(
         LossyFirmware(DeviceSimulation(DeviceConfig.evita())), "sim://"),
+    "unplayed-commit": lambda: _sim_driver(UnplayedCardSimulation(DeviceConfig.evita()),
+                                           "sim://"),
 }
 """The negative controls by name (see the module docstring)."""
 
@@ -348,6 +365,7 @@ CATCHES: dict[str, tuple[str, str]] = {
     "no-ownership": (check_names.DEVICE_SESSION_OWNERSHIP, "second-host-refused"),
     "accepts-bad-crc": (check_names.DEVICE_UPLOAD_INTEGRITY, "bad-crc"),
     "drops-reports": (check_names.DEVICE_REPORT_LOSS, "loss-fraction"),
+    "unplayed-commit": (check_names.DEVICE_UPLOAD_INTEGRITY, "valid-after"),
 }
 """The (check, case) each negative control exists to fail (spec/conformance.md section 6, QN1):
 the proof that the threshold of that check bites.

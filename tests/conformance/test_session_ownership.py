@@ -6,9 +6,12 @@ and is UNASSESSED, with the reason, where two drivers cannot share one device.""
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import pytest
 
+from hcard.device.errors import DeviceError
+from hcard.device.protocol import State
 from hcard_conformance.context import Context
 from hcard_conformance.device_checks.session_ownership import (
     CASES,
@@ -16,8 +19,9 @@ from hcard_conformance.device_checks.session_ownership import (
     check_session_ownership,
 )
 from hcard_conformance.registry import builtin_checks
-from hcard_conformance.result import FAIL, PASS, UNASSESSED, CheckResult
+from hcard_conformance.result import ERROR, FAIL, PASS, UNASSESSED, CheckResult
 from hcard_device.controls import CONTROLS
+from hcard_device.sim_driver import SimDriver
 from tests.helpers.realtime import assert_conforms
 from tests.helpers.served_device import served_device
 
@@ -94,3 +98,63 @@ def test_a_transport_that_cannot_share_one_device_is_unassessed_with_the_reason(
 
 def test_the_reference_implementation_without_a_driver_is_not_checked() -> None:
     assert list(check_session_ownership(Context.for_driver("reference"))) == []
+
+
+class _ElsewhereDriver(SimDriver):
+    """``sim://`` whose second host reaches a new simulated device, not this one's."""
+
+    def another_host(self) -> SimDriver:
+        return type(self).open(self.uri)
+
+
+class _NoSecondHostDriver(SimDriver):
+    """``sim://`` whose transport refuses a second host."""
+
+    def another_host(self) -> SimDriver:
+        raise DeviceError(f"{self.uri}: one host per device on this transport")
+
+
+class _DeafHost(SimDriver):
+    """A second host that reads no STATE report (its sends and feature requests work)."""
+
+    def read_inputs(self, *args: Any, **kwargs: Any) -> list[State]:
+        return []
+
+
+class _DeafSecondHostDriver(SimDriver):
+    """``sim://`` whose second host shares the device but never reads a report."""
+
+    def another_host(self) -> SimDriver:
+        return _DeafHost(self.uri, self.firmware, timeout_s=self.timeout_s, device=self.device)
+
+
+def _run_with(cls: type[SimDriver]) -> dict[str, CheckResult]:
+    ctx = Context("sim-variant", lambda: cls.open("sim://"))
+    return {r.case: r for r in check_session_ownership(ctx)}
+
+
+@pytest.mark.parametrize("cls, why", [
+    (_ElsewhereDriver, "and so does the driver's another_host() (it saw output_reports move "
+                       "by 0)"),
+    (_NoSecondHostDriver, "the driver's another_host() failed (DeviceError: sim://: one host "
+                          "per device on this transport)"),
+])
+def test_a_driver_whose_second_host_reaches_no_shared_device_is_unassessed(
+        cls: type[SimDriver], why: str) -> None:
+    """A second host on another device once failed every case for intrusions into a device no
+    other host used; one that could not attach crashed every case with IndexError."""
+    results = _run_with(cls)
+    assert [r.status for r in results.values()] == [UNASSESSED] * 3, \
+        [r.detail for r in results.values()]
+    assert all(why in r.detail and "usbip:// or hid://" in r.detail for r in results.values())
+
+
+def test_a_second_host_that_fails_while_the_first_plays_is_an_error_naming_why() -> None:
+    """What the second host raises inside the first host's simulated play is the cases' cause,
+    not the first host's play error followed by an IndexError."""
+    results = _run_with(_DeafSecondHostDriver)
+    assert set(results) == set(CASES)
+    assert all(r.status == ERROR for r in results.values())
+    assert all("DeviceError" in r.detail and "no STATE report" in r.detail
+               and "IndexError" not in r.detail for r in results.values()), \
+        [r.detail for r in results.values()]

@@ -3,7 +3,8 @@
 The reference device passes both on ``sim://`` and over ``usbip://`` served in real time by
 another process, twice against the same running server; the negative controls
 ``accepts-bad-crc`` and ``drops-reports`` fail the case made to catch them, by a margin, and
-pass the cases their defect does not touch. Two test-only firmwares show that the other two
+pass the cases their defect does not touch; ``unplayed-commit`` (committed, never played) fails
+every upload case. Two test-only firmwares show that the other two
 loss cases can fail too: one that loses reports without counting them, one that loses them
 without numbering them.
 """
@@ -179,6 +180,19 @@ def test_accepts_bad_crc_fails_the_bad_crc_case_only() -> None:
     assert "card A" in bad.detail and "replaced" in bad.detail
     assert bad.value >= 20  # reports after the wrong commit show card B, not A
     assert not _failures({c: r for c, r in results.items() if c != "bad-crc"})
+
+
+def test_a_commit_that_never_plays_fails_every_case_saying_why() -> None:
+    """``unplayed-commit`` reports card A COMMITTED and renders nothing: every case fails (the
+    card in force must play, U2; a committed one must play, U3), where they were UNASSESSED."""
+    results = _cases(Context.for_driver("control:unplayed-commit"),
+                     upload_integrity.check_upload_integrity)
+    assert list(results) == list(upload_integrity.UPLOAD_CASES)
+    for case, r in results.items():
+        assert r.outcome == "FAIL", (case, r.detail)
+        assert r.detail.startswith("card A committed, UPLOAD_STATUS COMMITTED"), r.detail
+        assert "but 0 of" in r.detail and "a committed card must play (U2, U3)" in r.detail
+        assert r.metric == "reports_off_card_a" and r.value >= 10
 
 
 def test_drops_reports_fails_the_loss_fraction_only() -> None:

@@ -7,8 +7,10 @@ device (spec/device-protocol.md section 14).
     before and after the first sends :data:`PROBE_KEEPALIVES` KEEPALIVEs. When it does not
     move by that much the two drivers reach two devices: ``sim://`` opens a new device for
     every driver, and there the second host is ``SimDriver.another_host()`` on the first's
-    device (same clock, every report to both, in simulated time); a driver that cannot attach
-    one makes every case UNASSESSED with that reason. Cases:
+    device (same clock, every report to both, in simulated time), which must pass the same
+    probe; a driver that cannot attach one, whose ``another_host()`` fails or reaches another
+    device, makes every case UNASSESSED with that reason. What the second host raises while
+    the first plays is the cases' ERROR, naming its cause. Cases:
 
     ``second-host-refused``
         The first host plays a :data:`PLAY_S` stroke (:func:`hcard.device.play.play`);
@@ -130,17 +132,36 @@ class Background:
             thread.join(PLAY_S + 10.0)
 
     def _run_simulated(self, intrude: Callable[[], None]) -> None:
+        """``intrude`` runs inside the first host's play (between two device steps): what it
+        raises is kept apart from the play and raised here once the play ends (it once became
+        the first host's play error, and the case an IndexError)."""
         seen: list[float] = []
+        acted: list[BaseException | None] = []
 
         def due() -> bool:
             if not seen and self._rendering():
                 seen.append(self.driver.clock())
             return bool(seen) and self.driver.clock() >= seen[0] + INTRUDE_S
 
-        self.driver.device.call_when(due, intrude)  # type: ignore[attr-defined]
+        def act() -> None:
+            try:
+                intrude()
+            except Exception as exc:  # the second host's, not the first host's play's
+                acted.append(exc)
+            else:
+                acted.append(None)
+
+        self.driver.device.call_when(due, act)  # type: ignore[attr-defined]
         self._run()
         if not seen:
             raise CannotAssess(f"the first host's play did not start: {self.error}")
+        if not acted:
+            raise CannotAssess(
+                f"the second host never acted: the first host's play ended "
+                f"{self.driver.clock() - seen[0]:.3f} s after its START took effect, before "
+                f"{INTRUDE_S:g} s" + (f" ({self.error})" if self.error is not None else ""))
+        if acted[0] is not None:
+            raise acted[0]
 
     def _rendering(self) -> bool:
         """The first host's START took effect: RUNNING in its reports, and its session
@@ -201,26 +222,48 @@ def latest_state(driver: Driver) -> State:
     return states[-1]
 
 
+def shares_device(first: Driver, second: Driver) -> int:
+    """How far ``second``'s COUNTERS ``output_reports`` moves while ``first`` sends
+    :data:`PROBE_KEEPALIVES` KEEPALIVEs: at least that many when they reach one device."""
+    before = second.counters().output_reports
+    for _ in range(PROBE_KEEPALIVES):
+        first.keepalive()
+    return int((second.counters().output_reports - before) % (1 << 32))
+
+
 def two_hosts(open_driver: Callable[[], Driver]) -> Hosts:
     """How to reach one device from two hosts; CannotAssess when the transport cannot.
 
     Two drivers opened with ``open_driver`` share a device when the second one's COUNTERS
-    ``output_reports`` moves by the first one's :data:`PROBE_KEEPALIVES` KEEPALIVEs."""
+    ``output_reports`` moves by the first one's :data:`PROBE_KEEPALIVES` KEEPALIVEs
+    (:func:`shares_device`); otherwise the first driver's ``another_host()``, when it has one,
+    must pass the same probe: a driver whose second host fails to attach, or reaches another
+    device, cannot put two hosts on one device (the cases once crashed with IndexError, or
+    failed the device for intrusions into a device nobody else was using)."""
     with open_driver() as first, open_driver() as second:
-        before = second.counters().output_reports
-        for _ in range(PROBE_KEEPALIVES):
-            first.keepalive()
-        moved = (second.counters().output_reports - before) % (1 << 32)
+        moved = shares_device(first, second)
         attachable = callable(getattr(first, "another_host", None))
     if moved >= PROBE_KEEPALIVES:
         return Hosts(open_driver, True)
-    if attachable:
-        return Hosts(open_driver, False)
-    raise CannotAssess(
-        f"two drivers opened on this URI reach two devices (the second saw output_reports "
-        f"move by {moved} for the first's {PROBE_KEEPALIVES} KEEPALIVEs) and the driver "
-        "cannot attach a second host to its device: this transport cannot put two hosts on "
-        "one device; run the check on usbip:// or hid://")
+    cannot = (f"two drivers opened on this URI reach two devices (the second saw output_reports "
+              f"move by {moved} for the first's {PROBE_KEEPALIVES} KEEPALIVEs)")
+    advice = ("this transport cannot put two hosts on one device; run the check on usbip:// or "
+              "hid://")
+    if not attachable:
+        raise CannotAssess(f"{cannot} and the driver cannot attach a second host to its "
+                           f"device: {advice}")
+    with open_driver() as first:
+        try:
+            attached = first.another_host()  # type: ignore[attr-defined]
+        except Exception as exc:
+            raise CannotAssess(f"{cannot} and the driver's another_host() failed "
+                               f"({type(exc).__name__}: {exc}): {advice}") from exc
+        with attached:
+            moved = shares_device(first, attached)
+    if moved < PROBE_KEEPALIVES:
+        raise CannotAssess(f"{cannot}, and so does the driver's another_host() (it saw "
+                           f"output_reports move by {moved}): {advice}")
+    return Hosts(open_driver, False)
 
 
 def session_faults(first: Background, owner: State, max_lost: float = MAX_LOST) -> list[str]:

@@ -24,6 +24,7 @@ nor its uptime, so it passes twice in a row against one device that stays powere
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
@@ -351,13 +352,39 @@ def see_playing(session: LinkSession, card: LinkCard, generation: int) -> list[S
     return from_generation(play_until_shown(session, card, generation), generation)
 
 
+class CommittedNotPlaying(Exception):
+    """Card A was committed (UPLOAD_STATUS COMMITTED with its CRC-32) in a run kept in real
+    time, but the reports after it do not show it playing: the device fails the case (U2: the
+    card in force plays; U3: a committed card plays), which :func:`failed_case` reports.
+
+    Attributes:
+        off: the reports that do not show card A playing.
+    """
+
+    def __init__(self, detail: str, off: int) -> None:
+        super().__init__(detail)
+        self.off = off
+
+
+def failed_case(case: str, exc: CommittedNotPlaying) -> CheckResult:
+    """The FAIL of ``case`` when card A, committed before it, did not play."""
+    return CheckResult(CHECK, LEVEL, case, False, "reports_off_card_a", float(exc.off), 0.0,
+                       "reports", str(exc))
+
+
 def ensure_card(session: LinkSession, card: LinkCard) -> int:
     """Make ``card`` the card in force and see it play; its generation.
 
     When UPLOAD_STATUS already names its CRC-32 and the reports show it playing
     (:func:`see_playing`), nothing is sent; otherwise it is uploaded (which also ends a
-    streaming mode left by an earlier session). Raises CannotAssess when it does not commit
-    or play."""
+    streaming mode left by an earlier session).
+
+    Raises:
+        CannotAssess: it does not commit.
+        NotKept: it committed and did not play, while the host paused longer than
+            :data:`HOST_PAUSE_MAX_S` or the device flagged REALTIME_LAG (spec QT3).
+        CommittedNotPlaying: it committed and did not play in a run kept in real time: a
+            COMMITTED card that never plays once failed nothing (UNASSESSED)."""
     status = session.driver.upload_status()
     if status.active_crc32 == card.crc:
         kinds = [classify(s, card, status.card_generation)
@@ -369,11 +396,20 @@ def ensure_card(session: LinkSession, card: LinkCard) -> int:
         raise CannotAssess(f"card A ({len(card.data)} B) did not commit: "
                            f"{status_text(attempt.status)}")
     generation = attempt.status.card_generation
-    kinds = [classify(s, card, generation) for s in see_playing(session, card, generation)]
+    states = see_playing(session, card, generation)
+    kinds = [classify(s, card, generation) for s in states]
     if OTHER in kinds or kinds.count(SHOWS) < MIN_PLAYING_REPORTS:
-        raise CannotAssess(f"card A committed but {kinds.count(SHOWS)} of {len(kinds)} STATE "
-                           f"reports show it playing (targets {card.target}, generation "
-                           f"{generation})")
+        detail = (f"card A committed, UPLOAD_STATUS {status_text(attempt.status)}, but "
+                  f"{kinds.count(SHOWS)} of {len(kinds)} STATE reports after it show it playing "
+                  f"(targets {card.target}, generation {generation}; at least "
+                  f"{MIN_PLAYING_REPORTS} and none against it required): a committed card "
+                  "must play (U2, U3)")
+        host = (f"the host paused {session.longest_pause_s * MS_PER_S:.0f} ms between reads"
+                if session.longest_pause_s > HOST_PAUSE_MAX_S else "")
+        why = reasons(host, device_lag(states))
+        if why:
+            raise NotKept(f"{why}; {detail}")
+        raise CommittedNotPlaying(detail, len(kinds) - kinds.count(SHOWS))
     return generation
 
 
@@ -461,21 +497,28 @@ def measure_upload_integrity(driver: Driver) -> Iterator[CheckResult]:
 
             def refusal(case: str = case, steps: list[Step] = steps,
                         expected: UploadResult = expected) -> CheckResult:
-                generation = ensure_card(session, card_a)
+                try:
+                    generation = ensure_card(session, card_a)
+                except CommittedNotPlaying as exc:
+                    return failed_case(case, exc)
                 attempt = run_attempt(session, steps)
                 return kept(judge_refusal(case, attempt, expected, card_a, generation), attempt)
 
             yield attempted_case(CHECK, LEVEL, case, refusal)
 
         def commit() -> CheckResult:
-            generation = ensure_card(session, card_a)
+            try:
+                generation = ensure_card(session, card_a)
+            except CommittedNotPlaying as exc:
+                return failed_case("valid-after", exc)
             attempt = upload(session, card_b)
             if attempt.status.state == UploadState.COMMITTED:  # a slow host: B's reports lag
                 attempt.states += play_until_shown(session, card_b, next_generation(generation))
             return kept(judge_commit(attempt, card_b, generation, card_a), attempt)
 
         yield attempted_case(CHECK, LEVEL, "valid-after", commit)
-        ensure_card(session, card_a)  # leave card A in force (module docstring)
+        with contextlib.suppress(CommittedNotPlaying):  # its cases have failed already
+            ensure_card(session, card_a)  # leave card A in force (module docstring)
     finally:
         session.restore()
 
