@@ -51,6 +51,7 @@ from hcard.device.protocol import (
     crc32,
 )
 from hcard.device.protocol.constants import UPLOAD_TIMEOUT_S
+from hcard.errors import HcardError
 from hcard.quantities import MS_PER_S, S_PER_US, US_PER_S
 from hcard_conformance.check_names import DEVICE_UPLOAD_INTEGRITY as CHECK
 from hcard_conformance.context import Context
@@ -352,7 +353,7 @@ def see_playing(session: LinkSession, card: LinkCard, generation: int) -> list[S
     return from_generation(play_until_shown(session, card, generation), generation)
 
 
-class CommittedNotPlaying(Exception):
+class CommittedNotPlaying(HcardError):
     """Card A was committed (UPLOAD_STATUS COMMITTED with its CRC-32) in a run kept in real
     time, but the reports after it do not show it playing: the device fails the case (U2: the
     card in force plays; U3: a committed card plays), which :func:`failed_case` reports.
