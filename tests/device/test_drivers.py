@@ -526,10 +526,16 @@ def test_tier2_touch_source_switch_and_counter_clear_twice_on_one_server():
                 assert before.stream_frames_dropped > 0
                 assert before.latched_faults & FaultBits.STREAM_OVERRUN
                 driver.clear_counters()
-                driver.collect_until(driver.clock() + 0.05)
+                after = driver.collect_until(driver.clock() + 0.05)
                 cleared = driver.counters()
+                # a report the device produced late since the clear latches REALTIME_LAG anew
+                # (a loaded machine: CI saw it once); it must show in those reports, and
+                # nothing from before the clear may stay latched
+                fresh = 0
+                for state in after:
+                    fresh |= state.faults & FaultBits.REALTIME_LAG
                 assert (cleared.rejected_requests, cleared.stream_frames_dropped,
-                        cleared.latched_faults) == (0, 0, 0)
+                        cleared.latched_faults & ~fresh) == (0, 0, 0)
                 assert cleared.input_reports < 100  # counted again from the clear (~1 kHz)
                 driver.stop()
         assert served.process.poll() is None, "the server died"
