@@ -135,7 +135,7 @@ class FrameDriver(Driver):
                                         spec.max_current_a)
         self._limits = self._hardware
         self._rendering = HostRendering(self.device_profile(), spec.frame_rate_hz)
-        self._card: tuple[bytes, CardClipping] | None = None
+        self._clipping: CardClipping | None = None  # of the active card; None: no card
         self._generation = 0
         self._upload_status = UploadStatus(int(UploadState.IDLE), int(UploadResult.OK),
                                            0, 0, 0, 0, 0)
@@ -212,7 +212,7 @@ class FrameDriver(Driver):
         if cls is UploadStatus:
             return self._upload_status
         if cls is ClipReport:
-            return wire_clip_report(self._card[1] if self._card else None, self._generation,
+            return wire_clip_report(self._clipping, self._generation,
                                     self._clip_index)
         if cls is Counters:
             c = self._counts
@@ -261,7 +261,7 @@ class FrameDriver(Driver):
             raise DeviceError(f"{self.uri}: {upload_error(self._upload_status)} ({reason})")
         self._rendering.load(message)
         self._generation = self._generation % _U16 + 1
-        self._card = (data, clip_report(message, self._rendering.profile))
+        self._clipping = clip_report(message, self._rendering.profile)
         self._upload_status = UploadStatus(int(UploadState.COMMITTED), int(UploadResult.OK), 0,
                                     len(data), len(data), zlib.crc32(data), self._generation)
         return UploadOutcome(self._upload_status, self.clip_report(), len(data), 0)
@@ -417,7 +417,7 @@ class FrameDriver(Driver):
             flags |= StateFlags.CONTACT
         if self._running:
             flags |= StateFlags.RUNNING
-        if self._card is not None:
+        if self._clipping is not None:
             flags |= StateFlags.CARD_LOADED
         if self._host_finger:
             flags |= StateFlags.HOST_FINGER
