@@ -54,6 +54,11 @@ name:
     The E-ViTa whose upload store never compares the CRC-32 of the received bytes with the one
     UPLOAD_BEGIN declared (protocol PU3, 9.3): a card whose CRC is wrong is committed, as long
     as its length is right and it parses. Fails ``device.upload-integrity`` case ``bad-crc``.
+``reads-any-major``
+    The E-ViTa whose card check reads a card of any major version as if it were version 1
+    (protocol PU3 and README V1 ask it to refuse a major version it does not read with
+    INVALID_CARD): a well-formed card of major version 2 is committed and played. Fails
+    ``device.upload-integrity`` case ``unknown-major`` and passes the others.
 ``unplayed-commit``
     The E-ViTa whose renderer never takes the card a COMMIT puts in force: the upload is
     checked and committed as PU3 asks (UPLOAD_STATUS COMMITTED with its CRC-32 and the next
@@ -77,6 +82,7 @@ import math
 from collections.abc import Callable, Sequence
 
 import numpy as np
+from google.protobuf.message import DecodeError
 
 from hcard.device.base import DEFAULT_TIMEOUT_S, DeviceListing
 from hcard.device.errors import UriError
@@ -87,6 +93,7 @@ from hcard.physics.card_clipping import ClipReport
 from hcard.render import RenderMode, RenderOptions
 from hcard.v1 import card_pb2 as pb
 from hcard_conformance import check_names
+from hcard_device.card_check import CardOutcome, InlineChecker
 from hcard_device.firmware import Firmware
 from hcard_device.sim import DeviceConfig, DeviceSimulation
 from hcard_device.sim.simulation import Limits, PreparedCard, SimBlock
@@ -288,6 +295,27 @@ def _no_crc_firmware(simulation: DeviceSimulation) -> Firmware:
     return firmware
 
 
+class AnyMajorChecker(InlineChecker):
+    """A card check that reads every major version as 1 (``reads-any-major``): the version is
+    overwritten before the reference check runs, so only a card of an unknown major version
+    that would otherwise be valid gets through."""
+
+    def check_card(self, data: bytes, options: RenderOptions) -> CardOutcome:
+        """The reference check of ``data`` read as version 1 (bytes that do not parse are left
+        to it)."""
+        try:
+            card = pb.Card.FromString(data)
+        except DecodeError:
+            return super().check_card(data, options)
+        card.version.major = 1
+        return super().check_card(card.SerializeToString(deterministic=True), options)
+
+
+def _any_major_firmware(simulation: DeviceSimulation) -> Firmware:
+    """The firmware of ``reads-any-major``: the reference one with :class:`AnyMajorChecker`."""
+    return Firmware(simulation, checker=AnyMajorChecker())
+
+
 DROPPED_FRACTION = 0.05
 """Fraction of its STATE reports the ``drops-reports`` control loses (at random)."""
 
@@ -346,6 +374,8 @@ CONTROLS: dict[str, Callable[[], SimDriver]] = {
         _no_crc_firmware(DeviceSimulation(DeviceConfig.evita())), "sim://"),
     "drops-reports": lambda: _firmware_driver(
         LossyFirmware(DeviceSimulation(DeviceConfig.evita())), "sim://"),
+    "reads-any-major": lambda: _firmware_driver(
+        _any_major_firmware(DeviceSimulation(DeviceConfig.evita())), "sim://"),
     "unplayed-commit": lambda: _sim_driver(UnplayedCardSimulation(DeviceConfig.evita()),
                                            "sim://"),
 }
@@ -365,6 +395,7 @@ CATCHES: dict[str, tuple[str, str]] = {
     "no-ownership": (check_names.DEVICE_SESSION_OWNERSHIP, "second-host-refused"),
     "accepts-bad-crc": (check_names.DEVICE_UPLOAD_INTEGRITY, "bad-crc"),
     "drops-reports": (check_names.DEVICE_REPORT_LOSS, "loss-fraction"),
+    "reads-any-major": (check_names.DEVICE_UPLOAD_INTEGRITY, "unknown-major"),
     "unplayed-commit": (check_names.DEVICE_UPLOAD_INTEGRITY, "valid-after"),
 }
 """The (check, case) each negative control exists to fail (spec/conformance.md section 6, QN1):

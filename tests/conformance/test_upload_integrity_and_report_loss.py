@@ -26,11 +26,13 @@ from hcard_device.controls import DROPPED_FRACTION, LossyFirmware
 from hcard_device.sim import DeviceConfig, DeviceSimulation
 from hcard_device.sim_driver import SimDriver
 from tests.helpers.realtime import assert_conforms
+from tests.helpers.repository import REPO
 from tests.helpers.served_device import served_device
 
 LINK_CHECKS = ("device.upload-integrity", "device.report-loss")
 REFUSALS = {"bad-crc": "CRC_MISMATCH", "truncated": "SHORT", "out-of-order": "OUT_OF_ORDER",
-            "interrupted": "TIMEOUT", "restarted": "OUT_OF_ORDER", "oversize": "TOO_LARGE"}
+            "interrupted": "TIMEOUT", "restarted": "OUT_OF_ORDER", "oversize": "TOO_LARGE",
+            "unknown-major": "INVALID_CARD", "invalid-card": "INVALID_CARD"}
 
 
 def _cases(ctx: Context, check: object) -> dict[str, CheckResult]:
@@ -101,7 +103,7 @@ def test_neutral_frames_count_against_the_card_unless_the_finger_came_late() -> 
 
 
 def test_bad_uploads_end_with_commit_and_name_their_result() -> None:
-    data = bytes(range(256)) * 5  # 1280 B: 23 chunks
+    data = (REPO / "spec" / "vectors" / "cards" / "button.hcard").read_bytes()  # 46 chunks
     uploads = upload_integrity.bad_uploads(data, 4096)
     assert {case: r.name for case, (_steps, r) in uploads.items()} == REFUSALS
     for steps, _result in uploads.values():
@@ -109,8 +111,12 @@ def test_bad_uploads_end_with_commit_and_name_their_result() -> None:
     assert uploads["oversize"][0][0].total_length == 4097
     assert uploads["bad-crc"][0][0].crc32 == crc32(data) ^ 1  # one bit off
     assert uploads["truncated"][0][0].crc32 == crc32(data)  # the others declare it right
+    for case in ("unknown-major", "invalid-card"):  # another card, transferred intact
+        begin, *parts, _commit = uploads[case][0]
+        sent = b"".join(part.data for part in parts)
+        assert sent != data and len(sent) == begin.total_length and crc32(sent) == begin.crc32
     with pytest.raises(ValueError, match="too short"):
-        upload_integrity.bad_uploads(b"x" * 100, 4096)
+        upload_integrity.bad_uploads(data[:150], 4096)
 
 
 def test_link_checks_are_registered_and_need_a_driver() -> None:
@@ -180,6 +186,37 @@ def test_accepts_bad_crc_fails_the_bad_crc_case_only() -> None:
     assert "card A" in bad.detail and "replaced" in bad.detail
     assert bad.value >= 20  # reports after the wrong commit show card B, not A
     assert not _failures({c: r for c, r in results.items() if c != "bad-crc"})
+
+
+def test_reads_any_major_fails_the_unknown_major_case_only() -> None:
+    """A device that reads a card of major version 2 as version 1 commits it (PU3 asks
+    INVALID_CARD): the card B it was sent plays instead of A, and only ``unknown-major``
+    fails; ``invalid-card`` (version 1, a baseline that is not finite) is still refused."""
+    results = _cases(Context.for_driver("control:reads-any-major"),
+                     upload_integrity.check_upload_integrity)
+    wrong = results["unknown-major"]
+    assert wrong.outcome == "FAIL"
+    assert "expected FAILED INVALID_CARD, device said COMMITTED" in wrong.detail
+    assert wrong.value >= 10  # reports after the wrong commit show card B, not A
+    assert results["invalid-card"].passed
+    assert not _failures({c: r for c, r in results.items() if c != "unknown-major"})
+
+
+def test_the_invalid_cards_differ_from_card_b_only_where_the_case_says() -> None:
+    """The PU3 uploads are card B with one field changed: the major version (2), or the
+    baseline (not finite); the reference reader refuses each naming that field, and reads B."""
+    from hcard.card_io import parse_card
+    from hcard.errors import CardError
+
+    with open_device("sim://") as driver:
+        info = driver.info()
+    card_b = upload_integrity.link_card(info, upload_integrity.CARD_B_FRICTION)
+    parse_card(card_b.data)  # B itself is valid
+    for mutate, field in ((upload_integrity.unknown_major, "version.major"),
+                          (upload_integrity.broken_rule, "textures[0].baseline")):
+        with pytest.raises(CardError) as caught:
+            parse_card(mutate(card_b.data))
+        assert caught.value.field_path == field
 
 
 def test_a_commit_that_never_plays_fails_every_case_saying_why() -> None:

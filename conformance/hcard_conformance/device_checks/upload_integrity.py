@@ -6,8 +6,9 @@ reports show A's targets and generation, UPLOAD_STATUS its CRC-32 and generation
 uploads of a card B that the device must refuse, one case each, crafted from raw
 UPLOAD_BEGIN / UPLOAD_DATA / UPLOAD_END reports (:func:`bad_uploads`): ``bad-crc``,
 ``truncated``, ``out-of-order``, ``interrupted`` (2 s of upload silence, then the host
-resumes), ``restarted`` (a new BEGIN, then the old upload's remaining chunks) and
-``oversize``. A case passes when UPLOAD_STATUS is FAILED with the expected result (U1), A's
+resumes), ``restarted`` (a new BEGIN, then the old upload's remaining chunks), ``oversize``,
+and two uploads transferred intact whose card the device must not read (PU3): ``unknown-major``
+(major version 2) and ``invalid-card`` (a baseline that is not finite, T3). A case passes when UPLOAD_STATUS is FAILED with the expected result (U1), A's
 CRC-32 and generation are still active, and every STATE report during and after the attempt
 shows A playing (U2; a neutral frame is excused only when the finger sample it applies came
 after a gap in the finger stream, :func:`off_card`). Last, ``valid-after``: a good upload of
@@ -53,6 +54,7 @@ from hcard.device.protocol import (
 from hcard.device.protocol.constants import UPLOAD_TIMEOUT_S
 from hcard.errors import HcardError
 from hcard.quantities import MS_PER_S, S_PER_US, US_PER_S
+from hcard.v1 import card_pb2 as pb
 from hcard_conformance.check_names import DEVICE_UPLOAD_INTEGRITY as CHECK
 from hcard_conformance.context import Context
 from hcard_conformance.device_checks.common import LEVEL
@@ -90,7 +92,7 @@ reporting while it refuses an upload shows nothing playing)."""
 PROBE = "probe"
 """Step of an attempt: GET UPLOAD_STATUS now; it must already be FAILED with the result."""
 UPLOAD_CASES = ("bad-crc", "truncated", "out-of-order", "interrupted", "restarted", "oversize",
-                "valid-after")
+                "unknown-major", "invalid-card", "valid-after")
 """The cases of ``device.upload-integrity``, in order."""
 _PLAYING = int(StateFlags.CONTACT | StateFlags.RUNNING | StateFlags.CARD_LOADED)
 
@@ -136,10 +138,33 @@ def chunks(data: bytes) -> list[UploadData]:
             for offset in range(0, len(data), UPLOAD_CHUNK_BYTES)]
 
 
+def unknown_major(data: bytes) -> bytes:
+    """``data``, a valid card, as a card of major version 2: every byte intact and well formed,
+    but of a format version no v1 reader may read (README V1; protocol PU3: INVALID_CARD)."""
+    card = pb.Card.FromString(data)
+    card.version.major = 2
+    return card.SerializeToString(deterministic=True)
+
+
+def broken_rule(data: bytes) -> bytes:
+    """``data``, a valid card, with its first texture's baseline not finite: it parses and is
+    of version 1, but breaks an error rule of README section 5 (T3; protocol PU3:
+    INVALID_CARD)."""
+    card = pb.Card.FromString(data)
+    card.textures[0].baseline = math.nan
+    return card.SerializeToString(deterministic=True)
+
+
+def complete_upload(data: bytes) -> list[Step]:
+    """BEGIN with the length and CRC-32 of ``data``, its chunks in order, and COMMIT: an upload
+    whose transfer is right, so that only the card's content can refuse it."""
+    return [UploadBegin(len(data), crc32(data)), *chunks(data), UploadEnd(UploadAction.COMMIT)]
+
+
 def bad_uploads(data: bytes, max_card_bytes: int) -> dict[str, tuple[list[Step], UploadResult]]:
-    """The uploads of ``data`` that a device must refuse, by case: the steps and the result
-    UPLOAD_STATUS must give (protocol 9.4). Every attempt ends with COMMIT, as a host that
-    ignored the failure would send."""
+    """The uploads of ``data`` (a valid card) that a device must refuse, by case: the steps and
+    the result UPLOAD_STATUS must give (protocol 9.4). Every attempt ends with COMMIT, as a host
+    that ignored the failure would send."""
     parts = chunks(data)
     if len(parts) < 4:
         raise ValueError(f"a {len(data)}-byte card is too short to reorder its chunks")
@@ -165,6 +190,10 @@ def bad_uploads(data: bytes, max_card_bytes: int) -> dict[str, tuple[list[Step],
         # more than max_card_bytes announced (PU1), then the bytes and COMMIT anyway
         "oversize": ([UploadBegin(max_card_bytes + 1, begin.crc32), PROBE, *parts, commit],
                      UploadResult.TOO_LARGE),
+        # transferred intact, but a card of a major version the device cannot read (PU3, V1)
+        "unknown-major": (complete_upload(unknown_major(data)), UploadResult.INVALID_CARD),
+        # transferred intact, version 1, but an error rule broken (PU3, T3)
+        "invalid-card": (complete_upload(broken_rule(data)), UploadResult.INVALID_CARD),
     }
 
 
