@@ -36,6 +36,7 @@ RENDER_PAIRS: tuple[tuple[str, str], ...] = (
     ("single-grating", "reversal"),
     ("single-grating", "liftoff"),
     ("single-grating", "noisy-stroke"),
+    ("single-grating", "flick"),
     ("single-grating-auto", "moderate-stroke"),
     ("oriented-gratings", "diagonal-stroke"),
     ("oriented-gratings", "moderate-stroke"),
@@ -56,6 +57,7 @@ RENDER_PAIRS: tuple[tuple[str, str], ...] = (
     ("coarse-grating", "slow-stroke"),
     ("coarse-grating", "moderate-stroke"),
     ("coarse-grating", "fast-stroke"),
+    ("coarse-grating", "scrub"),
 )
 """The (card, track) pairs with a golden render."""
 

@@ -92,6 +92,32 @@ def reversal() -> VectorTrack:
                        make_track(t, x, np.full_like(t, STROKE_Y_MM)))
 
 
+def scrub() -> VectorTrack:
+    """250 mm/s back and forth between x = 20 and 100 mm at y = 35 mm: reversals at 0.32, 0.64
+    and 0.96 s, 1.2 s. At each reversal an odometer (R4) overshoots by twice the speed times a
+    touch period, 10 mm, until the next one: a position-locked texture rendered velocity-locked
+    (R8) is a quarter of a 40 mm period off for a whole leg."""
+    t = _times(1.2)
+    period = 0.64
+    phase = np.mod(t, period) / period
+    x = 20.0 + 80.0 * np.where(phase < 0.5, 2.0 * phase, 2.0 - 2.0 * phase)
+    return VectorTrack("scrub", "fast", ("reversal",),
+                       make_track(t, x, np.full_like(t, STROKE_Y_MM)))
+
+
+def flick() -> VectorTrack:
+    """Along +x at y = 35 mm from x = 5 mm, accelerating evenly from 1000 to 1400 mm/s, 0.08 s:
+    a 1 mm grating's temporal frequency (R10) stays at or above the band limit (B = 1000 Hz),
+    where a renderer plays none of it. (A device reports at 1 kHz, so what it plays above 500 Hz
+    reaches the suite aliased: a flat golden shows a grating that was not faded, while a fade
+    inside the band could not be judged.)"""
+    t = _times(0.08)
+    accel = (1400.0 - 1000.0) / 0.08
+    x = 5.0 + 1000.0 * t + 0.5 * accel * t * t
+    return VectorTrack("flick", "fast", ("stroke", "band-limit"),
+                       make_track(t, x, np.full_like(t, STROKE_Y_MM)))
+
+
 def liftoff() -> VectorTrack:
     """60 mm/s along +x at y = 35 mm; lift-off at 0.5 s, touch-down 0.2 s later 30 mm further
     on; 1.2 s."""
@@ -123,6 +149,8 @@ TRACK_FACTORIES: tuple[Callable[[], VectorTrack], ...] = (
     reversal,
     liftoff,
     noisy_stroke,
+    scrub,
+    flick,
 )
 
 
