@@ -41,7 +41,7 @@ def test_generation_is_deterministic_and_matches_the_committed_files(tmp_path: P
     generate(first)
     generate(second)
     tree_a, tree_b = _tree(first), _tree(second)
-    assert len(tree_a) == 77  # README, manifest, 11 cards x 2 forms, 9 tracks, 28 renders, 16 invalid
+    assert len(tree_a) == 89  # README, manifest, 12 cards x 2 forms, 9 tracks, 28 renders, 26 invalid
     assert tree_a == tree_b
     assert tree_a == _tree(ROOT)
     assert differences(ROOT) == []
@@ -65,8 +65,8 @@ def test_check_mode_fails_on_drift_and_passes_when_fresh(tmp_path: Path) -> None
 
 
 def test_manifest_covers_every_required_kind_of_vector() -> None:
-    assert (len(MANIFEST.cards), len(MANIFEST.tracks)) == (11, 9)
-    assert (len(MANIFEST.renders), len(MANIFEST.invalid)) == (28, 16)
+    assert (len(MANIFEST.cards), len(MANIFEST.tracks)) == (12, 9)
+    assert (len(MANIFEST.renders), len(MANIFEST.invalid)) == (28, 26)
     tags = {tag for card in MANIFEST.cards for tag in card.tags}
     assert tags == {"dense", "coarse", "sparse", "bipolar", "temporal", "oriented",
                     "checkerboard"}

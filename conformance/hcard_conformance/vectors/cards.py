@@ -207,6 +207,20 @@ def coarse_grating() -> VectorCard:
     return VectorCard("coarse-grating", ("coarse",), card)
 
 
+def later_minor() -> VectorCard:
+    """A card of a later minor version (1.9) whose two UV gratings can leave [0, 1]: readers
+    accept any minor (README V2) and warn of what the renderer will clip (W1: 0.9 + 0.3 above
+    1; W2: 0.1 - 0.3 below 0)."""
+    high = build.texture(0.9, [build.spatial(1.0, 0.3)], channel="uv", locking="velocity",
+                         name="above-one")
+    low = build.texture(0.1, [build.spatial(1.0, 0.3)], channel="uv", locking="velocity",
+                        name="below-zero")
+    card = _card("later minor", "Version 1.9; UV gratings that clip above 1 and below 0.",
+                 [high, low], taxtel_mm=(60.0, 80.0), texture_index=np.array([0, 1]))
+    card.version.minor = 9
+    return VectorCard("later-minor", ("dense",), card)
+
+
 CARD_FACTORIES: tuple[Callable[[], VectorCard], ...] = (
     single_grating,
     single_grating_auto,
@@ -219,6 +233,7 @@ CARD_FACTORIES: tuple[Callable[[], VectorCard], ...] = (
     bipolar_extreme,
     temporal,
     coarse_grating,
+    later_minor,
 )
 
 

@@ -82,6 +82,22 @@ def _extra_components(card: pb.Card) -> None:
     card.textures[0].components.extend(build.spatial(1.0 + i, 0.01) for i in range(16))
 
 
+def _no_columns(card: pb.Card) -> None:
+    card.grid.cols = 0
+    del card.grid.texture_index[:]
+
+
+def _one_column(card: pb.Card) -> None:
+    """One 10 mm column on the 20 mm surface, with its one index: only G4 is broken."""
+    card.grid.cols = 1
+    del card.grid.texture_index[1:]
+
+
+def _extra_textures(card: pb.Card) -> None:
+    card.textures.extend(build.texture(0.5, [], channel="uv", locking="velocity", name=f"t{i}")
+                         for i in range(256))
+
+
 def _set_attr(getter: Callable[[pb.Card], object], name: str, value: object
               ) -> Callable[[pb.Card], None]:
     def mutate(card: pb.Card) -> None:
@@ -148,4 +164,29 @@ def invalid_vectors() -> list[InvalidVector]:
         InvalidVector("uv-baseline-above-1", ".hcard",
                       _binary(_set_attr(lambda c: c.textures[0], "baseline", 1.2)),
                       "UV can only lower friction", "textures[0].baseline", "T6"),
+        InvalidVector("long-title", ".json", _json(_set(("metadata", "title"), "x" * 1025)),
+                      "1025 characters, over the limit of 1024", "metadata.title", "M1"),
+        InvalidVector("zero-width", ".hcard",
+                      _binary(_set_attr(lambda c: c.surface, "width_mm", 0.0)),
+                      "must be > 0 mm", "surface.width_mm", "G1"),
+        InvalidVector("tiny-taxtel", ".json", _json(_set(("grid", "taxtel_width_mm"), 0.01)),
+                      "must be at least 0.05 mm", "grid.taxtel_width_mm", "G2"),
+        InvalidVector("no-columns", ".hcard", _binary(_no_columns), "must be at least 1",
+                      "grid.cols", "G3"),
+        InvalidVector("grid-short-of-surface", ".hcard", _binary(_one_column),
+                      "cover 10 mm, less than the surface (20 mm)", "grid.cols", "G4"),
+        InvalidVector("too-many-textures", ".hcard", _binary(_extra_textures),
+                      "257 textures exceed the limit of 256", "textures", "T1"),
+        InvalidVector("duplicate-texture-name", ".hcard",
+                      _binary(lambda c: c.textures.append(c.textures[0])),
+                      "duplicate name 'grating'", "textures[1].name", "T2"),
+        InvalidVector("missing-locking", ".json", _json(_delete(("textures", 0, "locking"))),
+                      "must be LOCKING_POSITION, LOCKING_VELOCITY or LOCKING_AUTO",
+                      "textures[0].locking", "T5"),
+        InvalidVector("missing-domain", ".json",
+                      _json(_delete(("textures", 0, "components", 0, "domain"))),
+                      "must be DOMAIN_SPATIAL or DOMAIN_TEMPORAL", f"{comp}.domain", "C1"),
+        InvalidVector("unknown-channel", ".hcard",
+                      _binary(_set_attr(lambda c: c.textures[0].components[0], "channel", 9)),
+                      "unknown channel 9", f"{comp}.channel", "C5"),
     ]
