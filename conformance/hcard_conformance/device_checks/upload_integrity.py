@@ -8,7 +8,8 @@ UPLOAD_BEGIN / UPLOAD_DATA / UPLOAD_END reports (:func:`bad_uploads`): ``bad-crc
 ``truncated``, ``out-of-order``, ``interrupted`` (2 s of upload silence, then the host
 resumes), ``restarted`` (a new BEGIN, then the old upload's remaining chunks), ``oversize``,
 and two uploads transferred intact whose card the device must not read (PU3): ``unknown-major``
-(major version 2) and ``invalid-card`` (a baseline that is not finite, T3). A case passes when UPLOAD_STATUS is FAILED with the expected result (U1), A's
+(major version 2) and ``invalid-card`` (a baseline that is not finite, T3). A case passes
+when UPLOAD_STATUS is FAILED with the expected result (U1), A's
 CRC-32 and generation are still active, and every STATE report during and after the attempt
 shows A playing (U2; a neutral frame is excused only when the finger sample it applies came
 after a gap in the finger stream, :func:`off_card`). Last, ``valid-after``: a good upload of
