@@ -22,6 +22,7 @@ from hcard.render.compiled import velocity_locked
 from hcard.render.touch import segment_speeds
 from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb
+from hcard_conformance.phase_windows import PhaseWindows
 
 
 @dataclass(frozen=True)
@@ -201,24 +202,60 @@ def compared_frames(impl: Signal, golden: Signal, tol: Tolerances) -> np.ndarray
 # ---------------------------------------------------------------------------------- A1
 
 
-def relative_error(impl: Signal, golden: Signal, tol: Tolerances) -> Metric:
-    """A1: RMS relative friction error minimised over a lag of 0..``latency_s``."""
+def _squared_errors(impl: Signal, golden: Signal, frames: np.ndarray, lags: np.ndarray,
+                    floor: float) -> np.ndarray:
+    """``((m_{j+d} - m*_j) / max(m*_j, floor))^2`` for the golden ``frames`` (rows) and the
+    ``lags`` (columns); inf where the implementation has no frame ``j + d``."""
+    index = frames[:, None] + lags[None, :]
+    valid = (index >= 0) & (index < len(impl))
+    gold = golden.m[frames][:, None]
+    values = impl.m[np.clip(index, 0, len(impl) - 1)]
+    return np.where(valid, ((values - gold) / np.maximum(gold, floor)) ** 2, np.inf)
+
+
+def relative_error(impl: Signal, golden: Signal, tol: Tolerances,
+                   windows: PhaseWindows | None = None) -> Metric:
+    """A1: RMS relative friction error minimised over a global lag ``d`` of 0..``latency_s``;
+    the frames of each phase window (:mod:`hcard_conformance.phase_windows`: velocity-locked
+    and temporal textures) take the best lag within its half-width of ``d``."""
     fs = frame_rate(golden)
     selected = np.flatnonzero(compared_frames(impl, golden, tol))
     if selected.size == 0:
         return NOT_APPLICABLE
-    denominator = np.maximum(golden.m[selected], tol.relative_floor)
-    best = (math.inf, 0)
-    for d in range(round(tol.latency_s * fs) + 1):
-        j = selected[selected + d < len(impl)]
-        if j.size == 0:
-            break
-        r = (impl.m[j + d] - golden.m[j]) / denominator[: j.size]
-        value = float(np.sqrt(np.mean(r * r)))
-        if value < best[0]:
-            best = (value, d)
-    return Metric(best[0], f"RMS relative error {best[0]:.4f} over {selected.size} frames "
-                  f"at lag {MS_PER_S * best[1] / fs:.1f} ms")
+    window = (windows.window[selected] if windows is not None
+              else np.full(selected.size, -1, dtype=int))
+    lags = np.arange(round(tol.latency_s * fs) + 1)
+    # frames of fixed phase: their sum and count at each global lag
+    fixed = _squared_errors(impl, golden, selected[window < 0], lags, tol.relative_floor)
+    finite = np.isfinite(fixed)
+    total = np.where(finite, fixed, 0.0).sum(axis=0)
+    count = finite.sum(axis=0).astype(float)
+    shifted = np.zeros(lags.size, dtype=int)
+    for w in np.unique(window[window >= 0]):
+        assert windows is not None
+        h = int(windows.half_width[w])
+        frames = selected[window == w]
+        sums = _squared_errors(impl, golden, frames, np.arange(-h, lags[-1] + h + 1),
+                               tol.relative_floor).sum(axis=0)
+        # the best shift within +-h of each global lag (a sliding minimum over 2h + 1 lags)
+        spans = np.lib.stride_tricks.sliding_window_view(sums, 2 * h + 1)
+        k = np.argmin(spans, axis=1)
+        best = spans[np.arange(lags.size), k]
+        usable = np.isfinite(best)
+        total += np.where(usable, best, 0.0)
+        count += np.where(usable, frames.size, 0)
+        shifted = np.where(usable, np.maximum(shifted, np.abs(k - h)), shifted)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        errors = np.sqrt(total / count)
+    errors[count == 0] = np.inf
+    d = int(np.argmin(errors))
+    detail = (f"RMS relative error {errors[d]:.4f} over {selected.size} frames at lag "
+              f"{MS_PER_S * d / fs:.1f} ms")
+    if np.any(window >= 0):
+        detail += (f"; velocity-locked and temporal phase free in "
+                   f"{len(np.unique(window[window >= 0]))} windows, shifted up to "
+                   f"{MS_PER_S * shifted[d] / fs:.1f} ms")
+    return Metric(float(errors[d]), detail)
 
 
 # ---------------------------------------------------------------------------------- A2-A4

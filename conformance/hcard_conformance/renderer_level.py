@@ -45,6 +45,7 @@ from hcard_conformance.check_names import (
 )
 from hcard_conformance.context import CLOCK_MISMATCH_KEY, DEVICE_LAG_KEY, REALTIME_KEY, Context
 from hcard_conformance.metrics import Metric, Signal, Tolerances
+from hcard_conformance.phase_windows import phase_windows
 from hcard_conformance.realtime import NOT_KEPT, HostWatch, reasons
 from hcard_conformance.result import CannotAssess, CheckResult, guarded, measured, unassessed
 
@@ -289,7 +290,11 @@ def check_friction_error(ctx: Context) -> Iterator[CheckResult]:
         tol = tolerances(ctx, entry)
 
         def metric_of(impl: Signal) -> Metric:
-            return metrics.relative_error(impl, data["golden"], tol)
+            golden = data["golden"]
+            windows = phase_windows(golden.t, golden.texture,
+                                    metrics.compared_frames(impl, golden, tol), data["card"],
+                                    data["track"], entry.options(), tol.correlation_window_s)
+            return metrics.relative_error(impl, golden, tol, windows)
 
         metric = metric_of(data["impl"])
         if not metric.applicable:
