@@ -22,6 +22,7 @@ from hcard_conformance import metrics
 from hcard_conformance.metrics import Signal, Tolerances
 from hcard_conformance.phase_windows import phase_free_textures, phase_windows
 from hcard_conformance.vectors import load_manifest
+from hcard_conformance.vectors.manifest import RenderEntry
 from tests.helpers.repository import REPO
 
 VECTORS = REPO / "spec" / "vectors"
@@ -34,7 +35,7 @@ VELOCITY_LOCKED = ("bipolar-extreme@moderate-stroke", "bipolar-grating@moderate-
 """Renders where absolute phase failed imperceptible errors (0.09-0.39 against 0.08)."""
 
 
-def _entry(name: str):  # noqa: ANN202 - the manifest's render entry
+def _entry(name: str) -> RenderEntry:
     card, track = name.split("@")
     return next(r for r in MANIFEST.renders if (r.card, r.track) == (card, track))
 
