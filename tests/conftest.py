@@ -1,5 +1,5 @@
-"""Hooks of the whole run: its own cache directory, the order of the test files, and the
-helpers' asserts rewritten like a test's. The helpers themselves are modules of
+"""Hooks of the whole run: its own cache directory, the order of the test files, the two lanes
+of a parallel run, and the helpers' asserts rewritten like a test's. The helpers themselves are modules of
 :mod:`tests.helpers`, imported by name."""
 
 from __future__ import annotations
@@ -20,9 +20,22 @@ and its timing bounds are the first to go on a machine that has been busy for mi
 real-time device tests before it)."""
 
 
+WALL_CLOCK_LANE = "wall-clock"
+"""The xdist group of the tests marked ``wall_clock``: devices served in real time over USB/IP
+and the QEMU guest. With ``-n 2 --dist loadgroup`` (the README's test command) they run one
+after another on one worker, never two at once, while the other worker runs everything else
+(:data:`COMPUTE_LANE`): fits, renders and in-process devices whose clock is simulated."""
+COMPUTE_LANE = "compute"
+"""The xdist group of every test that is not marked ``wall_clock``."""
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Run the files of :data:`FIRST` first, keeping the order within each group."""
+    """Run the files of :data:`FIRST` first, keeping the order within each group, and put
+    each test in its lane (:data:`WALL_CLOCK_LANE` or :data:`COMPUTE_LANE`)."""
     items.sort(key=lambda item: item.path.name not in FIRST)
+    for item in items:
+        lane = WALL_CLOCK_LANE if item.get_closest_marker("wall_clock") else COMPUTE_LANE
+        item.add_marker(pytest.mark.xdist_group(lane))
 
 
 _CACHE_DIRECTORY = pytest.StashKey[tuple[pytest.MonkeyPatch, Path]]()

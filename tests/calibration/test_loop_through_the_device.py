@@ -26,6 +26,8 @@ from hcard.physics.profile import DeviceProfile
 from tests.helpers.cli import run_hcard
 from tests.helpers.served_device import served_device
 
+pytestmark = pytest.mark.wall_clock
+
 PLAN_S = "30s"
 """Length of the protocol in these tests (the default is 60 s)."""
 VERIFY_S = "16s"

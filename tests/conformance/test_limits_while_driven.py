@@ -19,6 +19,8 @@ from hcard_device.controls import CONTROLS
 from tests.helpers.realtime import assert_conforms
 from tests.helpers.served_device import served_device
 
+pytestmark = pytest.mark.wall_clock
+
 CASE = "limits-while-driven"
 
 

@@ -22,6 +22,8 @@ from hcard_device.controls import (
     open_control,
 )
 
+pytestmark = pytest.mark.wall_clock
+
 
 def _run(name: str, check: object, renders: list[str] | None = None) -> dict[str, CheckResult]:
     ctx = Context.for_driver(name)

@@ -32,6 +32,8 @@ from hcard_device.sim import DeviceConfig, DeviceSimulation
 from hcard_device.sim_driver import SimDriver
 from tests.helpers.realtime import MACHINE, assert_conforms, in_real_time, kept_run
 
+pytestmark = pytest.mark.wall_clock
+
 
 def _state(faults: int = 0) -> State:
     return State(timestamp_us=0, sequence=0, flags=0, x_10um=0, y_10um=0,

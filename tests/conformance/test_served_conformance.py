@@ -25,6 +25,8 @@ from tests.helpers.plate_loop import plate_loop_bandwidth_hz
 from tests.helpers.realtime import assert_conforms
 from tests.helpers.served_device import served_device
 
+pytestmark = pytest.mark.wall_clock
+
 
 def test_the_reference_conforms_at_every_level_twice_against_one_running_server():
     reference = run_suite(Context.for_driver("reference"), ("format", "renderer"))

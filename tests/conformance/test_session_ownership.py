@@ -25,6 +25,8 @@ from hcard_device.sim_driver import SimDriver
 from tests.helpers.realtime import assert_conforms
 from tests.helpers.served_device import served_device
 
+pytestmark = pytest.mark.wall_clock
+
 
 def run(name: str) -> dict[str, CheckResult]:
     return {r.case: r for r in check_session_ownership(Context.for_driver(name))}

@@ -29,6 +29,8 @@ from tests.helpers.realtime import assert_conforms
 from tests.helpers.repository import REPO
 from tests.helpers.served_device import served_device
 
+pytestmark = pytest.mark.wall_clock
+
 LINK_CHECKS = ("device.upload-integrity", "device.report-loss")
 REFUSALS = {"bad-crc": "CRC_MISMATCH", "truncated": "SHORT", "out-of-order": "OUT_OF_ORDER",
             "interrupted": "TIMEOUT", "restarted": "OUT_OF_ORDER", "oversize": "TOO_LARGE",

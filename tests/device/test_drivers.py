@@ -50,6 +50,8 @@ from tests.helpers.hid_over_usbip import HidOverUsbip
 from tests.helpers.realtime import in_real_time, kept_run
 from tests.helpers.served_device import served_device
 
+pytestmark = pytest.mark.wall_clock
+
 TIMEOUT_S = 1.0
 
 

@@ -32,10 +32,11 @@ RUN_GUEST = GUEST / "run_guest.py"
 # repeats, spec/conformance.md QT3); this one only catches a runner that hangs itself.
 SUBPROCESS_TIMEOUT_S = 600
 
-pytestmark = pytest.mark.skipif(
-    os.environ.get("HCARD_SKIP_GUEST") == "1",
-    reason="HCARD_SKIP_GUEST=1: the QEMU guest tier is skipped on request",
-)
+pytestmark = [
+    pytest.mark.wall_clock,
+    pytest.mark.skipif(os.environ.get("HCARD_SKIP_GUEST") == "1",
+                       reason="HCARD_SKIP_GUEST=1: the QEMU guest tier is skipped on request"),
+]
 
 
 def _load(name: str, path: Path) -> ModuleType:

@@ -8,8 +8,12 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import pytest
+
 from hcard.calibration.measurement import read_measurement
 from tests.helpers.served_device import served_device
+
+pytestmark = pytest.mark.wall_clock
 
 CLIENT = r'''
 import importlib.abc

@@ -24,6 +24,8 @@ from hcard.device.recording import force_recording, recording, write_recording
 from hcard.device.state_log import STATE_ROW, StateLog
 from hcard.track import make_track
 
+pytestmark = pytest.mark.wall_clock
+
 CARD = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[
     build.texture(1.0, channel="uv", name="plain"), build.texture(0.5, channel="uv", name="slip")],
     texture_index=[0, 1], title="step")

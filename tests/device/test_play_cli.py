@@ -18,6 +18,8 @@ from hcard.track import straight_stroke, track_to_csv
 from tests.helpers.realtime import in_real_time, kept_run
 from tests.helpers.served_device import served_device
 
+pytestmark = pytest.mark.wall_clock
+
 
 @pytest.fixture
 def files(tmp_path):

@@ -65,6 +65,8 @@ from tests.helpers.hostile_cards import json_empty_components
 from tests.helpers.realtime import NotKept, in_real_time
 from tests.helpers.served_device import ServedDevice, served_device
 
+pytestmark = pytest.mark.wall_clock
+
 DELIVERY_SHARE = 0.9
 """Share of the STATE reports a well-behaved client receives alone that it still receives
 beside any misbehaving client (spec/device-protocol.md section 13, rule PN15)."""

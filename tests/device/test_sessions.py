@@ -37,6 +37,8 @@ from hcard_device.usb.server import make_firmware
 from tests.helpers.realtime import NotKept, in_real_time, kept_run
 from tests.helpers.served_device import served_device
 
+pytestmark = pytest.mark.wall_clock
+
 CARD = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[
     build.texture(1.0, channel="uv"), build.texture(0.4, channel="uv")], texture_index=[0, 1])
 OTHER_CARD = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[

@@ -37,6 +37,8 @@ from hcard_device.usb.server import DeviceServer
 from hcard_device.usb.transport import NoDelayUSBIP
 from tests.helpers.served_device import served_device
 
+pytestmark = pytest.mark.wall_clock
+
 T = 1.0  # transfer timeout, s
 
 
