@@ -1,6 +1,6 @@
 """Hooks of the whole run: its own cache directory, the order of the test files, the two lanes
-of a parallel run, and the helpers' asserts rewritten like a test's. The helpers themselves are modules of
-:mod:`tests.helpers`, imported by name."""
+of a parallel run, and the helpers' asserts rewritten like a test's. The helpers themselves are
+modules of :mod:`tests.helpers`, imported by name."""
 
 from __future__ import annotations
 
