@@ -287,3 +287,21 @@ def test_unnumbered_loss_fails_sequence_gaps() -> None:
     assert not gaps.passed and gaps.value > 100  # misnumbered: time steps of 2 ms, seq of 1
     assert results["loss-fraction"].passed  # the sequence alone shows no gap
     assert results["drops-counted"].passed  # nothing seen missing, nothing counted
+
+
+def test_an_invalid_card_refusal_must_name_the_field() -> None:
+    """PU8: INVALID_CARD's detail is the field path of the card's first error; a device that
+    refuses with another detail fails the case, saying so."""
+    from hcard.device.protocol import UploadResult, UploadState, UploadStatus
+
+    card_a = upload_integrity.LinkCard(b"card A", (4500, 10000))
+    for detail, named in (("textures[0].baseline", True), ("bad card", False)):
+        status = UploadStatus(state=UploadState.FAILED, result=UploadResult.INVALID_CARD,
+                              detail_flags=0, received=10, total_length=10,
+                              active_crc32=card_a.crc, card_generation=1, detail=detail)
+        result = upload_integrity.judge_refusal("invalid-card",
+                                                upload_integrity.Attempt(status),
+                                                UploadResult.INVALID_CARD, card_a, 1)
+        assert ("(PU8)" not in result.detail) == named, result.detail
+        assert "detail 'bad card', not the field path 'textures[0].baseline'" in result.detail \
+            or named

@@ -139,6 +139,11 @@ def chunks(data: bytes) -> list[UploadData]:
             for offset in range(0, len(data), UPLOAD_CHUNK_BYTES)]
 
 
+INVALID_CARD_DETAILS = {"unknown-major": "version.major", "invalid-card": "textures[0].baseline"}
+"""The UPLOAD_STATUS ``detail`` each INVALID_CARD case must give: the field path of the card's
+first error (protocol PU8; README 1.4)."""
+
+
 def unknown_major(data: bytes) -> bytes:
     """``data``, a valid card, as a card of major version 2: every byte intact and well formed,
     but of a format version no v1 reader may read (README V1; protocol PU3: INVALID_CARD)."""
@@ -455,18 +460,23 @@ def _excused_text(attempt: Attempt, excused: int) -> str:
 def judge_refusal(case: str, attempt: Attempt, expected: UploadResult, card_a: LinkCard,
                   generation: int) -> CheckResult:
     """U1 and U2 for one refused upload: FAILED with ``expected`` (at the end and at every
-    probe), no STALL, A's CRC-32 and ``generation`` still active, at least
-    :data:`MIN_PLAYING_REPORTS` reports showing A playing and none against it
-    (:func:`off_card`). The metric is the number of reports against A."""
+    probe; an INVALID_CARD naming the field of :data:`INVALID_CARD_DETAILS`, PU8), no STALL,
+    A's CRC-32 and ``generation`` still active, at least :data:`MIN_PLAYING_REPORTS` reports
+    showing A playing and none against it (:func:`off_card`). The metric is the number of
+    reports against A."""
     status = attempt.status
     refused = status.state == UploadState.FAILED and status.result == expected
+    detail = INVALID_CARD_DETAILS.get(case)
+    named = detail is None or not refused or status.detail == detail
     probes_ok = all(p.state == UploadState.FAILED and p.result == expected
                     for p in attempt.probes)
     kept = status.active_crc32 == card_a.crc and status.card_generation == generation
     playing, excused, off = off_card(attempt.states, card_a, generation)
-    passed = (refused and probes_ok and kept and off == 0 and playing >= MIN_PLAYING_REPORTS
-              and not attempt.stalls)
+    passed = (refused and named and probes_ok and kept and off == 0
+              and playing >= MIN_PLAYING_REPORTS and not attempt.stalls)
     parts = [f"expected FAILED {expected.name}, device said {status_text(status)}"]
+    if not named:
+        parts.append(f"detail {status.detail!r}, not the field path {detail!r} (PU8)")
     parts += [f"while sending: {status_text(p)}" for p in attempt.probes
               if not (p.state == UploadState.FAILED and p.result == expected)]
     if not kept:
