@@ -405,6 +405,23 @@ class Driver(abc.ABC):
         self._check_session()
         self._write_output(report.encode())
 
+    def send_raw(self, data: bytes) -> None:
+        """Send ``data`` as an output report exactly as it is (ID first), well formed or not:
+        what a conformance check sends to see a device refuse it (protocol PE2, PT7). Refusal
+        is the device's to report (STATE fault INVALID_REQUEST, ``rejected_requests``)."""
+        self._check_open()
+        self._write_output(bytes(data))
+
+    def get_raw_feature(self, report_id: int, size: int) -> bytes:
+        """GET_REPORT(Feature) of any ``report_id`` and ``size`` (ID included), undecoded:
+        what a conformance check asks to see a device STALL (protocol PE1).
+
+        Raises:
+            DeviceStall: the device refused the request.
+        """
+        self._check_open()
+        return self._get_feature(report_id, size)
+
     def command(self, command: Command, argument: int = 0) -> None:
         """Send a CONTROL command."""
         self.send(Control(int(command), argument))

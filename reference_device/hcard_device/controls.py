@@ -59,6 +59,11 @@ name:
     (protocol PU3 and README V1 ask it to refuse a major version it does not read with
     INVALID_CARD): a well-formed card of major version 2 is committed and played. Fails
     ``device.upload-integrity`` case ``unknown-major`` and passes the others.
+``silent-refusals``
+    The E-ViTa whose firmware ignores a malformed or refused output report without counting it
+    in ``rejected_requests`` or flagging INVALID_REQUEST (protocol PE2): the host never learns
+    that what it sent was not carried out. Fails ``device.refusals`` (``short-report`` among
+    others).
 ``unplayed-commit``
     The E-ViTa whose renderer never takes the card a COMMIT puts in force: the upload is
     checked and committed as PU3 asks (UPLOAD_STATUS COMMITTED with its CRC-32 and the next
@@ -311,6 +316,14 @@ class AnyMajorChecker(InlineChecker):
         return super().check_card(card.SerializeToString(deterministic=True), options)
 
 
+class SilentRefusalFirmware(Firmware):
+    """A firmware that drops malformed and refused output reports silently
+    (``silent-refusals``)."""
+
+    def _refuse(self) -> None:
+        """Nothing: neither counted nor flagged (PE2 asks both)."""
+
+
 def _any_major_firmware(simulation: DeviceSimulation) -> Firmware:
     """The firmware of ``reads-any-major``: the reference one with :class:`AnyMajorChecker`."""
     return Firmware(simulation, checker=AnyMajorChecker())
@@ -376,6 +389,8 @@ CONTROLS: dict[str, Callable[[], SimDriver]] = {
         LossyFirmware(DeviceSimulation(DeviceConfig.evita())), "sim://"),
     "reads-any-major": lambda: _firmware_driver(
         _any_major_firmware(DeviceSimulation(DeviceConfig.evita())), "sim://"),
+    "silent-refusals": lambda: _firmware_driver(
+        SilentRefusalFirmware(DeviceSimulation(DeviceConfig.evita())), "sim://"),
     "unplayed-commit": lambda: _sim_driver(UnplayedCardSimulation(DeviceConfig.evita()),
                                            "sim://"),
 }
@@ -396,6 +411,7 @@ CATCHES: dict[str, tuple[str, str]] = {
     "accepts-bad-crc": (check_names.DEVICE_UPLOAD_INTEGRITY, "bad-crc"),
     "drops-reports": (check_names.DEVICE_REPORT_LOSS, "loss-fraction"),
     "reads-any-major": (check_names.DEVICE_UPLOAD_INTEGRITY, "unknown-major"),
+    "silent-refusals": (check_names.DEVICE_REFUSALS, "short-report"),
     "unplayed-commit": (check_names.DEVICE_UPLOAD_INTEGRITY, "valid-after"),
 }
 """The (check, case) each negative control exists to fail (spec/conformance.md section 6, QN1):
