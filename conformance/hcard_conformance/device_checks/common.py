@@ -5,8 +5,11 @@ the plate amplitude counted as off in m)."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterator, Sequence
 
-from hcard_conformance.result import CheckResult
+from hcard.device.base import Driver
+from hcard_conformance.context import Context
+from hcard_conformance.result import CheckResult, guarded
 
 LEVEL = "device"
 """The level of every check of :mod:`hcard_conformance.device_checks`."""
@@ -25,3 +28,19 @@ def judged(check: str, case: str, metric: str, value: float, threshold: float, u
     threshold (at least, with ``at_most=False``)."""
     passed = math.isfinite(value) and (value <= threshold if at_most else value >= threshold)
     return CheckResult(check, LEVEL, case, passed, metric, value, threshold, unit, detail)
+
+
+def on_one_driver(ctx: Context, check: str, cases: Sequence[str],
+                  measure: Callable[[Driver], Iterator[CheckResult]]) -> Iterator[CheckResult]:
+    """The cases of ``check`` measured by ``measure`` on one driver opened for them all;
+    nothing for an implementation without a driver (the reference renderer). An exception is
+    one ERROR per case not yet reported (:func:`~hcard_conformance.result.guarded`)."""
+    if ctx.open_driver is None:
+        return
+    open_driver = ctx.open_driver
+
+    def run() -> Iterator[CheckResult]:
+        with open_driver() as driver:
+            yield from measure(driver)
+
+    yield from guarded(check, LEVEL, cases, run)

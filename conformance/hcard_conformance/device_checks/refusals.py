@@ -46,10 +46,10 @@ from hcard.device.protocol import (
 from hcard.device.protocol.constants import STREAM_FRAMES_PER_REPORT
 from hcard_conformance.check_names import DEVICE_REFUSALS as CHECK
 from hcard_conformance.context import Context
-from hcard_conformance.device_checks.common import LEVEL
+from hcard_conformance.device_checks.common import LEVEL, on_one_driver
 from hcard_conformance.device_checks.link_session import HOST_PAUSE_MAX_S, LinkSession
 from hcard_conformance.realtime import NotKept, attempted_case, device_lag, reasons
-from hcard_conformance.result import CannotAssess, CheckResult, guarded
+from hcard_conformance.result import CannotAssess, CheckResult
 
 REFUSAL_CASES = ("padded-report", "short-report", "unknown-output", "unknown-command",
                  "bad-stream", "unknown-feature")
@@ -185,12 +185,4 @@ def measure_refusals(driver: Driver) -> Iterator[CheckResult]:
 def check_refusals(ctx: Context) -> Iterator[CheckResult]:
     """Malformed, unknown and refused reports are ignored, counted and flagged, and the device
     keeps running (PT7, PO4, PO5, PE1-PE3)."""
-    if ctx.open_driver is None:
-        return
-    open_driver = ctx.open_driver
-
-    def measure() -> Iterator[CheckResult]:
-        with open_driver() as driver:
-            yield from measure_refusals(driver)
-
-    yield from guarded(CHECK, LEVEL, REFUSAL_CASES, measure)
+    yield from on_one_driver(ctx, CHECK, REFUSAL_CASES, measure_refusals)

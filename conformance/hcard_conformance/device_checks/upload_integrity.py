@@ -58,7 +58,7 @@ from hcard.quantities import MS_PER_S, S_PER_US, US_PER_S
 from hcard.v1 import card_pb2 as pb
 from hcard_conformance.check_names import DEVICE_UPLOAD_INTEGRITY as CHECK
 from hcard_conformance.context import Context
-from hcard_conformance.device_checks.common import LEVEL
+from hcard_conformance.device_checks.common import LEVEL, on_one_driver
 from hcard_conformance.device_checks.host_finger import FINGER_PERIOD_S
 from hcard_conformance.device_checks.link_session import (
     HOST_PAUSE_MAX_S,
@@ -67,7 +67,7 @@ from hcard_conformance.device_checks.link_session import (
     LinkSession,
 )
 from hcard_conformance.realtime import NotKept, attempted_case, device_lag, reasons
-from hcard_conformance.result import CannotAssess, CheckResult, guarded, unassessed
+from hcard_conformance.result import CannotAssess, CheckResult, unassessed
 
 CARD_A_FRICTION = 0.45
 """Relative friction of card A (uniform; UV, or EV 1 + this on a device without UV)."""
@@ -581,12 +581,4 @@ def kept(result: CheckResult, attempt: Attempt) -> CheckResult:
 
 def check_upload_integrity(ctx: Context) -> Iterator[CheckResult]:
     """Bad uploads are refused with their reason and the previous card keeps playing (U1-U3)."""
-    if ctx.open_driver is None:
-        return
-    open_driver = ctx.open_driver
-
-    def measure() -> Iterator[CheckResult]:
-        with open_driver() as driver:
-            yield from measure_upload_integrity(driver)
-
-    yield from guarded(CHECK, LEVEL, UPLOAD_CASES, measure)
+    yield from on_one_driver(ctx, CHECK, UPLOAD_CASES, measure_upload_integrity)

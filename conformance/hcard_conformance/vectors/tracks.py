@@ -81,15 +81,22 @@ def diagonal_stroke() -> VectorTrack:
                        _stroke((10.0, 10.0), velocity, 0.8))
 
 
+def _back_and_forth(x0_mm: float, x1_mm: float, speed_mm_s: float,
+                    duration_s: float) -> FingerTrack:
+    """From ``x0_mm`` to ``x1_mm`` and back at ``speed_mm_s`` along y = 35 mm, for
+    ``duration_s`` (s)."""
+    t = _times(duration_s)
+    period = 2.0 * (x1_mm - x0_mm) / speed_mm_s
+    phase = np.mod(t, period) / period
+    x = x0_mm + (x1_mm - x0_mm) * np.where(phase < 0.5, 2.0 * phase, 2.0 - 2.0 * phase)
+    return make_track(t, x, np.full_like(t, STROKE_Y_MM))
+
+
 def reversal() -> VectorTrack:
     """80 mm/s back and forth between x = 44 and 76 mm at y = 35 mm: reversals at 0.4 and
     0.8 s, 1.2 s; crosses x = 60 mm (the ``edge`` card) three times."""
-    t = _times(1.2)
-    period = 0.8
-    phase = np.mod(t, period) / period
-    x = 44.0 + 32.0 * np.where(phase < 0.5, 2.0 * phase, 2.0 - 2.0 * phase)
     return VectorTrack("reversal", "moderate", ("reversal",),
-                       make_track(t, x, np.full_like(t, STROKE_Y_MM)))
+                       _back_and_forth(44.0, 76.0, 80.0, 1.2))
 
 
 def scrub() -> VectorTrack:
@@ -97,12 +104,7 @@ def scrub() -> VectorTrack:
     and 0.96 s, 1.2 s. At each reversal an odometer (R4) overshoots by twice the speed times a
     touch period, 10 mm, until the next one: a position-locked texture rendered velocity-locked
     (R8) is a quarter of a 40 mm period off for a whole leg."""
-    t = _times(1.2)
-    period = 0.64
-    phase = np.mod(t, period) / period
-    x = 20.0 + 80.0 * np.where(phase < 0.5, 2.0 * phase, 2.0 - 2.0 * phase)
-    return VectorTrack("scrub", "fast", ("reversal",),
-                       make_track(t, x, np.full_like(t, STROKE_Y_MM)))
+    return VectorTrack("scrub", "fast", ("reversal",), _back_and_forth(20.0, 100.0, 250.0, 1.2))
 
 
 def flick() -> VectorTrack:
