@@ -95,5 +95,5 @@ def test_the_pytest_plugin_makes_an_unreachable_device_one_error(tmp_path: Path)
 def test_the_pytest_plugin_collects_without_running(tmp_path: Path) -> None:
     run, _ = pytest_run(tmp_path, "--hcard-driver=control:drops-reports", "--collect-only")
     assert run.returncode == 0, run.stdout[-2000:]
-    assert "17 tests collected" in run.stdout
+    assert "18 tests collected" in run.stdout
     assert "device.safety::cases" in run.stdout and "passed" not in run.stdout
