@@ -11,22 +11,16 @@ for the FAIL a row needs.
 
 from __future__ import annotations
 
-import re
-
 import pytest
 
 from hcard_conformance.context import Context
 from hcard_conformance.faulty.faults import FAULTS, fault_uri
-from hcard_conformance.faulty.known_faults import KNOWN_FAULTS, markdown_table
+from hcard_conformance.faulty.known_faults import KNOWN_FAULTS
 from hcard_conformance.registry import BUILTIN_CHECKS
 from hcard_conformance.result import FAIL, PASS, CheckResult
 from hcard_conformance.runner import run_suite
 from hcard_device.controls import CATCHES
-from tests.helpers.repository import REPO
-
-README = REPO / "conformance" / "README.md"
-BEGIN = "<!-- known-faults: generated from hcard_conformance/faulty/known_faults.py -->\n"
-END = "<!-- known-faults: end -->"
+from tests.helpers.known_fault_table import README, expected_block, readme_block
 
 
 def run_row(fault: str, strength: float) -> list[CheckResult]:
@@ -84,10 +78,12 @@ def test_every_fault_has_one_row_with_strengths_in_its_range() -> None:
 
 def test_the_readme_table_is_the_data() -> None:
     """conformance/README.md holds the table made from the rows and the reference device's
-    negative controls (``controls.CATCHES``); on a difference, the expected table is below."""
-    text = README.read_text(encoding="utf-8")
-    found = re.search(re.escape(BEGIN) + r"(.*?)" + re.escape(END), text, flags=re.S)
-    assert found, f"conformance/README.md has no {BEGIN.strip()} ... {END} block"
-    expected = markdown_table(CATCHES)
-    assert found.group(1) == expected, "expected:\n" + expected
-    assert all(f"`control:{name}`" in expected for name in CATCHES)
+    negative controls (``controls.CATCHES``); ``python -m tests.helpers.known_fault_table``
+    rewrites it after a change."""
+    found = readme_block(README.read_text(encoding="utf-8"))
+    assert found is not None, "conformance/README.md has lost the known-fault table's markers"
+    assert found == expected_block(), (
+        "the known-fault table of conformance/README.md is not the data; run python -m "
+        "tests.helpers.known_fault_table")
+    assert all(f"`control:{name}`" in found for name in CATCHES)
+    assert all(f"`faulty://{row.fault}`" in found for row in KNOWN_FAULTS)
