@@ -57,8 +57,9 @@ def _parse_options(pairs: tuple[str, ...]) -> dict[str, Any]:
 @verbosity_options
 @click.option("--driver", "driver_name", required=True, metavar="NAME",
               help="Implementation under test: 'reference' (hcard.render), a device URI "
-                   "(sim://, usbip://HOST:PORT/BUSID, hid://PATH, ...) or a negative control "
-                   "(control:NAME; see conformance/README.md).")
+                   "(sim://, usbip://HOST:PORT/BUSID, hid://PATH, ...), a negative control "
+                   "(control:NAME) or the faulty device (faulty://FAULT?strength=S); see "
+                   "conformance/README.md.")
 @click.option("--level", "levels", multiple=True, type=click.Choice(LEVEL_NAMES),
               help="Level to run (repeatable); default: all levels.")
 @click.option("--check", "select", multiple=True, metavar="PREFIX",

@@ -239,6 +239,8 @@ def _loss_note(found: dict[str, Any]) -> str:
 
 def _entries(ctx: Context) -> list[Any]:
     wanted = ctx.options.get("renders")  # optional subset of case names, e.g. in tests
+    if isinstance(wanted, str):  # from the command line: --option renders=CASE[,CASE]
+        wanted = wanted.split(",")
     return [e for e in ctx.manifest.renders if not wanted or e.name in wanted]
 
 

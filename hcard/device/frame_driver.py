@@ -134,7 +134,7 @@ class FrameDriver(Driver):
         self._hardware = Limits.from_si(spec.max_amplitude_m, spec.max_voltage_v,
                                         spec.max_current_a)
         self._limits = self._hardware
-        self._rendering = HostRendering(self.device_profile(), spec.frame_rate_hz)
+        self._rendering = self.host_rendering(self.device_profile(), spec.frame_rate_hz)
         self._clipping: CardClipping | None = None  # of the active card; None: no card
         self._generation = 0
         self._upload_status = UploadStatus(int(UploadState.IDLE), int(UploadResult.OK),
@@ -151,6 +151,12 @@ class FrameDriver(Driver):
         self._sequence = 0
         self._counts = {"input": 0, "output": 0, "rejected": 0, "trips": 0, "latched": 0}
         self._watchdog_on = False
+
+    def host_rendering(self, profile: DeviceProfile, frame_rate_hz: float) -> HostRendering:
+        """What renders the card on the host, frame by frame, with ``profile`` at the device's
+        ``frame_rate_hz`` (Hz): a :class:`HostRendering`. A subclass may return a subclass of it
+        that renders otherwise (the conformance suite's deliberately faulty device does)."""
+        return HostRendering(profile, frame_rate_hz)
 
     # ------------------------------------------------------------------ what the host knows
 

@@ -167,3 +167,17 @@ def test_frame_count_mismatch_is_infinite_a0() -> None:
     report = run_suite(ctx, ("renderer",), select=("renderer.exact",))
     (result,) = report.results
     assert not result.passed and result.value == np.inf
+
+
+def test_renders_given_as_text_are_whole_case_names() -> None:
+    """``--option renders=A,B`` arrives as text: the renders named, comma-separated, each a
+    whole case name (a name inside another, or a misspelt one, selects nothing)."""
+    from hcard_conformance.renderer_level import _entries
+
+    def chosen(text: str) -> list[str]:
+        return [e.name for e in _entries(Context.for_driver("reference",
+                                                            options={"renders": text}))]
+
+    assert chosen("edge@fast-stroke,coarse-grating@slow-stroke") == [
+        "edge@fast-stroke", "coarse-grating@slow-stroke"]
+    assert chosen("xedge@slow-stroke") == []

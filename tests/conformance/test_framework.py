@@ -108,8 +108,9 @@ def test_each_builtin_check_name_is_spelled_once() -> None:
 
 
 def test_listing_the_plugins_imports_no_check_module_and_no_driver() -> None:
-    """``hcard plugins`` lists 17 checks and hcard's 5 drivers from their tables (rows, not
-    modules), whatever other drivers are installed."""
+    """``hcard plugins`` lists 17 checks and hcard's 6 drivers from their tables (rows, not
+    modules), whatever other drivers are installed; of the faulty device it imports the entry
+    point's module, which holds the rows, and nothing of its driver."""
     code = ("import sys, warnings\n"
             "from hcard.plugins.registry import get_registry\n"
             "warnings.simplefilter('ignore')\n"
@@ -123,9 +124,11 @@ def test_listing_the_plugins_imports_no_check_module_and_no_driver() -> None:
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           check=True)
     counts, imported = done.stdout.splitlines()
-    assert counts.split() == ["18", "5"]  # usbip, pyusb, hid; sim, control
-    assert ast.literal_eval(imported) == ["hcard_conformance.check_names",
-                                          "hcard_conformance.registry", "hcard_conformance.result"]
+    assert counts.split() == ["18", "6"]  # usbip, pyusb, hid; sim, control; faulty
+    assert ast.literal_eval(imported) == [
+        "hcard_conformance.check_names", "hcard_conformance.faulty",
+        "hcard_conformance.faulty.plugin", "hcard_conformance.registry",
+        "hcard_conformance.result"]
 
 
 def test_plugin_checks_join_the_suite() -> None:

@@ -12,6 +12,7 @@ from hcard import build
 from hcard.device.errors import DeviceError
 from hcard.device.frame_device import FrameDevice, FrameDeviceInfo, Measurement
 from hcard.device.frame_driver import HOST_SILENCE_S, FrameDriver
+from hcard.device.host_rendering import FrameBlock, HostRendering
 from hcard.device.protocol import ClipReason, FaultBits, Limits, StateFlags
 from hcard.device.uri import DeviceUri
 from hcard.physics.device_limits import DeviceLimits
@@ -103,6 +104,38 @@ def test_lowered_limits_clamp_every_command_and_a_greedy_card_is_reported_clippe
     assert max(s.amplitude_m for s in played) == pytest.approx(0.5e-6, abs=1e-9)
     assert all(s.faults & FaultBits.AMPLITUDE_LIMIT for s in played)
     assert all(s.faults & FaultBits.CARD_CLIPPED for s in played)
+
+
+class HalvedRendering(HostRendering):
+    """Renders every command at half the amplitude the profile asks (a driver's own rendering)."""
+
+    def frames(self, first: int, count: int, *, running: bool,
+               limits: tuple[float, float]) -> FrameBlock:
+        block = super().frames(first, count, running=running, limits=limits)
+        block.amplitude_m[:] *= 0.5
+        return block
+
+
+class HalvingDriver(IdealDriver):
+    def host_rendering(self, profile: DeviceProfile, frame_rate_hz: float) -> HostRendering:
+        return HalvedRendering(profile, frame_rate_hz)
+
+
+def test_a_driver_renders_with_the_host_rendering_it_makes() -> None:
+    """FrameDriver.host_rendering is where a driver brings a rendering of its own: every frame
+    the device plays comes from it (half the ideal driver's amplitude here)."""
+    plain, halving = opened(), HalvingDriver(DeviceUri("ideal://plate", "ideal"))
+    played = []
+    for driver in (plain, halving):
+        driver.upload_card(uniform(0.5))
+        driver.set_touch_source(host=True)
+        driver.start()
+        for k in range(3):
+            driver.send_finger(k * 0.01, 20.0 + 0.6 * k, 30.0, 0.5, True)
+            states = driver.collect_until((k + 1) * 0.01)
+        played.append(states[-1].amplitude_m)
+    assert played[0] > 0.1e-6
+    assert played[1] == pytest.approx(played[0] / 2, abs=1e-9)
 
 
 def test_frames_stop_host_silence_after_the_last_output() -> None:
