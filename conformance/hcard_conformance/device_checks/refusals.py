@@ -19,7 +19,10 @@ hostile host might send:
     a STREAM report of 0 frames: malformed (PO4), counted and flagged;
 ``unknown-feature``
     GET_REPORT(Feature) of an ID the protocol does not define: a STALL (PE1), counted, and the
-    next request (GET DEVICE_INFO) answered as usual.
+    next request (GET DEVICE_INFO) answered as usual;
+``flood``
+    :data:`FLOOD_REPORTS` short reports sent as fast as the host can (PS2: a flood of malformed
+    reports stops neither the input stream nor the device's answers): every one counted.
 
 In every case the device keeps producing STATE reports and keeps RUNNING the session (PE3):
 at least :data:`MIN_REPORTS` reports in the :data:`AFTER_S` that follow, the last with
@@ -52,7 +55,7 @@ from hcard_conformance.realtime import NotKept, attempted_case, device_lag, reas
 from hcard_conformance.result import CannotAssess, CheckResult
 
 REFUSAL_CASES = ("padded-report", "short-report", "unknown-output", "unknown-command",
-                 "bad-stream", "unknown-feature")
+                 "bad-stream", "unknown-feature", "flood")
 """The cases of ``device.refusals``, in order."""
 BEFORE_S = 0.02
 """Reports read before each case, s (the last one gives the count of rejections so far)."""
@@ -70,13 +73,16 @@ UNKNOWN_COMMAND = 0xFE
 """A CONTROL command no protocol version defines."""
 STREAM_LAYOUT = Stream.STRUCT
 """STREAM on the wire: ID, ``stream_seq``, ``count``, then the frames (PO3)."""
+FLOOD_REPORTS = 200
+"""Malformed reports of the ``flood`` case: 0.2 s of them at the 1 kHz a full-speed interrupt
+pipe carries, sent back to back."""
 COUNTER_MODULO = 1 << 16
 """STATE ``rejected_requests`` wraps at 2**16."""
 
 
 @dataclass(frozen=True)
 class Refusal:
-    """One case: what the host sends and how many rejections it must cause (0 or 1)."""
+    """One case: what the host sends and how many rejections it must cause."""
 
     send: Callable[[Driver], str]
     """Sends the bytes and says what happened on the host's side ("" when nothing to say)."""
@@ -92,9 +98,10 @@ def _keepalive() -> bytes:
     return Control(int(Command.KEEPALIVE)).encode()
 
 
-def _send(data: bytes) -> Callable[[Driver], str]:
+def _send(data: bytes, times: int = 1) -> Callable[[Driver], str]:
     def send(driver: Driver) -> str:
-        driver.send_raw(data)
+        for _ in range(times):
+            driver.send_raw(data)
         return ""
 
     return send
@@ -125,6 +132,7 @@ def refusals() -> dict[str, Refusal]:
         "unknown-command": Refusal(_send(bytes([ReportId.CONTROL, UNKNOWN_COMMAND, 0])), 1),
         "bad-stream": Refusal(_send(_empty_stream()), 1),
         "unknown-feature": Refusal(_unknown_feature, 1),
+        "flood": Refusal(_send(keepalive[:-1], FLOOD_REPORTS), FLOOD_REPORTS),
     }
 
 

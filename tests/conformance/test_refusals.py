@@ -1,0 +1,52 @@
+"""Check ``device.refusals`` (spec/conformance.md 4.9, X1): the reference device passes every
+case; the control that drops refused reports silently fails every output case, by the count
+it did not keep; a device rendered on the host is not judged by it."""
+
+from __future__ import annotations
+
+from hcard_conformance.context import Context
+from hcard_conformance.device_checks import refusals
+from hcard_conformance.result import CheckResult
+from hcard_conformance.runner import run_suite
+
+
+def _cases(uri: str) -> dict[str, CheckResult]:
+    report = run_suite(Context.for_driver(uri), ("device",), select=("device.refusals",))
+    return {r.case: r for r in report.results}
+
+
+def test_the_reference_device_passes_every_case() -> None:
+    results = _cases("sim://")
+    assert list(results) == list(refusals.REFUSAL_CASES)
+    for case, r in results.items():
+        assert r.outcome == "PASS", (case, r.detail)
+    assert "200 rejection(s) counted" in results["flood"].detail
+    assert "INVALID_REQUEST flagged" in results["short-report"].detail
+    assert "INVALID_REQUEST" not in results["padded-report"].detail
+
+
+def test_a_device_that_drops_refused_reports_silently_fails_each_output_case() -> None:
+    """``silent-refusals`` neither counts nor flags (PE2): 0 of 1 counted in four cases, 0 of
+    200 in the flood; a padded report and the STALLed feature (counted elsewhere) pass."""
+    results = _cases("control:silent-refusals")
+    failed = {case for case, r in results.items() if r.outcome == "FAIL"}
+    assert failed == {"short-report", "unknown-output", "unknown-command", "bad-stream",
+                      "flood"}
+    assert results["flood"].value == 200
+    assert "0 rejections counted, 1 required" in results["short-report"].detail
+    assert "no STATE report flagged INVALID_REQUEST (PE2)" in results["bad-stream"].detail
+
+
+def test_the_bytes_sent_are_what_each_case_names() -> None:
+    """The empty STREAM is the protocol's 64-byte report with count 0; the short and padded
+    reports are a KEEPALIVE one byte short and padded to 64."""
+    stream = refusals._empty_stream()
+    assert len(stream) == refusals.REPORT_BYTES and stream[0] == 0x11 and stream[3] == 0
+    keepalive = refusals._keepalive()
+    assert len(keepalive) == 3 and keepalive[0] == 0x12
+
+
+def test_a_device_rendered_on_the_host_is_not_judged() -> None:
+    report = run_suite(Context.for_driver("faulty://none"), ("device",),
+                       select=("device.refusals",))
+    assert report.results == [] and "device.refusals" in report.not_applicable
