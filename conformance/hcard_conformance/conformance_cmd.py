@@ -176,8 +176,8 @@ def conformance(driver_name: str, levels: tuple[str, ...], select: tuple[str, ..
 def _list(ctx: Any, levels: tuple[str, ...], select: tuple[str, ...]) -> None:
     """Print the plan of a run (:func:`hcard_conformance.plan.plan_suite`), measuring nothing:
     ``CHECK::CASE`` a line on standard output (``CHECK::(cases)`` for a check that declares
-    none, ``CHECK::(error)`` for one that cannot say, its error on standard error), then the
-    checks that do not apply, on standard error."""
+    none, whose cases its run names; ``CHECK::(error)`` for one that cannot say, its error on
+    standard error), then the checks that do not apply, on standard error."""
     from hcard_conformance.plan import plan_suite
 
     plan = plan_suite(ctx, levels, select=select)
@@ -185,9 +185,9 @@ def _list(ctx: Any, levels: tuple[str, ...], select: tuple[str, ...]) -> None:
         if planned.error is not None:
             click.echo(f"{planned.name}::{planned.error.case}")
             click.echo(f"{planned.name}: ERROR {planned.error.detail}", err=True)
-        for case in planned.cases if planned.cases is not None else ():
+        for case in planned.cases or ():
             click.echo(f"{planned.name}::{case}")
-        if planned.cases is None and planned.error is None:
+        if not planned.cases and planned.error is None:
             click.echo(f"{planned.name}::(cases)")
     if plan.not_applicable:
         click.echo(f"not applicable: {', '.join(plan.not_applicable)}", err=True)

@@ -158,7 +158,8 @@ class CheckNode(pytest.Collector):
     def collect(self) -> list[ConformanceItem]:
         """An item per declared case (those named by node ID, when some are), the ERROR of a
         check that could not say whether it applies or what its cases are, or one
-        :data:`UNDECLARED` item for a check that declares none.
+        :data:`UNDECLARED` item for a check that declares none (or declares an empty list: its
+        run reports ``(none)``, which fails, spec Q6).
 
         Raises:
             CaseNotFound: a node ID names a case the check does not declare.
@@ -167,7 +168,7 @@ class CheckNode(pytest.Collector):
         if planned.error is not None:
             return [ConformanceItem.from_parent(self, name=planned.error.case, check=self.name,
                                                 level=level, result=planned.error)]
-        if planned.cases is None:
+        if not planned.cases:
             names = sorted(self.wanted) if self.wanted else [UNDECLARED]
             return [ConformanceItem.from_parent(self, name=name, check=self.name, level=level,
                                                 undeclared=not self.wanted) for name in names]
@@ -302,8 +303,8 @@ class Suite:
         narrowed: dict[str, frozenset[str]] = {}
         for planned in chosen:
             names = frozenset(i.name for i in by_check[planned.name] if not i.undeclared)
-            whole = planned.cases is None and not names
-            if not whole and (planned.cases is None or not names >= set(planned.cases)):
+            whole = not planned.cases and not names
+            if not whole and (not planned.cases or not names >= set(planned.cases)):
                 narrowed[planned.name] = names
         self.ctx.selected_cases = narrowed
         report = run_suite(self.ctx, self.plan.levels, checks=[p.check for p in chosen],
@@ -333,7 +334,7 @@ class Suite:
                 continue
             planned = self.plan.check(result.check)
             declared = planned.cases if planned is not None else None
-            if result.check in narrowed and (declared is None or name in declared):
+            if result.check in narrowed and (not declared or name in declared):
                 continue  # not selected
             parent = mine[0].parent if mine else None
             if parent is not None:

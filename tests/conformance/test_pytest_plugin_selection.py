@@ -150,27 +150,38 @@ def short(ctx):
     yield CheckResult("acme.short", "format", "x", True)
 
 
+@check(name="acme.nothing", level="format", cases=())
+def nothing(ctx):
+    ran("acme.nothing")
+    return iter(())
+
+
 plugin = types.ModuleType("acme_checks")
-plugin.hcard_conformance_checks = hookimpl(lambda: [undeclared, partly, short])
+plugin.hcard_conformance_checks = hookimpl(lambda: [undeclared, partly, short, nothing])
 get_registry().register(plugin, package="acme")
 '''
-"""A vendor's conftest.py adding three checks: one declaring no cases, one reporting a case it
-did not declare, one not reporting a case it declared; each notes in ran.txt that it ran."""
+"""A vendor's conftest.py adding four checks: one declaring no cases, one reporting a case it
+did not declare, one not reporting a case it declared, one declaring and reporting none (which
+fails, spec Q6); each notes in ran.txt that it ran."""
 
 
 def test_cases_a_check_did_not_declare_are_reported_and_none_is_dropped(tmp_path: Path) -> None:
     (tmp_path / "conftest.py").write_text(VENDOR_CHECKS)
     ran = tmp_path / "ran.txt"
     listed, _ = pytest_run(tmp_path, REFERENCE, "--hcard-check=acme", "--collect-only")
-    assert collected(listed.stdout) == ["acme.partly::a", "acme.short::x", "acme.short::y",
+    assert collected(listed.stdout) == ["acme.nothing::(cases)", "acme.partly::a",
+                                        "acme.short::x", "acme.short::y",
                                         "acme.undeclared::(cases)"], listed.stdout[-2000:]
     assert not ran.exists()
     run, xml = pytest_run(tmp_path, REFERENCE, "--hcard-check=acme")
-    assert junit_cases(xml) == ["acme.partly::a", "acme.partly::b", "acme.short::x",
-                                "acme.short::y", "acme.undeclared::one", "acme.undeclared::two"]
-    assert dashboard(xml)["red"] == ["acme.short.y", "acme.undeclared.two"]
+    assert junit_cases(xml) == ["acme.nothing::(none)", "acme.partly::a", "acme.partly::b",
+                                "acme.short::x", "acme.short::y", "acme.undeclared::one",
+                                "acme.undeclared::two"]
+    assert dashboard(xml)["red"] == ["acme.nothing.(none)", "acme.short.y",
+                                     "acme.undeclared.two"]
     assert "acme.short [format] y: ERROR acme.short did not report case y" in run.stdout
-    assert ran.read_text().split() == ["acme.partly", "acme.short", "acme.undeclared"]
+    assert ran.read_text().split() == ["acme.nothing", "acme.partly", "acme.short",
+                                       "acme.undeclared"]
     ran.unlink()
     again, xml = pytest_run(tmp_path, REFERENCE, "acme.undeclared::two", in_folder=False)
     assert junit_cases(xml) == ["acme.undeclared::two"], again.stdout[-2000:]
