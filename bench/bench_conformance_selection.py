@@ -28,7 +28,11 @@ import tempfile
 import time
 from pathlib import Path
 
-PLUGIN = ("-p", "hcard_conformance.pytest_plugin", "-p", "no:cacheprovider", "-q")
+PLUGIN = ("-p", "hcard_conformance.pytest_plugin", "-p", "no:cacheprovider",
+          "-p", "no:hypothesispytest", "-q")
+"""The plugin, without the cache and without Hypothesis's pytest plugin (a dev dependency of
+this repository that a vendor's pytest need not have: it imports Hypothesis for its terminal
+summary, ~2 s of every run here)."""
 REFERENCE = "--hcard-driver=reference"
 ONE_CASE = "renderer.friction_error::single-grating@fast-stroke"
 ONE_DEVICE_CASE = "device.friction::dense-grating"
