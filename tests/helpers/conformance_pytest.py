@@ -15,6 +15,11 @@ PROGRESS = re.compile(r"^hcard conformance: (\S+): (\d+) cases? in [0-9.]+ s$", 
 """The plugin's line per check run (hcard_conformance.pytest_plugin, not printed with -q)."""
 
 
+NOT_THE_VENDORS = ("-p", "no:hypothesispytest")
+"""pytest plugins of this repository's dev environment that a vendor's run need not have:
+Hypothesis's imports Hypothesis for its terminal summary, ~1-2 s of every run."""
+
+
 def dashboard(xml: bytes) -> dict[str, list[str]]:
     """Each case's colour as a dashboard shows it, by ``classname.name``."""
     colours: dict[str, list[str]] = {"red": [], "skipped": [], "green": []}
@@ -47,7 +52,7 @@ def pytest_run(folder: Path, *args: str, quiet: bool = True, in_folder: bool = T
     junit = folder / "plugin.xml"
     junit.unlink(missing_ok=True)
     run = subprocess.run([sys.executable, "-m", "pytest", "-p", "hcard_conformance.pytest_plugin",
-                          "-p", "no:cacheprovider", *(["-q"] if quiet else []),
+                          "-p", "no:cacheprovider", *NOT_THE_VENDORS, *(["-q"] if quiet else []),
                           f"--junitxml={junit}", *args, *([str(folder)] if in_folder else [])],
                          capture_output=True, text=True, cwd=folder, timeout=600)
     return run, junit.read_bytes() if junit.exists() else b""
