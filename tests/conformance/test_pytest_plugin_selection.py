@@ -79,7 +79,7 @@ def test_the_node_id_of_a_failure_selects_it_again(tmp_path: Path) -> None:
     options = (REFERENCE, "--hcard-level=format", f"--hcard-vectors={vectors}")
     run, _ = pytest_run(tmp_path, *options)
     assert run.returncode == 1, run.stdout[-2000:]
-    (node_id,) = re.findall(r"^FAILED (\S+) - ", run.stdout, re.M)
+    (node_id,) = re.findall(r"^FAILED (\S+)", run.stdout, re.M)
     assert node_id == f"format.reject::{victim.name}"
     again, xml = pytest_run(tmp_path, *options, "-v", node_id, quiet=False, in_folder=False)
     assert again.returncode == 1, again.stdout[-2000:]
