@@ -19,7 +19,8 @@ and a non-zero exit; anything else escaping is a bug. The one hierarchy, by kind
 - ``hcard.device.errors.DeviceError``: the device failed (``DeviceTimeout``, also a
   :class:`TimeoutError`; ``DeviceStall``, ``SessionBusy``, ``SessionLost``), and
   ``hcard.device.protocol.base.ProtocolError`` for malformed reports.
-- The conformance suite's ``CannotAssess`` and ``ConformanceFailure``.
+- The conformance suite's ``CannotAssess``, and its pytest plugin's ``ConformanceFailure`` and
+  ``CaseNotFound`` (a node ID naming no declared case).
 """
 
 from __future__ import annotations

@@ -81,9 +81,12 @@ def _parse_options(pairs: tuple[str, ...]) -> dict[str, Any]:
                    "(a bench PC; default) or 'software-emulation' (an emulated guest: "
                    "looser latency and report-loss bounds; rendered friction and dynamics "
                    "not applicable).")
+@click.option("--list", "list_cases", is_flag=True,
+              help="List the cases a run would measure, CHECK::CASE a line (the pytest "
+                   "plugin's node IDs), and measure nothing.")
 def conformance(driver_name: str, levels: tuple[str, ...], select: tuple[str, ...],
                 junit_path: Path | None, json_path: Path | None, vectors_dir: Path | None,
-                option_pairs: tuple[str, ...], timing: str | None) -> None:
+                option_pairs: tuple[str, ...], timing: str | None, list_cases: bool) -> None:
     """Run the conformance suite against an implementation.
 
     Exits 0 when every case passes, 1 when one fails, 2 when the driver or vectors cannot be
@@ -94,6 +97,7 @@ def conformance(driver_name: str, levels: tuple[str, ...], select: tuple[str, ..
       hcard conformance --driver sim://
       hcard conformance --driver usbip://127.0.0.1:3240/1-1 --junit results.xml
       hcard conformance --driver sim:// --level format --json - | jq .totals
+      hcard conformance --driver sim:// --level device --list
     """
     from hcard.atomic import write_atomically
     from hcard_conformance.context import Context
@@ -136,6 +140,9 @@ def conformance(driver_name: str, levels: tuple[str, ...], select: tuple[str, ..
         except (HcardError, OSError, ValueError) as exc:
             raise cannot_start(f"cannot open driver {driver_name!r}: {exc}") from None
 
+    if list_cases:
+        _list(ctx, levels or LEVEL_NAMES, select)
+        return
     started = time.perf_counter()
 
     def check_done(chk: Any, results: list[Any], seconds: float) -> None:
@@ -165,6 +172,26 @@ def conformance(driver_name: str, levels: tuple[str, ...], select: tuple[str, ..
                 click.echo(f"wrote {path}", file=sys.stderr)
     if not report.passed:
         raise SystemExit(1)
+
+
+def _list(ctx: Any, levels: tuple[str, ...], select: tuple[str, ...]) -> None:
+    """Print the plan of a run (:func:`hcard_conformance.plan.plan_suite`), measuring nothing:
+    ``CHECK::CASE`` a line on standard output (``CHECK::(cases)`` for a check that declares
+    none, whose cases its run names; ``CHECK::(error)`` for one that cannot say, its error on
+    standard error), then the checks that do not apply, on standard error."""
+    from hcard_conformance.plan import plan_suite
+
+    plan = plan_suite(ctx, levels, select=select)
+    for planned in plan.checks:
+        if planned.error is not None:
+            click.echo(f"{planned.name}::{planned.error.case}")
+            click.echo(f"{planned.name}: ERROR {planned.error.detail}", err=True)
+        for case in planned.cases or ():
+            click.echo(f"{planned.name}::{case}")
+        if not planned.cases and planned.error is None:
+            click.echo(f"{planned.name}::(cases)")
+    if plan.not_applicable:
+        click.echo(f"not applicable: {', '.join(plan.not_applicable)}", err=True)
 
 
 COMMANDS = [conformance]

@@ -30,7 +30,7 @@ from hcard.v1 import card_pb2 as pb
 
 if TYPE_CHECKING:
     from hcard.device.base import Driver
-    from hcard.device.protocol import State
+    from hcard.device.protocol import DeviceInfo, State
 
 REFERENCE = "reference"
 """Driver name of the reference implementation (hcard.render, no device)."""
@@ -55,6 +55,9 @@ CLOCK_MISMATCH_KEY = "clock-mismatch"
 though none was lost (:func:`~hcard_conformance.realtime.clock_mismatch`), or empty."""
 """:attr:`Context.cache` key: why the device did not keep real time in the last play of
 :meth:`Context.render` (REALTIME_LAG, device protocol PI4); empty when it did."""
+
+DEVICE_INFO_KEY = "device-info"
+""":attr:`Context.cache` key of the device's DEVICE_INFO (:meth:`Context.device_info`)."""
 
 Renderer = Callable[[pb.Card, FingerTrack, RenderOptions], Frames]
 
@@ -131,6 +134,9 @@ class Context:
         vectors_root: the vectors directory (``spec/vectors``).
         options: free-form options for checks (for example ``{"tail_s": 0.05}``).
         renderer: override of :meth:`render` (tests use it to plant a wrong renderer).
+        selected_cases: the cases wanted of some checks, by check name (a run of part of a
+            check, such as pytest's ``-k``); a check not named here runs all its cases
+            (:meth:`wants`).
     """
 
     driver_name: str
@@ -139,7 +145,33 @@ class Context:
     options: dict[str, Any] = field(default_factory=dict)
     renderer: Renderer | None = None
     cache: dict[Any, Any] = field(default_factory=dict, repr=False)
+    selected_cases: dict[str, frozenset[str]] = field(default_factory=dict)
     _manifest: Any = field(default=None, init=False, repr=False)
+
+    def wants(self, check: str, case: str) -> bool:
+        """Whether ``check`` is to measure ``case``: yes unless :attr:`selected_cases` names
+        the check without the case. A check whose cases are measured one by one skips the
+        cases not wanted; one that measures them together measures them all, and whoever
+        selected keeps the results it wants."""
+        chosen = self.selected_cases.get(check)
+        return chosen is None or case in chosen
+
+    def device_info(self) -> DeviceInfo:
+        """DEVICE_INFO of the implementation's device, read once per Context (the driver is
+        opened and closed for it): what a check whose cases depend on the device declares
+        them from before it runs (:func:`hcard_conformance.registry.declared_cases`).
+
+        Raises:
+            ValueError: the implementation has no device (``reference``).
+            HcardError, OSError: the driver's own errors opening it.
+        """
+        if self.open_driver is None:
+            raise ValueError(f"{self.driver_name} has no device: no DEVICE_INFO")
+        if DEVICE_INFO_KEY not in self.cache:
+            with self.open_driver() as driver:
+                self.cache[DEVICE_INFO_KEY] = driver.info()
+        info: DeviceInfo = self.cache[DEVICE_INFO_KEY]
+        return info
 
     @property
     def frame_exact(self) -> bool:

@@ -7,6 +7,10 @@
 * ``format.reject`` (Q4): every invalid vector is rejected with a :class:`CardError` whose
   reason contains the documented fragment and whose field path is the documented one.
 
+Each check declares its cases from the manifest before it runs (``parse_cases``,
+``round_trip_cases``, ``reject_cases``, named by the registry) and measures only the cases a
+run wants (:meth:`Context.wants`).
+
 These exercise the host-side reader (``hcard.card_io``) that every driver uploads through; the
 level is the same whichever driver is named. A device's own acceptance of cards is judged at
 the device level.
@@ -24,6 +28,24 @@ from hcard_conformance.context import Context
 from hcard_conformance.result import CheckResult
 
 LEVEL = "format"
+FORMS = ("binary", "json")
+"""The two files of every vector card, in the order ``format.parse`` reads them."""
+
+
+def parse_cases(ctx: Context) -> list[str]:
+    """Cases of ``format.parse`` (registry declaration): ``CARD.binary`` and ``CARD.json`` of
+    every vector card."""
+    return [f"{entry.name}.{form}" for entry in ctx.manifest.cards for form in FORMS]
+
+
+def round_trip_cases(ctx: Context) -> list[str]:
+    """Cases of ``format.round_trip`` (registry declaration): every vector card."""
+    return [entry.name for entry in ctx.manifest.cards]
+
+
+def reject_cases(ctx: Context) -> list[str]:
+    """Cases of ``format.reject`` (registry declaration): every invalid vector."""
+    return [entry.name for entry in ctx.manifest.invalid]
 
 
 def _first_difference(a: bytes, b: bytes) -> str:
@@ -38,7 +60,9 @@ def _first_difference(a: bytes, b: bytes) -> str:
 def check_parse(ctx: Context) -> Iterator[CheckResult]:
     """Q2: parse and validate both files of every card; metric = validation errors found."""
     for entry in ctx.manifest.cards:
-        for form, path in (("binary", entry.binary), ("json", entry.json)):
+        for form, path in zip(FORMS, (entry.binary, entry.json), strict=True):
+            if not ctx.wants(FORMAT_PARSE, f"{entry.name}.{form}"):
+                continue
             try:
                 card = parse_card(read_card_file(path), source=path, check=False)
                 problems = card_errors(card)
@@ -55,6 +79,8 @@ def check_parse(ctx: Context) -> Iterator[CheckResult]:
 def check_round_trip(ctx: Context) -> Iterator[CheckResult]:
     """Q3: metric = number of round trips (of three) whose bytes differ."""
     for entry in ctx.manifest.cards:
+        if not ctx.wants(FORMAT_ROUND_TRIP, entry.name):
+            continue
         binary = read_card_file(entry.binary)
         json_bytes = read_card_file(entry.json)
         from_binary = card_from_bytes(binary, source=entry.binary)
@@ -74,6 +100,8 @@ def check_round_trip(ctx: Context) -> Iterator[CheckResult]:
 def check_reject(ctx: Context) -> Iterator[CheckResult]:
     """Q4: metric = 0 when rejected as documented, 1 otherwise."""
     for entry in ctx.manifest.invalid:
+        if not ctx.wants(FORMAT_REJECT, entry.name):
+            continue
         try:
             parse_card(read_card_file(entry.file), source=entry.file)
         except CardError as exc:

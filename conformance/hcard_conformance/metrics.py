@@ -258,6 +258,12 @@ def relative_error(impl: Signal, golden: Signal, tol: Tolerances,
     return Metric(float(errors[d]), detail)
 
 
+def relative_error_applies(golden: Signal, tol: Tolerances) -> bool:
+    """Whether A1 applies to the golden render (spec Q6: :func:`relative_error` of the golden
+    against itself is applicable): some frame is compared, without computing the metric."""
+    return bool(np.any(compared_frames(golden, golden, tol)))
+
+
 # ---------------------------------------------------------------------------------- A2-A4
 
 
@@ -310,6 +316,29 @@ def _nearest_peak(spectrum: np.ndarray, window: np.ndarray, k: int, floor: float
     return int(local[order[0]])
 
 
+def golden_peaks(golden: Signal, start: int, stop: int, tol: Tolerances,
+                 band_limit_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The golden frames ``[start, stop)``'s spectrum and the peaks A2/A3 compare (spec 3.3):
+    frequencies (Hz), amplitudes (relative friction), and the bins of the (up to) four largest
+    local maxima at least ``peak_min_amplitude`` high, above two bins of the segment's
+    resolution and at most ``band_limit_hz``."""
+    fs = frame_rate(golden)
+    n = stop - start
+    f, gold = _spectrum(golden.m[start:stop], fs)
+    peak = np.zeros(gold.size, dtype=bool)
+    peak[1:-1] = (gold[1:-1] >= gold[:-2]) & (gold[1:-1] > gold[2:])
+    peak &= (gold >= tol.peak_min_amplitude) & (f > 2 * fs / n) & (f <= band_limit_hz)
+    top = np.flatnonzero(peak)
+    return f, gold, top[np.argsort(gold[top])[::-1][:4]]
+
+
+def components_apply(golden: Signal, tol: Tolerances, band_limit_hz: float) -> bool:
+    """Whether A2 and A3 apply to the golden render (spec Q6: :func:`component_errors` of the
+    golden against itself is applicable): a segment has a peak to compare."""
+    return any(golden_peaks(golden, start, stop, tol, band_limit_hz)[2].size
+               for start, stop in segments(golden, golden, tol))
+
+
 def component_errors(impl: Signal, golden: Signal, tol: Tolerances,
                      band_limit_hz: float) -> tuple[Metric, Metric]:
     """A2 (amplitude, relative to the golden mean) and A3 (relative frequency): the worst over
@@ -319,13 +348,8 @@ def component_errors(impl: Signal, golden: Signal, tol: Tolerances,
     worst_f: tuple[float, str] = (-1.0, "")
     for start, stop in segments(impl, golden, tol):
         n = stop - start
-        f, gold = _spectrum(golden.m[start:stop], fs)
+        f, gold, top = golden_peaks(golden, start, stop, tol, band_limit_hz)
         _, mine = _spectrum(impl.m[start:stop], fs)
-        peak = np.zeros(gold.size, dtype=bool)
-        peak[1:-1] = (gold[1:-1] >= gold[:-2]) & (gold[1:-1] > gold[2:])
-        peak &= (gold >= tol.peak_min_amplitude) & (f > 2 * fs / n) & (f <= band_limit_hz)
-        top = np.flatnonzero(peak)
-        top = top[np.argsort(gold[top])[::-1][:4]]
         mean = float(np.mean(golden.m[start:stop]))
         where = f"{golden.t[start]:.2f}-{golden.t[stop - 1]:.2f} s"
         for k in top:
@@ -412,16 +436,14 @@ PHASE_TIE = 1e-9
 the smallest lag among them is taken."""
 
 
-def spatial_phase_error(impl: Signal, golden: Signal, tol: Tolerances, track: FingerTrack,
-                        locked: set[int]) -> Metric:
-    """A4: the displacement (mm) of position-locked features, from the lag of the largest
-    correlation coefficient (:func:`phase_correlation`), worst over segments; a segment where
-    the implementation's frames have no variance at any lag counts as not displaced (A1/A2
-    judge a missing texture)."""
-    fs = frame_rate(golden)
-    window = round(tol.correlation_window_s * fs)
+def phase_segments(impl: Signal, golden: Signal, tol: Tolerances, track: FingerTrack,
+                   locked: set[int]) -> list[tuple[int, int, float]]:
+    """The segments A4 judges (spec 3.4), ``(start, stop, mean speed in mm/s)``: those of
+    :func:`segments` on a position-locked texture (``locked``), whose golden friction varies
+    by at least ``peak_min_amplitude``, with touch samples inside, stroked at
+    ``speed_min_mm_s`` or faster."""
     speeds = sample_speeds(track)
-    worst: tuple[float, str] | None = None
+    found = []
     for start, stop in segments(impl, golden, tol):
         if golden.texture is not None and int(golden.texture[start]) not in locked:
             continue
@@ -432,8 +454,29 @@ def spatial_phase_error(impl: Signal, golden: Signal, tol: Tolerances, track: Fi
         if not np.any(inside):
             continue
         vbar = float(np.mean(speeds[inside]))
-        if vbar < tol.speed_min_mm_s:
-            continue
+        if vbar >= tol.speed_min_mm_s:
+            found.append((start, stop, vbar))
+    return found
+
+
+def spatial_phase_applies(golden: Signal, tol: Tolerances, track: FingerTrack,
+                          locked: set[int]) -> bool:
+    """Whether A4 applies to the golden render (spec Q6: :func:`spatial_phase_error` of the
+    golden against itself is applicable), without correlating: a segment to judge."""
+    return bool(phase_segments(golden, golden, tol, track, locked))
+
+
+def spatial_phase_error(impl: Signal, golden: Signal, tol: Tolerances, track: FingerTrack,
+                        locked: set[int]) -> Metric:
+    """A4: the displacement (mm) of position-locked features, from the lag of the largest
+    correlation coefficient (:func:`phase_correlation`), worst over segments; a segment where
+    the implementation's frames have no variance at any lag counts as not displaced (A1/A2
+    judge a missing texture)."""
+    fs = frame_rate(golden)
+    window = round(tol.correlation_window_s * fs)
+    worst: tuple[float, str] | None = None
+    for start, stop, vbar in phase_segments(impl, golden, tol, track, locked):
+        gold = golden.m[start:stop]
         r = phase_correlation(impl, gold, start, window)
         lags = np.arange(-window, window + 1)
         if np.all(np.isnan(r)):
@@ -448,6 +491,29 @@ def spatial_phase_error(impl: Signal, golden: Signal, tol: Tolerances, track: Fi
     return NOT_APPLICABLE if worst is None else Metric(*worst)
 
 
+def boundary_transitions(golden: Signal, tol: Tolerances,
+                         track: FingerTrack) -> list[tuple[int, float]]:
+    """The golden texture transitions A5 judges (spec 3.5), ``(frame, speed in mm/s)``: in
+    contact on both sides, crossed at ``speed_min_mm_s`` or faster (none without textures)."""
+    if golden.texture is None:
+        return []
+    gt = golden.texture
+    both = golden.contact[1:] & golden.contact[:-1]
+    transitions = np.flatnonzero(both & (gt[1:] != gt[:-1])) + 1
+    found = []
+    for j_star in transitions.tolist():
+        v = speed_at(track, float(golden.t[j_star]))
+        if v >= tol.speed_min_mm_s:
+            found.append((j_star, v))
+    return found
+
+
+def boundary_applies(golden: Signal, tol: Tolerances, track: FingerTrack) -> bool:
+    """Whether A5 applies to the golden render (spec Q6: :func:`boundary_error` of the golden
+    against itself is applicable): a transition to judge."""
+    return bool(boundary_transitions(golden, tol, track))
+
+
 def boundary_error(impl: Signal, golden: Signal, tol: Tolerances, track: FingerTrack) -> Metric:
     """A5: the worst misplacement (mm) of a golden texture transition in contact."""
     if golden.texture is None:
@@ -455,13 +521,8 @@ def boundary_error(impl: Signal, golden: Signal, tol: Tolerances, track: FingerT
     fs = frame_rate(golden)
     window = round(tol.correlation_window_s * fs)
     gt = golden.texture
-    both = golden.contact[1:] & golden.contact[:-1]
-    transitions = np.flatnonzero(both & (gt[1:] != gt[:-1])) + 1
     worst: tuple[float, str] | None = None
-    for j_star in transitions.tolist():
-        v = speed_at(track, float(golden.t[j_star]))
-        if v < tol.speed_min_mm_s:
-            continue
+    for j_star, v in boundary_transitions(golden, tol, track):
         a, b = int(gt[j_star - 1]), int(gt[j_star])
         lo, hi = max(j_star - window, 1), min(j_star + window + 1, len(impl))
         if impl.texture is not None:

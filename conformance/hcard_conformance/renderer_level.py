@@ -21,7 +21,10 @@ per 20 ms touch sample) and passes A4 on coarse ones, which is the distinction t
 are built to make.
 
 Each implementation rendering is computed once per run and shared by the checks
-(``Context.cache``).
+(``Context.cache``). Which entries a check reports on is decided from the golden renders
+alone (:func:`applicable_entries`, spec Q6), so each check declares its cases before it runs
+(``exact_cases`` ... ``boundary_cases``, named by the registry) and renders only the entries a
+run wants (:meth:`Context.wants`).
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from hcard.render import Frames
+from hcard.track import FingerTrack
 from hcard_conformance import metrics
 from hcard_conformance.check_names import (
     RENDERER_BOUNDARY,
@@ -142,12 +146,23 @@ def case(ctx: Context, entry: Any) -> dict[str, Any]:
     return found
 
 
+def golden_of(ctx: Context, entry: Any) -> tuple[Signal, FingerTrack]:
+    """The golden render of ``entry`` (its speed onsets as events) and its track, loaded once
+    per Context: what the checks compare with and what says which metrics apply (spec Q6)."""
+    key = ("renderer-golden", entry.name)
+    if key not in ctx.cache:
+        track = ctx.manifest.track(entry.track).load_track()
+        golden = replace(Signal.of(entry.load_arrays()), events=metrics.speed_onsets(track))
+        ctx.cache[key] = (golden, track)
+    found: tuple[Signal, FingerTrack] = ctx.cache[key]
+    return found
+
+
 def _render_case(ctx: Context, entry: Any) -> dict[str, Any]:
     manifest = ctx.manifest
     card_entry = manifest.card(entry.card)
     card = ctx.card(entry.card)
-    track = manifest.track(entry.track).load_track()
-    golden = replace(Signal.of(entry.load_arrays()), events=metrics.speed_onsets(track))
+    golden, track = golden_of(ctx, entry)
     in_contact = max(int(np.count_nonzero(golden.contact)), 1)
     losses: list[int] = []
     late: list[str] = []
@@ -192,9 +207,10 @@ def _counts(losses: list[int]) -> str:
 
 def _each_entry(ctx: Context, name: str, entries: Iterable[Any],
                 judge: Callable[[Any], CheckResult | None]) -> Iterator[CheckResult]:
-    """``judge(entry)`` for every entry, each guarded: an entry whose rendering or metric
-    raises is one ERROR result (spec section 6), the others are judged as usual. ``judge``
-    returns None when its metric does not apply to the entry (spec Q6)."""
+    """``judge(entry)`` for every entry (of check ``name``: :func:`_entries`), each guarded:
+    an entry whose rendering or metric raises is one ERROR result (spec section 6), the others
+    are judged as usual. ``judge`` returns None when its metric does not apply to the entry
+    (spec Q6)."""
     for entry in entries:
 
         def measure(entry: Any = entry) -> Iterator[CheckResult]:
@@ -237,11 +253,89 @@ def _loss_note(found: dict[str, Any]) -> str:
     return note
 
 
-def _entries(ctx: Context) -> list[Any]:
-    wanted = ctx.options.get("renders")  # optional subset of case names, e.g. in tests
-    if isinstance(wanted, str):  # from the command line: --option renders=CASE[,CASE]
-        wanted = wanted.split(",")
-    return [e for e in ctx.manifest.renders if not wanted or e.name in wanted]
+def _metric_applies(ctx: Context, name: str, entry: Any) -> bool:
+    """Whether the metric of check ``name`` applies to ``entry``'s golden render (spec Q6),
+    from the golden alone, without rendering: A0 and A1 wherever a frame is compared, A2/A3 on
+    a card tagged ``dense``, ``oriented``, ``temporal`` or ``bipolar`` whose golden has a
+    spectral peak, A4 on a ``coarse`` or ``sparse`` card with a position-locked segment to
+    judge, A5 where a golden texture transition in contact is crossed fast enough."""
+    golden, track = golden_of(ctx, entry)
+    tol = tolerances(ctx, entry)
+    if name == RENDERER_EXACT:
+        return True
+    if name == RENDERER_FRICTION_ERROR:
+        return metrics.relative_error_applies(golden, tol)
+    if name in (RENDERER_COMPONENT_AMPLITUDE, RENDERER_COMPONENT_FREQUENCY):
+        return bool(_tags(ctx, entry) & COMPONENT_TAGS) and metrics.components_apply(
+            golden, tol, entry.band_limit_hz)
+    if name == RENDERER_SPATIAL_PHASE:
+        if not _tags(ctx, entry) & PHASE_TAGS:
+            return False
+        locked = metrics.position_locked_textures(ctx.card(entry.card), entry.options())
+        return metrics.spatial_phase_applies(golden, tol, track, locked)
+    if name == RENDERER_BOUNDARY:
+        return metrics.boundary_applies(golden, tol, track)
+    raise ValueError(f"{name!r} is not a renderer-level check")
+
+
+def applicable_entries(ctx: Context, name: str) -> list[Any]:
+    """The render entries check ``name`` reports on, in manifest order: those of the manifest
+    (or of ``ctx.options['renders']``, a subset of entry names, e.g. in tests) whose golden
+    render its metric applies to (:func:`_metric_applies`; computed once per Context)."""
+    subset = ctx.options.get("renders")
+    if isinstance(subset, str):  # from the command line: --option renders=CASE[,CASE]
+        subset = subset.split(",")
+    found = []
+    for entry in ctx.manifest.renders:
+        if subset and entry.name not in subset:
+            continue
+        key = ("renderer-applies", name, entry.name)
+        if key not in ctx.cache:
+            ctx.cache[key] = _metric_applies(ctx, name, entry)
+        if ctx.cache[key]:
+            found.append(entry)
+    return found
+
+
+def _entries(ctx: Context, name: str) -> list[Any]:
+    """:func:`applicable_entries` that the run wants (:meth:`Context.wants`): each entry is
+    rendered and judged on its own, so a run of some cases renders only theirs."""
+    return [e for e in applicable_entries(ctx, name) if ctx.wants(name, e.name)]
+
+
+def declared(ctx: Context, name: str) -> list[str]:
+    """The cases check ``name`` reports, before it runs: one per applicable render entry."""
+    return [e.name for e in applicable_entries(ctx, name)]
+
+
+def exact_cases(ctx: Context) -> list[str]:
+    """Cases of ``renderer.exact`` (registry declaration)."""
+    return declared(ctx, RENDERER_EXACT)
+
+
+def friction_error_cases(ctx: Context) -> list[str]:
+    """Cases of ``renderer.friction_error`` (registry declaration)."""
+    return declared(ctx, RENDERER_FRICTION_ERROR)
+
+
+def component_amplitude_cases(ctx: Context) -> list[str]:
+    """Cases of ``renderer.component_amplitude`` (registry declaration)."""
+    return declared(ctx, RENDERER_COMPONENT_AMPLITUDE)
+
+
+def component_frequency_cases(ctx: Context) -> list[str]:
+    """Cases of ``renderer.component_frequency`` (registry declaration)."""
+    return declared(ctx, RENDERER_COMPONENT_FREQUENCY)
+
+
+def spatial_phase_cases(ctx: Context) -> list[str]:
+    """Cases of ``renderer.spatial_phase`` (registry declaration)."""
+    return declared(ctx, RENDERER_SPATIAL_PHASE)
+
+
+def boundary_cases(ctx: Context) -> list[str]:
+    """Cases of ``renderer.boundary`` (registry declaration)."""
+    return declared(ctx, RENDERER_BOUNDARY)
 
 
 def _result(name: str, entry: Any, metric_id: str, metric: Metric, threshold: float,
@@ -281,7 +375,8 @@ def check_exact(ctx: Context) -> Iterator[CheckResult]:
         result.passed = passed
         return result
 
-    yield from _each_entry(ctx, RENDERER_EXACT, _entries(ctx), judge)
+    name = RENDERER_EXACT
+    yield from _each_entry(ctx, name, _entries(ctx, name), judge)
 
 
 def check_friction_error(ctx: Context) -> Iterator[CheckResult]:
@@ -304,18 +399,12 @@ def check_friction_error(ctx: Context) -> Iterator[CheckResult]:
         return _result(RENDERER_FRICTION_ERROR, entry, "A1", metric,
                        tol.friction_rel_jnd, "relative friction")
 
-    yield from _each_entry(ctx, RENDERER_FRICTION_ERROR, _entries(ctx), judge)
+    name = RENDERER_FRICTION_ERROR
+    yield from _each_entry(ctx, name, _entries(ctx, name), judge)
 
 
 def _tags(ctx: Context, entry: Any) -> set[str]:
     return set(ctx.manifest.card(entry.card).tags)
-
-
-def _changes_texture_in_contact(ctx: Context, entry: Any) -> bool:
-    """Whether the golden texture changes while in contact (A5 applies), without rendering."""
-    golden = entry.load_arrays()
-    contact, texture = golden["contact"], golden["texture"]
-    return bool(np.any(contact[1:] & contact[:-1] & (texture[1:] != texture[:-1])))
 
 
 def _components(ctx: Context, entry: Any, which: int, name: str, metric_id: str,
@@ -342,7 +431,8 @@ def check_component_amplitude(ctx: Context) -> Iterator[CheckResult]:
         return _components(ctx, entry, 0, RENDERER_COMPONENT_AMPLITUDE, "A2",
                            tolerances(ctx, entry).component_amplitude_rel, "relative friction")
 
-    yield from _each_entry(ctx, RENDERER_COMPONENT_AMPLITUDE, _entries(ctx), judge)
+    name = RENDERER_COMPONENT_AMPLITUDE
+    yield from _each_entry(ctx, name, _entries(ctx, name), judge)
 
 
 def check_component_frequency(ctx: Context) -> Iterator[CheckResult]:
@@ -352,7 +442,8 @@ def check_component_frequency(ctx: Context) -> Iterator[CheckResult]:
         return _components(ctx, entry, 1, RENDERER_COMPONENT_FREQUENCY, "A3",
                            tolerances(ctx, entry).component_frequency_rel, "fraction")
 
-    yield from _each_entry(ctx, RENDERER_COMPONENT_FREQUENCY, _entries(ctx), judge)
+    name = RENDERER_COMPONENT_FREQUENCY
+    yield from _each_entry(ctx, name, _entries(ctx, name), judge)
 
 
 def check_spatial_phase(ctx: Context) -> Iterator[CheckResult]:
@@ -372,8 +463,8 @@ def check_spatial_phase(ctx: Context) -> Iterator[CheckResult]:
         return _result(RENDERER_SPATIAL_PHASE, entry, "A4", metric, tol.spatial_phase_mm,
                        "mm")
 
-    entries = [e for e in _entries(ctx) if _tags(ctx, e) & PHASE_TAGS]
-    yield from _each_entry(ctx, RENDERER_SPATIAL_PHASE, entries, judge)
+    name = RENDERER_SPATIAL_PHASE
+    yield from _each_entry(ctx, name, _entries(ctx, name), judge)
 
 
 def check_boundary(ctx: Context) -> Iterator[CheckResult]:
@@ -391,5 +482,5 @@ def check_boundary(ctx: Context) -> Iterator[CheckResult]:
             return _unmeasured(RENDERER_BOUNDARY, entry, data, metric_of, metric)
         return _result(RENDERER_BOUNDARY, entry, "A5", metric, tol.boundary_mm, "mm")
 
-    entries = [e for e in _entries(ctx) if _changes_texture_in_contact(ctx, e)]
-    yield from _each_entry(ctx, RENDERER_BOUNDARY, entries, judge)
+    name = RENDERER_BOUNDARY
+    yield from _each_entry(ctx, name, _entries(ctx, name), judge)

@@ -136,6 +136,19 @@ def check_applies(chk: Any, ctx: Context) -> bool | CheckResult:
                             "deciding whether it applies")
 
 
+def choose_checks(levels: Sequence[str], checks: Sequence[Any] | None = None,
+                  select: Sequence[str] = ()) -> tuple[tuple[str, ...], list[Any]]:
+    """The levels of a run, in level order, and its checks: those of ``checks`` (default
+    :func:`all_checks` of the levels) of those levels whose name starts with one of ``select``
+    (any, when empty), in level order."""
+    ordered = tuple(sorted(dict.fromkeys(levels), key=level_index))
+    candidates = list(checks) if checks is not None else all_checks(ordered)
+    chosen = [c for c in candidates if c.level in ordered
+              and (not select or any(c.name.startswith(s) for s in select))]
+    chosen.sort(key=lambda c: level_index(c.level))
+    return ordered, chosen
+
+
 def run_suite(ctx: Context, levels: Sequence[str] = LEVELS, *, checks: Sequence[Any] | None = None,
               select: Sequence[str] = (), progress: Progress | None = None,
               check_done: Callable[[Any, list[CheckResult], float], None] | None = None,
@@ -150,11 +163,7 @@ def run_suite(ctx: Context, levels: Sequence[str] = LEVELS, *, checks: Sequence[
         progress: called after each result.
         check_done: called after each check with the check, its results and its time, s.
     """
-    ordered = tuple(sorted(dict.fromkeys(levels), key=level_index))
-    candidates = list(checks) if checks is not None else all_checks(ordered)
-    chosen = [c for c in candidates if c.level in ordered
-              and (not select or any(c.name.startswith(s) for s in select))]
-    chosen.sort(key=lambda c: level_index(c.level))
+    ordered, chosen = choose_checks(levels, checks, select)
     report = SuiteReport(ctx.driver_name, ordered)
     try:
         report.thresholds = {**ctx.manifest.tolerances, **ctx.options.get("tolerances", {})}

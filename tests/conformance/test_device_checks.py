@@ -145,3 +145,27 @@ def test_a_late_second_sample_is_latency_not_a_friction_error() -> None:
                                  start_s=known + friction.PLATE_SETTLE_S)
     assert measured.rms_relative_error < 0.01
     assert measured.reports >= naive.reports - 10  # only the unsettled start is left out
+
+
+def test_device_checks_of_separate_cases_measure_only_those_a_run_wants() -> None:
+    """A run of some cases (the pytest plugin's -k, spec QP6): device.dynamics measures only
+    the rise time (not the bandwidth sweep), device.upload-integrity only the one refused
+    upload, device.friction only the one play."""
+    ctx = Context.for_driver("sim://")
+    ctx.selected_cases = {"device.dynamics": frozenset({"rise-time"}),
+                          "device.upload-integrity": frozenset({"truncated"}),
+                          "device.friction": frozenset({"dense-grating"})}
+    report = run_suite(ctx, ("device",), select=("device.dynamics", "device.upload-integrity",
+                                                 "device.friction"))
+    assert [(r.check, r.case) for r in report.results] == [
+        ("device.friction", "dense-grating"), ("device.dynamics", "rise-time"),
+        ("device.upload-integrity", "truncated")]
+
+
+def test_device_friction_declares_the_bipolar_case_of_a_device_with_ev() -> None:
+    """DEVICE_INFO's capabilities: the coupled device has EV, the E-ViTa has not."""
+    names = friction.friction_case_names
+    assert names(Context.for_driver("sim://coupled")) == ["coarse-taxtels", "dense-grating",
+                                                          "bipolar"]
+    assert names(Context.for_driver("sim://")) == ["coarse-taxtels", "dense-grating"]
+    assert names(Context.for_driver("reference")) == []

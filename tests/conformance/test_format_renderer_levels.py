@@ -172,11 +172,12 @@ def test_frame_count_mismatch_is_infinite_a0() -> None:
 def test_renders_given_as_text_are_whole_case_names() -> None:
     """``--option renders=A,B`` arrives as text: the renders named, comma-separated, each a
     whole case name (a name inside another, or a misspelt one, selects nothing)."""
-    from hcard_conformance.renderer_level import _entries
+    from hcard_conformance.check_names import RENDERER_EXACT
+    from hcard_conformance.renderer_level import applicable_entries
 
     def chosen(text: str) -> list[str]:
-        return [e.name for e in _entries(Context.for_driver("reference",
-                                                            options={"renders": text}))]
+        ctx = Context.for_driver("reference", options={"renders": text})
+        return [e.name for e in applicable_entries(ctx, RENDERER_EXACT)]
 
     assert chosen("edge@fast-stroke,coarse-grating@slow-stroke") == [
         "edge@fast-stroke", "coarse-grating@slow-stroke"]

@@ -22,7 +22,15 @@ from hcard.cli.main import cli
 from hcard.plugins import hookimpl
 from hcard.plugins.registry import PluginRegistry
 from hcard_conformance.context import Context
-from hcard_conformance.registry import BUILTIN_CHECKS, Check, all_checks, builtin_checks, check
+from hcard_conformance.plan import plan_suite
+from hcard_conformance.registry import (
+    BUILTIN_CHECKS,
+    Check,
+    all_checks,
+    builtin_checks,
+    check,
+    declared_cases,
+)
 from hcard_conformance.report import failure_message, json_bytes, junit_xml, table
 from hcard_conformance.result import CheckResult, measured
 from hcard_conformance.runner import SuiteReport, run_suite
@@ -145,6 +153,84 @@ def test_plugin_checks_join_the_suite() -> None:
     report = run_suite(Context.for_driver("reference"), ("format",), checks=chosen)
     assert report.passed
     assert [r.case for r in report.results if r.check == "acme.always"] == ["one"]
+
+
+def test_a_check_declares_its_cases_as_names_or_a_function_of_the_context() -> None:
+    ctx = Context.for_driver("reference")
+
+    def made(cases: object) -> Check:
+        return check(name="acme.x", level="format", cases=cases)(lambda c: iter(()))
+
+    assert declared_cases(made(("a", "b")), ctx) == ("a", "b")
+    assert declared_cases(made(lambda c: [f"v{k}" for k in range(3)]), ctx) == ("v0", "v1", "v2")
+    assert declared_cases(made(None), ctx) is None
+    assert declared_cases(types.SimpleNamespace(name="acme.y", level="format"), ctx) is None
+    for bad, why in (((("a", "a")), "declares case 'a' twice"), (("a", ""), "not a non-empty"),
+                     ((3,), "declares a case 3")):
+        with pytest.raises(ValueError, match=why):
+            declared_cases(made(bad), ctx)
+
+
+def test_every_builtin_check_declares_its_cases() -> None:
+    """The pytest plugin lists a check's cases before it runs (spec QP3): every built-in row
+    names a declaration, a tuple of names or a function, that resolves."""
+    for row in BUILTIN_CHECKS:
+        assert row.cases_target is not None, row.name
+        assert callable(row.cases) or all(isinstance(c, str) for c in row.cases), row.name
+
+
+def test_the_plan_names_the_cases_and_the_checks_that_cannot_say() -> None:
+    """A check whose declaration raises is planned as one ERROR ``(error)`` saying so (QP5)
+    and not run; one that does not apply is listed as such."""
+    found: dict[str, Check] = {}
+
+    def unreadable(ctx: Context) -> list[str]:
+        raise OSError("vectors gone")
+
+    @check(name="acme.fine", level="format", cases=("one",), registry=found)
+    def fine(ctx: Context) -> Iterator[CheckResult]:
+        yield measured("acme.fine", "format", "one", "x", 0.0, 1.0)
+
+    @check(name="acme.cannot-say", level="format", cases=unreadable, registry=found)
+    def cannot_say(ctx: Context) -> Iterator[CheckResult]:
+        raise AssertionError("a check whose cases are unknown is not run by the plan")
+
+    @check(name="acme.device", level="device", cases=("d",), registry=found)
+    def device(ctx: Context) -> Iterator[CheckResult]:
+        yield measured("acme.device", "device", "d", "x", 0.0, 1.0)
+
+    plan = plan_suite(Context.for_driver("reference"), checks=list(found.values()))
+    assert [(p.name, p.cases) for p in plan.checks] == [("acme.fine", ("one",)),
+                                                        ("acme.cannot-say", None)]
+    error = plan.checks[1].error
+    assert error is not None and (error.case, error.status) == ("(error)", "ERROR")
+    assert "raised OSError: vectors gone" in error.detail
+    assert error.detail.endswith("while declaring its cases")
+    assert plan.not_applicable == ["acme.device"]  # no driver: device checks do not apply
+
+
+def test_a_context_wants_every_case_of_a_check_it_does_not_narrow() -> None:
+    ctx = Context.for_driver("reference")
+    assert ctx.wants("renderer.boundary", "edge@reversal")
+    ctx.selected_cases = {"renderer.boundary": frozenset({"edge@slow-stroke"})}
+    assert ctx.wants("renderer.boundary", "edge@slow-stroke")
+    assert not ctx.wants("renderer.boundary", "edge@reversal")
+    assert ctx.wants("renderer.friction_error", "edge@reversal")
+    report = run_suite(ctx, ("renderer",), select=["renderer.boundary"])
+    assert [r.case for r in report.results] == ["edge@slow-stroke"]
+
+
+def test_cli_lists_the_cases_of_a_run_without_measuring() -> None:
+    """``hcard conformance --list``: the plan's node IDs, in the order a run reports them
+    (format level: both files of every card, then every card, then every invalid vector)."""
+    result = CliRunner().invoke(cli, ["conformance", "--driver", "reference", "--level",
+                                      "format", "--list"])
+    assert result.exit_code == 0, result.output
+    assert result.stdout.splitlines() == [
+        *(f"format.parse::{c.name}.{form}" for c in MANIFEST.cards for form in ("binary",
+                                                                                  "json")),
+        *(f"format.round_trip::{c.name}" for c in MANIFEST.cards),
+        *(f"format.reject::{v.name}" for v in MANIFEST.invalid)]
 
 
 def _crashing_checks() -> list[Check]:

@@ -4,8 +4,6 @@ case is red (how Jenkins, GitLab and GitHub's test reporters count)."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -15,20 +13,7 @@ from hcard.cli.main import cli
 from hcard_conformance.report import junit_xml
 from hcard_conformance.result import PASS, UNASSESSED, CheckResult
 from hcard_conformance.runner import SuiteReport
-
-
-def dashboard(xml: bytes) -> dict[str, list[str]]:
-    """Each case's colour as a dashboard shows it, by ``classname.name``."""
-    colours: dict[str, list[str]] = {"red": [], "skipped": [], "green": []}
-    for case in ET.fromstring(xml).iter("testcase"):
-        name = f"{case.get('classname')}.{case.get('name')}"
-        if case.find("failure") is not None or case.find("error") is not None:
-            colours["red"].append(name)
-        elif case.find("skipped") is not None:
-            colours["skipped"].append(name)
-        else:
-            colours["green"].append(name)
-    return colours
+from tests.helpers.conformance_pytest import collected, dashboard, pytest_run
 
 
 def report_of(outcomes: list[str]) -> SuiteReport:
@@ -63,16 +48,6 @@ def test_an_unreachable_device_still_writes_one_error(tmp_path: Path) -> None:
         "message", "")
 
 
-def pytest_run(tmp_path: Path, *args: str) -> tuple[subprocess.CompletedProcess[str], bytes]:
-    """pytest with the conformance plugin in an empty folder; its output and JUnit XML."""
-    junit = tmp_path / "plugin.xml"
-    run = subprocess.run([sys.executable, "-m", "pytest", "-p", "hcard_conformance.pytest_plugin",
-                          "-p", "no:cacheprovider", "-q", f"--junitxml={junit}", *args,
-                          str(tmp_path)], capture_output=True, text=True, cwd=tmp_path,
-                         timeout=600)
-    return run, junit.read_bytes() if junit.exists() else b""
-
-
 def test_the_pytest_plugin_skips_unassessed_cases_with_their_reason(tmp_path: Path) -> None:
     run, xml = pytest_run(tmp_path, "--hcard-driver=control:drops-reports",
                           "--hcard-check=renderer.boundary")
@@ -93,7 +68,20 @@ def test_the_pytest_plugin_makes_an_unreachable_device_one_error(tmp_path: Path)
 
 
 def test_the_pytest_plugin_collects_without_running(tmp_path: Path) -> None:
+    """Every case, the device's included, is listed before anything runs: the wire-protocol
+    checks apply to the control device (it speaks the protocol), device.friction lists the
+    cases of its DEVICE_INFO."""
+    from hcard_conformance.device_checks.safety import SAFETY_CASES
+
     run, _ = pytest_run(tmp_path, "--hcard-driver=control:drops-reports", "--collect-only")
     assert run.returncode == 0, run.stdout[-2000:]
-    assert "18 tests collected" in run.stdout
-    assert "device.safety::cases" in run.stdout and "passed" not in run.stdout
+    ids = collected(run.stdout)
+    assert f"{len(ids)} tests collected" in run.stdout and "passed" not in run.stdout
+    assert [i for i in ids if i.startswith("device.safety::")] == [
+        f"device.safety::{case}" for case in SAFETY_CASES]
+    assert {i.split("::")[0] for i in ids if i.startswith("device.")} == {
+        "device.friction", "device.dynamics", "device.latency", "device.safety",
+        "device.watchdog", "device.upload-integrity", "device.report-loss",
+        "device.refusals", "device.session-ownership"}
+    assert "device.friction::dense-grating" in ids
+    assert not any(i.startswith("renderer.exact::") for i in ids)  # A0: the reference only

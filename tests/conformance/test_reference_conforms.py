@@ -9,6 +9,8 @@ import xml.etree.ElementTree as ET
 from click.testing import CliRunner
 
 from hcard.cli.main import cli
+from hcard_conformance.context import Context
+from hcard_conformance.plan import plan_suite
 
 
 def test_reference_device_passes_every_level(tmp_path):
@@ -26,6 +28,13 @@ def test_reference_device_passes_every_level(tmp_path):
     data = json.loads(report.read_text())
     assert json.dumps(data).count('"passed": false') == 0
     assert json.dumps(data).count('"passed": true') >= 100
+    # every check declared, before the run, the cases it reported (the pytest plugin's items)
+    reported: dict[str, list[str]] = {}
+    for result in data["results"]:
+        reported.setdefault(result["check"], []).append(result["case"])
+    plan = plan_suite(Context.for_driver("sim://"))
+    assert {p.name: list(p.cases or ()) for p in plan.checks} == reported
+    assert all(p.error is None for p in plan.checks)
 
 
 def test_position_only_control_fails_through_the_command(tmp_path):

@@ -31,16 +31,21 @@ def judged(check: str, case: str, metric: str, value: float, threshold: float, u
 
 
 def on_one_driver(ctx: Context, check: str, cases: Sequence[str],
-                  measure: Callable[[Driver], Iterator[CheckResult]]) -> Iterator[CheckResult]:
-    """The cases of ``check`` measured by ``measure`` on one driver opened for them all;
-    nothing for an implementation without a driver (the reference renderer). An exception is
-    one ERROR per case not yet reported (:func:`~hcard_conformance.result.guarded`)."""
+                  measure: Callable[[Driver, Callable[[str], bool]], Iterator[CheckResult]],
+                  ) -> Iterator[CheckResult]:
+    """The cases of ``check`` the run wants (:meth:`Context.wants`) measured by
+    ``measure(driver, wants)`` on one driver opened for them all; nothing for an
+    implementation without a driver (the reference renderer). An exception is one ERROR per
+    wanted case not yet reported (:func:`~hcard_conformance.result.guarded`)."""
     if ctx.open_driver is None:
         return
     open_driver = ctx.open_driver
 
+    def wants(case: str) -> bool:
+        return ctx.wants(check, case)
+
     def run() -> Iterator[CheckResult]:
         with open_driver() as driver:
-            yield from measure(driver)
+            yield from measure(driver, wants)
 
-    yield from guarded(check, LEVEL, cases, run)
+    yield from guarded(check, LEVEL, [c for c in cases if wants(c)], run)

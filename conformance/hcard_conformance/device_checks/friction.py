@@ -99,6 +99,15 @@ def friction_cases(info: DeviceInfo) -> list[tuple[str, pb.Card, FingerTrack]]:
     return cases
 
 
+def friction_case_names(ctx: Context) -> list[str]:
+    """Cases of ``device.friction`` (registry declaration): those of :func:`friction_cases`
+    for the device's DEVICE_INFO (:meth:`Context.device_info`, which opens the driver once to
+    read it: ``bipolar`` only on a device with EV); none without a device."""
+    if ctx.open_driver is None:
+        return []
+    return [name for name, _card, _track in friction_cases(ctx.device_info())]
+
+
 @dataclass(frozen=True)
 class FrictionMeasurement:
     """Rendered against target friction over the settled reports in contact.
@@ -208,6 +217,8 @@ def check_friction(ctx: Context) -> Iterator[CheckResult]:
     with ctx.open_driver() as driver:
         cases = friction_cases(driver.info())
     for case, card, track in cases:
+        if not ctx.wants(CHECK, case):  # each case is a play of its own
+            continue
 
         def measure(case: str = case, card: pb.Card = card,
                     track: FingerTrack = track) -> Iterator[CheckResult]:

@@ -215,6 +215,10 @@ def _host_time_since(state: State, start_us: int) -> float | None:
     return since_us * S_PER_US + age
 
 
+LATENCY_CASES = ("boundary-move", "host-read-lag")
+"""The cases of ``device.latency``, in order (the second reads the first's run)."""
+
+
 def check_latency(ctx: Context) -> Iterator[CheckResult]:
     """End-to-end latency from a host finger update to the plate's change, and (case
     ``host-read-lag``) how late the host read the device's reports."""
@@ -249,7 +253,7 @@ def check_latency(ctx: Context) -> Iterator[CheckResult]:
         left_out = (f"; {len(run.latencies_s) - len(lat)} trials not kept in real time and "
                     f"left out ({run.not_kept[0]}{', ...' if len(run.not_kept) > 1 else ''})"
                     if len(lat) < len(run.latencies_s) else "")
-        yield judged(CHECK, "boundary-move", "median_latency",
+        yield judged(CHECK, LATENCY_CASES[0], "median_latency",
                       float(np.median(lat)) * MS_PER_S, timing.latency_s * MS_PER_S, "ms",
                       f"{len(lat)} moves, max {np.nanmax(lat) * MS_PER_S:.1f} ms; {timed}"
                       f"{left_out}; {timing.why}")
@@ -261,7 +265,7 @@ def check_latency(ctx: Context) -> Iterator[CheckResult]:
             raise CannotAssess("the device does not date its reports (echo age, protocol 1.3 "
                                "PI3)")
         lags = np.asarray(runs[0].read_lag_s)
-        yield judged(CHECK, "host-read-lag", "median_read_lag",
+        yield judged(CHECK, LATENCY_CASES[1], "median_read_lag",
                       float(np.median(lags)) * MS_PER_S, timing.read_lag_s * MS_PER_S, "ms",
                       f"{lags.size} {'windows' if timing.keeps_real_time else 'reports'}, "
                       "90th percentile "
@@ -270,5 +274,5 @@ def check_latency(ctx: Context) -> Iterator[CheckResult]:
                       f"{'; the freshest read of each 100 ms' if timing.keeps_real_time else ''}"
                       f"); {timing.why}")
 
-    yield from guarded(CHECK, LEVEL, ["boundary-move"], measure)
-    yield from guarded(CHECK, LEVEL, ["host-read-lag"], read_lag)
+    yield from guarded(CHECK, LEVEL, LATENCY_CASES[:1], measure)
+    yield from guarded(CHECK, LEVEL, LATENCY_CASES[1:], read_lag)

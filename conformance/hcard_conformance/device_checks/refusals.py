@@ -161,12 +161,16 @@ def judge(case: str, refusal: Refusal, before: State, after: list[State],
                        float(abs(counted - refusal.rejections)), 0.0, "requests", detail)
 
 
-def measure_refusals(driver: Driver) -> Iterator[CheckResult]:
-    """The cases of ``device.refusals`` on one open driver (module docstring)."""
+def measure_refusals(driver: Driver, wants: Callable[[str], bool] | None = None,
+                     ) -> Iterator[CheckResult]:
+    """The cases of ``device.refusals`` on one open driver (module docstring); with ``wants``,
+    only the cases it is true of."""
     session = LinkSession(driver)
     session.begin()
     try:
         for case, refusal in refusals().items():
+            if wants is not None and not wants(case):
+                continue
 
             def attempt(case: str = case, refusal: Refusal = refusal) -> CheckResult:
                 before = session.run(BEFORE_S)

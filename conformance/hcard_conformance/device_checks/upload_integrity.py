@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import contextlib
 import math
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 
 from hcard import build
@@ -519,8 +519,10 @@ def judge_commit(attempt: Attempt, card_b: LinkCard, generation_a: int,
                        "reports_off_card", float(wrong), 0.0, "reports", detail)
 
 
-def measure_upload_integrity(driver: Driver) -> Iterator[CheckResult]:
-    """The cases of ``device.upload-integrity`` on one open driver (module docstring)."""
+def measure_upload_integrity(driver: Driver, wants: Callable[[str], bool] | None = None,
+                             ) -> Iterator[CheckResult]:
+    """The cases of ``device.upload-integrity`` on one open driver (module docstring); with
+    ``wants``, only the cases it is true of (each case is an attempt of its own on card A)."""
     info = driver.info()
     card_a, card_b = link_card(info, CARD_A_FRICTION), link_card(info, CARD_B_FRICTION)
     if info.max_card_bytes < len(card_b.data):
@@ -531,6 +533,8 @@ def measure_upload_integrity(driver: Driver) -> Iterator[CheckResult]:
     try:
         uploads = bad_uploads(card_b.data, info.max_card_bytes)
         for case, (steps, expected) in uploads.items():
+            if wants is not None and not wants(case):
+                continue
             if case == "oversize" and info.max_card_bytes >= 0xFFFF_FFFF:
                 yield unassessed(CHECK, LEVEL, case, "max_card_bytes is "
                                  "the largest u32: no announced size is above it")
@@ -557,7 +561,8 @@ def measure_upload_integrity(driver: Driver) -> Iterator[CheckResult]:
                 attempt.states += play_until_shown(session, card_b, next_generation(generation))
             return kept(judge_commit(attempt, card_b, generation, card_a), attempt)
 
-        yield attempted_case(CHECK, LEVEL, "valid-after", commit)
+        if wants is None or wants("valid-after"):
+            yield attempted_case(CHECK, LEVEL, "valid-after", commit)
         with contextlib.suppress(CommittedNotPlaying):  # its cases have failed already
             ensure_card(session, card_a)  # leave card A in force (module docstring)
     finally:

@@ -97,6 +97,10 @@ def _read_briefly(driver: Driver, seconds: float) -> list[State]:
     return states
 
 
+WATCHDOG_CASES = ("host-silent", "fault-reported")
+"""The cases of ``device.watchdog``, in order (both from one silence of the host)."""
+
+
 def check_watchdog(ctx: Context) -> Iterator[CheckResult]:
     """Fault behaviour on host silence (spec PS3)."""
     if ctx.open_driver is None:
@@ -107,12 +111,12 @@ def check_watchdog(ctx: Context) -> Iterator[CheckResult]:
         with open_driver() as driver:
             limit = driver.info().watchdog_ms * S_PER_MS + WATCHDOG_ALLOWANCE_S
             off, reported, driven = measure_watchdog(driver)
-        yield judged(CHECK, "host-silent", "time_to_off", off * MS_PER_S,
+        yield judged(CHECK, WATCHDOG_CASES[0], "time_to_off", off * MS_PER_S,
                       limit * MS_PER_S, "ms",
                       f"plate at {driven * NM_PER_M:.0f} nm before the host went silent; "
                       f"off means <= {OFF_AMPLITUDE_M * NM_PER_M:.0f} nm and <= 1 V")
-        yield CheckResult(CHECK, LEVEL, "fault-reported", reported,
+        yield CheckResult(CHECK, LEVEL, WATCHDOG_CASES[1], reported,
                           "watchdog_fault", float(reported), 1.0, "bool",
                           "fault WATCHDOG in STATE")
 
-    yield from guarded(CHECK, LEVEL, ["host-silent", "fault-reported"], measure)
+    yield from guarded(CHECK, LEVEL, WATCHDOG_CASES, measure)
