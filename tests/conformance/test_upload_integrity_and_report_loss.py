@@ -15,7 +15,7 @@ import pytest
 
 from hcard.device import open_device
 from hcard.device.base import DEFAULT_TIMEOUT_S
-from hcard.device.protocol import State, StateFlags, UploadAction, crc32
+from hcard.device.protocol import FaultBits, State, StateFlags, UploadAction, crc32
 from hcard.device.uri import parse_uri
 from hcard_conformance.context import Context
 from hcard_conformance.device_checks import report_loss, upload_integrity
@@ -23,6 +23,7 @@ from hcard_conformance.registry import all_checks
 from hcard_conformance.result import CheckResult
 from hcard_conformance.runner import run_suite
 from hcard_device.controls import DROPPED_FRACTION, LossyFirmware
+from hcard_device.firmware import Firmware
 from hcard_device.sim import DeviceConfig, DeviceSimulation
 from hcard_device.sim_driver import SimDriver
 from tests.helpers.realtime import assert_conforms
@@ -305,3 +306,27 @@ def test_an_invalid_card_refusal_must_name_the_field() -> None:
         assert ("(PU8)" not in result.detail) == named, result.detail
         assert "detail 'bad card', not the field path 'textures[0].baseline'" in result.detail \
             or named
+
+
+class UnflaggedClipFirmware(Firmware):
+    """Plays a card that asks too much clipped, as PU5 asks, but never flags CARD_CLIPPED in
+    STATE (test only)."""
+
+    def _faults(self, sim_faults: int, clipped: int) -> int:
+        return super()._faults(sim_faults, clipped) & ~int(FaultBits.CARD_CLIPPED)
+
+
+def test_a_clipped_card_must_commit_and_be_flagged() -> None:
+    """PU5, PF3: the reference commits the UV 0 card, flags every report of it CARD_CLIPPED and
+    lists it in CLIP_REPORT; a firmware that never flags it fails the case, saying how many of
+    its reports went unflagged, and passes every other case."""
+    reference = _cases(Context.for_driver("sim://"), upload_integrity.check_upload_integrity)
+    assert reference["clipped-card"].outcome == "PASS", reference["clipped-card"].detail
+    assert "CLIP_REPORT gen" in reference["clipped-card"].detail
+    unflagged = _cases(Context("test:unflagged-clip", lambda: SimDriver(
+        parse_uri("sim://"), UnflaggedClipFirmware(DeviceSimulation(DeviceConfig.evita())),
+        timeout_s=DEFAULT_TIMEOUT_S)), upload_integrity.check_upload_integrity)
+    case = unflagged["clipped-card"]
+    assert case.outcome == "FAIL" and case.value >= upload_integrity.MIN_PLAYING_REPORTS
+    assert "0 of" in case.detail and "flag CARD_CLIPPED" in case.detail
+    assert not _failures({c: r for c, r in unflagged.items() if c != "clipped-card"})

@@ -7,8 +7,10 @@ uploads of a card B that the device must refuse, one case each, crafted from raw
 UPLOAD_BEGIN / UPLOAD_DATA / UPLOAD_END reports (:func:`bad_uploads`): ``bad-crc``,
 ``truncated``, ``out-of-order``, ``interrupted`` (2 s of upload silence, then the host
 resumes), ``restarted`` (a new BEGIN, then the old upload's remaining chunks), ``oversize``,
-and two uploads transferred intact whose card the device must not read (PU3): ``unknown-major``
-(major version 2) and ``invalid-card`` (a baseline that is not finite, T3). A case passes
+two uploads transferred intact whose card the device must not read (PU3): ``unknown-major``
+(major version 2) and ``invalid-card`` (a baseline that is not finite, T3), and
+``clipped-card``, a valid card asking more than the device renders, which must be committed and
+played clipped, flagged CARD_CLIPPED and listed in CLIP_REPORT (PU5, PF3). A case passes
 when UPLOAD_STATUS is FAILED with the expected result (U1), A's
 CRC-32 and generation are still active, and every STATE report during and after the attempt
 shows A playing (U2; a neutral frame is excused only when the finger sample it applies came
@@ -34,12 +36,14 @@ from dataclasses import dataclass, field
 from hcard import build
 from hcard.card_io import to_bytes
 from hcard.device.base import Driver
-from hcard.device.errors import DeviceStall
+from hcard.device.errors import DeviceError, DeviceStall
 from hcard.device.protocol import (
     FRICTION_SCALE,
     UPLOAD_CHUNK_BYTES,
     Capability,
+    ClipReport,
     DeviceInfo,
+    FaultBits,
     Report,
     State,
     StateFlags,
@@ -93,7 +97,7 @@ reporting while it refuses an upload shows nothing playing)."""
 PROBE = "probe"
 """Step of an attempt: GET UPLOAD_STATUS now; it must already be FAILED with the result."""
 UPLOAD_CASES = ("bad-crc", "truncated", "out-of-order", "interrupted", "restarted", "oversize",
-                "unknown-major", "invalid-card", "valid-after")
+                "unknown-major", "invalid-card", "clipped-card", "valid-after")
 """The cases of ``device.upload-integrity``, in order."""
 _PLAYING = int(StateFlags.CONTACT | StateFlags.RUNNING | StateFlags.CARD_LOADED)
 
@@ -117,6 +121,15 @@ class LinkCard:
     def crc(self) -> int:
         """CRC-32 of :attr:`data` (protocol 9.3)."""
         return crc32(self.data)
+
+
+def clipped_card(info: DeviceInfo) -> LinkCard:
+    """A valid card that asks more than any device renders: uniform UV 0 (no friction left:
+    an amplitude no plate reaches at 120 mm/s, the clip report's reference speed) on a device
+    with UV, else EV 4 (a voltage no EV electrode reaches at 0.5 N). Committed and played
+    clipped, never refused (protocol PU5)."""
+    uv = bool(info.capabilities & Capability.UV)
+    return link_card(info, 0.0) if uv else link_card(info, 3.0)
 
 
 def link_card(info: DeviceInfo, friction: float) -> LinkCard:
@@ -551,6 +564,24 @@ def measure_upload_integrity(driver: Driver, wants: Callable[[str], bool] | None
 
             yield attempted_case(CHECK, LEVEL, case, refusal)
 
+        def clipped() -> CheckResult:
+            try:
+                generation = ensure_card(session, card_a)
+            except CommittedNotPlaying as exc:
+                return failed_case("clipped-card", exc)
+            card_c = clipped_card(info)
+            attempt = upload(session, card_c)
+            if attempt.status.state == UploadState.COMMITTED:  # read on until it plays
+                attempt.states += session.run(SEE_TIMEOUT_S / 4)
+            try:
+                clip: ClipReport | None = driver.clip_report()
+            except DeviceError:
+                clip = None
+            return kept(judge_clipped(attempt, card_c, generation, clip), attempt)
+
+        if wants is None or wants("clipped-card"):
+            yield attempted_case(CHECK, LEVEL, "clipped-card", clipped)
+
         def commit() -> CheckResult:
             try:
                 generation = ensure_card(session, card_a)
@@ -567,6 +598,29 @@ def measure_upload_integrity(driver: Driver, wants: Callable[[str], bool] | None
             ensure_card(session, card_a)  # leave card A in force (module docstring)
     finally:
         session.restore()
+
+
+def judge_clipped(attempt: Attempt, card_c: LinkCard, generation_a: int,
+                  clip: ClipReport | None) -> CheckResult:
+    """PU5 and PF3: the card that asks too much is COMMITTED with its CRC-32 and the next
+    generation (not refused), at least :data:`MIN_PLAYING_REPORTS` reports of that generation
+    carry fault CARD_CLIPPED, and CLIP_REPORT, read after, is of that generation and lists at
+    least one item. The metric is the number of that generation's reports without the fault."""
+    status = attempt.status
+    generation = next_generation(generation_a)
+    committed = (status.state == UploadState.COMMITTED and status.active_crc32 == card_c.crc
+                 and status.card_generation == generation)
+    mine = [s for s in attempt.states if s.card_generation == generation]
+    flagged = sum(1 for s in mine if s.faults & FaultBits.CARD_CLIPPED)
+    listed = clip is not None and clip.card_generation == generation and clip.item_count >= 1
+    passed = committed and listed and flagged >= MIN_PLAYING_REPORTS and flagged == len(mine)
+    clip_text = ("CLIP_REPORT unreadable" if clip is None else
+                 f"CLIP_REPORT gen {clip.card_generation}, {clip.item_count} item(s)")
+    detail = (f"expected COMMITTED gen {generation} CRC 0x{card_c.crc:08X} (PU5: a card asking "
+              f"too much is played clipped), device said {status_text(status)}; "
+              f"{flagged} of {len(mine)} reports of it flag CARD_CLIPPED; {clip_text} (PF3)")
+    return CheckResult(CHECK, LEVEL, "clipped-card", passed, "reports_unflagged",
+                       float(len(mine) - flagged), 0.0, "reports", detail)
 
 
 def kept(result: CheckResult, attempt: Attempt) -> CheckResult:
