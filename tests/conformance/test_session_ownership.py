@@ -10,8 +10,10 @@ from typing import Any
 
 import pytest
 
+from hcard.device.base import DEFAULT_TIMEOUT_S
 from hcard.device.errors import DeviceError
 from hcard.device.protocol import State
+from hcard.device.uri import parse_uri
 from hcard_conformance.context import Context
 from hcard_conformance.device_checks.session_ownership import (
     CASES,
@@ -21,6 +23,8 @@ from hcard_conformance.device_checks.session_ownership import (
 from hcard_conformance.registry import builtin_checks
 from hcard_conformance.result import ERROR, FAIL, PASS, UNASSESSED, CheckResult
 from hcard_device.controls import CONTROLS
+from hcard_device.firmware import Firmware
+from hcard_device.sim import DeviceConfig, DeviceSimulation
 from hcard_device.sim_driver import SimDriver
 from tests.helpers.realtime import assert_conforms
 from tests.helpers.served_device import served_device
@@ -160,3 +164,27 @@ def test_a_second_host_that_fails_while_the_first_plays_is_an_error_naming_why()
     assert all("DeviceError" in r.detail and "no STATE report" in r.detail
                and "IndexError" not in r.detail for r in results.values()), \
         [r.detail for r in results.values()]
+
+
+class EndlessSessionFirmware(Firmware):
+    """Sessions that never end on host silence (test only; PN7 asks them to end after
+    ``watchdog_ms``): a host that crashed keeps the device from every other host."""
+
+    def __init__(self, simulation: DeviceSimulation) -> None:
+        super().__init__(simulation)
+        self.session.timeout_s = math.inf
+
+
+def test_a_session_must_end_when_its_host_falls_silent() -> None:
+    """PN7: on sim:// the session ends one watchdog period (100 ms) into the first host's
+    silence and the second host gets the next; a device whose sessions never time out fails
+    the case, still showing SESSION past watchdog_ms + 50 ms, and passes the other three."""
+    reference = run("sim://")["ends-when-silent"]
+    assert reference.status == PASS and reference.value == pytest.approx(100.0, abs=5.0)
+    endless = {r.case: r for r in check_session_ownership(Context("test:endless-session",
+               lambda: SimDriver(parse_uri("sim://"), EndlessSessionFirmware(
+                   DeviceSimulation(DeviceConfig.evita())), timeout_s=DEFAULT_TIMEOUT_S)))}
+    case = endless["ends-when-silent"]
+    assert case.status == FAIL and math.isinf(case.value)
+    assert "flag SESSION still set" in case.detail
+    assert all(r.status == PASS for c, r in endless.items() if c != "ends-when-silent")

@@ -33,6 +33,13 @@ device (spec/device-protocol.md section 14).
         The first host starts and stops (PN4) and stays connected; the second host then
         starts. Pass: its START is granted and STATE shows its token in the next session
         (``session_number`` + 1, PN1, PN2).
+    ``ends-when-silent``
+        The first host starts and then sends nothing at all; the second host only reads. Pass
+        (PN7): within ``watchdog_ms`` + :data:`SILENCE_MARGIN_S` (plus the timing class's read
+        lag) of the silence a report shows flag SESSION cleared with the first host's
+        ``session_number``, and the second host's START is then granted the next session.
+        Metric: the time from the first host's last report to the second host reading that
+        report, ms.
 """
 
 from __future__ import annotations
@@ -60,7 +67,7 @@ from hcard_conformance.realtime import HostWatch, NotKept, attempted_case, devic
 from hcard_conformance.result import CannotAssess, CheckResult, guarded, measured
 from hcard_conformance.timing import timing_class
 
-CASES = ("second-host-refused", "takeover-reported", "released-by-stop")
+CASES = ("second-host-refused", "takeover-reported", "released-by-stop", "ends-when-silent")
 PROBE_KEEPALIVES = 5
 """KEEPALIVEs the first driver sends to show the second one shares its device."""
 PLAY_S = 1.5
@@ -78,6 +85,9 @@ MAX_LOST = 0.05
 gaps, PT5) for its recording to count as complete."""
 LOSS_THRESHOLD_S = 0.25
 """Longest time from a TAKE_OVER to the former owner's driver reporting the loss, s."""
+SILENCE_MARGIN_S = 0.05
+"""Time past ``watchdog_ms`` of host silence in which a report must show the session ended
+(PN7), s: the watchdog's own margin (spec S2)."""
 SETTLE_S = 0.05
 """Reports read after a request before judging its effect, s."""
 
@@ -486,6 +496,53 @@ def case_released_by_stop(hosts: Hosts) -> CheckResult:
                        detail)
 
 
+def case_ends_when_silent(hosts: Hosts, read_lag_s: float = 0.0) -> CheckResult:
+    """``ends-when-silent`` (module docstring; rules PN7, PN1)."""
+    case = CASES[3]
+    with hosts.open_driver() as first, hosts.second(first) as second, HostWatch() as watch:
+        watchdog_s = first.info().watchdog_ms / MS_PER_S
+        limit_s = watchdog_s + SILENCE_MARGIN_S + read_lag_s
+        first.start()
+        silent_from = first.clock()  # the first host's last report: its START
+        number = first.session_number
+        ended: State | None = None
+        live = False  # the second host's first reports may be from before the START
+        while ended is None and second.clock() - silent_from <= limit_s:
+            for state in second.collect_until(second.clock() + 0.005):
+                live = live or (state.session_live and state.session_number == number)
+                if live and not state.session_live and ended is None:
+                    ended = state
+        waited_s = second.clock() - silent_from
+        granted = False
+        if ended is not None:
+            try:
+                second.start()
+                granted = second.session_number == ((number or 0) + 1) % (1 << 16)
+            except SessionBusy:
+                granted = False
+            with contextlib.suppress(DeviceError):
+                second.stop()
+    problems = []
+    if ended is None:
+        problems.append(f"flag SESSION still set {waited_s * MS_PER_S:.0f} ms into the first "
+                        f"host's silence (watchdog_ms {watchdog_s * MS_PER_S:.0f})")
+    elif ended.session_number != number:
+        problems.append(f"the session ended as number {ended.session_number}, not the first "
+                        f"host's {number} (PN7: session_number stays)")
+    if ended is not None and not granted:
+        problems.append("the second host's START was not then granted the next session (PN1)")
+    detail = "; ".join(problems) or (
+        f"session {number} ended {waited_s * MS_PER_S:.0f} ms into the first host's silence "
+        f"(watchdog_ms {watchdog_s * MS_PER_S:.0f}); the second host was granted the next")
+    value = waited_s * MS_PER_S if ended is not None and not problems else math.inf
+    result = measured(CHECK, LEVEL, case, "time_to_end", value, limit_s * MS_PER_S, unit="ms",
+                      detail=detail)
+    late = reasons(watch.late if first.realtime else "")
+    if not result.passed and late:  # the second host read late: the run measured the host
+        raise NotKept(f"{late}; the case failed so: {detail}")
+    return result
+
+
 def check_session_ownership(ctx: Context) -> Iterator[CheckResult]:
     """Session ownership between two hosts on one device (spec section 14)."""
     if ctx.open_driver is None:
@@ -504,5 +561,7 @@ def check_session_ownership(ctx: Context) -> Iterator[CheckResult]:
         yield attempted_case(CHECK, LEVEL, CASES[1],
                              lambda: case_takeover_reported(hosts, read_lag_s))
         yield case_released_by_stop(hosts)
+        yield attempted_case(CHECK, LEVEL, CASES[3],
+                             lambda: case_ends_when_silent(hosts, read_lag_s))
 
     yield from guarded(CHECK, LEVEL, CASES, measure)
