@@ -4,6 +4,7 @@ it did not keep; a device rendered on the host is not judged by it."""
 
 from __future__ import annotations
 
+from hcard.device.protocol import FaultBits, State, StateFlags
 from hcard_conformance.context import Context
 from hcard_conformance.device_checks import refusals
 from hcard_conformance.result import CheckResult
@@ -50,3 +51,34 @@ def test_a_device_rendered_on_the_host_is_not_judged() -> None:
     report = run_suite(Context.for_driver("faulty://none"), ("device",),
                        select=("device.refusals",))
     assert report.results == [] and "device.refusals" in report.not_applicable
+
+
+def _state(sequence: int, rejected: int, faults: int = 0) -> State:
+    return State(timestamp_us=sequence * 1000, sequence=sequence, flags=int(StateFlags.RUNNING),
+                 x_10um=0, y_10um=0, corner_forces_mn=(0, 0, 0, 0), lateral_force_mn=0,
+                 amplitude_nm=0, voltage_dv=0, current_10na=0, target_uv_x1e4=10_000,
+                 target_ev_x1e4=10_000, texture=-1, faults=faults, dropped_reports=0,
+                 rejected_requests=rejected, stream_queued=0, host_time_echo_us=0,
+                 card_generation=0)
+
+
+def test_the_flag_is_required_only_where_the_host_read_every_report() -> None:
+    """PE2's INVALID_REQUEST rides on one report: a host that read every report after the
+    request must see it; one that lost reports (a guest under software emulation reads a few
+    hundred of 1000 a second) cannot, and only the count is judged."""
+    short = refusals.refusals()["short-report"]
+    before = _state(100, 7)
+    every = [_state(101 + i, 8) for i in range(20)]
+    assert refusals.all_read(before, every)
+    unflagged = refusals.judge("short-report", short, before, every, "")
+    assert not unflagged.passed and "no STATE report flagged INVALID_REQUEST" in unflagged.detail
+    flagged = [_state(101, 8, int(FaultBits.INVALID_REQUEST)), *every[1:]]
+    assert refusals.judge("short-report", short, before, flagged, "").passed
+    lossy = every[::3]  # two of every three reports never read
+    assert not refusals.all_read(before, lossy)
+    waived = refusals.judge("short-report", short, before, lossy[:2] + [_state(200 + i, 8)
+                                                                       for i in range(10)], "")
+    assert waived.passed and "INVALID_REQUEST not judged" in waived.detail
+    uncounted = refusals.judge("short-report", short, before, [_state(101 + i, 7)
+                                                               for i in range(20)], "")
+    assert not uncounted.passed and "0 rejections counted, 1 required" in uncounted.detail

@@ -205,6 +205,23 @@ def test_sim_driver_begins_and_ends_its_session_and_refuses_to_send_after_a_loss
     assert driver.firmware.counters().rejected_requests == rejected
 
 
+def test_a_driver_whose_session_the_device_ended_after_its_silence_has_lost_it():
+    """PN9, PN7: a host silent for watchdog_ms has lost its session (from then on another
+    host's reports are carried out): its driver raises SessionLost on the first report that
+    shows its session ended, and sends nothing more. Before, it went on as if it still owned
+    the device, and a recording could hold another client's finger (seen in CI under load)."""
+    with open_device("sim://") as driver:
+        driver.start()
+        number = driver.session_number
+        silence_s = driver.info().watchdog_ms / 1000 + 0.02
+        driver._idle(silence_s)  # no host report: the device ends the session (PN7)
+        with pytest.raises(SessionLost, match=rf"session {number} was lost: ended by the "
+                                              r"device after watchdog_ms of silence"):
+            driver.collect_until(driver.clock() + 0.01)
+        with pytest.raises(SessionLost):
+            driver.keepalive()
+
+
 # ---------------------------------------------------------------------- served (PN10)
 
 @contextlib.contextmanager
@@ -399,8 +416,10 @@ def test_a_host_slower_than_the_report_stream_still_begins_its_session():
             def begin(driver=driver, outcome=outcome) -> None:
                 try:
                     driver.start()
-                    outcome["batch"] = len(driver.read_inputs(0.05))
                     driver.stop()
+                    # a batch read after the session (a read of READ_BATCH_MAX reports at 2 ms
+                    # each is longer than watchdog_ms: inside the session it would end it, PN7)
+                    outcome["batch"] = len(driver.read_inputs(0.05))
                 except Exception as exc:  # reported by the assertion below
                     outcome["error"] = exc
 

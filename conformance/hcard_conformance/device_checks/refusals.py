@@ -136,6 +136,17 @@ def refusals() -> dict[str, Refusal]:
     }
 
 
+def all_read(before: State, after: list[State]) -> bool:
+    """Whether the host read every STATE report from ``before`` to the last of ``after`` (the
+    sequence numbers step by one, PT5): the flag of PE2 rides on one report only."""
+    expected = before.sequence
+    for state in after:
+        expected = (expected + 1) % COUNTER_MODULO
+        if state.sequence != expected:
+            return False
+    return True
+
+
 def judge(case: str, refusal: Refusal, before: State, after: list[State],
           host_note: str) -> CheckResult:
     """The case's verdict from the last report before it and the reports after it."""
@@ -144,19 +155,24 @@ def judge(case: str, refusal: Refusal, before: State, after: list[State],
     flagged = any(s.faults & FaultBits.INVALID_REQUEST for s in after)
     running = bool(after) and bool(after[-1].flags & StateFlags.RUNNING)
     problems = [host_note.rstrip("; ")] if host_note else []
+    notes = []
     if counted != refusal.rejections:
         problems.append(f"{counted} rejections counted, {refusal.rejections} required")
+    gapless = all_read(before, after)
     if refusal.rejections and case != "unknown-feature" and not flagged:
-        problems.append("no STATE report flagged INVALID_REQUEST (PE2)")
+        if gapless:
+            problems.append("no STATE report flagged INVALID_REQUEST (PE2)")
+        else:  # the one report that carries the flag may be among those the host lost
+            notes.append("INVALID_REQUEST not judged: the host lost reports after the request")
     if not refusal.rejections and flagged:
         problems.append("a STATE report flagged INVALID_REQUEST for an accepted report")
     if len(after) < MIN_REPORTS or not running:
         problems.append(f"{len(after)} STATE reports in {AFTER_S * 1000:.0f} ms after it, "
                         f"{'RUNNING' if running else 'not RUNNING'} (PE3)")
-    detail = "; ".join(problems) or (
+    detail = "; ".join(problems + notes) if problems else "; ".join([
         f"{counted} rejection(s) counted as required"
         + (", INVALID_REQUEST flagged" if flagged else "")
-        + f"; {len(after)} reports after it, RUNNING")
+        + f"; {len(after)} reports after it, RUNNING", *notes])
     return CheckResult(CHECK, LEVEL, case, not problems, "rejections_off",
                        float(abs(counted - refusal.rejections)), 0.0, "requests", detail)
 
