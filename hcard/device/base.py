@@ -177,6 +177,7 @@ class Driver(abc.ABC):
         self.granted_state: State | None = None
         """The STATE report that granted this driver's latest session (PN1, PN2)."""
         self._session_card: int | None = None
+        self._session_ended = False
         self._previous_session: tuple[int, int] | None = None
         self._last_state: State | None = None
 
@@ -584,6 +585,7 @@ class Driver(abc.ABC):
                     self.session_number = state.session_number
                     self.granted_state = state
                     self._session_card = state.card_generation
+                    self._session_ended = False
                     return
                 if state.faults & FaultBits.SESSION_BUSY and self._foreign(state):
                     self.session_token = None
@@ -610,11 +612,11 @@ class Driver(abc.ABC):
         if number is None or self.session_lost:
             return
         if state.session_number == number and not state.session_live:
-            self._lose(f"session {number} was lost: ended by the device after watchdog_ms of "
-                       f"silence from this host (PN7; another host's reports are no longer "
-                       f"refused) at device time {state.timestamp_us * S_PER_US:.3f} s")
+            self._session_ended = True  # PN7: the device ended it after host silence
         if state.session_number != number:
-            self._lose(f"session {number} was lost: taken over by session {state.session_number} "
+            how = ("ended by the device after host silence (PN7), then another host began"
+                   if self._session_ended else "taken over by")
+            self._lose(f"session {number} was lost: {how} session {state.session_number} "
                        f"({_owner(state.session_token)}) at device time "
                        f"{state.timestamp_us * S_PER_US:.3f} s")
         if self._session_card is not None and state.card_generation != self._session_card:

@@ -27,6 +27,7 @@ from hcard.device.priority import collection_deferred
 from hcard.device.protocol import (
     Capability,
     DeviceInfo,
+    StateFlags,
 )
 from hcard.device.published_profiles import published_profile
 from hcard.device.state_log import StateLog
@@ -73,7 +74,7 @@ def _profile_record(driver: Driver, info: DeviceInfo, profile: bytes | None) -> 
 
 
 def play(driver: Driver, card: pb.Card, track: FingerTrack, *, profile: bytes | None = None,
-         tail_s: float = TAIL_S) -> PlayResult:
+         tail_s: float = TAIL_S, whole_session: bool = False) -> PlayResult:
     """Set the profile, upload ``card``, drive ``track`` as the host's finger, record, stop.
 
     ``profile``: the bytes of a device profile file to upload first (None: the device's own
@@ -84,7 +85,11 @@ def play(driver: Driver, card: pb.Card, track: FingerTrack, *, profile: bytes | 
     Sessions (protocol 1.2, spec section 14): before it changes anything, :func:`play` checks
     that no other host's session is live (rule PN8); START begins its own session. A result is
     returned only for a complete session: when the session is lost (PN9) or the input stream
-    stops (:data:`STREAM_STALL_S`), it raises, and the caller records nothing.
+    stops (:data:`STREAM_STALL_S`), it raises, and the caller records nothing. With
+    ``whole_session`` (what ``hcard play`` records) a session the device ended after this
+    host's silence (PN7) is lost too: from then on another host's reports were carried out, so
+    what followed is not this host's play. Measurements that judge such a run themselves (the
+    conformance suite: a run not kept in real time, spec QT3) leave it False.
 
     Raises:
         PlayTooLong: the track lasts longer than :data:`MAX_PLAY_S` (nothing is sent).
@@ -118,6 +123,8 @@ def play(driver: Driver, card: pb.Card, track: FingerTrack, *, profile: bytes | 
     try:
         with collection_deferred():
             last_report = _drive(driver, track, host_us, start, keepalive_s, tail_s, states)
+        if whole_session:
+            _check_session_kept(driver, states)
     except SessionLost as exc:
         raise SessionLost(f"{exc}; play stopped after {driver.clock() - start:.3f} s of the "
                           f"{float(track.t[-1] - track.t[0]):.3f} s track with "
@@ -132,6 +139,23 @@ def play(driver: Driver, card: pb.Card, track: FingerTrack, *, profile: bytes | 
                       driver.malformed_inputs, track, card_bytes, card.metadata.title, limits,
                       profile_record, str(driver.uri), started, host_us,
                       None if limits == limits_at_start else limits_at_start)
+
+
+def _check_session_kept(driver: Driver, states: StateLog) -> None:
+    """Raise :class:`SessionLost` when a report shows this driver's session ended by the device
+    (its ``session_number`` with flag SESSION cleared: PN7, the host was silent for
+    ``watchdog_ms``)."""
+    number = driver.session_number
+    if number is None or not len(states):
+        return
+    ended = np.flatnonzero((states.field("session_number") == number)
+                           & ((states.field("flags") & int(StateFlags.SESSION)) == 0))
+    if ended.size:
+        at = states[int(ended[0])].timestamp_us * S_PER_US
+        raise SessionLost(f"{driver.uri}: session {number} was ended by the device after "
+                          f"watchdog_ms of silence from this host at device time {at:.3f} s "
+                          "(spec PN7): another host's reports were carried out from then on "
+                          "(spec PN9)")
 
 
 def check_play_length(track: FingerTrack) -> None:

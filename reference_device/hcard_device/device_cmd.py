@@ -237,7 +237,7 @@ def synthesize(device_class: str, uri: str | None, effect_names: tuple[str, ...]
     click.echo(f"playing the {device_class} protocol ({plan.track.t[-1]:.1f} s, "
                f"{len(plan.sessions)} sessions) on {uri}")
     with open_device(uri, timeout_s=timeout) as driver:
-        result = play_track(driver, plan.card, plan.track)
+        result = play_track(driver, plan.card, plan.track, whole_session=True)
     path = output / RECORDING
     try:
         write_measurement(recording(result, track_path=str(output / "protocol.csv"),
@@ -311,7 +311,8 @@ def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Pat
         DeviceProfile.from_json(profile_bytes, source=str(profile_path))  # checked before use
     with open_device(uri, timeout_s=timeout) as driver, \
             real_time_host() if driver.realtime else contextlib.nullcontext():
-        result = play_track(driver, loaded, track, profile=profile_bytes)
+        result = play_track(driver, loaded, track, profile=profile_bytes,
+                            whole_session=True)
     try:
         write_recording(result, output, track_path=str(track_path), card_path=str(card))
     except ValueError as exc:

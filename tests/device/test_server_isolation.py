@@ -447,23 +447,33 @@ def test_hcard_play_records_only_its_own_session_whatever_another_client_sends(t
     stroke = straight_stroke((2.0, 5.0), (16.0 / 3.0, 0.0), 3.0)
     (tmp_path / "stroke.csv").write_text(track_to_csv(stroke))
     output = tmp_path / "rec.csv"
-    with served_device() as served:
-        player = _play(tmp_path / "step.hcard", served.uri, tmp_path / "stroke.csv", output)
-        with open_device(served.uri) as intruder:
-            deadline = time.monotonic() + 20.0
-            while not any(s.session_live for s in intruder.read_inputs(0.05)):
-                assert time.monotonic() < deadline, "the player began no session"
-            intruder.link.control_out(0x02, 0x03, 0, 0x01, b"", timeout_s=1.0)
-            intruder.link.control_out(0x02, 0x01, 0, 0x01, b"", timeout_s=1.0)
-            t_end = time.monotonic() + 1.5
-            while time.monotonic() < t_end:
-                intruder._write_output(Finger.from_si(0.000777, 70.0, 5.0, 0.5, True).encode())
-                intruder._write_output(Stream(1, (1000,), (10000,)).encode())
-                with contextlib.suppress(DeviceStall):
-                    intruder.set_report(Limits.from_si(1e-7, 0.0, 1e-6))
-                intruder.read_inputs(0.01)
-            _out, err = player.communicate(timeout=60)
-    assert player.returncode == 0, err
+
+    def one_run() -> str:
+        with served_device() as served:
+            player = _play(tmp_path / "step.hcard", served.uri, tmp_path / "stroke.csv", output)
+            with open_device(served.uri) as intruder:
+                deadline = time.monotonic() + 20.0
+                while not any(s.session_live for s in intruder.read_inputs(0.05)):
+                    assert time.monotonic() < deadline, "the player began no session"
+                intruder.link.control_out(0x02, 0x03, 0, 0x01, b"", timeout_s=1.0)
+                intruder.link.control_out(0x02, 0x01, 0, 0x01, b"", timeout_s=1.0)
+                t_end = time.monotonic() + 1.5
+                while time.monotonic() < t_end:
+                    intruder._write_output(
+                        Finger.from_si(0.000777, 70.0, 5.0, 0.5, True).encode())
+                    intruder._write_output(Stream(1, (1000,), (10000,)).encode())
+                    with contextlib.suppress(DeviceStall):
+                        intruder.set_report(Limits.from_si(1e-7, 0.0, 1e-6))
+                    intruder.read_inputs(0.01)
+                _out, err = player.communicate(timeout=60)
+        # a player that did not run for watchdog_ms on a loaded machine lost its session to
+        # the device (PN7) and said so, recording nothing: the run measured the machine
+        if player.returncode == 1 and "after watchdog_ms of silence" in err:
+            raise NotKept(err.strip().splitlines()[-1])
+        assert player.returncode == 0, err
+        return err
+
+    in_real_time(one_run, "hcard play beside an intruding client")
     table = read_measurement(output)
     touching = table.column("contact").astype(bool)
     x_mm = table.column("x")[touching] * 1e3
