@@ -4,6 +4,8 @@ modules of :mod:`tests.helpers`, imported by name."""
 
 from __future__ import annotations
 
+import contextlib
+import os
 import shutil
 import tempfile
 from pathlib import Path
@@ -27,6 +29,10 @@ after another on one worker, never two at once, while the other worker runs ever
 (:data:`COMPUTE_LANE`): fits, renders and in-process devices whose clock is simulated."""
 COMPUTE_LANE = "compute"
 """The xdist group of every test that is not marked ``wall_clock``."""
+COMPUTE_NICE = 10
+"""Nice value of the worker that runs the compute lane in a parallel run: the fits and
+renders beside the wall-clock lane take what CPU it leaves (a CI run with both lanes at nice 0,
+BLAS on two threads, saw the served reference's host stall for 144 ms and its plays not kept)."""
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
@@ -38,6 +44,28 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         item.add_marker(pytest.mark.xdist_group(lane))
 
 
+_COMPUTE_WORKER = pytest.StashKey[bool]()
+
+
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """In a parallel run (``PYTEST_XDIST_WORKER`` set), the worker that takes the compute lane
+    yields to the wall-clock lane: nice :data:`COMPUTE_NICE` and one BLAS/OpenMP thread, from
+    its first compute test on (a group stays on one worker). A run in one process is left as
+    it is: its real-time tests run alone."""
+    config = item.config
+    if (not os.environ.get("PYTEST_XDIST_WORKER") or config.stash.get(_COMPUTE_WORKER, False)
+            or item.get_closest_marker("wall_clock")):
+        return
+    config.stash[_COMPUTE_WORKER] = True
+    with contextlib.suppress(OSError):
+        os.setpriority(os.PRIO_PROCESS, 0, max(os.getpriority(os.PRIO_PROCESS, 0),
+                                                COMPUTE_NICE))
+    from threadpoolctl import threadpool_limits
+
+    config.stash[_THREAD_LIMIT] = threadpool_limits(limits=1)
+
+
+_THREAD_LIMIT = pytest.StashKey[object]()
 _CACHE_DIRECTORY = pytest.StashKey[tuple[pytest.MonkeyPatch, Path]]()
 
 
