@@ -26,6 +26,7 @@ from hcard.device.protocol import (
     Finger,
     ReportId,
     ReportKind,
+    State,
     StateFlags,
     decode_input,
 )
@@ -35,6 +36,7 @@ from hcard.device.transports.usbip_link import UsbipLink
 from hcard_device.usb.device import MANUFACTURER, PRODUCTS, BoundedEndpoint
 from hcard_device.usb.server import DeviceServer
 from hcard_device.usb.transport import NoDelayUSBIP
+from tests.helpers.realtime import in_real_time, kept_run
 from tests.helpers.served_device import served_device
 
 pytestmark = pytest.mark.wall_clock
@@ -167,24 +169,34 @@ def test_unread_input_reports_are_dropped_not_queued_without_bound(loopback):
 
 
 def test_firmware_runs_in_real_time_at_the_input_rate():
-    with DeviceServer("coupled", loopback=True) as server:
-        link = UsbipLink.open("loopback", 0, "1-1", timeout_s=T, transport=server.transport)
-        link.start_in(IN_ENDPOINT, 64)
-        link.read_in(T)
-        while link.poll_in():  # skip what queued before this test read
-            link.read_in(0.0)
-        first = decode_input(link.read_in(T))
-        t0 = time.monotonic()
-        count = 0
-        while time.monotonic() - t0 < 0.25:  # read as the reports come
-            last = decode_input(link.read_in(T))
-            count += 1
-        elapsed = time.monotonic() - t0
-        link.close()
-    device_s = ((last.timestamp_us - first.timestamp_us) % (1 << 32)) * 1e-6
-    assert device_s == pytest.approx(elapsed, abs=0.02)  # device time follows the wall clock
-    assert (last.sequence - first.sequence) % 65536 == pytest.approx(device_s * 1000, abs=2)
-    assert count == (last.sequence - first.sequence) % 65536  # every report, none dropped
+    """Device time follows the wall clock and every report of the input rate is sent. A run
+    in which the device says it fell behind (REALTIME_LAG, PI4) or the host did not run is
+    measured again (spec QT3): on a loaded machine the in-process server can be starved."""
+
+    def one_run() -> None:
+        states: list[State] = []
+        with kept_run(states), DeviceServer("coupled", loopback=True) as server:
+            link = UsbipLink.open("loopback", 0, "1-1", timeout_s=T, transport=server.transport)
+            link.start_in(IN_ENDPOINT, 64)
+            link.read_in(T)
+            while link.poll_in():  # skip what queued before this test read
+                link.read_in(0.0)
+            first = decode_input(link.read_in(T))
+            t0 = time.monotonic()
+            count = 0
+            while time.monotonic() - t0 < 0.25:  # read as the reports come
+                last = decode_input(link.read_in(T))
+                states.append(last)
+                count += 1
+            elapsed = time.monotonic() - t0
+            link.close()
+            device_s = ((last.timestamp_us - first.timestamp_us) % (1 << 32)) * 1e-6
+            assert device_s == pytest.approx(elapsed, abs=0.02)  # device time: the wall clock
+            assert (last.sequence - first.sequence) % 65536 == pytest.approx(device_s * 1000,
+                                                                             abs=2)
+            assert count == (last.sequence - first.sequence) % 65536  # every report, no drop
+
+    in_real_time(one_run, "the served firmware's input rate")
 
 
 def test_tcp_nodelay_on_every_socket():
