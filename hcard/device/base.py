@@ -620,9 +620,11 @@ class Driver(abc.ABC):
                        f"({_owner(state.session_token)}) at device time "
                        f"{state.timestamp_us * S_PER_US:.3f} s")
         if self._session_card is not None and state.card_generation != self._session_card:
-            self._lose(f"session {number} was lost: the active card was replaced (generation "
-                       f"{self._session_card} -> {state.card_generation}) by another host at "
-                       f"device time {state.timestamp_us * S_PER_US:.3f} s")
+            ended = ("ended by the device after host silence (PN7), then "
+                     if self._session_ended or not state.session_live else "")
+            self._lose(f"session {number} was lost: {ended}the active card was replaced "
+                       f"(generation {self._session_card} -> {state.card_generation}) by "
+                       f"another host at device time {state.timestamp_us * S_PER_US:.3f} s")
 
     def _lose(self, reason: str) -> None:
         self.session_lost = f"{self.uri}: {reason} (spec PN9)"
