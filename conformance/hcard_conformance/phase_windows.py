@@ -25,6 +25,7 @@ import numpy as np
 
 from hcard.render import RenderOptions
 from hcard.render.compiled import velocity_locked
+from hcard.render.touch import velocity_estimate
 from hcard.track import FingerTrack
 from hcard.v1 import card_pb2 as pb
 
@@ -68,14 +69,15 @@ def phase_free_textures(card: pb.Card, options: RenderOptions) -> set[int]:
 
 
 def sample_velocities(track: FingerTrack) -> np.ndarray:
-    """R4's velocity estimate of each sample, mm/s, shape (M, 2) (the first takes the
-    second's; samples after a lift take their own finite difference, which no frame in contact
-    uses before the next sample)."""
+    """R4's velocity estimate of each sample (:func:`hcard.render.touch.velocity_estimate`),
+    mm/s, shape (M, 2), whatever the contact (a sample after a lift takes its own finite
+    difference, which no frame in contact uses before the next sample); the first takes the
+    second's."""
     t, x, y = (np.asarray(a, dtype=float) for a in (track.t, track.x, track.y))
     v = np.zeros((len(t), 2))
     if len(t) >= 2:
-        v[1:, 0] = np.diff(x) / np.diff(t)
-        v[1:, 1] = np.diff(y) / np.diff(t)
+        dt = np.diff(t)
+        v[1:] = velocity_estimate(np.column_stack((np.diff(x), np.diff(y))), dt, dt > 0)
         v[0] = v[1]
     return v
 
