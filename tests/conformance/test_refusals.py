@@ -82,3 +82,42 @@ def test_the_flag_is_required_only_where_the_host_read_every_report() -> None:
     uncounted = refusals.judge("short-report", short, before, [_state(101 + i, 7)
                                                                for i in range(20)], "")
     assert not uncounted.passed and "0 rejections counted, 1 required" in uncounted.detail
+
+
+def _refusals_through(driver: object, timing: str) -> dict[str, CheckResult]:
+    ctx = Context.for_driver("sim://")
+    ctx.open_driver = lambda: driver
+    ctx.options["timing"] = timing
+    return {r.case: r for r in refusals.check_refusals(ctx)}
+
+
+def test_a_host_reading_late_waits_for_a_report_that_covers_the_request() -> None:
+    """A host whose reads lag the device by 300 ms (as a QEMU guest's do): every report it
+    reads in the first 50 ms was made before the request. Under software emulation it reads
+    on until a report echoes the FINGER it sent after the request, and the reference passes
+    every case with the counts of a prompt host; a real-time host reading that late gives up
+    after 20 ms more and finds nothing counted, which X1 fails."""
+    from tests.helpers.late_transport import LateReaderDriver
+
+    late = _refusals_through(LateReaderDriver(), "software-emulation")
+    assert list(late) == list(refusals.REFUSAL_CASES)
+    for case, r in late.items():
+        assert r.outcome == "PASS", (case, r.detail)
+    assert "200 rejection(s) counted" in late["flood"].detail
+    strict = _refusals_through(LateReaderDriver(), "real-time")
+    assert strict["short-report"].outcome == "FAIL"
+    assert "0 rejections counted, 1 required" in strict["short-report"].detail
+
+
+def test_the_device_keeps_running_by_its_sequence_not_by_the_reports_read() -> None:
+    """PE3 counts the reports the device produced after the request (sequence numbers, PT5):
+    three reports read that span 40 produced pass; 5 produced (the device all but stopped)
+    fail, however many of them were read."""
+    short = refusals.refusals()["short-report"]
+    before = _state(100, 7)
+    sparse = [_state(110, 8, int(FaultBits.INVALID_REQUEST)), _state(125, 8), _state(140, 8)]
+    assert refusals.judge("short-report", short, before, sparse, "").passed
+    stalled = [_state(101 + i, 8, int(FaultBits.INVALID_REQUEST) if i == 0 else 0)
+               for i in range(5)]
+    result = refusals.judge("short-report", short, before, stalled, "")
+    assert not result.passed and "5 STATE reports produced after it (5 read)" in result.detail

@@ -90,8 +90,10 @@ class HostFinger:
         self.due_s = max(self.due_s + self.period_s, now)
 
     def mark(self) -> None:
-        """From now on, remember the host times of the FINGER reports sent (:attr:`after_us`)."""
+        """From now on, remember the host times of the FINGER reports sent (:attr:`after_us`),
+        forgetting those sent before."""
         self.marked = True
+        self.after_us = set()
 
     def _send(self, now_s: float) -> None:
         if not self.host_finger:

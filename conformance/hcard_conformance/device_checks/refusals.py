@@ -24,9 +24,18 @@ hostile host might send:
     :data:`FLOOD_REPORTS` short reports sent as fast as the host can (PS2: a flood of malformed
     reports stops neither the input stream nor the device's answers): every one counted.
 
+Right after the bytes the host sends a FINGER report (on a device with HOST_FINGER). A device
+handles a host's reports in order, so a STATE report that echoes that FINGER
+(``host_time_echo_us``) was made after the request was handled: the host reads for
+:data:`AFTER_S`, and then on until such a report arrives, at most the timing class's latency
+and read lag longer (a guest under software emulation reads reports up to seconds late). The
+count is judged on the last report read.
+
 In every case the device keeps producing STATE reports and keeps RUNNING the session (PE3):
-at least :data:`MIN_REPORTS` reports in the :data:`AFTER_S` that follow, the last with
-RUNNING. The metric is the difference between the rejections counted and those required.
+its report sequence advances by at least :data:`MIN_REPORTS` from the last report before the
+request to the last one read (counted by sequence number, PT5, so reports the host failed to
+read count as produced), the last with RUNNING. The metric is the difference between the
+rejections counted and those required.
 """
 
 from __future__ import annotations
@@ -50,9 +59,10 @@ from hcard.device.protocol.constants import STREAM_FRAMES_PER_REPORT
 from hcard_conformance.check_names import DEVICE_REFUSALS as CHECK
 from hcard_conformance.context import Context
 from hcard_conformance.device_checks.common import LEVEL, on_one_driver
-from hcard_conformance.device_checks.link_session import HOST_PAUSE_MAX_S, LinkSession
+from hcard_conformance.device_checks.link_session import HOST_PAUSE_MAX_S, POLL_S, LinkSession
 from hcard_conformance.realtime import NotKept, attempted_case, device_lag, reasons
 from hcard_conformance.result import CannotAssess, CheckResult
+from hcard_conformance.timing import REAL_TIME, timing_class
 
 REFUSAL_CASES = ("padded-report", "short-report", "unknown-output", "unknown-command",
                  "bad-stream", "unknown-feature", "flood")
@@ -60,9 +70,11 @@ REFUSAL_CASES = ("padded-report", "short-report", "unknown-output", "unknown-com
 BEFORE_S = 0.02
 """Reports read before each case, s (the last one gives the count of rejections so far)."""
 AFTER_S = 0.05
-"""Reports read after each case, s: the rejection counted and flagged, the device running."""
+"""Reports read after each case at least, s: the rejection counted and flagged, the device
+running."""
 MIN_REPORTS = 10
-"""Fewest STATE reports the device must send in :data:`AFTER_S` (PE3: it keeps running)."""
+"""Fewest STATE reports the device must produce after the request (PE3: it keeps running): a
+tenth of what a 1 kHz device sends in :data:`AFTER_S`."""
 REPORT_BYTES = 64
 """Longest report of the protocol, bytes (PT3): what a padding host stack sends."""
 UNKNOWN_OUTPUT_ID = 0x1F
@@ -149,7 +161,8 @@ def all_read(before: State, after: list[State]) -> bool:
 
 def judge(case: str, refusal: Refusal, before: State, after: list[State],
           host_note: str) -> CheckResult:
-    """The case's verdict from the last report before it and the reports after it."""
+    """The case's verdict from the last report before it and the reports after it (read until
+    one covers the request, module docstring)."""
     counted = (after[-1].rejected_requests - before.rejected_requests) % COUNTER_MODULO \
         if after else 0
     flagged = any(s.faults & FaultBits.INVALID_REQUEST for s in after)
@@ -166,21 +179,39 @@ def judge(case: str, refusal: Refusal, before: State, after: list[State],
             notes.append("INVALID_REQUEST not judged: the host lost reports after the request")
     if not refusal.rejections and flagged:
         problems.append("a STATE report flagged INVALID_REQUEST for an accepted report")
-    if len(after) < MIN_REPORTS or not running:
-        problems.append(f"{len(after)} STATE reports in {AFTER_S * 1000:.0f} ms after it, "
+    produced = (after[-1].sequence - before.sequence) % COUNTER_MODULO if after else 0
+    if produced < MIN_REPORTS or not running:
+        problems.append(f"{produced} STATE reports produced after it ({len(after)} read), "
                         f"{'RUNNING' if running else 'not RUNNING'} (PE3)")
     detail = "; ".join(problems + notes) if problems else "; ".join([
         f"{counted} rejection(s) counted as required"
         + (", INVALID_REQUEST flagged" if flagged else "")
-        + f"; {len(after)} reports after it, RUNNING", *notes])
+        + f"; {produced} reports produced after it ({len(after)} read), RUNNING", *notes])
     return CheckResult(CHECK, LEVEL, case, not problems, "rejections_off",
                        float(abs(counted - refusal.rejections)), 0.0, "requests", detail)
 
 
+def read_past(session: LinkSession, longest_s: float) -> list[State]:
+    """The reports read for :data:`AFTER_S` and then on, at most ``longest_s`` (s) longer,
+    until one echoes a FINGER the host sent after the request (:meth:`HostFinger.mark`); on a
+    device without HOST_FINGER, those of :data:`AFTER_S` alone."""
+    finger = session.finger
+    after = session.run(AFTER_S)
+    if not finger.host_finger:
+        return after
+    deadline = session.driver.clock() + longest_s
+    while not any(s.host_time_echo_us in finger.after_us for s in after) \
+            and session.driver.clock() < deadline:
+        after += session.run(POLL_S)
+    return after
+
+
 def measure_refusals(driver: Driver, wants: Callable[[str], bool] | None = None,
+                     lag_s: float = REAL_TIME.latency_s + REAL_TIME.read_lag_s,
                      ) -> Iterator[CheckResult]:
     """The cases of ``device.refusals`` on one open driver (module docstring); with ``wants``,
-    only the cases it is true of."""
+    only the cases it is true of. ``lag_s``: how much longer than :data:`AFTER_S` the host
+    reads for a report that covers the request, s."""
     session = LinkSession(driver)
     session.begin()
     try:
@@ -194,7 +225,9 @@ def measure_refusals(driver: Driver, wants: Callable[[str], bool] | None = None,
                     raise CannotAssess(f"no STATE report in {BEFORE_S * 1000:.0f} ms")
                 session.mark()
                 note = refusal.send(driver)
-                after = session.run(AFTER_S)
+                session.finger.mark()
+                session.finger.send()
+                after = read_past(session, lag_s)
                 result = judge(case, refusal, before[-1], after, note)
                 if result.passed:
                     return result
@@ -213,4 +246,7 @@ def measure_refusals(driver: Driver, wants: Callable[[str], bool] | None = None,
 def check_refusals(ctx: Context) -> Iterator[CheckResult]:
     """Malformed, unknown and refused reports are ignored, counted and flagged, and the device
     keeps running (PT7, PO4, PO5, PE1-PE3)."""
-    yield from on_one_driver(ctx, CHECK, REFUSAL_CASES, measure_refusals)
+    timing = timing_class(ctx)
+    lag_s = timing.latency_s + timing.read_lag_s
+    yield from on_one_driver(ctx, CHECK, REFUSAL_CASES,
+                             lambda driver, wants: measure_refusals(driver, wants, lag_s))
