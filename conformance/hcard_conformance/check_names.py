@@ -12,6 +12,7 @@ from __future__ import annotations
 FORMAT_PARSE = "format.parse"
 FORMAT_ROUND_TRIP = "format.round_trip"
 FORMAT_REJECT = "format.reject"
+FORMAT_COMPAT = "format.compat"
 
 RENDERER_EXACT = "renderer.exact"
 RENDERER_FRICTION_ERROR = "renderer.friction_error"

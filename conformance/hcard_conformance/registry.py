@@ -157,6 +157,11 @@ BUILTIN_CHECKS: tuple[LazyCheck, ...] = (
               "Q4: every invalid vector is rejected with its documented error",
               "hcard_conformance.format_level:check_reject",
               cases_target="hcard_conformance.format_level:reject_cases"),
+    LazyCheck(check_names.FORMAT_COMPAT, "format",
+              "Q4b: other writers' files: unknown fields kept (V3, V4), the form read from "
+              "the content (F4), JSON written by the mapping's rules (F2)",
+              "hcard_conformance.format_compat:check_compat",
+              cases_target="hcard_conformance.format_compat:compat_cases"),
     LazyCheck(check_names.RENDERER_EXACT, "renderer",
               "A0: every golden render reproduced frame for frame within 1e-5",
               "hcard_conformance.renderer_level:check_exact",

@@ -73,9 +73,9 @@ def test_builtin_checks_are_ordered_by_level() -> None:
         assert name in names
     levels = [c.level for c in checks]
     assert levels == sorted(levels, key=("format", "renderer", "device").index)
-    assert levels.count("format") == 3
+    assert levels.count("format") == 4
     assert [c.name for c in all_checks(("format",), plugins=False)] == [
-        "format.parse", "format.round_trip", "format.reject"]
+        "format.parse", "format.round_trip", "format.reject", "format.compat"]
 
 
 def test_every_row_of_the_builtin_table_names_a_check_function_of_its_level() -> None:
@@ -83,7 +83,7 @@ def test_every_row_of_the_builtin_table_names_a_check_function_of_its_level() ->
     (and predicate) imports, and every public ``check_*`` function of the check modules is a
     row (a function left out of the table would never run)."""
     targets = {row.target for row in BUILTIN_CHECKS}
-    assert len({row.name for row in BUILTIN_CHECKS}) == len(BUILTIN_CHECKS) == 18
+    assert len({row.name for row in BUILTIN_CHECKS}) == len(BUILTIN_CHECKS) == 19
     modules = {target.split(":")[0] for target in targets}
     for row in BUILTIN_CHECKS:
         assert callable(row.func) and row.name.split(".")[0] == row.level, row
@@ -132,7 +132,7 @@ def test_listing_the_plugins_imports_no_check_module_and_no_driver() -> None:
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           check=True)
     counts, imported = done.stdout.splitlines()
-    assert counts.split() == ["18", "6"]  # usbip, pyusb, hid; sim, control; faulty
+    assert counts.split() == ["19", "6"]  # usbip, pyusb, hid; sim, control; faulty
     assert ast.literal_eval(imported) == [
         "hcard_conformance.check_names", "hcard_conformance.faulty",
         "hcard_conformance.faulty.plugin", "hcard_conformance.registry",
@@ -222,7 +222,8 @@ def test_a_context_wants_every_case_of_a_check_it_does_not_narrow() -> None:
 
 def test_cli_lists_the_cases_of_a_run_without_measuring() -> None:
     """``hcard conformance --list``: the plan's node IDs, in the order a run reports them
-    (format level: both files of every card, then every card, then every invalid vector)."""
+    (format level: both files of every card, then every card, then every invalid vector, then
+    every compatibility file and the JSON writer)."""
     result = CliRunner().invoke(cli, ["conformance", "--driver", "reference", "--level",
                                       "format", "--list"])
     assert result.exit_code == 0, result.output
@@ -230,7 +231,8 @@ def test_cli_lists_the_cases_of_a_run_without_measuring() -> None:
         *(f"format.parse::{c.name}.{form}" for c in MANIFEST.cards for form in ("binary",
                                                                                   "json")),
         *(f"format.round_trip::{c.name}" for c in MANIFEST.cards),
-        *(f"format.reject::{v.name}" for v in MANIFEST.invalid)]
+        *(f"format.reject::{v.name}" for v in MANIFEST.invalid),
+        *(f"format.compat::{c.case}" for c in MANIFEST.compat), "format.compat::json-writer"]
 
 
 def _crashing_checks() -> list[Check]:
@@ -359,7 +361,8 @@ def test_cli_writes_reports_and_exits_zero_for_the_reference(tmp_path: Path) -> 
     assert result.exit_code == 0, result.output
     assert "CONFORMS" in result.output
     data = json.loads(report.read_text())
-    cases = 2 * len(MANIFEST.cards) + len(MANIFEST.cards) + len(MANIFEST.invalid)
+    cases = 2 * len(MANIFEST.cards) + len(MANIFEST.cards) + len(MANIFEST.invalid) \
+        + len(MANIFEST.compat) + 1
     assert data["totals"] == {"cases": cases, "failed": 0, "pass": cases, "fail": 0, "error": 0,
                               "unassessed": 0}
     assert ET.parse(junit).getroot().get("tests") == str(cases + 1)  # and the verdict
@@ -392,7 +395,7 @@ def test_pytest_plugin_makes_one_item_per_case(broken_vectors: Path, tmp_path: P
          "--hcard-driver=reference", "--hcard-level=format", f"--hcard-vectors={broken_vectors}",
          "-p", "no:cacheprovider", "-q", f"--junitxml={junit}", str(tmp_path)],
         capture_output=True, text=True, cwd=tmp_path, timeout=300)
-    cases = 3 * len(MANIFEST.cards) + len(MANIFEST.invalid)
+    cases = 3 * len(MANIFEST.cards) + len(MANIFEST.invalid) + len(MANIFEST.compat) + 1
     assert run.returncode == 1, run.stdout + run.stderr
     assert f"1 failed, {cases - 1} passed" in run.stdout
     victim = MANIFEST.invalid[0].name

@@ -97,6 +97,7 @@ def test_every_rule_of_the_covered_documents_has_one_row() -> None:
 def test_every_named_vector_and_check_exists() -> None:
     vectors = ({c.name for c in MANIFEST.cards} | {t.name for t in MANIFEST.tracks}
                | {i.name for i in MANIFEST.invalid}
+               | {f"compat/{c.file.name}" for c in MANIFEST.compat}
                | {f"{r.card}@{r.track}" for r in MANIFEST.renders})
     checks = {c.name for c in all_checks(plugins=False)}
     for rule, (vector_cell, check_cell) in ROWS.items():

@@ -19,6 +19,7 @@ from hcard.rates import DEFAULT_FRAME_RATE_HZ
 from hcard.render import Frames, Renderer, RenderOptions
 from hcard.track import track_to_csv
 from hcard_conformance.vectors.cards import vector_cards
+from hcard_conformance.vectors.compat import compat_vectors
 from hcard_conformance.vectors.invalid import invalid_vectors
 from hcard_conformance.vectors.manifest import MANIFEST_FORMAT, MANIFEST_NAME
 from hcard_conformance.vectors.readme import README_TEXT
@@ -27,7 +28,7 @@ from hcard_conformance.vectors.tracks import vector_tracks
 GENERATOR = "python -m hcard_conformance.vectors"
 ZIP_TIME = (1980, 1, 1, 0, 0, 0)
 """Timestamp of every NPZ member (the zip epoch), for byte-identical archives."""
-SUBDIRS = ("cards", "tracks", "renders", "invalid")
+SUBDIRS = ("cards", "tracks", "renders", "invalid", "compat")
 
 RENDER_PAIRS: tuple[tuple[str, str], ...] = (
     ("single-grating", "slow-stroke"),
@@ -174,6 +175,17 @@ def generated_files() -> dict[str, bytes]:
         invalid_rows.append({"name": iv.name, "file": path, "error": iv.error,
                              "field": iv.field, "rule": iv.rule})
     manifest["invalid"] = invalid_rows
+
+    compat_rows = []
+    for cv in compat_vectors():
+        path = f"compat/{cv.file_name}"
+        files[path] = cv.data
+        compat_rows.append({"name": cv.name, "file": path,
+                            "form": "json" if card_io.looks_like_json(cv.data) else "binary",
+                            "card": cv.card, "minor": cv.minor, "rule": cv.rule,
+                            "description": cv.description,
+                            "unknown": [u.as_json() for u in cv.unknown]})
+    manifest["compat"] = compat_rows
     manifest["tolerances"] = dict(TOLERANCES)
 
     files[MANIFEST_NAME] = _json_bytes(manifest)

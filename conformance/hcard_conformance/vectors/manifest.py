@@ -114,6 +114,34 @@ class InvalidEntry:
 
 
 @dataclass(frozen=True)
+class CompatEntry:
+    """A compatibility vector (README V3, V4, F4): a file that must read as vector card
+    ``card`` with minor version ``minor``.
+
+    Attributes:
+        name: ``unknown-fields``, ``binary-named`` or ``json-named``.
+        file: its path; the suffix is part of the vector (F4 gives a wrong one on purpose).
+        form: ``binary`` or ``json``, the form of its content.
+        unknown: the fields 1.0 does not define that a re-written binary file must keep (V3),
+            each ``{"path", "number", "wire_type", "payload_hex"}``.
+    """
+
+    name: str
+    file: Path
+    form: str
+    card: str
+    minor: int
+    rule: str
+    description: str
+    unknown: tuple[dict[str, Any], ...] = ()
+
+    @property
+    def case(self) -> str:
+        """The file's name (``binary-named.json``), the case name of ``format.compat``."""
+        return self.file.name
+
+
+@dataclass(frozen=True)
 class Manifest:
     """The whole manifest: cards, tracks, renders, invalid cards and default tolerances."""
 
@@ -123,6 +151,7 @@ class Manifest:
     renders: tuple[RenderEntry, ...]
     invalid: tuple[InvalidEntry, ...]
     tolerances: dict[str, float] = field(default_factory=dict)
+    compat: tuple[CompatEntry, ...] = ()
 
     def card(self, name: str) -> CardEntry:
         """The card entry called ``name``; KeyError when absent."""
@@ -178,4 +207,9 @@ def load_manifest(root: str | Path | None = None) -> Manifest:
             for i in raw["invalid"]
         ),
         tolerances={k: float(v) for k, v in raw["tolerances"].items()},
+        compat=tuple(
+            CompatEntry(c["name"], base / c["file"], c["form"], c["card"], int(c["minor"]),
+                        c["rule"], c.get("description", ""), tuple(c.get("unknown", ())))
+            for c in raw.get("compat", ())
+        ),
     )

@@ -25,6 +25,9 @@ drift from the generator. How the vectors are used, every metric and every thres
 - `renders/CARD__TRACK.npz`: golden renders by the reference renderer (NPZ with `t_s, uv, ev,
   friction` float64, `contact` bool, `texture` int32; `../track-format.md` TO2).
 - `invalid/NAME.hcard`, `invalid/NAME.json`: invalid cards, one broken rule each.
+- `compat/*`: valid files a 1.0 reader meets in the world, each the content of one card
+  (README V3, V4, F4): a later minor's binary card and JSON card with fields 1.0 does not
+  define, and the two forms under each other's file names.
 
 ## Manifest
 
@@ -34,6 +37,8 @@ drift from the generator. How the vectors are used, every metric and every thres
      "renders": [{"card", "track", "npz", "frames", "frame_rate_hz", "band_limit_hz",
                   "dead_reckoning_s", "mode", "tolerance": {"friction_abs", "time_abs_s"}}],
      "invalid": [{"name", "file", "error", "field", "rule"}],
+     "compat":  [{"name", "file", "form", "card", "minor", "rule", "description",
+                  "unknown": [{"path", "number", "wire_type", "payload_hex"}]}],
      "tolerances": {...}}
 
 Paths are relative to this folder. Card tags (`../conformance.md` Q6): `dense`, `coarse`,
@@ -52,7 +57,11 @@ Golden renders use the defaults of README R1 (hybrid mode, `fs` = 10 kHz, `B` = 
    (README section 9), validate, and check that re-serialising gives the other file's content
    (deterministic binary; JSON compared as parsed messages if your JSON writer differs from the
    reference one). Every `invalid/*` file must be rejected; the manifest gives the field path
-   your error should name and a fragment of the reference message.
+   your error should name and a fragment of the reference message. Every `compat/*` file
+   must read as its `card` with version minor `minor` (`../conformance.md` Q4b); re-written as
+   binary, `compat/unknown-fields.hcard` must keep each field of its `unknown` list (README
+   V3: the message at `path` holds field `number` of `wire_type` with the bytes `payload_hex`
+   after its tag).
 2. **Renderer** (README R13, `../conformance.md` A0): for every `renders` entry, read the card and
    the track CSV, render with the stated options, and compare with the NPZ: same frame count,
    `t_s` within 1e-9 s, `uv`, `ev`, `friction` within `tolerance.friction_abs` (1e-5),
