@@ -50,11 +50,11 @@ REALTIME_KEY = "driver-realtime"
 runs on the wall clock (a host's lateness matters, spec QT3) or in simulated time."""
 
 DEVICE_LAG_KEY = "device-lag"
-CLOCK_MISMATCH_KEY = "clock-mismatch"
-"""``Context.cache`` key: why the last play's reports leave gaps on the host's time line
-though none was lost (:func:`~hcard_conformance.realtime.clock_mismatch`), or empty."""
 """:attr:`Context.cache` key: why the device did not keep real time in the last play of
 :meth:`Context.render` (REALTIME_LAG, device protocol PI4); empty when it did."""
+CLOCK_MISMATCH_KEY = "clock-mismatch"
+""":attr:`Context.cache` key: why the last play's reports leave gaps on the host's time line
+though none was lost (:func:`~hcard_conformance.realtime.clock_mismatch`), or empty."""
 
 DEVICE_INFO_KEY = "device-info"
 """:attr:`Context.cache` key of the device's DEVICE_INFO (:meth:`Context.device_info`)."""
