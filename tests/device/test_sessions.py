@@ -208,18 +208,37 @@ def test_sim_driver_begins_and_ends_its_session_and_refuses_to_send_after_a_loss
 
 # ---------------------------------------------------------------------- served (PN10)
 
+FEED_PERIOD_S = 0.02
+"""How often :func:`feeding` sends a KEEPALIVE, s (a playing host's reports come as often)."""
+
+
 @contextlib.contextmanager
 def feeding(driver) -> Iterator[list[State]]:
-    """Keep ``driver``'s session fed on a thread (KEEPALIVE every 20 ms, as a playing host's
-    reports would) and collect its reports into the list yielded; the thread owns the driver
-    until the block ends."""
+    """Keep ``driver``'s session fed on a thread (KEEPALIVE every :data:`FEED_PERIOD_S`, as a
+    playing host's reports would) and collect its reports into the list yielded; the thread
+    owns the driver until the block ends.
+
+    The feeding is the host keeping real time: when the thread fell silent for longer than the
+    device's watchdog (so that the device ended the session for host silence, PN7, and the
+    block saw another host's session), the run was not kept (:class:`NotKept`, QT3), whatever
+    the block found. Any other error of the thread fails the block."""
     states: list[State] = []
     stop = threading.Event()
+    watchdog_s = driver.info().watchdog_ms / 1000
+    longest_gap_s = [0.0]
+    failure: list[BaseException] = []
 
     def feed() -> None:
-        while not stop.is_set():
-            states.extend(driver.collect_until(driver.clock() + 0.02))
-            driver.keepalive()
+        last = time.monotonic()
+        try:
+            while not stop.is_set():
+                states.extend(driver.collect_until(driver.clock() + FEED_PERIOD_S))
+                driver.keepalive()
+                now = time.monotonic()
+                longest_gap_s[0] = max(longest_gap_s[0], now - last)
+                last = now
+        except DeviceError as exc:
+            failure.append(exc)
 
     thread = threading.Thread(target=feed, daemon=True)
     thread.start()
@@ -228,6 +247,14 @@ def feeding(driver) -> Iterator[list[State]]:
     finally:
         stop.set()
         thread.join(5)
+        silent = longest_gap_s[0] > watchdog_s or any(
+            isinstance(e, SessionLost) and "host silence" in str(e) for e in failure)
+        if silent:
+            raise NotKept(f"the feeding thread fell silent for {longest_gap_s[0] * 1e3:.0f} ms "
+                          f"(watchdog {watchdog_s * 1e3:.0f} ms)"
+                          + (f": {failure[0]}" if failure else ""))
+        if failure:
+            raise failure[0]
 
 
 def test_two_clients_of_one_device_served_in_another_process_repeatedly():
