@@ -332,7 +332,7 @@ class Driver(abc.ABC):
                 self._check_open()
                 self._check_session()
                 if index == len(reports) - 1:  # UPLOAD_END: held while the device checks (PU12)
-                    with self._waiting_at_most(max(self.timeout_s, commit_timeout_s)):
+                    with self.waiting_at_most(max(self.timeout_s, commit_timeout_s)):
                         self._set_feature(report)
                 else:
                     self._set_feature(report)
@@ -346,7 +346,7 @@ class Driver(abc.ABC):
         return len(reports)
 
     @contextlib.contextmanager
-    def _waiting_at_most(self, timeout_s: float) -> Iterator[None]:
+    def waiting_at_most(self, timeout_s: float) -> Iterator[None]:
         """Within the block, the transport primitives wait up to ``timeout_s`` (they read
         :attr:`timeout_s` when called): the UPLOAD_END SET's status stage comes only once the
         device has checked the card or profile (PU12), which on a loaded machine takes longer

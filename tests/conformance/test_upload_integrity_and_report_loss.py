@@ -330,3 +330,38 @@ def test_a_clipped_card_must_commit_and_be_flagged() -> None:
     assert case.outcome == "FAIL" and case.value >= upload_integrity.MIN_PLAYING_REPORTS
     assert "0 of" in case.detail and "flag CARD_CLIPPED" in case.detail
     assert not _failures({c: r for c, r in unflagged.items() if c != "clipped-card"})
+
+
+class _TimedSim(SimDriver):
+    """``sim://`` that records, for every SET_REPORT(Feature), its report ID, first byte after
+    it and the timeout the driver's transport would wait for the status stage (s)."""
+
+    def __init__(self) -> None:
+        super().__init__(parse_uri("sim://"), Firmware(DeviceSimulation(DeviceConfig.evita())),
+                         timeout_s=DEFAULT_TIMEOUT_S)
+        self.sets: list[tuple[int, int, float]] = []
+
+    def _set_feature(self, report: bytes) -> None:
+        self.sets.append((report[0], report[1] if len(report) > 1 else -1, self.timeout_s))
+        super()._set_feature(report)
+
+
+def test_the_suite_waits_for_a_commit_as_long_as_the_driver_does() -> None:
+    """PU12: the device holds a COMMIT's status stage until its checks end; the suite's raw
+    uploads wait for it up to the driver's commit timeout (a served device's checker beside
+    two busy processes took over 1 s: CI found `control OUT got no answer within 1 s`), and
+    every other request keeps the driver's own 1 s."""
+    from hcard.device.base import COMMIT_TIMEOUT_S
+    from hcard.device.protocol.constants import ReportId
+
+    driver = _TimedSim()
+    results = list(upload_integrity.measure_upload_integrity(
+        driver, lambda case: case in ("bad-crc", "valid-after")))
+    assert [r.outcome for r in results] == ["PASS", "PASS"]
+    ends = [(action, timeout) for rid, action, timeout in driver.sets
+            if rid == ReportId.UPLOAD_END]
+    commits = [t for action, t in ends if action == UploadAction.COMMIT]
+    assert len(commits) >= 2 and all(t == COMMIT_TIMEOUT_S for t in commits)
+    others = {t for rid, _a, t in driver.sets if rid != ReportId.UPLOAD_END}
+    assert others == {DEFAULT_TIMEOUT_S}
+    assert driver.timeout_s == DEFAULT_TIMEOUT_S

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 
 from hcard import build
 from hcard.card_io import to_bytes
-from hcard.device.base import Driver
+from hcard.device.base import COMMIT_TIMEOUT_S, Driver
 from hcard.device.errors import DeviceError, DeviceStall
 from hcard.device.protocol import (
     FRICTION_SCALE,
@@ -122,6 +122,10 @@ class LinkCard:
         """CRC-32 of :attr:`data` (protocol 9.3)."""
         return crc32(self.data)
 
+
+COMMITS = (UploadAction.COMMIT, UploadAction.COMMIT_PROFILE)
+"""UPLOAD_END actions whose SET the device holds until its checks end (PU12): the host waits
+for it up to the driver's commit timeout, not the 1 s of any other request."""
 
 def clipped_card(info: DeviceInfo) -> LinkCard:
     """A valid card that asks more than any device renders: uniform UV 0 (no friction left:
@@ -258,8 +262,11 @@ def run_attempt(session: LinkSession, steps: Sequence[Step]) -> Attempt:
             run_quiet(session, step)
             continue
         else:
-            try:
-                driver.set_report(step)
+            held = isinstance(step, UploadEnd) and step.action in COMMITS
+            try:  # the status stage of a COMMIT comes once the device has checked (PU12)
+                with driver.waiting_at_most(max(driver.timeout_s, COMMIT_TIMEOUT_S)) if held \
+                        else contextlib.nullcontext():
+                    driver.set_report(step)
             except DeviceStall:
                 stalls.append(step.name())
         session.run(POLL_S)
