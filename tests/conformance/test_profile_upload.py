@@ -1,7 +1,8 @@
 """Check ``device.profile-upload`` (spec/conformance.md 4.10, U4-U5; protocol PU9-PU11): the
-reference devices pass every case, measured; the control that skips the CRC-32 commits the
-corrupt profile and fails by the number the check measures; a device that takes no profile,
-or is rendered on the host, or a host that does not keep real time, is not judged by it."""
+reference devices pass every case, measured; the controls that let a profile raise a limit,
+that keep the host's profile after DEVICE_PROFILE and that skip the CRC-32 fail their case by
+the number the check measures; a device that takes no profile, or is rendered on the host, or a
+host that does not keep real time, is not judged by it."""
 
 from __future__ import annotations
 
@@ -103,6 +104,30 @@ def test_the_profiles_that_must_be_refused_or_clamped() -> None:
     raised = host_profiles.raised_limits(own, evita).limits
     assert raised is not None
     assert raised.max_amplitude == pytest.approx(2 * evita.max_amplitude_nm * 1e-9)
+
+
+def test_a_profile_that_raises_the_limits_fails_limits_not_raised() -> None:
+    """``profile-raises-limits`` puts the profile's limits in force (clamped to the hardware's):
+    with the host's 1250 nm lowered limit, the greedy card drives the plate to its 2500 nm
+    hardware limit, every report under the profile over the limit."""
+    results = _cases("control:profile-raises-limits")
+    assert {c for c, r in results.items() if r.outcome == FAIL} == {"limits-not-raised"}
+    limits = results["limits-not-raised"]
+    assert limits.value > 50  # reports over the limit, of ~120 under the profile
+    assert "largest output 2.000 x its limit" in limits.detail
+    assert "LIMITS read back Limits(max_amplitude_nm=2500" in limits.detail
+
+
+def test_a_device_profile_that_keeps_the_host_profile_fails_own_profile_restored(
+        evita: dict[str, CheckResult]) -> None:
+    """``sticky-profile`` clears HOST_PROFILE but renders with the host's profile: through the
+    device's own profile its amplitude reads 0.452 for the card's 0.7 (35 % off)."""
+    results = _cases("control:sticky-profile")
+    assert {c for c, r in results.items() if r.outcome == FAIL} == {"own-profile-restored"}
+    restored = results["own-profile-restored"]
+    assert restored.value == pytest.approx(0.248 / 0.7, abs=0.02)
+    assert "HOST_PROFILE clear from report" in restored.detail  # the flag alone would pass
+    assert evita["own-profile-restored"].value < 0.03
 
 
 def test_a_device_that_skips_the_crc_commits_the_corrupt_profile() -> None:
