@@ -229,6 +229,12 @@ BUILTIN_CHECKS: tuple[LazyCheck, ...] = (
               "hcard_conformance.device_checks.session_ownership:check_session_ownership",
               "hcard_conformance.wire_protocol:speaks_wire_protocol",
               cases_target="hcard_conformance.device_checks.session_ownership:CASES"),
+    LazyCheck(check_names.DEVICE_PROFILE_UPLOAD, "device",
+              "a host's profile is checked and put in force, raises no limit; DEVICE_PROFILE "
+              "restores the own",
+              "hcard_conformance.device_checks.profile_upload:check_profile_upload",
+              "hcard_conformance.wire_protocol:takes_host_profiles",
+              cases_target="hcard_conformance.device_checks.profile_upload:PROFILE_CASES"),
 )
 """The built-in checks, in level order: the one place their names (spelled in
 :mod:`~hcard_conformance.check_names`), levels and descriptions are given."""

@@ -1,13 +1,16 @@
 """Which implementations the checks of the wire protocol concern (spec/conformance.md
 section 4.4).
 
-``device.upload-integrity``, ``device.report-loss``, ``device.refusals`` and
-``device.session-ownership`` judge what a device does with the hcard HID protocol: how it takes a
-card upload, numbers its STATE reports, refuses reports it must not carry out and shares itself
-between hosts. A driver that renders on the host for a device of actuator
+``device.upload-integrity``, ``device.report-loss``, ``device.refusals``,
+``device.session-ownership`` and ``device.profile-upload`` judge what a device does with the
+hcard HID protocol: how it takes a card upload, numbers its STATE reports, refuses reports it
+must not carry out, shares itself between hosts and takes a host's device profile. A driver
+that renders on the host for a device of actuator
 frames (:class:`hcard.device.frame_driver.FrameDriver`, ``Driver.renders_on_host``) does that
 bookkeeping itself on the host; those checks would judge the host library, not the device, so
-they are not applicable to it.
+they are not applicable to it. ``device.profile-upload`` concerns only a device that takes
+profiles (capability PROFILE, protocol 1.1), and judges which profile is in force by the
+friction rendered, which needs a host that keeps real time (as ``device.friction``).
 """
 
 from __future__ import annotations
@@ -15,6 +18,8 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from hcard.device.errors import DeviceError
+from hcard.device.protocol import Capability
+from hcard_conformance.timing import timing_class
 
 if TYPE_CHECKING:
     from hcard_conformance.context import Context
@@ -36,3 +41,18 @@ def speaks_wire_protocol(ctx: Context) -> bool:
         except DeviceError:
             return True
     return not ctx.cache[RENDERS_ON_HOST_KEY]
+
+
+def takes_host_profiles(ctx: Context) -> bool:
+    """The implementation speaks the protocol itself (:func:`speaks_wire_protocol`), its
+    device takes a device profile from the host (DEVICE_INFO capability PROFILE, protocol 9.5)
+    and the host keeps real time (the timing class; the profile in force is judged by the
+    friction rendered). A device that cannot be opened counts as one that takes profiles (its
+    check then reports the error)."""
+    if not speaks_wire_protocol(ctx) or not timing_class(ctx).keeps_real_time:
+        return False
+    try:
+        info = ctx.device_info()
+    except DeviceError:
+        return True
+    return bool(info.capabilities & Capability.PROFILE)

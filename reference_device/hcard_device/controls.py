@@ -70,6 +70,17 @@ name:
     generation, STATE CARD_LOADED and that generation), but the plate goes on rendering what it
     rendered before (nothing, neutral friction, on a fresh device). Fails
     ``device.upload-integrity`` (U2, U3: every case, its card A never plays).
+``profile-raises-limits``
+    The E-ViTa that puts a host's device profile in force with the profile's own ``limits``
+    (clamped only to its hardware limits), in place of the limits the host set with LIMITS
+    (protocol PU10: a profile never raises a limit): after a host lowered the limits, a
+    profile written for the device's full range drives the plate past them. Fails
+    ``device.profile-upload`` case ``limits-not-raised``.
+``sticky-profile``
+    The E-ViTa whose CONTROL DEVICE_PROFILE clears the state flag HOST_PROFILE but keeps
+    rendering with the host's profile (protocol PU11: the device's own profile goes back in
+    force): every later recording says "the device's own profile" of what the host's rendered.
+    Fails ``device.profile-upload`` case ``own-profile-restored``.
 ``drops-reports``
     The E-ViTa whose firmware loses :data:`DROPPED_FRACTION` of its STATE reports at random as
     it produces them (an IN endpoint starved by the firmware's main loop), and counts them
@@ -95,6 +106,7 @@ from hcard.device.protocol import FaultBits, ReportId, crc32
 from hcard.device.protocol.upload import UploadStore
 from hcard.device.uri import DeviceUri, parse_uri
 from hcard.physics.card_clipping import ClipReport
+from hcard.physics.profile import DeviceProfile
 from hcard.render import RenderMode, RenderOptions
 from hcard.v1 import card_pb2 as pb
 from hcard_conformance import check_names
@@ -257,6 +269,39 @@ class UnplayedCardSimulation(DeviceSimulation):
         return self.clip_report
 
 
+class ProfileLimitsSimulation(DeviceSimulation):
+    """A device whose host profile brings its own limits (``profile-raises-limits``; test
+    control: it violates PU10 and, with limits the host lowered, PS1)."""
+
+    def set_profile(self, profile: DeviceProfile | None) -> ClipReport:
+        """The profile in force, and its ``limits`` as the limits in force (up to the
+        hardware's): the defect."""
+        if profile is not None and profile.limits is not None:
+            limits = profile.limits
+            self.set_limits(limits.max_amplitude, limits.max_voltage, limits.max_current)
+        return super().set_profile(profile)
+
+
+class StickyProfileSimulation(DeviceSimulation):
+    """A device that reports its own profile back in force after DEVICE_PROFILE (HOST_PROFILE
+    clear) but goes on rendering with the host's last one (``sticky-profile``)."""
+
+    def __init__(self, config: DeviceConfig, seed: int = 0) -> None:
+        self._kept: DeviceProfile | None = None
+        super().__init__(config, seed)
+
+    def set_profile(self, profile: DeviceProfile | None) -> ClipReport:
+        """Remember a host's profile for good; None clears the flag only."""
+        if profile is not None:
+            self._kept = profile
+        return super().set_profile(profile)
+
+    def _profile_in_force(self) -> DeviceProfile:
+        """The host's last profile at the limits in force, once one was given: the defect."""
+        own = super()._profile_in_force()
+        return own if self._kept is None else self._kept.replace(limits=own.limits)
+
+
 class DelayedFingerDriver(SimDriver):
     """``sim://`` with every FINGER report held for :data:`ADDED_LATENCY_S` of device time."""
 
@@ -393,6 +438,10 @@ CONTROLS: dict[str, Callable[[], SimDriver]] = {
         SilentRefusalFirmware(DeviceSimulation(DeviceConfig.evita())), "sim://"),
     "unplayed-commit": lambda: _sim_driver(UnplayedCardSimulation(DeviceConfig.evita()),
                                            "sim://"),
+    "profile-raises-limits": lambda: _sim_driver(ProfileLimitsSimulation(DeviceConfig.evita()),
+                                                 "sim://"),
+    "sticky-profile": lambda: _sim_driver(StickyProfileSimulation(DeviceConfig.evita()),
+                                          "sim://"),
 }
 """The negative controls by name (see the module docstring)."""
 
@@ -413,6 +462,8 @@ CATCHES: dict[str, tuple[str, str]] = {
     "reads-any-major": (check_names.DEVICE_UPLOAD_INTEGRITY, "unknown-major"),
     "silent-refusals": (check_names.DEVICE_REFUSALS, "short-report"),
     "unplayed-commit": (check_names.DEVICE_UPLOAD_INTEGRITY, "valid-after"),
+    "profile-raises-limits": (check_names.DEVICE_PROFILE_UPLOAD, "limits-not-raised"),
+    "sticky-profile": (check_names.DEVICE_PROFILE_UPLOAD, "own-profile-restored"),
 }
 """The (check, case) each negative control exists to fail (spec/conformance.md section 6, QN1):
 the proof that the threshold of that check bites.

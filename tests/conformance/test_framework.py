@@ -116,7 +116,7 @@ def test_each_builtin_check_name_is_spelled_once() -> None:
 
 
 def test_listing_the_plugins_imports_no_check_module_and_no_driver() -> None:
-    """``hcard plugins`` lists 17 checks and hcard's 6 drivers from their tables (rows, not
+    """``hcard plugins`` lists 19 checks and hcard's 6 drivers from their tables (rows, not
     modules), whatever other drivers are installed; of the faulty device it imports the entry
     point's module, which holds the rows, and nothing of its driver."""
     code = ("import sys, warnings\n"

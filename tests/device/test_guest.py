@@ -205,7 +205,8 @@ def test_guest_device_level_conforms_over_hid_under_software_emulation(tmp_path:
     assert required <= passed, sorted(required - passed)
     assert payload["conditions"]["timing_class"] == "software-emulation"
     assert payload["conditions"]["device_class"] == "e-vita"
-    assert set(payload["not_applicable"]) == {"device.friction", "device.dynamics"}
+    assert set(payload["not_applicable"]) == {"device.friction", "device.dynamics",
+                                              "device.profile-upload"}
     by_case = {(r["check"], r["case"]): r for r in results}
     assert {("device.latency", "boundary-move"), ("device.safety", "card-over-limit"),
             ("device.safety", "host-limits"), ("device.safety", "stream-extremes"),

@@ -126,9 +126,9 @@ class LimitsChange:
                 f"new limit (tolerance one report count)")
 
 
-def _over_new_limits(states: list[State], new: Limits) -> tuple[int, float]:
+def over_limits(states: Sequence[State], new: Limits) -> tuple[int, float]:
     """Reports with an output above its limit in ``new`` plus :data:`REPORT_QUANTA`, and the
-    largest output / limit."""
+    largest output / limit (also ``device.profile-upload``'s count under a host profile)."""
     over = np.zeros(len(states), dtype=bool)
     worst = 0.0
     for field, limit, quantum in zip(
@@ -214,7 +214,7 @@ def measure_limits_while_driven(driver: Driver, base: Limits) -> LimitsChange:
     after = [s for s in states if s.host_time_echo_us in finger.after_us]
     if not after:
         raise CannotAssess("no report echoed a FINGER sent after the change")
-    over, worst = _over_new_limits(after, lowered)
+    over, worst = over_limits(after, lowered)
     return LimitsChange(len(after), over, worst, driven, lowered, read_back)
 
 
