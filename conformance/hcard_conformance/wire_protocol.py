@@ -1,13 +1,13 @@
 """Which implementations the checks of the wire protocol concern (spec/conformance.md
 section 4.4).
 
-``device.upload-integrity``, ``device.report-loss``, ``device.refusals`` and
-``device.session-ownership`` judge what a device does with the hcard HID protocol: how it takes a
-card upload, numbers its STATE reports, refuses reports it must not carry out and shares itself
-between hosts. A driver that renders on the host for a device of actuator
-frames (:class:`hcard.device.frame_driver.FrameDriver`, ``Driver.renders_on_host``) does that
-bookkeeping itself on the host; those checks would judge the host library, not the device, so
-they are not applicable to it.
+``device.upload-integrity``, ``device.report-loss``, ``device.refusals``, ``device.descriptor``
+and ``device.session-ownership`` judge what a device does with the hcard HID protocol: how it
+takes a card upload, numbers its STATE reports, refuses reports it must not carry out, declares
+its reports and shares itself between hosts. A driver that renders on the host for a device of
+actuator frames (:class:`hcard.device.frame_driver.FrameDriver`, ``Driver.renders_on_host``)
+does that bookkeeping itself on the host, and its device speaks a HID protocol of its own;
+those checks would judge the host library, not the device, so they are not applicable to it.
 """
 
 from __future__ import annotations
