@@ -1,7 +1,8 @@
 """Check ``device.descriptor`` (spec/conformance.md 4.10, H1-H3; protocol PD1, PD2): the
-reference device passes every case in process and over USB/IP; the suite's own item reader gets
-hand-written descriptors right; a device of another minor version, a driver that cannot read
-descriptors and a device rendered on the host are each treated as the spec says.
+reference device passes every case in process and over USB/IP; the control that declares STATE
+one byte short fails by that byte; the suite's own item reader gets hand-written descriptors
+right; a device of another minor version, a driver that cannot read descriptors and a device
+rendered on the host are each treated as the spec says.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ def _cases(ctx: Context) -> dict[str, CheckResult]:
     return {r.case: r for r in report.results}
 
 
-# ---- the reference device -------------------------------------------------------------------
+# ---- the reference device and the negative control -------------------------------------------
 
 
 @pytest.mark.parametrize("uri", ["sim://", "usbip://loopback"])
@@ -44,6 +45,16 @@ def test_the_reference_device_passes_every_case(uri: str) -> None:
     assert results["exact-bytes"].detail.startswith("111 bytes, equal to")
     assert "announces 111 bytes" in results["announced-length"].detail
     assert "12 reports declared" in results["declares-reports"].detail
+
+
+def test_a_device_that_declares_state_one_byte_short_fails_by_that_byte() -> None:
+    results = _cases(Context.for_driver("control:misdeclared-state"))
+    exact, announced, declared = (results[c] for c in dc.DESCRIPTOR_CASES)
+    assert (exact.outcome, exact.value, exact.unit) == ("FAIL", 1.0, "bytes")
+    assert "offset 0x0013: 0x39 where 4.1 has 0x3A" in exact.detail
+    assert (announced.outcome, announced.value) == ("PASS", 0.0)  # still 111 bytes long
+    assert (declared.outcome, declared.value, declared.unit) == ("FAIL", 1.0, "faults")
+    assert "input report 0x01 (STATE) declared 58 bytes, the protocol's is 59" in declared.detail
 
 
 # ---- the item reader on hand-written descriptors ---------------------------------------------

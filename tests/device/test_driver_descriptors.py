@@ -16,6 +16,7 @@ from hcard.device import DescriptorUnavailable, DeviceError, Driver, open_device
 from hcard.device.protocol import REPORT_DESCRIPTOR
 from hcard.device.transports.usb_descriptors import hid_descriptor_in
 from hcard.device.transports.usbip_client import UsbipDriver
+from hcard_device.controls import open_control, state_declared_short
 from hcard_device.firmware import Firmware
 from hcard_device.sim import DeviceConfig, DeviceSimulation
 from hcard_device.sim_driver import SimDriver
@@ -68,6 +69,18 @@ def test_a_firmware_declares_its_own_descriptor_and_its_length_follows() -> None
             UsbipDriver.open(server.uri) as served:
         assert served.report_descriptor() == REPORT_DESCRIPTOR + b"\xc0"
         assert _fields(served.hid_descriptor())[-1] == 112
+
+
+def test_the_misdeclared_control_declares_state_one_byte_short() -> None:
+    short = state_declared_short()
+    differ = [i for i, (a, b) in enumerate(zip(short, REPORT_DESCRIPTOR, strict=True)) if a != b]
+    assert differ == [0x13]  # the Report Count of STATE (section 4.2: 0012  95 3A)
+    assert (REPORT_DESCRIPTOR[0x13], short[0x13]) == (58, 57)
+    with open_control("misdeclared-state") as driver:
+        assert driver.report_descriptor() == short
+        assert _fields(driver.hid_descriptor())[-1] == 111  # the length is unchanged
+    with pytest.raises(ValueError, match="does not declare STATE"):
+        state_declared_short(short)
 
 
 def test_the_hid_descriptor_is_found_after_its_interface() -> None:
