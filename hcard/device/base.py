@@ -265,7 +265,8 @@ class Driver(abc.ABC):
         """The HID descriptor of the device's HID interface (HID 1.11 6.2.1: ``bLength``,
         ``bDescriptorType`` 0x21, ``bcdHID``, ``bCountryCode``, ``bNumDescriptors``, then each
         class descriptor's type and length), which announces the report descriptor's length
-        (protocol PD1).
+        (protocol PD1); b"" when the device's configuration carries none for its HID
+        interface.
 
         Raises:
             DescriptorUnavailable: this driver's transport cannot read it (hidapi reads the

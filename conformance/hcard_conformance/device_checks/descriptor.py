@@ -117,7 +117,8 @@ def judge_announced_length(announced: int | None, expected: int, read: int | Non
     read_text = "" if read is None else f"; {read} bytes read"
     if announced is None:
         return judged(CHECK, "announced-length", "length_off", float("nan"), 0.0, "bytes",
-                      "the HID descriptor names no report descriptor (HID 1.11 6.2.1; PD1)")
+                      "no HID descriptor naming a report descriptor after the HID interface "
+                      f"(HID 1.11 6.2.1; PD1){read_text}")
     return judged(CHECK, "announced-length", "length_off", float(abs(announced - expected)),
                   0.0, "bytes", f"the HID descriptor announces {announced} bytes; {what} is "
                   f"{expected} (PD1){read_text}")

@@ -49,10 +49,10 @@ def read_report_descriptor(control_in: ControlIn, interface: int) -> bytes:
 
 def read_hid_descriptor(control_in: ControlIn, interface: int) -> bytes:
     """The HID descriptor of interface ``interface`` in the device's first configuration
-    (module docstring).
+    (module docstring); b"" when the configuration carries none for it.
 
     Raises:
-        DeviceError: the configuration has no such interface, or no HID descriptor after it.
+        DeviceError: the configuration descriptor's header is cut short.
     """
     head = control_in(STANDARD_DEVICE_IN, GET_DESCRIPTOR, DT_CONFIGURATION << 8, 0,
                       CONFIGURATION_HEADER_BYTES)
@@ -66,11 +66,8 @@ def read_hid_descriptor(control_in: ControlIn, interface: int) -> bytes:
 
 def hid_descriptor_in(configuration: bytes, interface: int) -> bytes:
     """The HID descriptor that follows interface ``interface`` (alternate setting 0) in the
-    bytes of a configuration descriptor.
-
-    Raises:
-        DeviceError: no such interface, or no HID descriptor before the next interface.
-    """
+    bytes of a configuration descriptor; b"" when there is none (no such interface, or none
+    before the next interface: a device that breaks HID 1.11 6.2.1)."""
     pos, current = 0, None
     while pos + 2 <= len(configuration) and configuration[pos] >= 2:
         length, kind = configuration[pos], configuration[pos + 1]
@@ -80,5 +77,4 @@ def hid_descriptor_in(configuration: bytes, interface: int) -> bytes:
         elif kind == DT_HID and current == (interface, 0):
             return blob
         pos += length
-    raise DeviceError(f"the configuration descriptor has no HID descriptor for interface "
-                      f"{interface}")
+    return b""
