@@ -2,15 +2,16 @@
 section 4.4).
 
 ``device.upload-integrity``, ``device.report-loss``, ``device.refusals``,
-``device.session-ownership`` and ``device.profile-upload`` judge what a device does with the
-hcard HID protocol: how it takes a card upload, numbers its STATE reports, refuses reports it
-must not carry out, shares itself between hosts and takes a host's device profile. A driver
-that renders on the host for a device of actuator
-frames (:class:`hcard.device.frame_driver.FrameDriver`, ``Driver.renders_on_host``) does that
-bookkeeping itself on the host; those checks would judge the host library, not the device, so
-they are not applicable to it. ``device.profile-upload`` concerns only a device that takes
-profiles (capability PROFILE, protocol 1.1), and judges which profile is in force by the
-friction rendered, which needs a host that keeps real time (as ``device.friction``).
+``device.descriptor``, ``device.session-ownership`` and ``device.profile-upload`` judge what
+a device does with the hcard HID protocol: how it takes a card upload, numbers its STATE
+reports, refuses reports it must not carry out, declares its reports, shares itself between
+hosts and takes a host's device profile. A driver that renders on the host for a device of
+actuator frames (:class:`hcard.device.frame_driver.FrameDriver`, ``Driver.renders_on_host``)
+does that bookkeeping itself on the host, and its device speaks a HID protocol of its own;
+those checks would judge the host library, not the device, so they are not applicable to
+it. ``device.profile-upload`` concerns only a device that takes profiles (capability
+PROFILE, protocol 1.1), and judges which profile is in force by the friction rendered,
+which needs a host that keeps real time (as ``device.friction``).
 """
 
 from __future__ import annotations

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from hcard.device.base import DEFAULT_TIMEOUT_S, DeviceListing, Driver
     from hcard.device.errors import (
+        DescriptorUnavailable,
         DeviceError,
         DeviceStall,
         DeviceTimeout,
@@ -37,8 +38,9 @@ if TYPE_CHECKING:
 
 _LAZY = {
     **dict.fromkeys(("DEFAULT_TIMEOUT_S", "DeviceListing", "Driver"), "hcard.device.base"),
-    **dict.fromkeys(("DeviceError", "DeviceStall", "DeviceTimeout", "PlayTooLong",
-                     "SessionBusy", "SessionLost", "UriError"), "hcard.device.errors"),
+    **dict.fromkeys(("DescriptorUnavailable", "DeviceError", "DeviceStall", "DeviceTimeout",
+                     "PlayTooLong", "SessionBusy", "SessionLost", "UriError"),
+                    "hcard.device.errors"),
     **dict.fromkeys(("driver_classes", "list_devices", "open_device"), "hcard.device.open"),
     **dict.fromkeys(("DeviceUri", "parse_uri"), "hcard.device.uri"),
 }
@@ -54,6 +56,7 @@ def __getattr__(name: str) -> Any:
 
 __all__ = [
     "DEFAULT_TIMEOUT_S",
+    "DescriptorUnavailable",
     "DeviceError",
     "DeviceListing",
     "DeviceStall",

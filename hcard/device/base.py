@@ -4,7 +4,9 @@ A :class:`Driver` subclass supplies five transport primitives (write an output r
 get a feature report, read an input report with a timeout, close); everything else (device
 information, limits, card upload with integrity check and commit, start/stop, finger state,
 direct streaming, decoding of STATE reports, loss accounting) is implemented once, here, with
-:mod:`hcard.device.protocol`.
+:mod:`hcard.device.protocol`. Two more primitives are optional: reading the HID report
+descriptor and the HID descriptor (:meth:`Driver.report_descriptor`, protocol PD1, PD2); a
+transport that cannot raises :class:`DescriptorUnavailable`, the default.
 
 Every wait is bounded by a timeout; a device that vanishes raises :class:`DeviceError`, never a
 hang. A driver is used from one thread at a time.
@@ -35,7 +37,13 @@ from types import TracebackType
 from typing import TYPE_CHECKING, ClassVar
 
 from hcard.card_io import to_bytes
-from hcard.device.errors import DeviceError, DeviceStall, SessionBusy, SessionLost
+from hcard.device.errors import (
+    DescriptorUnavailable,
+    DeviceError,
+    DeviceStall,
+    SessionBusy,
+    SessionLost,
+)
 from hcard.device.protocol import (
     PROTOCOL_MAJOR,
     Capability,
@@ -219,9 +227,54 @@ class Driver(abc.ABC):
     def _close(self) -> None:
         """Release the transport."""
 
+    def _report_descriptor(self) -> bytes:
+        """GET_DESCRIPTOR(Report) of the device's HID interface: all the bytes it returns.
+        Optional: by default the transport cannot (:class:`DescriptorUnavailable`)."""
+        raise DescriptorUnavailable(
+            f"{self.uri}: the {self.name or type(self).__name__} driver cannot read the "
+            "device's report descriptor (it implements no Driver._report_descriptor)")
+
+    def _hid_descriptor(self) -> bytes:
+        """The HID descriptor (HID 1.11 6.2.1) of the device's HID interface, as its
+        configuration descriptor carries it. Optional: by default the transport cannot
+        (:class:`DescriptorUnavailable`)."""
+        raise DescriptorUnavailable(
+            f"{self.uri}: the {self.name or type(self).__name__} driver cannot read the "
+            "device's HID descriptor (it implements no Driver._hid_descriptor)")
+
     def clock(self) -> float:
         """The device-side time base of :meth:`collect_until`, s (wall clock by default)."""
         return time.monotonic()
+
+    # ------------------------------------------------------------------ descriptors
+
+    def report_descriptor(self) -> bytes:
+        """The HID report descriptor the device returns for GET_DESCRIPTOR(Report), as read
+        (protocol PD1: the bytes of spec/device-protocol.md 4.1; PD2 says what they declare).
+
+        Raises:
+            DescriptorUnavailable: this driver's transport cannot read descriptors (hidapi
+                before it had ``get_report_descriptor``, a vendor's driver without them).
+            DeviceStall: the device refused the request.
+            DeviceError: the device failed or vanished.
+        """
+        self._check_open()
+        return self._report_descriptor()
+
+    def hid_descriptor(self) -> bytes:
+        """The HID descriptor of the device's HID interface (HID 1.11 6.2.1: ``bLength``,
+        ``bDescriptorType`` 0x21, ``bcdHID``, ``bCountryCode``, ``bNumDescriptors``, then each
+        class descriptor's type and length), which announces the report descriptor's length
+        (protocol PD1); b"" when the device's configuration carries none for its HID
+        interface.
+
+        Raises:
+            DescriptorUnavailable: this driver's transport cannot read it (hidapi reads the
+                report descriptor only).
+            DeviceStall, DeviceError: as :meth:`report_descriptor`.
+        """
+        self._check_open()
+        return self._hid_descriptor()
 
     # ------------------------------------------------------------------ feature reports
 

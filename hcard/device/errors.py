@@ -19,6 +19,13 @@ class DeviceStall(DeviceError):
     """The device refused a request with a USB STALL (e.g. an unknown or read-only report ID)."""
 
 
+class DescriptorUnavailable(DeviceError):
+    """This driver's transport cannot read the device's USB descriptors (the HID report
+    descriptor, or the HID descriptor that announces its length; device protocol PD1, PD2): a
+    limit of the transport, not a fault of the device. The conformance suite reports what it
+    needed them for as not assessed, with this message."""
+
+
 class SessionBusy(DeviceError):
     """Another host's session is live on the device (spec section 14, rules PN3, PN8): this
     host's START was refused, or the driver saw the session and sent nothing that changes the

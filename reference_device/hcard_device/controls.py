@@ -81,6 +81,12 @@ name:
     rendering with the host's profile (protocol PU11: the device's own profile goes back in
     force): every later recording says "the device's own profile" of what the host's rendered.
     Fails ``device.profile-upload`` case ``own-profile-restored``.
+``misdeclared-state``
+    The E-ViTa whose report descriptor declares the STATE input report one byte short (Report
+    Count 57 for the 58 bytes after its ID: :func:`state_declared_short`), an off-by-one in the
+    firmware's descriptor table (protocol PD1, PD2). The reports themselves are the reference
+    device's; a host stack that sizes its input buffers from the descriptor cannot take a STATE
+    report whole. Fails ``device.descriptor`` (``declares-reports``, ``exact-bytes``).
 ``drops-reports``
     The E-ViTa whose firmware loses :data:`DROPPED_FRACTION` of its STATE reports at random as
     it produces them (an IN endpoint starved by the firmware's main loop), and counts them
@@ -102,7 +108,8 @@ from google.protobuf.message import DecodeError
 
 from hcard.device.base import DEFAULT_TIMEOUT_S, DeviceListing
 from hcard.device.errors import UriError
-from hcard.device.protocol import FaultBits, ReportId, crc32
+from hcard.device.protocol import REPORT_DESCRIPTOR, FaultBits, ReportId, State, crc32
+from hcard.device.protocol.descriptor import report_count, report_id, usage
 from hcard.device.protocol.upload import UploadStore
 from hcard.device.uri import DeviceUri, parse_uri
 from hcard.physics.card_clipping import ClipReport
@@ -369,6 +376,22 @@ class SilentRefusalFirmware(Firmware):
         """Nothing: neither counted nor flagged (PE2 asks both)."""
 
 
+def state_declared_short(descriptor: bytes = REPORT_DESCRIPTOR) -> bytes:
+    """``descriptor`` with the Report Count of STATE one less (``misdeclared-state``): its
+    report declared one byte shorter than the protocol's STATE, in as many bytes as before."""
+    declared = report_id(ReportId.STATE) + usage(ReportId.STATE)
+    right = declared + report_count(State.size() - 1)
+    if right not in descriptor:
+        raise ValueError("the descriptor does not declare STATE at its size")
+    return descriptor.replace(right, declared + report_count(State.size() - 2), 1)
+
+
+class MisdeclaredStateFirmware(Firmware):
+    """A firmware whose USB interface declares STATE one byte short (``misdeclared-state``)."""
+
+    report_descriptor = state_declared_short()
+
+
 def _any_major_firmware(simulation: DeviceSimulation) -> Firmware:
     """The firmware of ``reads-any-major``: the reference one with :class:`AnyMajorChecker`."""
     return Firmware(simulation, checker=AnyMajorChecker())
@@ -442,6 +465,8 @@ CONTROLS: dict[str, Callable[[], SimDriver]] = {
                                                  "sim://"),
     "sticky-profile": lambda: _sim_driver(StickyProfileSimulation(DeviceConfig.evita()),
                                           "sim://"),
+    "misdeclared-state": lambda: _firmware_driver(
+        MisdeclaredStateFirmware(DeviceSimulation(DeviceConfig.evita())), "sim://"),
 }
 """The negative controls by name (see the module docstring)."""
 
@@ -464,6 +489,7 @@ CATCHES: dict[str, tuple[str, str]] = {
     "unplayed-commit": (check_names.DEVICE_UPLOAD_INTEGRITY, "valid-after"),
     "profile-raises-limits": (check_names.DEVICE_PROFILE_UPLOAD, "limits-not-raised"),
     "sticky-profile": (check_names.DEVICE_PROFILE_UPLOAD, "own-profile-restored"),
+    "misdeclared-state": (check_names.DEVICE_DESCRIPTOR, "declares-reports"),
 }
 """The (check, case) each negative control exists to fail (spec/conformance.md section 6, QN1):
 the proof that the threshold of that check bites.

@@ -48,6 +48,7 @@ from hcard.device.protocol import (
     PROTOCOL_MAJOR,
     PROTOCOL_MINOR,
     REALTIME_LATE_S,
+    REPORT_DESCRIPTOR,
     STREAM_FRAMES_PER_REPORT,
     TIME_UNIT_S,
     VOLTAGE_UNIT_V,
@@ -305,6 +306,11 @@ class Firmware:
         checker: checks the bytes of a COMMIT (default: in the calling thread, outside the
             lock; :class:`~hcard_device.card_check.ProcessChecker` in a worker process).
     """
+
+    report_descriptor: bytes = REPORT_DESCRIPTOR
+    """The HID report descriptor this device's USB interface declares and returns for
+    GET_DESCRIPTOR(Report) (protocol PD1, PD2: the bytes of spec/device-protocol.md 4.1; its
+    HID descriptor announces their length). A negative control declares another."""
 
     def __init__(
         self,

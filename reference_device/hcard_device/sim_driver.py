@@ -12,6 +12,11 @@ The driver also provides the host library's devices simulated in this process
 URIs (:meth:`SimDriver.resolve_model`) and serves the device of a ``loopback`` URI in this
 process (:meth:`SimDriver.serve_in_process`).
 
+Descriptors (:meth:`SimDriver.report_descriptor`, :meth:`SimDriver.hid_descriptor`; protocol
+PD1, PD2) are read with GET_DESCRIPTOR control transfers from the USB device the reference
+device serves around this firmware (:func:`~hcard_device.usb.device.build_usb_device`, built
+when first asked, never plugged in): the bytes a USB host would read.
+
 Every ``sim://`` URI opens a new device. :meth:`SimDriver.another_host` opens a second host on
 the same device (a :class:`SharedDevice`: one clock, every host gets every STATE report, as two
 processes that open one hidraw node; spec rule PN10), for checks of session ownership.
@@ -21,14 +26,19 @@ from __future__ import annotations
 
 import collections
 import re
+import struct
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from usbip.core import Urb
+from usbip.device import IN
+
 from hcard.device.base import DEFAULT_TIMEOUT_S, DeviceListing, Driver
-from hcard.device.errors import DeviceStall
+from hcard.device.errors import DeviceError, DeviceStall
 from hcard.device.protocol import INPUT_RATE_HZ, ProtocolError, State
+from hcard.device.transports.usb_descriptors import read_hid_descriptor, read_report_descriptor
 from hcard.device.uri import DeviceUri, parse_uri, uri_error
-from hcard_device.usb.device import PRODUCTS
+from hcard_device.usb.device import PRODUCTS, STALL_STATUS, build_usb_device
 from hcard_device.usb.server import DeviceServer, make_firmware
 
 STEP_S = 1.0 / INPUT_RATE_HZ
@@ -37,6 +47,8 @@ CHUNK_S = 0.010
 """Longest single advance of the firmware before its input reports are collected, s."""
 PENDING_CAPACITY = 65_536
 """Input reports held for the host before the oldest are dropped (65 s at 1 kHz)."""
+HID_INTERFACE = 0
+"""bInterfaceNumber of the reference device's one HID interface."""
 
 
 class SharedDevice:
@@ -108,6 +120,7 @@ class SimDriver(Driver):
         self.device = device if device is not None else SharedDevice(firmware)
         self.firmware = self.device.firmware
         self._pending = self.device.attach()
+        self._usb_device: Any = None  # built on the first descriptor request
 
     def another_host(self) -> SimDriver:
         """A second host on this driver's device (same firmware and clock, its own copy of
@@ -214,6 +227,30 @@ class SimDriver(Driver):
             self.advance(step)
             waited += step
         return self._pending.popleft() if self._pending else None
+
+    def _control_in(self, request_type: int, request: int, value: int, index: int,
+                    length: int) -> bytes:
+        """A standard control-IN request answered by the USB device served around this
+        firmware (module docstring), as a USB/IP server answers it; a STALL raises
+        :class:`DeviceStall`."""
+        if self._usb_device is None:
+            variant = self.uri.variant if self.uri.variant in PRODUCTS else "evita"
+            self._usb_device, _interface = build_usb_device(self.firmware, variant)
+        setup = struct.pack("<BBHHH", request_type, request, value, index, length)
+        urb = self._usb_device.handle_urb(Urb(direction=IN, ep=0, setup=setup, length=length))
+        if urb.status == STALL_STATUS:
+            raise DeviceStall(f"{self.uri}: the device STALLed control request "
+                              f"0x{request:02X} (wValue 0x{value:04X})")
+        if urb.status:
+            raise DeviceError(f"{self.uri}: control request 0x{request:02X} failed "
+                              f"(status {urb.status})")
+        return bytes(urb.buffer[:urb.actual])
+
+    def _report_descriptor(self) -> bytes:
+        return read_report_descriptor(self._control_in, HID_INTERFACE)
+
+    def _hid_descriptor(self) -> bytes:
+        return read_hid_descriptor(self._control_in, HID_INTERFACE)
 
     def _close(self) -> None:
         self._pending.clear()

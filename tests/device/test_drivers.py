@@ -18,6 +18,7 @@ from hypothesis import strategies as st
 
 from hcard import build
 from hcard.device import (
+    DescriptorUnavailable,
     DeviceError,
     DeviceStall,
     UriError,
@@ -27,6 +28,7 @@ from hcard.device import (
 )
 from hcard.device.priority import host_priority
 from hcard.device.protocol import (
+    REPORT_DESCRIPTOR,
     Capability,
     ClipReason,
     DeviceInfo,
@@ -384,6 +386,30 @@ def test_tier2_unknown_report_ids_stall(kind, device_process):
             driver._set_feature(bytes([0x01] + [0] * 51))  # STATE is an input report
         driver._write_output(bytes([0x7F, 1, 2, 3]))  # unknown output: counted, no STALL
         assert driver.counters().rejected_requests == before + 3
+        assert isinstance(driver.info(), DeviceInfo)
+
+
+@pytest.mark.parametrize("kind", ["usbip", "pyusb", "hid"])
+def test_tier2_report_descriptor_through_every_transport(kind, device_process):
+    """PD1: the 111 bytes of section 4.1 through each driver; the HID descriptor that announces
+    them is read by usbip and pyusb, never by hidapi (it has no call for it)."""
+    with _open(kind, device_process) as driver:
+        assert driver.report_descriptor() == REPORT_DESCRIPTOR
+        assert len(REPORT_DESCRIPTOR) == 111
+        if kind == "hid":
+            with pytest.raises(DescriptorUnavailable, match="never the HID descriptor"):
+                driver.hid_descriptor()
+        else:
+            assert driver.hid_descriptor()[7:9] == (111).to_bytes(2, "little")
+
+
+def test_tier2_hidapi_without_get_report_descriptor_says_so(device_process):
+    """An older cython-hidapi has no get_report_descriptor: DescriptorUnavailable, the rest of
+    the driver unchanged."""
+    module = HidOverUsbip((device_process.host, device_process.port), report_descriptor=False)
+    with HidapiDriver.open("hid://", timeout_s=TIMEOUT_S, module=module) as driver:
+        with pytest.raises(DescriptorUnavailable, match="no get_report_descriptor"):
+            driver.report_descriptor()
         assert isinstance(driver.info(), DeviceInfo)
 
 

@@ -185,17 +185,23 @@ def test_guest_device_level_conforms_over_hid_under_software_emulation(tmp_path:
     # host's session kept alive while a second host uploads. Nothing may FAIL or raise.
     host_timed = {("device.safety", "limits-while-driven"),
                   ("device.session-ownership", "second-host-refused")}
+    # hidapi reads the report descriptor the kernel holds, never the HID descriptor that
+    # announces its length: that case is UNASSESSED over hid://, saying so (PD1)
+    unread = ("device.descriptor", "announced-length")
     failed = [(r["check"], r["case"], r["outcome"], r["value"], r["detail"]) for r in results
               if r["outcome"] != "PASS"
               and not (r["outcome"] == "UNASSESSED" and (r["check"], r["case"]) in host_timed
-                       and "real time" in r["detail"])]
+                       and "real time" in r["detail"])
+              and not (r["outcome"] == "UNASSESSED" and (r["check"], r["case"]) == unread
+                       and "never the HID descriptor" in r["detail"])]
     assert not failed, failed
     required = {("device.latency", "boundary-move"), ("device.watchdog", "host-silent"),
                 ("device.watchdog", "fault-reported"), ("device.report-loss", "sequence-gaps"),
                 ("device.latency", "host-read-lag"),
                 ("device.report-loss", "loss-fraction"), ("device.report-loss", "drops-counted"),
                 ("device.session-ownership", "takeover-reported"),
-                ("device.session-ownership", "released-by-stop")}
+                ("device.session-ownership", "released-by-stop"),
+                ("device.descriptor", "exact-bytes"), ("device.descriptor", "declares-reports")}
     required |= {("device.safety", c) for c in ("card-over-limit", "host-limits",
                                                 "stream-extremes")}
     required |= {("device.upload-integrity", c) for c in (

@@ -2,7 +2,9 @@
 
 Linux turns a hidraw ``write`` into an interrupt OUT transfer, ``HIDIOCSFEATURE`` /
 ``HIDIOCGFEATURE`` into SET_REPORT / GET_REPORT(Feature) and delivers interrupt IN reports to
-``read``; a STALL surfaces as EPIPE ("Broken pipe"), an unplugged device as ENODEV. This module
+``read``; a STALL surfaces as EPIPE ("Broken pipe"), an unplugged device as ENODEV. hidapi's
+``get_report_descriptor`` returns the report descriptor the kernel read when the device was
+attached: the HID descriptor's ``wDescriptorLength`` bytes of GET_DESCRIPTOR(Report). This module
 does the same over :class:`~hcard.device.transports.usbip_link.UsbipLink`, so that
 :class:`~hcard.device.transports.hidapi_driver.HidapiDriver` runs unmodified against the real
 firmware in a separate process. Paths are ``usbip://HOST:PORT/BUSID`` (bytes, as hidapi's).
@@ -11,9 +13,11 @@ The QEMU guest tier (tests/device/test_guest.py) runs the driver on a real ``/de
 
 from __future__ import annotations
 
+import struct
 from typing import Any
 
 from hcard.device.errors import DeviceError, DeviceStall
+from hcard.device.transports.usb_descriptors import read_hid_descriptor
 from hcard.device.transports.usbip_link import UsbipLink
 
 _TIMEOUT_S = 5.0  # the kernel's USB_CTRL_SET_TIMEOUT
@@ -77,6 +81,25 @@ class UsbipHidDevice:
             raise OSError("read error") from exc
         return list(data[:max_length]) if data else []
 
+    def get_report_descriptor(self) -> list[int]:
+        """As the kernel reads it (module docstring); cython-hidapi before this call had none:
+        :class:`HidOverUsbip` with ``report_descriptor=False``."""
+        assert self.link is not None
+
+        def control_in(request_type: int, request: int, value: int, index: int,
+                       length: int) -> bytes:
+            assert self.link is not None
+            return self.link.control_in(request_type, request, value, index, length,
+                                        timeout_s=_TIMEOUT_S)
+
+        try:
+            hid = read_hid_descriptor(control_in, 0)
+            announced = struct.unpack_from("<H", hid, 7)[0]
+            return list(control_in(0x81, 0x06, 0x2200, 0, announced))
+        except DeviceError as exc:
+            self._fail(exc)
+            raise OSError("read error") from exc
+
     def error(self) -> str:
         return self._error
 
@@ -85,13 +108,20 @@ class UsbipHidDevice:
             self.link.close()
 
 
+class OlderUsbipHidDevice(UsbipHidDevice):
+    """The ``device`` API of a cython-hidapi release without ``get_report_descriptor``."""
+
+    get_report_descriptor = None  # type: ignore[assignment]
+
+
 class HidOverUsbip:
-    """A stand-in for the ``hidraw`` module listing the devices of USB/IP servers."""
+    """A stand-in for the ``hidraw`` module listing the devices of USB/IP servers;
+    ``report_descriptor=False``: a hidapi without ``get_report_descriptor``."""
 
-    device = UsbipHidDevice
-
-    def __init__(self, *servers: tuple[str, int]) -> None:
+    def __init__(self, *servers: tuple[str, int], report_descriptor: bool = True) -> None:
         self.servers = servers
+        self.device: type[UsbipHidDevice] = (UsbipHidDevice if report_descriptor
+                                             else OlderUsbipHidDevice)
 
     def enumerate(self, vid: int = 0, pid: int = 0) -> list[dict[str, Any]]:
         from usbip import host as usbip_host

@@ -6,7 +6,11 @@ the ``hid`` module (hidapi's libusb, Windows or macOS backend). Output reports a
 ``write`` (the kernel sends them on the interrupt OUT endpoint), feature reports with
 ``send_feature_report`` / ``get_feature_report`` (SET/GET_REPORT), input reports are read with
 a timeout. The handle is opened non-blocking, so no read waits longer than asked; the feature
-ioctls are bounded by the kernel's control-transfer timeout (5 s).
+ioctls are bounded by the kernel's control-transfer timeout (5 s). The report descriptor is
+hidapi's ``get_report_descriptor`` (the bytes the operating system read from the device: on
+Linux the kernel asks for the length the HID descriptor announces); hidapi has no call for the
+HID descriptor itself, nor do cython-hidapi releases before ``get_report_descriptor`` for the
+report descriptor: :class:`DescriptorUnavailable` then.
 
 Never open this driver in a process that also serves the device (``hcard device serve`` or a
 ``loopback`` URI): closing a hidraw node whose USB/IP server lives in the same process can
@@ -25,7 +29,7 @@ from typing import Any
 
 from hcard.device import in_process
 from hcard.device.base import DEFAULT_TIMEOUT_S, DeviceListing, Driver
-from hcard.device.errors import DeviceError, DeviceStall
+from hcard.device.errors import DescriptorUnavailable, DeviceError, DeviceStall
 from hcard.device.protocol import MAX_REPORT_BYTES
 from hcard.device.protocol.usb_ids import PID, VID
 from hcard.device.uri import DeviceUri, parse_uri
@@ -156,6 +160,23 @@ class HidapiDriver(Driver):
         except (OSError, ValueError):
             raise self._failure("input report read") from None
         return bytes(data) if data else None
+
+    def _report_descriptor(self) -> bytes:
+        read = getattr(self.handle, "get_report_descriptor", None)
+        if read is None:
+            raise DescriptorUnavailable(
+                f"{self.uri}: this hidapi has no get_report_descriptor (older cython-hidapi "
+                "releases lack it; pip install -U hidapi)")
+        try:
+            data = read()
+        except (OSError, ValueError):
+            raise self._failure("report descriptor read") from None
+        return bytes(data)
+
+    def _hid_descriptor(self) -> bytes:
+        raise DescriptorUnavailable(
+            f"{self.uri}: hidapi reads the report descriptor the operating system holds, never "
+            "the HID descriptor that announces its length")
 
     def _close(self) -> None:
         self.handle.close()

@@ -22,6 +22,7 @@ from hcard.device.errors import DeviceError, DeviceStall, DeviceTimeout
 from hcard.device.protocol import MAX_REPORT_BYTES, ReportKind
 from hcard.device.protocol.usb_ids import IN_ENDPOINT, OUT_ENDPOINT, PID, VID
 from hcard.device.transports.pyusb_backend import UsbipBackend
+from hcard.device.transports.usb_descriptors import read_hid_descriptor, read_report_descriptor
 from hcard.device.transports.usbip_client import (
     CLASS_INTERFACE_IN,
     CLASS_INTERFACE_OUT,
@@ -118,6 +119,19 @@ class PyusbDriver(Driver):
                           CLASS_INTERFACE_IN, GET_REPORT, (ReportKind.FEATURE << 8) | report_id,
                           HID_INTERFACE, size, _ms(self.timeout_s))
         return bytes(data)
+
+    def _control_in(self, request_type: int, request: int, value: int, index: int,
+                    length: int) -> bytes:
+        data = self._call(f"control request 0x{request:02X} (wValue 0x{value:04X})",
+                          self.device.ctrl_transfer,
+                          request_type, request, value, index, length, _ms(self.timeout_s))
+        return bytes(data)
+
+    def _report_descriptor(self) -> bytes:
+        return read_report_descriptor(self._control_in, HID_INTERFACE)
+
+    def _hid_descriptor(self) -> bytes:
+        return read_hid_descriptor(self._control_in, HID_INTERFACE)
 
     def _read_input(self, timeout_s: float) -> bytes | None:
         if timeout_s <= 0:

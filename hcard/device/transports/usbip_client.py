@@ -18,6 +18,7 @@ from hcard.device.base import DEFAULT_TIMEOUT_S, DeviceListing, Driver
 from hcard.device.errors import DeviceError
 from hcard.device.protocol import MAX_REPORT_BYTES, ReportKind
 from hcard.device.protocol.usb_ids import IN_ENDPOINT, OUT_ENDPOINT, PID, VID
+from hcard.device.transports.usb_descriptors import read_hid_descriptor, read_report_descriptor
 from hcard.device.transports.usbip_connect import UsbipConnector
 from hcard.device.transports.usbip_link import UsbipLink
 from hcard.device.uri import DeviceUri, parse_uri
@@ -106,6 +107,17 @@ class UsbipDriver(Driver):
 
     def _read_input(self, timeout_s: float) -> bytes | None:
         return self.link.read_in(timeout_s)
+
+    def _control_in(self, request_type: int, request: int, value: int, index: int,
+                    length: int) -> bytes:
+        return self.link.control_in(request_type, request, value, index, length,
+                                    timeout_s=self.timeout_s)
+
+    def _report_descriptor(self) -> bytes:
+        return read_report_descriptor(self._control_in, HID_INTERFACE)
+
+    def _hid_descriptor(self) -> bytes:
+        return read_hid_descriptor(self._control_in, HID_INTERFACE)
 
     def _close(self) -> None:
         try:

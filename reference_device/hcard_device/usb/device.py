@@ -1,7 +1,9 @@
 """The hcard reference device as a USB-HID device on :mod:`usbip` (pinned 0.7.0).
 
 One HID interface (class 0x03, no boot subclass) with the protocol's report descriptor
-(:data:`hcard.device.protocol.REPORT_DESCRIPTOR`) and two interrupt endpoints polled every 1 ms:
+(:data:`hcard.device.protocol.REPORT_DESCRIPTOR`, the firmware's ``report_descriptor``; the HID
+descriptor in the configuration descriptor announces its length) and two interrupt endpoints
+polled every 1 ms:
 
 * IN 0x81 (64 bytes): STATE input reports, moved from :meth:`Firmware.take_input_reports` by
   :meth:`HcardHID.pump`. The endpoint holds at most ``in_queue`` reports; when the host does
@@ -38,7 +40,7 @@ from usbip.classes.device import hid
 from usbip.core import CLASS, ENDPOINT, FEATURE_ENDPOINT_HALT, OUT, STANDARD, Setup, Stall, Urb
 from usbip.device import IN, Endpoint, _EPSpec
 
-from hcard.device.protocol import REPORT_DESCRIPTOR, ProtocolError, ReportId, ReportKind
+from hcard.device.protocol import ProtocolError, ReportId, ReportKind
 from hcard.device.protocol.usb_ids import IN_ENDPOINT, OUT_ENDPOINT, PID, VID
 from hcard_device.usb.connection import (
     DEFAULT_LIMITS,
@@ -78,7 +80,10 @@ _UPLOAD_END_SET = (_CLASS_INTERFACE_OUT, hid.SET_REPORT,
 
 class FirmwareLike(Protocol):
     """What the USB layer needs of :class:`hcard_device.firmware.Firmware`. ``origin``: the
-    connection a request came from (None: unknown, e.g. in-process callers)."""
+    connection a request came from (None: unknown, e.g. in-process callers).
+    ``report_descriptor``: the HID report descriptor the interface declares (PD1)."""
+
+    report_descriptor: bytes
 
     def set_feature(self, data: bytes, origin: object | None = None) -> None: ...
 
@@ -255,7 +260,7 @@ class HcardHID(hid.HID):
         self._dropped_by_gone = 0  # reports dropped at the pipes of connections that ended
         self._pipes_lock = threading.Lock()
         super().__init__(
-            REPORT_DESCRIPTOR,
+            firmware.report_descriptor,
             in_ep=IN_ENDPOINT, in_mps=MAX_PACKET, in_interval=INTERVAL_MS,
             out_ep=OUT_ENDPOINT, out_mps=MAX_PACKET, out_interval=INTERVAL_MS,
             get_report=self._on_get_report, set_report=self._on_set_report,
