@@ -224,6 +224,12 @@ BUILTIN_CHECKS: tuple[LazyCheck, ...] = (
               "hcard_conformance.device_checks.session_ownership:check_session_ownership",
               "hcard_conformance.wire_protocol:speaks_wire_protocol",
               cases_target="hcard_conformance.device_checks.session_ownership:CASES"),
+    LazyCheck(check_names.DEVICE_HOST_DRIVER, "device",
+              "the host driver refuses another major, takes any minor, reports undecodable "
+              "reports and looks before changing a busy device",
+              "hcard_conformance.device_checks.host_driver:check_host_driver",
+              "hcard_conformance.device_checks.host_link:judges_host_driver",
+              cases_target="hcard_conformance.device_checks.host_driver:CASES"),
 )
 """The built-in checks, in level order: the one place their names (spelled in
 :mod:`~hcard_conformance.check_names`), levels and descriptions are given."""

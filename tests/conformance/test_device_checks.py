@@ -21,7 +21,7 @@ from tests.helpers.plate_loop import plate_loop_bandwidth_hz
 
 DEVICE_CHECKS = {"device.friction", "device.dynamics", "device.latency", "device.safety",
                  "device.watchdog", "device.upload-integrity", "device.report-loss",
-                 "device.refusals", "device.session-ownership"}
+                 "device.refusals", "device.session-ownership", "device.host-driver"}
 
 
 def _results(uri: str) -> dict[tuple[str, str], CheckResult]:
