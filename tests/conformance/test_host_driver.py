@@ -1,9 +1,12 @@
 """Check ``device.host-driver`` (spec/conformance.md 4.10, H1-H4; protocol PV2, PV3, PE4, PN8):
-the host library's drivers pass every case, the scripted
+the host library's drivers pass every case, each negative control of the host driver fails
+its case by the number its defect makes and passes the cases it does not touch, the scripted
 device records what a driver sends on its own clock, and the check does not apply where no
 transport can be scripted."""
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import pytest
 
@@ -37,7 +40,7 @@ from hcard_conformance.device_checks.host_outcomes import (
 )
 from hcard_conformance.device_checks.host_sessions import EARLIER_SESSIONS, OTHER_TOKEN
 from hcard_conformance.registry import all_checks, declared_cases
-from hcard_conformance.result import PASS, CheckResult
+from hcard_conformance.result import FAIL, PASS, CheckResult
 from hcard_conformance.runner import run_suite
 
 HID_URI = "hid://1209:0001"
@@ -76,6 +79,34 @@ def test_the_host_librarys_drivers_pass_every_case(name: str) -> None:
     assert "after 150 ms of silence" in busy  # watchdog_ms 100 + the driver's 50 ms margin
     assert "ended at 10" in results["abandoned-session"].detail  # ms: watchdog_ms 100 + a report
     assert "2.3" in results["refuses-major"].detail and "major 1" in results["refuses-major"].detail
+
+
+CONTROL_FAILURES: dict[str, dict[str, Callable[[CheckResult], bool]]] = {
+    "host-accepts-any-major": {
+        # the whole upload, play and limits went to the 2.3 device, UPLOAD_BEGIN first
+        "refuses-major": lambda r: r.value >= 30 and "SET 0x22" in r.detail},
+    "host-refuses-newer-minor": {
+        "newer-minor": lambda r: r.value == 2.0 and "1.99" in r.detail},
+    "host-crashes-on-short-report": {
+        # crashed, and nothing reported; the next report still decoded
+        "short-state": lambda r: r.value == 2.0 and "crashed" in r.detail
+        and "unpack_from" in r.detail},
+    "host-barges-in": {
+        "busy-device": lambda r: r.value >= 5 and "SET 0x22" in r.detail
+        and "read no STATE report before changing the device" in r.detail,
+        "abandoned-session": lambda r: r.value >= 4 and "BUSY" in r.detail},
+}
+"""Per negative control of the host driver: the cases it fails, each with what its number
+and detail must show; every other case passes."""
+
+
+@pytest.mark.parametrize("name", sorted(CONTROL_FAILURES))
+def test_each_control_fails_its_case_by_its_defect_and_passes_the_others(name: str) -> None:
+    results = _run(Context.for_driver(f"control:{name}"))
+    failing = {case for case, r in results.items() if r.status != PASS}
+    assert failing == set(CONTROL_FAILURES[name]), {c: results[c].detail for c in failing}
+    for case, shows in CONTROL_FAILURES[name].items():
+        assert results[case].outcome == FAIL and shows(results[case]), results[case].detail
 
 
 def _sim_template() -> DriverTemplate:
