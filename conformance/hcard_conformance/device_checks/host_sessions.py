@@ -23,9 +23,9 @@ message makes):
     The other host feeds its session. The host reads DEVICE_INFO, takes the device over
     (``take_over()``, PN6: what a host does "when asked to"), stops its session and plays a
     stroke (PN5: the owner too uploads a card outside a session). **H4**: the sessions the
-    driver was granted, ``n_granted`` (a report showing a live session other than the other
+    driver was granted (a report showing a live session other than the other
     host's after ``take_over()``, and the play returning at least :data:`MIN_REPORTS`
-    reports), must be 1.
+    reports) are counted: ``n_denied``, 1 when none was, must be 0.
 """
 
 from __future__ import annotations
@@ -157,7 +157,7 @@ def abandoned_session(template: DriverTemplate) -> CheckResult:
     if count < MIN_REPORTS:
         problems.append(f"the play did not go on once the session ended ({played.text()}; "
                         f"{count} STATE reports)")
-    if ended is None:
+    if ended is None and not problems:
         problems.append(f"the driver read no report showing session {other.number} ended")
     detail = "; ".join(problems) if problems or ended is None else (
         f"waited until session {other.number} ended at {ended * MS_PER_S:.0f} ms "
@@ -193,9 +193,9 @@ def takes_over(template: DriverTemplate) -> CheckResult:
                         f"(session {other.number}, token {other.token} was live)")
     if not problems and count < MIN_REPORTS:
         problems.append(f"the play returned {count} STATE reports, fewer than {MIN_REPORTS}")
-    granted = 0.0 if problems else 1.0
+    denied = 1.0 if problems else 0.0
     detail = "; ".join(problems) if problems else (
         f"session {own[0].session_number} granted over session {other.number}; "
         f"played {count} STATE reports in it")
-    return CheckResult(CHECK, LEVEL, "takes-over", not problems, "n_granted", granted, 1.0,
+    return CheckResult(CHECK, LEVEL, "takes-over", not problems, "n_denied", denied, 0.0,
                        "sessions", detail)
