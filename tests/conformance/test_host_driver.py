@@ -6,6 +6,7 @@ transport can be scripted."""
 
 from __future__ import annotations
 
+import types
 from collections.abc import Callable
 
 import pytest
@@ -24,6 +25,9 @@ from hcard.device.protocol import (
 )
 from hcard.device.transports.hidapi_driver import HidapiDriver, hidapi_module
 from hcard.device.uri import parse_uri
+from hcard.plugins import hookimpl
+from hcard.plugins import registry as registry_module
+from hcard.plugins.registry import PluginRegistry
 from hcard_conformance.context import Context
 from hcard_conformance.device_checks.host_driver import CASES, check_host_driver
 from hcard_conformance.device_checks.host_link import (
@@ -40,7 +44,7 @@ from hcard_conformance.device_checks.host_outcomes import (
 )
 from hcard_conformance.device_checks.host_sessions import EARLIER_SESSIONS, OTHER_TOKEN
 from hcard_conformance.registry import all_checks, declared_cases
-from hcard_conformance.result import FAIL, PASS, CheckResult
+from hcard_conformance.result import FAIL, PASS, UNASSESSED, CheckResult
 from hcard_conformance.runner import run_suite
 
 HID_URI = "hid://1209:0001"
@@ -199,3 +203,19 @@ def test_there_is_nothing_to_script_without_a_protocol_transport() -> None:
     report = run_suite(Context.for_driver("faulty://none"), ("device",),
                        select=("device.host-driver",))
     assert report.results == [] and report.not_applicable == ["device.host-driver"]
+
+
+def test_without_a_simulated_device_every_case_is_unassessed(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The scripted device is the one the driver plugin of ``sim`` provides: where no plugin
+    does (the host library alone, with its hidapi driver), nothing can be judged, and every
+    case says why instead of failing the driver."""
+    plugin = types.ModuleType("hidapi_only")
+    plugin.hcard_drivers = hookimpl(lambda: [HidapiDriver])  # type: ignore[attr-defined]
+    registry = PluginRegistry()
+    registry.register(plugin, package="hcard", version="0")
+    monkeypatch.setattr(registry_module, "_default", registry)
+    results = _run(_context(HID_URI))
+    assert tuple(results) == CASES
+    assert {r.status for r in results.values()} == {UNASSESSED}
+    assert all("no device simulated in this process" in r.detail for r in results.values())

@@ -31,7 +31,9 @@ from typing import Any, cast
 
 from hcard.device.base import Driver
 from hcard.device.protocol import Command, Control, DeviceInfo, ReportId, State
+from hcard.errors import HcardError
 from hcard_conformance.context import Context
+from hcard_conformance.result import CannotAssess
 from hcard_conformance.wire_protocol import speaks_wire_protocol
 
 SIMULATED_URI = "sim://"
@@ -125,11 +127,15 @@ class ScriptedDevice:
         """A fresh simulated device (:data:`SIMULATED_URI`), through the driver plugins.
 
         Raises:
-            HcardError: no driver plugin provides a device simulated in this process.
+            CannotAssess: no driver plugin provides a device simulated in this process.
         """
         from hcard.device.open import open_device
 
-        return cls(open_device(SIMULATED_URI))
+        try:
+            return cls(open_device(SIMULATED_URI))
+        except HcardError as exc:
+            raise CannotAssess(f"no device simulated in this process to connect the driver to "
+                               f"({exc})") from None
 
     def info(self) -> DeviceInfo:
         """The simulated device's own DEVICE_INFO (read by the suite, not recorded)."""
