@@ -1,4 +1,4 @@
-"""Check ``device.host-driver`` (spec/conformance.md 4.10, H1-H4; protocol PV2, PV3, PE4, PN8):
+"""Check ``device.host-driver`` (spec/conformance.md 4.10, HD1-HD4; protocol PV2, PV3, PE4, PN8):
 the host library's drivers pass every case, each negative control of the host driver fails
 its case by the number its defect makes and passes the cases it does not touch, the scripted
 device records what a driver sends on its own clock, and the check does not apply where no

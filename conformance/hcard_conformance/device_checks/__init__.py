@@ -7,7 +7,7 @@ STATE input reports (spec/device-protocol.md); the thresholds are those of spec/
 Checks: :mod:`.friction` (``device.friction``, A1 on rendered friction), :mod:`.dynamics`
 (D1 bandwidth, D2 rise time), :mod:`.latency` (D3), :mod:`.safety` (S1; PS1, PS5),
 :mod:`.watchdog` (PS3, PS4), :mod:`.upload_integrity` (U1-U3), :mod:`.report_loss` (L1-L3),
-:mod:`.session_ownership` (O1-O3), :mod:`.refusals` (X1) and :mod:`.host_driver` (H1-H4: the
+:mod:`.session_ownership` (O1-O3), :mod:`.refusals` (X1) and :mod:`.host_driver` (HD1-HD4: the
 driver class itself, on the scripted device of :mod:`.host_link`, its cases in
 :mod:`.host_versions`, :mod:`.host_inputs` and :mod:`.host_sessions`). Shared: :mod:`.common`
 (the level, how a measured metric is judged, conventions of the measurements),

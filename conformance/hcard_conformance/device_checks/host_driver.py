@@ -1,4 +1,4 @@
-"""Check ``device.host-driver`` (spec/conformance.md 4.10, rules H1-H4; protocol PV2, PV3, PE4,
+"""Check ``device.host-driver`` (spec/conformance.md 4.10, rules HD1-HD4; protocol PV2, PV3, PE4,
 PN8): the rules of the device protocol that bind the host driver, not the device.
 
 The implementation's driver is opened as every device check opens it, and closed at once: the

@@ -1,4 +1,4 @@
-"""``device.host-driver`` cases of undecodable reports (spec/conformance.md 4.10, rule H3;
+"""``device.host-driver`` cases of undecodable reports (spec/conformance.md 4.10, rule HD3;
 protocol PE4).
 
 The driver reads DEVICE_INFO and :data:`PRIME_S` of STATE reports from the scripted device;
@@ -17,7 +17,7 @@ then the device sends one report the driver cannot decode, made from the last go
     bytes; the host asks for LIMITS twice.
 
 The host goes on reading (``read_inputs()``, or the second ``limits()``) for at most
-:data:`READ_S`. **H3**: ``n_miss``, the requirements of PE4 missed, of three, must be 0: the
+:data:`READ_S`. **HD3**: ``n_miss``, the requirements of PE4 missed, of three, must be 0: the
 driver does not crash (it raises nothing but the host library's error,
 :class:`~hcard.errors.HcardError`); it reports the report as an error naming the report and
 the reason, raised or, when it skips the report, in ``Driver.input_error`` with the report
@@ -101,7 +101,7 @@ def _after(state: State, sequence: int) -> bool:
 
 def _verdict(case: str, crashes: list[Outcome], reported: str, went_on: bool,
              what_next: str, seen: str) -> CheckResult:
-    """The case's result from what the driver did (module docstring, H3); ``seen``: what it
+    """The case's result from what the driver did (module docstring, HD3); ``seen``: what it
     did instead when it reported nothing."""
     problems = [f"crashed: {o.text()}" for o in crashes]
     if not reported:

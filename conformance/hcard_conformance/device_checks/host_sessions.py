@@ -1,4 +1,4 @@
-"""``device.host-driver`` cases of another host's session (spec/conformance.md 4.10, rule H4;
+"""``device.host-driver`` cases of another host's session (spec/conformance.md 4.10, rule HD4;
 protocol PN8, with PN6 and PN7).
 
 Before the driver under test connects, another host begins and ends
@@ -9,20 +9,20 @@ message makes):
 ``busy-device``
     The other host feeds its session (a KEEPALIVE every 20 ms). The host plays a stroke
     (:func:`hcard.device.play.play`: DEVICE_INFO, look, upload, START), then calls
-    ``start()``. **H4**: ``n_sent``, the requests that change the device plus every request
+    ``start()``. **HD4**: ``n_sent``, the requests that change the device plus every request
     (a GET included) sent after the driver read the first report showing the session and
     before it gave its verdict, must be 0; for each operation that silence must last at least
     ``watchdog_ms`` of device time, and the operation must raise an error naming the session's
     ``session_number`` and ``session_token``.
 ``abandoned-session``
     The other host sends nothing more (it crashed): the device ends the session after
-    ``watchdog_ms`` (PN7). The host plays a stroke. **H4**: ``n_sent``, the requests that
+    ``watchdog_ms`` (PN7). The host plays a stroke. **HD4**: ``n_sent``, the requests that
     change the device sent before the driver read a report showing the session ended, must
     be 0, and the play must return at least :data:`MIN_REPORTS` reports.
 ``takes-over``
     The other host feeds its session. The host reads DEVICE_INFO, takes the device over
     (``take_over()``, PN6: what a host does "when asked to"), stops its session and plays a
-    stroke (PN5: the owner too uploads a card outside a session). **H4**: the sessions the
+    stroke (PN5: the owner too uploads a card outside a session). **HD4**: the sessions the
     driver was granted (a report showing a live session other than the other
     host's after ``take_over()``, and the play returning at least :data:`MIN_REPORTS`
     reports) are counted: ``n_denied``, 1 when none was, must be 0.

@@ -1,4 +1,4 @@
-"""``device.host-driver`` cases of version handling (spec/conformance.md 4.10, rules H1 and H2;
+"""``device.host-driver`` cases of version handling (spec/conformance.md 4.10, rules HD1 and HD2;
 protocol PV2, PV3).
 
 ``refuses-major``
@@ -6,13 +6,13 @@ protocol PV2, PV3).
     the host first uploads a card (no DEVICE_INFO asked for by the host: the driver must read it
     itself, before any other request), then plays a stroke
     (:func:`hcard.device.play.play`), starts, sends a FINGER report and lowers a limit.
-    **H1**: the requests sent other than GET DEVICE_INFO, ``n_sent``, must be 0, and every one
+    **HD1**: the requests sent other than GET DEVICE_INFO, ``n_sent``, must be 0, and every one
     of the five operations must raise an error naming the device's version (``2.3``) and the
     major the driver implements (``1``, ``1.x`` or ``1.4``).
 ``newer-minor``
     DEVICE_INFO says protocol 1.:data:`NEWER_MINOR` and every STATE report carries
     :data:`APPENDED_BYTES` bytes more (fields a later minor appends, PV4, which a host ignores,
-    PT7). The host reads DEVICE_INFO and plays a stroke. **H2**: ``n_refused``, the operations
+    PT7). The host reads DEVICE_INFO and plays a stroke. **HD2**: ``n_refused``, the operations
     that raised plus the STATE reports the driver did not decode, must be 0, and the play
     must return at least :data:`MIN_REPORTS` reports.
 """
