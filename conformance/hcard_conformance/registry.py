@@ -240,6 +240,12 @@ BUILTIN_CHECKS: tuple[LazyCheck, ...] = (
               "hcard_conformance.device_checks.profile_upload:check_profile_upload",
               "hcard_conformance.wire_protocol:takes_host_profiles",
               cases_target="hcard_conformance.device_checks.profile_upload:PROFILE_CASES"),
+    LazyCheck(check_names.DEVICE_HOST_DRIVER, "device",
+              "the host driver refuses another major, takes any minor, reports undecodable "
+              "reports and looks before changing a busy device",
+              "hcard_conformance.device_checks.host_driver:check_host_driver",
+              "hcard_conformance.device_checks.host_link:judges_host_driver",
+              cases_target="hcard_conformance.device_checks.host_driver:CASES"),
 )
 """The built-in checks, in level order: the one place their names (spelled in
 :mod:`~hcard_conformance.check_names`), levels and descriptions are given."""

@@ -155,6 +155,12 @@ class Driver(abc.ABC):
         reports_received: STATE reports decoded.
         reports_lost: STATE reports missed, from gaps in their sequence numbers.
         malformed_inputs: input reports that could not be decoded (skipped).
+        input_error: why the newest of them was skipped, naming the report and the reason
+            (rule PE4); empty while none was.
+
+    Rule PV2: the first request a driver sends is GET DEVICE_INFO (every request path reads it
+    first when it was not read yet), and a device of another major version is refused with
+    :class:`DeviceError` naming both versions before anything else is sent to it.
     """
 
     kind: ClassVar[str] = "driver"
@@ -172,6 +178,7 @@ class Driver(abc.ABC):
         self.reports_received = 0
         self.reports_lost = 0
         self.malformed_inputs = 0
+        self.input_error = ""
         self._last_sequence: int | None = None
         self._stream_seq = 0
         self._info: DeviceInfo | None = None
@@ -281,6 +288,8 @@ class Driver(abc.ABC):
     def get_report(self, cls: type[Report]) -> Report:
         """GET_REPORT(Feature) of a report class, decoded."""
         self._check_open()
+        if cls is not DeviceInfo:
+            self._check_version()
         data = self._get_feature(cls.REPORT_ID, cls.size())
         try:
             return cls.decode(data)
@@ -292,6 +301,7 @@ class Driver(abc.ABC):
         """SET_REPORT(Feature) of a feature report (:class:`SessionLost` once the session
         was lost: rule PN9)."""
         self._check_open()
+        self._check_version()
         self._check_session()
         self._set_feature(report.encode())
 
@@ -303,10 +313,17 @@ class Driver(abc.ABC):
             if info.protocol_major != PROTOCOL_MAJOR:
                 raise DeviceError(
                     f"{self.uri}: the device speaks protocol {info.protocol_major}."
-                    f"{info.protocol_minor}; this driver speaks {PROTOCOL_MAJOR}.x"
+                    f"{info.protocol_minor}; this driver implements major {PROTOCOL_MAJOR} "
+                    "(spec PV2)"
                 )
             self._info = info
         return self._info
+
+    def _check_version(self) -> None:
+        """Rule PV2: read DEVICE_INFO before any other request (:meth:`info`, which refuses
+        a device of another major version), unless it was read already."""
+        if self._info is None:
+            self.info()
 
     def limits(self) -> Limits:
         """LIMITS in force."""
@@ -376,6 +393,8 @@ class Driver(abc.ABC):
         """Send ``data`` in chunks, commit it with ``action``, wait for COMMITTED; the number
         of reports sent. DeviceError naming the failure otherwise."""
         what = "profile" if action == UploadAction.COMMIT_PROFILE else "card"
+        self._check_open()
+        self._check_version()
         try:
             reports = upload_reports(data, action)
         except ProtocolError as exc:
@@ -455,6 +474,7 @@ class Driver(abc.ABC):
     def send(self, report: Report) -> None:
         """Send an output report (:class:`SessionLost` once the session was lost: PN9)."""
         self._check_open()
+        self._check_version()
         self._check_session()
         self._write_output(report.encode())
 
@@ -463,6 +483,7 @@ class Driver(abc.ABC):
         what a conformance check sends to see a device refuse it (protocol PE2, PT7). Refusal
         is the device's to report (STATE fault INVALID_REQUEST, ``rejected_requests``)."""
         self._check_open()
+        self._check_version()
         self._write_output(bytes(data))
 
     def get_raw_feature(self, report_id: int, size: int) -> bytes:
@@ -473,6 +494,8 @@ class Driver(abc.ABC):
             DeviceStall: the device refused the request.
         """
         self._check_open()
+        if report_id != DeviceInfo.REPORT_ID:
+            self._check_version()
         return self._get_feature(report_id, size)
 
     def command(self, command: Command, argument: int = 0) -> None:
@@ -559,6 +582,8 @@ class Driver(abc.ABC):
             reports = stream_reports(uv, ev, self._stream_seq)
         except ProtocolError as exc:
             raise DeviceError(f"{self.uri}: cannot stream these frames ({exc})") from None
+        self._check_open()
+        self._check_version()
         for report in reports:
             self._check_open()
             self._write_output(report)
@@ -690,12 +715,14 @@ class Driver(abc.ABC):
     # ------------------------------------------------------------------ input reports
 
     def parse_input(self, data: bytes) -> State | None:
-        """Decode one input report; None (counted in :attr:`malformed_inputs`) when it is not
-        a valid STATE report. Tracks sequence gaps in :attr:`reports_lost`. Never raises."""
+        """Decode one input report; None when it is not a valid STATE report: skipped, counted
+        in :attr:`malformed_inputs`, and why in :attr:`input_error` (the report and the reason,
+        rule PE4). Tracks sequence gaps in :attr:`reports_lost`. Never raises."""
         try:
             state = decode_input(bytes(data))
-        except (ProtocolError, TypeError, ValueError):
+        except (ProtocolError, TypeError, ValueError) as exc:
             self.malformed_inputs += 1
+            self.input_error = f"{self.uri}: input report skipped: {exc} (spec PE4)"
             return None
         if self._last_sequence is not None:
             gap = (state.sequence - self._last_sequence - 1) % _SEQUENCE_MODULO

@@ -94,6 +94,10 @@ name:
     STATE ``dropped_reports`` count them, the next report sent carries INPUT_DROPPED. Fails
     ``device.report-loss`` case ``loss-fraction``, passes ``sequence-gaps`` and
     ``drops-counted``.
+
+The controls of the host driver (``host-accepts-any-major``, ``host-refuses-newer-minor``,
+``host-crashes-on-short-report``, ``host-barges-in``) are the conforming device behind a
+``sim://`` driver with one defect in its protocol logic: :mod:`hcard_device.host_controls`.
 """
 
 from __future__ import annotations
@@ -119,6 +123,12 @@ from hcard.v1 import card_pb2 as pb
 from hcard_conformance import check_names
 from hcard_device.card_check import CardOutcome, InlineChecker
 from hcard_device.firmware import Firmware
+from hcard_device.host_controls import (
+    AnyMajorHostDriver,
+    BargingDriver,
+    NewerMinorRefusingDriver,
+    ShortReportCrashingDriver,
+)
 from hcard_device.sim import DeviceConfig, DeviceSimulation
 from hcard_device.sim.simulation import Limits, PreparedCard, SimBlock
 from hcard_device.sim_driver import SimDriver
@@ -467,6 +477,14 @@ CONTROLS: dict[str, Callable[[], SimDriver]] = {
                                           "sim://"),
     "misdeclared-state": lambda: _firmware_driver(
         MisdeclaredStateFirmware(DeviceSimulation(DeviceConfig.evita())), "sim://"),
+    "host-accepts-any-major": lambda: _sim_driver(DeviceSimulation(DeviceConfig.evita()),
+                                                  "sim://", AnyMajorHostDriver),
+    "host-refuses-newer-minor": lambda: _sim_driver(DeviceSimulation(DeviceConfig.evita()),
+                                                    "sim://", NewerMinorRefusingDriver),
+    "host-crashes-on-short-report": lambda: _sim_driver(
+        DeviceSimulation(DeviceConfig.evita()), "sim://", ShortReportCrashingDriver),
+    "host-barges-in": lambda: _sim_driver(DeviceSimulation(DeviceConfig.evita()), "sim://",
+                                          BargingDriver),
 }
 """The negative controls by name (see the module docstring)."""
 
@@ -490,6 +508,10 @@ CATCHES: dict[str, tuple[str, str]] = {
     "profile-raises-limits": (check_names.DEVICE_PROFILE_UPLOAD, "limits-not-raised"),
     "sticky-profile": (check_names.DEVICE_PROFILE_UPLOAD, "own-profile-restored"),
     "misdeclared-state": (check_names.DEVICE_DESCRIPTOR, "declares-reports"),
+    "host-accepts-any-major": (check_names.DEVICE_HOST_DRIVER, "refuses-major"),
+    "host-refuses-newer-minor": (check_names.DEVICE_HOST_DRIVER, "newer-minor"),
+    "host-crashes-on-short-report": (check_names.DEVICE_HOST_DRIVER, "short-state"),
+    "host-barges-in": (check_names.DEVICE_HOST_DRIVER, "busy-device"),
 }
 """The (check, case) each negative control exists to fail (spec/conformance.md section 6, QN1):
 the proof that the threshold of that check bites.

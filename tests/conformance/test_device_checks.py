@@ -22,7 +22,7 @@ from tests.helpers.plate_loop import plate_loop_bandwidth_hz
 DEVICE_CHECKS = {"device.friction", "device.dynamics", "device.latency", "device.safety",
                  "device.watchdog", "device.upload-integrity", "device.report-loss",
                  "device.refusals", "device.descriptor", "device.session-ownership",
-                 "device.profile-upload"}
+                 "device.profile-upload", "device.host-driver"}
 
 
 def _results(uri: str) -> dict[tuple[str, str], CheckResult]:

@@ -38,7 +38,8 @@ def test_controls_are_reachable_by_name() -> None:
         "inverted-phase", "frequency-off", "weak-actuator", "ignored-watchdog", "late-limits",
         "no-ownership", "accepts-bad-crc", "drops-reports", "reads-any-major",
         "silent-refusals", "unplayed-commit", "profile-raises-limits", "sticky-profile",
-        "misdeclared-state"}
+        "misdeclared-state", "host-accepts-any-major",
+        "host-refuses-newer-minor", "host-crashes-on-short-report", "host-barges-in"}
     assert set(CATCHES) == set(CONTROLS)  # every control names the check it must fail
     with open_control("control:no-ev") as driver:
         assert driver.info().capabilities & 2  # advertises EV, ignores it
