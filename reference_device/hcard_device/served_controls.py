@@ -1,6 +1,6 @@
 """Negative controls served over USB/IP in this process, for checks that need two hosts on one
 device (``device.session-ownership``): two drivers opened on ``sim://`` reach two devices,
-two opened on one USB/IP server reach the same one.
+two opened on one USB/IP server reach the same one, each over a connection of its own.
 
 ``no-ownership``
     The E-ViTa with the behaviour before protocol 1.2 (it reports protocol 1.1): START and STOP
@@ -9,6 +9,13 @@ two opened on one USB/IP server reach the same one.
     PN1-PN6 broken). Served in this process on 127.0.0.1 (a free port, real time) while any
     driver of it is open: every :func:`open_no_ownership` is one more client of that one
     device, and the server stops (the device powers off) when the last one closes.
+``no-attribution``
+    The E-ViTa with protocol 1.4 sessions, served the same way, whose firmware is not told
+    which connection a request came from (as over one USB HID bus): sessions are kept by token
+    alone, attributed to no connection (spec rule PN12 broken), so another connection's
+    requests that change the device are carried out under the owner's session, and its
+    KEEPALIVEs feed the watchdog and keep a silent owner's session alive (PN13 broken). Its
+    pipes are still per connection (PN14 holds).
 """
 
 from __future__ import annotations
@@ -45,12 +52,34 @@ class NoOwnershipFirmware(Firmware):
         return True
 
 
+class NoAttributionFirmware(Firmware):
+    """Firmware that is not told the connection of a request (see the module docstring)."""
+
+    def get_feature(self, report_id: int, origin: object | None = None) -> bytes:
+        """GET_REPORT(Feature), whichever connection asks (``origin`` dropped)."""
+        return super().get_feature(report_id)
+
+    def set_feature(self, data: bytes, origin: object | None = None) -> None:
+        """SET_REPORT(Feature), whichever connection asks (``origin`` dropped)."""
+        super().set_feature(data)
+
+    def handle_output(self, data: bytes, origin: object | None = None) -> None:
+        """An output report, whichever connection sent it (``origin`` dropped)."""
+        super().handle_output(data)
+
+
 def _no_ownership_firmware() -> Firmware:
     base = make_firmware("evita")
     return NoOwnershipFirmware(base.sim)
 
 
-_FACTORIES = {"no-ownership": _no_ownership_firmware}
+def _no_attribution_firmware() -> Firmware:
+    base = make_firmware("evita")
+    return NoAttributionFirmware(base.sim)
+
+
+_FACTORIES = {"no-ownership": _no_ownership_firmware,
+              "no-attribution": _no_attribution_firmware}
 
 
 class ServedControlDriver(UsbipDriver):
@@ -89,14 +118,24 @@ def release(name: str) -> None:
         server.stop()
 
 
-def open_no_ownership() -> ServedControlDriver:
-    """A new USB/IP client of the ``no-ownership`` device (one device while any is open)."""
-    server = lease("no-ownership")
+def open_served(name: str) -> ServedControlDriver:
+    """A new USB/IP client of the served control ``name`` (one device while any is open)."""
+    server = lease(name)
     try:
         driver = ServedControlDriver.open(server.uri)
         assert isinstance(driver, ServedControlDriver)  # open() makes an instance of cls
     except BaseException:
-        release("no-ownership")
+        release(name)
         raise
-    driver.control = "no-ownership"
+    driver.control = name
     return driver
+
+
+def open_no_ownership() -> ServedControlDriver:
+    """A new USB/IP client of the ``no-ownership`` device (one device while any is open)."""
+    return open_served("no-ownership")
+
+
+def open_no_attribution() -> ServedControlDriver:
+    """A new USB/IP client of the ``no-attribution`` device (one device while any is open)."""
+    return open_served("no-attribution")

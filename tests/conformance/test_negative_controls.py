@@ -36,7 +36,7 @@ def test_controls_are_reachable_by_name() -> None:
     assert set(CONTROLS) == {
         "position-only", "latency-30ms", "no-ev", "over-limit", "swapped-channels",
         "inverted-phase", "frequency-off", "weak-actuator", "ignored-watchdog", "late-limits",
-        "no-ownership", "accepts-bad-crc", "drops-reports", "reads-any-major",
+        "no-ownership", "no-attribution", "accepts-bad-crc", "drops-reports", "reads-any-major",
         "silent-refusals", "unplayed-commit"}
     assert set(CATCHES) == set(CONTROLS)  # every control names the check it must fail
     with open_control("control:no-ev") as driver:
