@@ -36,8 +36,8 @@ def test_controls_are_reachable_by_name() -> None:
     assert set(CONTROLS) == {
         "position-only", "latency-30ms", "no-ev", "over-limit", "swapped-channels",
         "inverted-phase", "frequency-off", "weak-actuator", "ignored-watchdog", "late-limits",
-        "no-ownership", "no-attribution", "accepts-bad-crc", "drops-reports", "reads-any-major",
-        "silent-refusals", "unplayed-commit"}
+        "no-ownership", "no-attribution", "shared-halts", "accepts-bad-crc", "drops-reports",
+        "reads-any-major", "silent-refusals", "unplayed-commit"}
     assert set(CATCHES) == set(CONTROLS)  # every control names the check it must fail
     with open_control("control:no-ev") as driver:
         assert driver.info().capabilities & 2  # advertises EV, ignores it

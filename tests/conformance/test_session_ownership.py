@@ -1,8 +1,9 @@
 """The conformance check ``device.session-ownership`` (spec/device-protocol.md section 14): it
 passes on the reference device served over USB/IP by another process and on ``sim://`` (a
 second host attached to the simulated device), fails on the ``no-ownership`` negative control,
-fails the cases of connections (PN12, PN13) on the ``no-attribution`` control, and is
-UNASSESSED, with the reason, where two drivers cannot share one device."""
+fails the cases of connections (PN12, PN13) on the ``no-attribution`` control and that of
+halts (PN14) on ``shared-halts``, and is UNASSESSED, with the reason, where two drivers cannot
+share one device."""
 
 from __future__ import annotations
 
@@ -114,6 +115,21 @@ def test_the_no_attribution_control_fails_the_cases_of_connections_and_only_thos
     assert takeover.status == FAIL and takeover.value >= 3, takeover.detail
     assert "the former owner's CONTROL KEEPALIVE: counted 0 times" in takeover.detail
     assert "the former owner's SET LIMITS changed the limits" in takeover.detail
+
+
+def test_the_shared_halts_control_fails_the_case_of_halts_and_only_that() -> None:
+    """One OUT halt for every connection, as on one bus: another connection's halt shows on
+    the owner's GET_STATUS and STALLs its 10 KEEPALIVEs, and the owner's SET_CONFIGURATION
+    clears it; sessions are attributed as the reference's are."""
+    results = {case: judged(r) for case, r in run("control:shared-halts").items()}
+    assert tuple(results) == SERVED_CASES
+    assert_conforms(r for c, r in results.items() if c != HALT_CASE)
+    halts = results[HALT_CASE]
+    assert halts.status == FAIL and halts.value == 3, halts.detail
+    assert "0 of the owner's 10 KEEPALIVEs carried out" in halts.detail
+    assert "the owner's GET_STATUS shows its OUT pipe halted by another connection" in \
+        halts.detail
+    assert "the owner's SET_CONFIGURATION cleared another connection's halt" in halts.detail
 
 
 def test_the_cases_of_connections_are_named_where_the_driver_tells_connections_apart() -> None:
