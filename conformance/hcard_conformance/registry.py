@@ -230,10 +230,12 @@ BUILTIN_CHECKS: tuple[LazyCheck, ...] = (
               "hcard_conformance.wire_protocol:speaks_wire_protocol",
               cases_target="hcard_conformance.device_checks.descriptor:DESCRIPTOR_CASES"),
     LazyCheck(check_names.DEVICE_SESSION_OWNERSHIP, "device",
-              "a second host is refused, a takeover is reported, STOP releases the device",
+              "a second host is refused, a takeover is reported, STOP releases the device; "
+              "over USB/IP other connections cannot change, feed or halt a session",
               "hcard_conformance.device_checks.session_ownership:check_session_ownership",
               "hcard_conformance.wire_protocol:speaks_wire_protocol",
-              cases_target="hcard_conformance.device_checks.session_ownership:CASES"),
+              cases_target=("hcard_conformance.device_checks.session_ownership:"
+                            "session_case_names")),
     LazyCheck(check_names.DEVICE_PROFILE_UPLOAD, "device",
               "a host's profile is checked and put in force, raises no limit; DEVICE_PROFILE "
               "restores the own",

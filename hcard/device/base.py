@@ -148,6 +148,12 @@ class Driver(abc.ABC):
             actuator frames (:class:`~hcard.device.frame_driver.FrameDriver`): the wire
             protocol's upload, report sequence and sessions are then the host's bookkeeping,
             not the device's, and the conformance checks of them do not apply.
+        separate_connections: True when every driver opened is a connection of its own that
+            the device can tell from the others' (one USB/IP import each, protocol PN10): the
+            device then attributes a session to the connection that began it and refuses the
+            other connections' changes (PN12-PN15). False where the drivers of one host share
+            its one connection (processes opening one hidraw node) or the device sees no
+            connection at all (``sim://``'s second host).
 
     Attributes:
         uri: the URI it was opened with.
@@ -169,6 +175,7 @@ class Driver(abc.ABC):
     schemes: ClassVar[tuple[str, ...]] = ()
     realtime: ClassVar[bool] = True
     renders_on_host: ClassVar[bool] = False
+    separate_connections: ClassVar[bool] = False
 
     def __init__(self, uri: DeviceUri, *, timeout_s: float = DEFAULT_TIMEOUT_S) -> None:
         if not timeout_s > 0:

@@ -50,6 +50,16 @@ name:
     and upload are carried out under the first host's session, and TAKE_OVER is unknown.
     Served over USB/IP in this process (one device, any number of drivers; see
     :mod:`hcard_device.served_controls`), since two ``sim://`` drivers never share one.
+``no-attribution``
+    The E-ViTa with sessions (protocol 1.4) whose firmware is not told which USB/IP connection
+    a request came from: sessions are kept by token alone (PN1-PN9 hold), but another
+    connection's FINGER, KEEPALIVE, START or STOP with the owner's token and SET of LIMITS are
+    carried out under the owner's session and its KEEPALIVEs keep a silent owner's session
+    alive (PN12, PN13 broken). Served over USB/IP in this process like ``no-ownership``.
+``shared-halts``
+    The E-ViTa served over USB/IP like ``no-ownership``, whose interrupt-OUT endpoint has one
+    halt for all its connections (PN14 broken): another connection's ENDPOINT_HALT STALLs the
+    session owner's output reports, and any SET_CONFIGURATION clears it.
 ``accepts-bad-crc``
     The E-ViTa whose upload store never compares the CRC-32 of the received bytes with the one
     UPLOAD_BEGIN declared (protocol PU3, 9.3): a card whose CRC is wrong is committed, as long
@@ -461,6 +471,8 @@ CONTROLS: dict[str, Callable[[], SimDriver]] = {
                                             "sim://"),
     "late-limits": lambda: _sim_driver(LateLimitsSimulation(DeviceConfig.evita()), "sim://"),
     "no-ownership": lambda: _no_ownership(),
+    "no-attribution": lambda: _no_attribution(),
+    "shared-halts": lambda: _shared_halts(),
     "accepts-bad-crc": lambda: _firmware_driver(
         _no_crc_firmware(DeviceSimulation(DeviceConfig.evita())), "sim://"),
     "drops-reports": lambda: _firmware_driver(
@@ -500,6 +512,8 @@ CATCHES: dict[str, tuple[str, str]] = {
     "ignored-watchdog": (check_names.DEVICE_WATCHDOG, "host-silent"),
     "late-limits": (check_names.DEVICE_SAFETY, "limits-while-driven"),
     "no-ownership": (check_names.DEVICE_SESSION_OWNERSHIP, "second-host-refused"),
+    "no-attribution": (check_names.DEVICE_SESSION_OWNERSHIP, "other-connection-refused"),
+    "shared-halts": (check_names.DEVICE_SESSION_OWNERSHIP, "halts-per-connection"),
     "accepts-bad-crc": (check_names.DEVICE_UPLOAD_INTEGRITY, "bad-crc"),
     "drops-reports": (check_names.DEVICE_REPORT_LOSS, "loss-fraction"),
     "reads-any-major": (check_names.DEVICE_UPLOAD_INTEGRITY, "unknown-major"),
@@ -526,6 +540,22 @@ def _no_ownership() -> SimDriver:
     from hcard_device.served_controls import open_no_ownership
 
     return open_no_ownership()  # type: ignore[return-value]
+
+
+def _no_attribution() -> SimDriver:
+    """The ``no-attribution`` control: the E-ViTa whose sessions are attributed to no
+    connection, served over USB/IP in this process (:mod:`hcard_device.served_controls`)."""
+    from hcard_device.served_controls import open_no_attribution
+
+    return open_no_attribution()  # type: ignore[return-value]
+
+
+def _shared_halts() -> SimDriver:
+    """The ``shared-halts`` control: the E-ViTa whose connections share one OUT halt, served
+    over USB/IP in this process (:mod:`hcard_device.served_controls`)."""
+    from hcard_device.served_controls import open_shared_halts
+
+    return open_shared_halts()  # type: ignore[return-value]
 
 
 def open_control(name: str) -> SimDriver:

@@ -1,6 +1,6 @@
 """Negative controls served over USB/IP in this process, for checks that need two hosts on one
 device (``device.session-ownership``): two drivers opened on ``sim://`` reach two devices,
-two opened on one USB/IP server reach the same one.
+two opened on one USB/IP server reach the same one, each over a connection of its own.
 
 ``no-ownership``
     The E-ViTa with the behaviour before protocol 1.2 (it reports protocol 1.1): START and STOP
@@ -9,6 +9,19 @@ two opened on one USB/IP server reach the same one.
     PN1-PN6 broken). Served in this process on 127.0.0.1 (a free port, real time) while any
     driver of it is open: every :func:`open_no_ownership` is one more client of that one
     device, and the server stops (the device powers off) when the last one closes.
+``no-attribution``
+    The E-ViTa with protocol 1.4 sessions, served the same way, whose firmware is not told
+    which connection a request came from (as over one USB HID bus): sessions are kept by token
+    alone, attributed to no connection (spec rule PN12 broken), so another connection's
+    requests that change the device are carried out under the owner's session, and its
+    KEEPALIVEs feed the watchdog and keep a silent owner's session alive (PN13 broken). Its
+    pipes are still per connection (PN14 holds).
+``shared-halts``
+    The E-ViTa served the same way, whose interrupt-OUT endpoint has one halt for every
+    connection, as a device on one bus has (spec rule PN14 broken): a connection's
+    SET_FEATURE(ENDPOINT_HALT) STALLs every connection's output reports, the session owner's
+    included, GET_STATUS shows it to all, and any connection's SET_CONFIGURATION clears it.
+    Sessions are attributed to connections as the reference's are (PN12, PN13 hold).
 """
 
 from __future__ import annotations
@@ -16,10 +29,13 @@ from __future__ import annotations
 import dataclasses
 import sys
 import threading
+from typing import Any
 
 from hcard.device.protocol import Command, DeviceInfo
 from hcard.device.transports.usbip_client import UsbipDriver
 from hcard_device.firmware import Firmware
+from hcard_device.usb.connection import Connection
+from hcard_device.usb.device import ConnectionView, HcardHID
 from hcard_device.usb.server import SWITCH_INTERVAL_S, DeviceServer, make_firmware
 
 _servers: dict[str, DeviceServer] = {}
@@ -45,12 +61,74 @@ class NoOwnershipFirmware(Firmware):
         return True
 
 
+class NoAttributionFirmware(Firmware):
+    """Firmware that is not told the connection of a request (see the module docstring)."""
+
+    def get_feature(self, report_id: int, origin: object | None = None) -> bytes:
+        """GET_REPORT(Feature), whichever connection asks (``origin`` dropped)."""
+        return super().get_feature(report_id)
+
+    def set_feature(self, data: bytes, origin: object | None = None) -> None:
+        """SET_REPORT(Feature), whichever connection asks (``origin`` dropped)."""
+        super().set_feature(data)
+
+    def handle_output(self, data: bytes, origin: object | None = None) -> None:
+        """An output report, whichever connection sent it (``origin`` dropped)."""
+        super().handle_output(data)
+
+
+class _OneHalt:
+    """The one halt of the ``shared-halts`` device's interrupt-OUT endpoint."""
+
+    out_halted = False
+
+
+class SharedHaltView(ConnectionView):
+    """A connection's view of the ``shared-halts`` device: its OUT halt is every
+    connection's (see the module docstring)."""
+
+    def __init__(self, device: Any, interface: HcardHID, connection: Connection,
+                 halt: _OneHalt) -> None:
+        self._halt = halt
+        super().__init__(device, interface, connection)
+
+    @property
+    def out_halted(self) -> bool:
+        """The device's one OUT halt."""
+        return self._halt.out_halted
+
+    @out_halted.setter
+    def out_halted(self, halted: bool) -> None:
+        self._halt.out_halted = halted
+
+
+class SharedHaltServer(DeviceServer):
+    """The reference server whose connections share one OUT halt (``shared-halts``)."""
+
+    def start(self) -> DeviceServer:
+        """Start as the reference does, each connection then seeing the one halt."""
+        started = super().start()
+        device, interface, halt = self.usb_device, self.interface, _OneHalt()
+        assert device is not None and interface is not None
+        device.connection_view = (  # before any client: the server was just started
+            lambda _device, connection: SharedHaltView(device, interface, connection, halt))
+        return started
+
+
 def _no_ownership_firmware() -> Firmware:
     base = make_firmware("evita")
     return NoOwnershipFirmware(base.sim)
 
 
-_FACTORIES = {"no-ownership": _no_ownership_firmware}
+def _no_attribution_firmware() -> Firmware:
+    base = make_firmware("evita")
+    return NoAttributionFirmware(base.sim)
+
+
+_FACTORIES = {"no-ownership": _no_ownership_firmware,
+              "no-attribution": _no_attribution_firmware,
+              "shared-halts": lambda: make_firmware("evita")}
+_SERVERS: dict[str, type[DeviceServer]] = {"shared-halts": SharedHaltServer}
 
 
 class ServedControlDriver(UsbipDriver):
@@ -72,7 +150,8 @@ def lease(name: str) -> DeviceServer:
         server = _servers.get(name)
         if server is None or server.stopped:
             sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL_S))
-            server = DeviceServer("evita", port=0, firmware_factory=_FACTORIES[name]).start()
+            server = _SERVERS.get(name, DeviceServer)(
+                "evita", port=0, firmware_factory=_FACTORIES[name]).start()
             _servers[name], _clients[name] = server, 0
         _clients[name] += 1
         return server
@@ -89,14 +168,29 @@ def release(name: str) -> None:
         server.stop()
 
 
-def open_no_ownership() -> ServedControlDriver:
-    """A new USB/IP client of the ``no-ownership`` device (one device while any is open)."""
-    server = lease("no-ownership")
+def open_served(name: str) -> ServedControlDriver:
+    """A new USB/IP client of the served control ``name`` (one device while any is open)."""
+    server = lease(name)
     try:
         driver = ServedControlDriver.open(server.uri)
         assert isinstance(driver, ServedControlDriver)  # open() makes an instance of cls
     except BaseException:
-        release("no-ownership")
+        release(name)
         raise
-    driver.control = "no-ownership"
+    driver.control = name
     return driver
+
+
+def open_no_ownership() -> ServedControlDriver:
+    """A new USB/IP client of the ``no-ownership`` device (one device while any is open)."""
+    return open_served("no-ownership")
+
+
+def open_no_attribution() -> ServedControlDriver:
+    """A new USB/IP client of the ``no-attribution`` device (one device while any is open)."""
+    return open_served("no-attribution")
+
+
+def open_shared_halts() -> ServedControlDriver:
+    """A new USB/IP client of the ``shared-halts`` device (one device while any is open)."""
+    return open_served("shared-halts")

@@ -1,11 +1,14 @@
 """The conformance check ``device.session-ownership`` (spec/device-protocol.md section 14): it
 passes on the reference device served over USB/IP by another process and on ``sim://`` (a
 second host attached to the simulated device), fails on the ``no-ownership`` negative control,
-and is UNASSESSED, with the reason, where two drivers cannot share one device."""
+fails the cases of connections (PN12, PN13) on the ``no-attribution`` control and that of
+halts (PN14) on ``shared-halts``, and is UNASSESSED, with the reason, where two drivers cannot
+share one device."""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from typing import Any
 
 import pytest
@@ -15,25 +18,52 @@ from hcard.device.errors import DeviceError
 from hcard.device.protocol import State
 from hcard.device.uri import parse_uri
 from hcard_conformance.context import Context
+from hcard_conformance.device_checks.connections import CONNECTION_CASES, HALT_CASE
 from hcard_conformance.device_checks.session_ownership import (
     CASES,
     LOSS_THRESHOLD_S,
     check_session_ownership,
+    session_case_names,
 )
+from hcard_conformance.realtime import NOT_KEPT
 from hcard_conformance.registry import builtin_checks
 from hcard_conformance.result import ERROR, FAIL, PASS, UNASSESSED, CheckResult
 from hcard_device.controls import CONTROLS
 from hcard_device.firmware import Firmware
 from hcard_device.sim import DeviceConfig, DeviceSimulation
 from hcard_device.sim_driver import SimDriver
-from tests.helpers.realtime import assert_conforms
+from tests.helpers.realtime import MACHINE, assert_conforms
 from tests.helpers.served_device import served_device
 
 pytestmark = pytest.mark.wall_clock
 
 
+SERVED_CASES = CASES + CONNECTION_CASES + (HALT_CASE,)
+"""The cases of a device reached over USB/IP by the usbip driver (connections told apart)."""
+
+
 def run(name: str) -> dict[str, CheckResult]:
     return {r.case: r for r in check_session_ownership(Context.for_driver(name))}
+
+
+def assert_not_failed(results: Iterable[CheckResult]) -> None:
+    """None of ``results`` is a FAIL or an ERROR: the cases a control's defect does not touch.
+    A case whose every run was not kept is UNASSESSED, saying so: a control served in the
+    test's own process shares the interpreter with its host, and under two CPU burners its
+    device flags a fifth of its reports REALTIME_LAG (PI4); what a control must show is that
+    those cases do not fail, its named cases that they do."""
+    wrong = [(r.case, r.status, r.detail) for r in results
+             if r.status not in (PASS, UNASSESSED) or (r.status == UNASSESSED
+                                                       and NOT_KEPT not in r.detail)]
+    assert not wrong, wrong
+
+
+def judged(result: CheckResult) -> CheckResult:
+    """``result``, unless no run of it was kept in real time (spec QT3): then the test fails
+    saying the machine could not keep real time, never reading the case as a verdict."""
+    if result.status == UNASSESSED and NOT_KEPT in result.detail:
+        pytest.fail(f"{MACHINE}: {result.case}: {result.detail}", pytrace=False)
+    return result
 
 
 def test_the_check_is_built_in_after_the_device_level() -> None:
@@ -48,7 +78,7 @@ def test_the_reference_served_over_usbip_passes_twice_on_one_server() -> None:
     with served_device() as served:
         for _ in range(2):  # the device stays powered between runs: sessions carry on
             results = run(served.uri)
-            assert set(results) == set(CASES)
+            assert tuple(results) == SERVED_CASES
             assert_conforms(results.values())  # the machine's lateness fails saying so
             refused = results["second-host-refused"]
             assert refused.value == 0 and "upload refused (BUSY)" in refused.detail
@@ -57,11 +87,79 @@ def test_the_reference_served_over_usbip_passes_twice_on_one_server() -> None:
             assert "SessionLost" in takeover.detail and "taken over by session" in \
                 takeover.detail
             assert "granted session" in results["released-by-stop"].detail
+            # PN12, PN13: another connection's 11 changes refused, its 5 GETs answered
+            refused = results["other-connection-refused"]
+            assert refused.value == 0
+            assert "11 requests of another connection refused" in refused.detail
+            assert "its 5 GETs answered" in refused.detail
+            # PN7 on the device's clock whatever another connection sends: watchdog_ms 100
+            ends = results["ends-despite-other-connection"]
+            assert 99.0 <= ends.value <= 101.0, ends.detail  # ms, one report period
+            assert "the watchdog tripped" in ends.detail
+            takeover = results["takeover-attributed"]
+            assert takeover.value == 0 and "the former owner's 4 requests refused" in \
+                takeover.detail
+            assert results["halts-per-connection"].value == 0  # PN14
 
 
-def test_the_no_ownership_control_fails_every_case() -> None:
+def test_the_no_attribution_control_fails_the_cases_of_connections_and_only_those() -> None:
+    """Sessions kept by token alone, attributed to no connection: the token rules (PN1-PN9)
+    hold, so the first four cases pass; another connection's requests are carried out under
+    the owner's session, and its KEEPALIVEs keep a silent owner's session alive."""
+    results = run("control:no-attribution")
+    assert tuple(results) == SERVED_CASES
+    results.update({c: judged(results[c]) for c in CONNECTION_CASES})
+    assert_not_failed(results[c] for c in (*CASES, HALT_CASE))  # per-connection pipes: PN14
+    refused = results["other-connection-refused"]
+    # Measured 12-14: FINGER, STREAM, KEEPALIVE, CLEAR_COUNTERS, SET_TOUCH_SOURCE, START, SET
+    # LIMITS, SET UPLOAD_BEGIN and STOP carried out, PLAY_CARD refused for want of a card but
+    # not flagged SESSION_BUSY, and the limits, upload and echo they changed. On a loaded
+    # machine the owner's session may end by its own silence (PN7) before a request: from
+    # there nothing is judged (QT3), what was carried out before still fails the case.
+    assert refused.status == FAIL and refused.value >= 1, refused.detail
+    assert "counted 0 times in rejected_requests, not once" in refused.detail
+    ends = results["ends-despite-other-connection"]
+    assert ends.status == FAIL and math.isinf(ends.value)
+    assert "flag SESSION still set" in ends.detail  # fed until 75 ms: held past 150 ms
+    assert "the watchdog did not trip" in ends.detail
+    takeover = results["takeover-attributed"]  # measured 4-6: KEEPALIVE, START, SET LIMITS,
+    assert takeover.status == FAIL and takeover.value >= 1, takeover.detail  # STOP, limits
+    assert "the former owner's CONTROL" in takeover.detail
+    assert "counted 0 times in rejected_requests, not once" in takeover.detail
+
+
+def test_the_shared_halts_control_fails_the_case_of_halts_and_only_that() -> None:
+    """One OUT halt for every connection, as on one bus: another connection's halt shows on
+    the owner's GET_STATUS and STALLs its 10 KEEPALIVEs, and the owner's SET_CONFIGURATION
+    clears it; sessions are attributed as the reference's are."""
+    results = run("control:shared-halts")
+    assert tuple(results) == SERVED_CASES
+    assert_not_failed(r for c, r in results.items() if c != HALT_CASE)
+    halts = judged(results[HALT_CASE])
+    assert halts.status == FAIL and halts.value == 3, halts.detail
+    assert "0 of the owner's 10 KEEPALIVEs carried out" in halts.detail
+    assert "the owner's GET_STATUS shows its OUT pipe halted by another connection" in \
+        halts.detail
+    assert "the owner's SET_CONFIGURATION cleared another connection's halt" in halts.detail
+
+
+def test_the_cases_of_connections_are_named_where_the_driver_tells_connections_apart() -> None:
+    """USB/IP (one import per driver) names them; ``sim://``'s second host and a hidraw node
+    shared by two processes are no connections of their own (PN12 attributes nothing)."""
+    assert session_case_names(Context.for_driver("sim://")) == CASES
+    assert session_case_names(Context.for_driver("usbip://loopback")) == SERVED_CASES
+    assert session_case_names(Context.for_driver("reference")) == CASES  # not run (no driver)
+
+
+def test_the_no_ownership_control_fails_every_case_of_sessions() -> None:
+    """Protocol 1.1: no session at all, so none to attribute either; its pipes are still the
+    connections' own (``halts-per-connection`` passes)."""
     results = run("control:no-ownership")
-    assert all(r.status == FAIL for r in results.values()), [r.detail for r in results.values()]
+    assert all(r.status == FAIL for c, r in results.items() if c != HALT_CASE), \
+        [r.detail for r in results.values()]
+    for case in CONNECTION_CASES:
+        assert math.isinf(results[case].value)
+        assert "speaks protocol 1.1: no sessions" in results[case].detail
     refused = results["second-host-refused"]
     assert refused.value >= 3  # START not flagged, COMMIT carried out, card changed under play
     assert "COMMIT replaced the card (PN5)" in refused.detail
@@ -97,7 +195,7 @@ def test_sim_passes_with_a_second_host_on_the_simulated_device(uri: str) -> None
 
 def test_a_transport_that_cannot_share_one_device_is_unassessed_with_the_reason() -> None:
     results = run("usbip://loopback")  # every driver starts its own in-process device
-    assert [r.status for r in results.values()] == [UNASSESSED] * len(CASES)
+    assert [r.status for r in results.values()] == [UNASSESSED] * len(SERVED_CASES)
     assert all("reach two devices" in r.detail and "usbip:// or hid://" in r.detail
                for r in results.values())
 

@@ -40,6 +40,12 @@ device (spec/device-protocol.md section 14).
         ``session_number``, and the second host's START is then granted the next session.
         Metric: the time from the first host's last report to the second host reading that
         report, ms.
+
+Where the driver opens a connection of its own that the device tells apart
+(:attr:`hcard.device.base.Driver.separate_connections`: USB/IP), the check also names the
+cases of :mod:`hcard_conformance.device_checks.connections` (rules PN12-PN14):
+``other-connection-refused``, ``ends-despite-other-connection``, ``takeover-attributed`` and,
+where the driver offers the standard endpoint requests, ``halts-per-connection``.
 """
 
 from __future__ import annotations
@@ -62,12 +68,15 @@ from hcard.track import FingerTrack, straight_stroke
 from hcard.v1 import card_pb2 as pb
 from hcard_conformance.check_names import DEVICE_SESSION_OWNERSHIP as CHECK
 from hcard_conformance.context import Context
+from hcard_conformance.device_checks import connections as conn
 from hcard_conformance.device_checks.common import LEVEL
 from hcard_conformance.realtime import HostWatch, NotKept, attempted_case, device_lag, reasons
 from hcard_conformance.result import CannotAssess, CheckResult, guarded, measured
 from hcard_conformance.timing import timing_class
 
 CASES = ("second-host-refused", "takeover-reported", "released-by-stop", "ends-when-silent")
+"""The cases of every implementation the check applies to; :func:`session_case_names` adds
+those of connections (:mod:`~hcard_conformance.device_checks.connections`)."""
 PROBE_KEEPALIVES = 5
 """KEEPALIVEs the first driver sends to show the second one shares its device."""
 PLAY_S = 1.5
@@ -543,6 +552,13 @@ def case_ends_when_silent(hosts: Hosts, read_lag_s: float = 0.0) -> CheckResult:
     return result
 
 
+def session_case_names(ctx: Context) -> tuple[str, ...]:
+    """The cases of ``device.session-ownership`` on ``ctx`` (registry declaration): :data:`CASES`,
+    and those of :func:`~hcard_conformance.device_checks.connections.connection_case_names`
+    where the device tells connections apart (its driver opened once to ask)."""
+    return CASES + conn.connection_case_names(ctx)
+
+
 def check_session_ownership(ctx: Context) -> Iterator[CheckResult]:
     """Session ownership between two hosts on one device (spec section 14)."""
     if ctx.open_driver is None:
@@ -550,6 +566,7 @@ def check_session_ownership(ctx: Context) -> Iterator[CheckResult]:
     open_driver = ctx.open_driver
     timing = timing_class(ctx)
     read_lag_s = 0.0 if timing.keeps_real_time else timing.read_lag_s
+    names = session_case_names(ctx)
 
     max_lost = max(MAX_LOST, timing.host_report_loss)
 
@@ -563,5 +580,21 @@ def check_session_ownership(ctx: Context) -> Iterator[CheckResult]:
         yield case_released_by_stop(hosts)
         yield attempted_case(CHECK, LEVEL, CASES[3],
                              lambda: case_ends_when_silent(hosts, read_lag_s))
+        if len(names) == len(CASES):
+            return
+        if not hosts.shared_uri:  # the device tells connections apart, the URI reaches two
+            raise CannotAssess("two drivers opened on this URI are two connections to two "
+                               "devices: no second connection to the first one's device")
+        cases: dict[str, Callable[[], CheckResult]] = {
+            conn.CONNECTION_CASES[0]:
+                lambda: conn.case_other_connection_refused(open_driver, read_lag_s),
+            conn.CONNECTION_CASES[1]:
+                lambda: conn.case_ends_despite_other_connection(open_driver, SILENCE_MARGIN_S),
+            conn.CONNECTION_CASES[2]:
+                lambda: conn.case_takeover_attributed(open_driver, read_lag_s),
+            conn.HALT_CASE: lambda: conn.case_halts_per_connection(open_driver),
+        }
+        for case in names[len(CASES):]:
+            yield attempted_case(CHECK, LEVEL, case, cases[case])
 
-    yield from guarded(CHECK, LEVEL, CASES, measure)
+    yield from guarded(CHECK, LEVEL, names, measure)

@@ -45,6 +45,7 @@ class PyusbDriver(Driver):
     name = "pyusb"
     description = "pyusb through an in-process USB/IP backend: pyusb://HOST:PORT/BUSID"
     schemes = ("pyusb",)
+    separate_connections = True
 
     def __init__(self, uri: DeviceUri, device: Any, backend: UsbipBackend, *,
                  timeout_s: float = DEFAULT_TIMEOUT_S,

@@ -28,6 +28,11 @@ HID_INTERFACE = 0
 GET_REPORT, SET_REPORT = 0x01, 0x09
 CLASS_INTERFACE_OUT, CLASS_INTERFACE_IN = 0x21, 0xA1
 """bmRequestType of HID class requests to the interface, host to device and back."""
+STANDARD_ENDPOINT_OUT, STANDARD_ENDPOINT_IN = 0x02, 0x82
+"""bmRequestType of standard requests to an endpoint, host to device and back."""
+GET_STATUS, CLEAR_FEATURE, SET_FEATURE, SET_CONFIGURATION = 0x00, 0x01, 0x03, 0x09
+ENDPOINT_HALT = 0
+"""Feature selector of SET_FEATURE and CLEAR_FEATURE to an endpoint (USB 2.0, 9.4)."""
 
 
 def check_identity(info: dict, where: str) -> None:
@@ -45,6 +50,7 @@ class UsbipDriver(Driver):
     name = "usbip"
     description = "USB/IP client (usbip package): usbip://HOST:PORT/BUSID, NODELAY, timeouts"
     schemes = ("usbip",)
+    separate_connections = True
 
     def __init__(self, uri: DeviceUri, link: UsbipLink, *, timeout_s: float = DEFAULT_TIMEOUT_S,
                  server: Any = None) -> None:
@@ -61,7 +67,7 @@ class UsbipDriver(Driver):
                                   transport=server.transport if server else None)
             try:
                 check_identity(link.info, str(uri))
-                link.control_out(0x00, 0x09, 1, 0, b"", timeout_s=timeout_s)  # SET_CONFIGURATION
+                link.control_out(0x00, SET_CONFIGURATION, 1, 0, b"", timeout_s=timeout_s)
                 link.start_in(IN_ENDPOINT, MAX_REPORT_BYTES, timeout_s=timeout_s)
             except BaseException:
                 link.close()
@@ -91,6 +97,41 @@ class UsbipDriver(Driver):
                         f"USB/IP export {info['busid']} ({VID:04x}:{PID:04x})",
                     ))
         return found
+
+    # ------------------------------------------------------------------ standard requests
+
+    def set_endpoint_halt(self, endpoint: int, halted: bool) -> None:
+        """SET_FEATURE (``halted``) or CLEAR_FEATURE of ENDPOINT_HALT on ``endpoint`` (its
+        address: 0x01 OUT, 0x81 IN): on a server of several connections, this connection's
+        own pipe (protocol PN14).
+
+        Raises:
+            DeviceStall: the device refused the request.
+        """
+        self._check_open()
+        self.link.control_out(STANDARD_ENDPOINT_OUT, SET_FEATURE if halted else CLEAR_FEATURE,
+                              ENDPOINT_HALT, endpoint, b"", timeout_s=self.timeout_s)
+
+    def endpoint_halted(self, endpoint: int) -> bool:
+        """GET_STATUS of ``endpoint``: whether it is halted (for this connection, PN14).
+
+        Raises:
+            DeviceStall: the device refused the request.
+        """
+        self._check_open()
+        status = self.link.control_in(STANDARD_ENDPOINT_IN, GET_STATUS, 0, endpoint, 2,
+                                      timeout_s=self.timeout_s)
+        return bool(status[0] & 1) if status else False
+
+    def set_configuration(self) -> None:
+        """SET_CONFIGURATION 1 (the device's one configuration): resets the halts and the IN
+        queue of this connection (PN14).
+
+        Raises:
+            DeviceStall: the device refused the request.
+        """
+        self._check_open()
+        self.link.control_out(0x00, SET_CONFIGURATION, 1, 0, b"", timeout_s=self.timeout_s)
 
     def _write_output(self, report: bytes) -> None:
         self.link.interrupt_out(OUT_ENDPOINT, report, timeout_s=self.timeout_s)
