@@ -248,6 +248,11 @@ BUILTIN_CHECKS: tuple[LazyCheck, ...] = (
               "hcard_conformance.device_checks.host_driver:check_host_driver",
               "hcard_conformance.device_checks.host_link:judges_host_driver",
               cases_target="hcard_conformance.device_checks.host_driver:CASES"),
+    LazyCheck(check_names.DEVICE_SATURATION, "device",
+              "a corner force past its STATE field reads as the range's end, not wrapped (PI2)",
+              "hcard_conformance.device_checks.saturation:check_saturation",
+              "hcard_conformance.device_checks.saturation:reports_host_forces",
+              cases_target="hcard_conformance.device_checks.saturation:SATURATION_CASES"),
 )
 """The built-in checks, in level order: the one place their names (spelled in
 :mod:`~hcard_conformance.check_names`), levels and descriptions are given."""

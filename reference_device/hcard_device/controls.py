@@ -97,6 +97,11 @@ name:
     firmware's descriptor table (protocol PD1, PD2). The reports themselves are the reference
     device's; a host stack that sizes its input buffers from the descriptor cannot take a STATE
     report whole. Fails ``device.descriptor`` (``declares-reports``, ``exact-bytes``).
+``wrapped-forces``
+    The E-ViTa whose force readout keeps the low 16 bits of each corner force in mN (an
+    integer cast where the firmware should saturate, protocol PI2): a corner loaded past
+    32.767 N reads negative, a finger pressing the plate as one pulling it. Fails
+    ``device.saturation`` (``corner-force``).
 ``drops-reports``
     The E-ViTa whose firmware loses :data:`DROPPED_FRACTION` of its STATE reports at random as
     it produces them (an IN endpoint starved by the firmware's main loop), and counts them
@@ -406,6 +411,22 @@ def state_declared_short(descriptor: bytes = REPORT_DESCRIPTOR) -> bytes:
     return descriptor.replace(right, declared + report_count(State.size() - 2), 1)
 
 
+FORCE_COUNTS = 1 << 16
+"""Counts of a 16-bit force field (mN)."""
+
+
+class WrappedForcesSimulation(DeviceSimulation):
+    """The E-ViTa whose corner forces keep the low 16 bits of their value in mN
+    (``wrapped-forces``)."""
+
+    def step(self, n_frames: int) -> SimBlock:
+        block = super().step(n_frames)
+        counts = np.rint(block.corner_forces_n * 1000.0)
+        wrapped = (counts + FORCE_COUNTS // 2) % FORCE_COUNTS - FORCE_COUNTS // 2
+        block.corner_forces_n[...] = wrapped / 1000.0
+        return block
+
+
 class MisdeclaredStateFirmware(Firmware):
     """A firmware whose USB interface declares STATE one byte short (``misdeclared-state``)."""
 
@@ -489,6 +510,8 @@ CONTROLS: dict[str, Callable[[], SimDriver]] = {
                                           "sim://"),
     "misdeclared-state": lambda: _firmware_driver(
         MisdeclaredStateFirmware(DeviceSimulation(DeviceConfig.evita())), "sim://"),
+    "wrapped-forces": lambda: _sim_driver(WrappedForcesSimulation(DeviceConfig.evita()),
+                                          "sim://"),
     "host-accepts-any-major": lambda: _sim_driver(DeviceSimulation(DeviceConfig.evita()),
                                                   "sim://", AnyMajorHostDriver),
     "host-refuses-newer-minor": lambda: _sim_driver(DeviceSimulation(DeviceConfig.evita()),
@@ -522,6 +545,7 @@ CATCHES: dict[str, tuple[str, str]] = {
     "profile-raises-limits": (check_names.DEVICE_PROFILE_UPLOAD, "limits-not-raised"),
     "sticky-profile": (check_names.DEVICE_PROFILE_UPLOAD, "own-profile-restored"),
     "misdeclared-state": (check_names.DEVICE_DESCRIPTOR, "declares-reports"),
+    "wrapped-forces": (check_names.DEVICE_SATURATION, "corner-force"),
     "host-accepts-any-major": (check_names.DEVICE_HOST_DRIVER, "refuses-major"),
     "host-refuses-newer-minor": (check_names.DEVICE_HOST_DRIVER, "newer-minor"),
     "host-crashes-on-short-report": (check_names.DEVICE_HOST_DRIVER, "short-state"),

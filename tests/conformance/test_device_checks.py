@@ -22,7 +22,8 @@ from tests.helpers.plate_loop import plate_loop_bandwidth_hz
 DEVICE_CHECKS = {"device.friction", "device.dynamics", "device.latency", "device.safety",
                  "device.watchdog", "device.upload-integrity", "device.report-loss",
                  "device.refusals", "device.descriptor", "device.session-ownership",
-                 "device.profile-upload", "device.host-driver"}
+                 "device.profile-upload", "device.host-driver",
+                 "device.saturation"}
 
 
 def _results(uri: str) -> dict[tuple[str, str], CheckResult]:

@@ -83,7 +83,7 @@ def test_every_row_of_the_builtin_table_names_a_check_function_of_its_level() ->
     (and predicate) imports, and every public ``check_*`` function of the check modules is a
     row (a function left out of the table would never run)."""
     targets = {row.target for row in BUILTIN_CHECKS}
-    assert len({row.name for row in BUILTIN_CHECKS}) == len(BUILTIN_CHECKS) == 22
+    assert len({row.name for row in BUILTIN_CHECKS}) == len(BUILTIN_CHECKS) == 23
     modules = {target.split(":")[0] for target in targets}
     for row in BUILTIN_CHECKS:
         assert callable(row.func) and row.name.split(".")[0] == row.level, row
@@ -116,7 +116,7 @@ def test_each_builtin_check_name_is_spelled_once() -> None:
 
 
 def test_listing_the_plugins_imports_no_check_module_and_no_driver() -> None:
-    """``hcard plugins`` lists 22 checks and hcard's 6 drivers from their tables (rows, not
+    """``hcard plugins`` lists 23 checks and hcard's 6 drivers from their tables (rows, not
     modules), whatever other drivers are installed; of the faulty device it imports the entry
     point's module, which holds the rows, and nothing of its driver."""
     code = ("import sys, warnings\n"
@@ -132,7 +132,7 @@ def test_listing_the_plugins_imports_no_check_module_and_no_driver() -> None:
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           check=True)
     counts, imported = done.stdout.splitlines()
-    assert counts.split() == ["22", "6"]  # usbip, pyusb, hid; sim, control; faulty
+    assert counts.split() == ["23", "6"]  # usbip, pyusb, hid; sim, control; faulty
     assert ast.literal_eval(imported) == [
         "hcard_conformance.check_names", "hcard_conformance.faulty",
         "hcard_conformance.faulty.plugin", "hcard_conformance.registry",

@@ -83,6 +83,6 @@ def test_the_pytest_plugin_collects_without_running(tmp_path: Path) -> None:
         "device.friction", "device.dynamics", "device.latency", "device.safety",
         "device.watchdog", "device.upload-integrity", "device.report-loss",
         "device.refusals", "device.descriptor", "device.session-ownership", "device.profile-upload",
-        "device.host-driver"}
+        "device.host-driver", "device.saturation"}
     assert "device.friction::dense-grating" in ids
     assert not any(i.startswith("renderer.exact::") for i in ids)  # A0: the reference only

@@ -39,7 +39,7 @@ def test_controls_are_reachable_by_name() -> None:
         "no-ownership", "no-attribution", "shared-halts", "accepts-bad-crc", "drops-reports",
         "reads-any-major",
         "silent-refusals", "unplayed-commit", "profile-raises-limits", "sticky-profile",
-        "misdeclared-state", "host-accepts-any-major",
+        "misdeclared-state", "wrapped-forces", "host-accepts-any-major",
         "host-refuses-newer-minor", "host-crashes-on-short-report", "host-barges-in"}
     assert set(CATCHES) == set(CONTROLS)  # every control names the check it must fail
     with open_control("control:no-ev") as driver:
