@@ -14,10 +14,12 @@ from dataclasses import dataclass
 
 from google.protobuf.descriptor import Descriptor, FieldDescriptor
 
+from hcard.errors import HcardError
+
 WIRE_VARINT, WIRE_FIXED64, WIRE_LEN, WIRE_FIXED32 = 0, 1, 2, 5
 
 
-class WireError(ValueError):
+class WireError(HcardError, ValueError):
     """Bytes that are not a well-formed protobuf message."""
 
 

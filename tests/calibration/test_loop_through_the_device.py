@@ -24,6 +24,7 @@ from hcard.calibration.measurement import read_measurement
 from hcard.calibration.results import AMBIGUOUS
 from hcard.physics.profile import DeviceProfile
 from tests.helpers.cli import run_hcard
+from tests.helpers.realtime import NotKept, in_real_time
 from tests.helpers.served_device import served_device
 
 pytestmark = pytest.mark.wall_clock
@@ -36,8 +37,17 @@ MIN_CUT = 2.0
 """The fitted profile must cut the rendered friction error at least this many times."""
 
 
+HOST_SILENCE = "of silence from this host"
+"""How a play says that the device ended its session because the host fell silent past
+``watchdog_ms`` (PN7): the host did not keep real time (spec QT3), whatever the device did."""
+
+
 def invoke(*args: str) -> str:
+    """``hcard ARGS``' output; NotKept when a play lost its session to the host's own silence
+    (a loaded machine stalled the test's process), an assertion error on any other failure."""
     result = run_hcard(*args)
+    if result.exit_code != 0 and HOST_SILENCE in result.output:
+        raise NotKept(f"hcard {args[0]}: {result.output.strip()[-400:]}")
     assert result.exit_code == 0, result.output
     return result.output
 
@@ -122,9 +132,17 @@ def test_sim_device_without_an_effect(plan, tmp_path):
 
 
 def test_served_device_in_real_time(plan, tmp_path):
-    with served_device("coupled", cli=True, extra=["--effect", "air-layer"]) as served:
-        report = run_loop(served.uri, plan, tmp_path)
-        assert served.process.poll() is None, "the server died"
+    """The loop in real time; measured again (at most three times) when a play lost its
+    session to the host's own silence on a loaded machine (QT3), never when the device erred."""
+    attempts = iter(range(1, 4))
+
+    def loop() -> dict:
+        with served_device("coupled", cli=True, extra=["--effect", "air-layer"]) as served:
+            report = run_loop(served.uri, plan, tmp_path / f"attempt-{next(attempts)}")
+            assert served.process.poll() is None, "the server died"
+        return report
+
+    report = in_real_time(loop, "the calibration loop through a served device")
     assert_found_and_cut(report, 10e-6)
     conditions = report["data"]["conditions"][0] if "conditions" in report["data"] else {}
     assert "air" not in json.dumps(conditions)
