@@ -30,8 +30,9 @@ message makes):
 
 from __future__ import annotations
 
+from hcard.device.base import Driver
 from hcard.device.play import play
-from hcard.device.protocol import ReportId, State
+from hcard.device.protocol import DeviceInfo, ReportId, State
 from hcard.quantities import MS_PER_S, S_PER_MS
 from hcard_conformance.check_names import DEVICE_HOST_DRIVER as CHECK
 from hcard_conformance.device_checks.common import LEVEL
@@ -55,6 +56,18 @@ OTHER_TOKEN = 201
 """The other host's session token."""
 EARLIER_SESSIONS = 6
 """Sessions the other host begins and ends before the one it keeps (so that it is session 7)."""
+
+
+def _beside_other_host(template: DriverTemplate, *, fed: bool,
+                       ) -> tuple[ScriptedDevice, DeviceInfo, OtherHost, Driver]:
+    """A scripted device on which another host holds session 7 (token :data:`OTHER_TOKEN`),
+    fed or gone silent, its DEVICE_INFO, that host, and the implementation's driver on it."""
+    device = ScriptedDevice.open()
+    info = device.info()
+    device.begin_other_session(OTHER_TOKEN, EARLIER_SESSIONS, fed=fed)
+    other = device.other
+    assert other is not None
+    return device, info, other, template.connect(device)
 
 
 def _states(device: ScriptedDevice, first: int) -> list[tuple[float, State]]:
@@ -102,12 +115,7 @@ def _busy(device: ScriptedDevice, other: OtherHost, outcome: Outcome, first_requ
 
 def busy_device(template: DriverTemplate) -> CheckResult:
     """Case ``busy-device`` (module docstring)."""
-    device = ScriptedDevice.open()
-    info = device.info()
-    device.begin_other_session(OTHER_TOKEN, EARLIER_SESSIONS, fed=True)
-    other = device.other
-    assert other is not None
-    driver = template.connect(device)
+    device, info, other, driver = _beside_other_host(template, fed=True)
     sent: list[Request] = []
     problems: list[str] = []
     outcomes = []
@@ -135,12 +143,7 @@ def busy_device(template: DriverTemplate) -> CheckResult:
 
 def abandoned_session(template: DriverTemplate) -> CheckResult:
     """Case ``abandoned-session`` (module docstring)."""
-    device = ScriptedDevice.open()
-    info = device.info()
-    device.begin_other_session(OTHER_TOKEN, EARLIER_SESSIONS, fed=False)
-    other = device.other
-    assert other is not None
-    driver = template.connect(device)
+    device, info, other, driver = _beside_other_host(template, fed=False)
     try:
         played = attempt("play", lambda: play(driver, stroke_card(info), stroke_track(info)))
     finally:
@@ -168,12 +171,7 @@ def abandoned_session(template: DriverTemplate) -> CheckResult:
 
 def takes_over(template: DriverTemplate) -> CheckResult:
     """Case ``takes-over`` (module docstring)."""
-    device = ScriptedDevice.open()
-    info = device.info()
-    device.begin_other_session(OTHER_TOKEN, EARLIER_SESSIONS, fed=True)
-    other = device.other
-    assert other is not None
-    driver = template.connect(device)
+    device, info, other, driver = _beside_other_host(template, fed=True)
     try:
         outcomes = [attempt("info()", driver.info)]
         first_report = len(device.delivered)
