@@ -6,7 +6,7 @@ Run from the repository root::
     python bench/bench_server_isolation.py [--seconds 5] [--no-commit]
 
 Serves an E-ViTa in another process (``python -m hcard_device.usb.server`` on 127.0.0.1) and
-measures, with the clients of ``tests/helpers/usbip_clients.py``:
+measures, with the clients of ``conformance/hcard_conformance/usbip_clients.py``:
 
 * **delivery**: the share of the 1000 STATE reports a second the device produces that a
   well-behaved client (the hcard driver's link, 4 IN URBs outstanding) receives, alone and then
@@ -38,7 +38,7 @@ sys.path.insert(0, str(HERE.parent))  # the repository's root: the clients and c
 
 from hcard.card_io import to_bytes  # noqa: E402
 from hcard.device.protocol.constants import DEFAULT_MAX_CARD_BYTES  # noqa: E402
-from tests.helpers import usbip_clients as clients  # noqa: E402
+from hcard_conformance import usbip_clients as clients  # noqa: E402
 from tests.helpers.cards import large_valid_card  # noqa: E402
 from tests.helpers.hostile_cards import json_empty_components  # noqa: E402
 from tests.helpers.served_device import served_device  # noqa: E402

@@ -17,6 +17,13 @@ from collections.abc import Iterator
 HOST_NICE = -10
 """Nice value a real-time host asks for while it plays or measures: about nine times the CPU
 share of an ordinary process (each step is ~1.25x)."""
+REALTIME_PRIORITY = 10
+"""``SCHED_RR`` priority of a process that must keep real time on its machine: the reference
+device's server (:func:`hcard_device.usb.server.raise_priority`) and a client that
+measures what a served device delivers
+(:func:`hcard_conformance.usbip_clients.real_time_thread`). Any real-time priority runs
+before every ordinary process, and 10 leaves the kernel's own real-time threads, at 50 and
+above, ahead of it."""
 
 
 @contextlib.contextmanager

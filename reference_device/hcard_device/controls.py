@@ -60,6 +60,10 @@ name:
     The E-ViTa served over USB/IP like ``no-ownership``, whose interrupt-OUT endpoint has one
     halt for all its connections (PN14 broken): another connection's ENDPOINT_HALT STALLs the
     session owner's output reports, and any SET_CONFIGURATION clears it.
+``blocking-writes``
+    The E-ViTa served over USB/IP like ``no-ownership``, whose connections write each answer
+    with a send that waits for the client (PN15 broken): a client that parks IN URBs and stops
+    reading stops every connection's STATE stream.
 ``accepts-bad-crc``
     The E-ViTa whose upload store never compares the CRC-32 of the received bytes with the one
     UPLOAD_BEGIN declared (protocol PU3, 9.3): a card whose CRC is wrong is committed, as long
@@ -494,6 +498,7 @@ CONTROLS: dict[str, Callable[[], SimDriver]] = {
     "no-ownership": lambda: _no_ownership(),
     "no-attribution": lambda: _no_attribution(),
     "shared-halts": lambda: _shared_halts(),
+    "blocking-writes": lambda: _blocking_writes(),
     "accepts-bad-crc": lambda: _firmware_driver(
         _no_crc_firmware(DeviceSimulation(DeviceConfig.evita())), "sim://"),
     "drops-reports": lambda: _firmware_driver(
@@ -537,6 +542,7 @@ CATCHES: dict[str, tuple[str, str]] = {
     "no-ownership": (check_names.DEVICE_SESSION_OWNERSHIP, "second-host-refused"),
     "no-attribution": (check_names.DEVICE_SESSION_OWNERSHIP, "other-connection-refused"),
     "shared-halts": (check_names.DEVICE_SESSION_OWNERSHIP, "halts-per-connection"),
+    "blocking-writes": (check_names.DEVICE_SESSION_OWNERSHIP, "beside-non-reader"),
     "accepts-bad-crc": (check_names.DEVICE_UPLOAD_INTEGRITY, "bad-crc"),
     "drops-reports": (check_names.DEVICE_REPORT_LOSS, "loss-fraction"),
     "reads-any-major": (check_names.DEVICE_UPLOAD_INTEGRITY, "unknown-major"),
@@ -580,6 +586,14 @@ def _shared_halts() -> SimDriver:
     from hcard_device.served_controls import open_shared_halts
 
     return open_shared_halts()  # type: ignore[return-value]
+
+
+def _blocking_writes() -> SimDriver:
+    """The ``blocking-writes`` control: the E-ViTa whose connections wait on their clients'
+    sockets, served over USB/IP in this process (:mod:`hcard_device.served_controls`)."""
+    from hcard_device.served_controls import open_blocking_writes
+
+    return open_blocking_writes()  # type: ignore[return-value]
 
 
 def open_control(name: str) -> SimDriver:

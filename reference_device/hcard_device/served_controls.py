@@ -22,11 +22,20 @@ two opened on one USB/IP server reach the same one, each over a connection of it
     SET_FEATURE(ENDPOINT_HALT) STALLs every connection's output reports, the session owner's
     included, GET_STATUS shows it to all, and any connection's SET_CONFIGURATION clears it.
     Sessions are attributed to connections as the reference's are (PN12, PN13 hold).
+``blocking-writes``
+    The E-ViTa served the same way, whose connections serve URBs as usbip 0.7.0's
+    ``serve_connection`` did (spec rule PN15 broken): every interrupt-IN URB a client sends is
+    parked, and each answer is written with a send that waits until the client has taken it.
+    The firmware's pump completes every connection's parked IN URBs, so a client that parks IN
+    URBs and stops reading stops the STATE stream of every connection once its socket is full.
+    Sessions, pipes and the other bounds are the reference's.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import select
+import socket
 import sys
 import threading
 from typing import Any
@@ -34,7 +43,7 @@ from typing import Any
 from hcard.device.protocol import Command, DeviceInfo
 from hcard.device.transports.usbip_client import UsbipDriver
 from hcard_device.firmware import Firmware
-from hcard_device.usb.connection import Connection
+from hcard_device.usb.connection import DEFAULT_LIMITS, Connection, ConnectionLimits
 from hcard_device.usb.device import ConnectionView, HcardHID
 from hcard_device.usb.server import SWITCH_INTERVAL_S, DeviceServer, make_firmware
 
@@ -115,6 +124,42 @@ class SharedHaltServer(DeviceServer):
         return started
 
 
+class BlockingWritesConnection(Connection):
+    """A connection whose answers wait until the client takes them (``blocking-writes``, see
+    the module docstring): nothing is buffered, and the thread that completed the URB (the
+    pump, for STATE reports) waits on the client's socket; it parks every IN URB."""
+
+    WAIT_S = 0.1
+    """Longest single wait for the socket to take more, s (the wait goes on after it)."""
+
+    def __init__(self, sock: socket.socket, number: int, peer: str, *,
+                 limits: ConnectionLimits = DEFAULT_LIMITS, **kwargs: Any) -> None:
+        super().__init__(sock, number, peer, **kwargs,
+                         limits=dataclasses.replace(limits, max_parked_in_urbs=sys.maxsize))
+
+    def send(self, data: bytes) -> None:
+        """Write ``data`` whole, waiting for the client as long as it does not read."""
+        with self._out_lock:
+            view = memoryview(data)
+            while view and not self._closed.is_set():
+                try:
+                    view = view[self.sock.send(view, socket.MSG_DONTWAIT):]
+                except (BlockingIOError, InterruptedError):
+                    select.select([], [self.sock], [], self.WAIT_S)
+                except OSError as exc:
+                    self._close_locked(f"socket error while sending ({exc.strerror or exc})")
+
+
+class BlockingWritesServer(DeviceServer):
+    """The reference server whose connections wait on their clients (``blocking-writes``)."""
+
+    def start(self) -> DeviceServer:
+        """Start as the reference does, each connection then a
+        :class:`BlockingWritesConnection`."""
+        self.transport.table.connection_class = BlockingWritesConnection  # before any client
+        return super().start()
+
+
 def _no_ownership_firmware() -> Firmware:
     base = make_firmware("evita")
     return NoOwnershipFirmware(base.sim)
@@ -127,8 +172,10 @@ def _no_attribution_firmware() -> Firmware:
 
 _FACTORIES = {"no-ownership": _no_ownership_firmware,
               "no-attribution": _no_attribution_firmware,
-              "shared-halts": lambda: make_firmware("evita")}
-_SERVERS: dict[str, type[DeviceServer]] = {"shared-halts": SharedHaltServer}
+              "shared-halts": lambda: make_firmware("evita"),
+              "blocking-writes": lambda: make_firmware("evita")}
+_SERVERS: dict[str, type[DeviceServer]] = {"shared-halts": SharedHaltServer,
+                                           "blocking-writes": BlockingWritesServer}
 
 
 class ServedControlDriver(UsbipDriver):
@@ -194,3 +241,8 @@ def open_no_attribution() -> ServedControlDriver:
 def open_shared_halts() -> ServedControlDriver:
     """A new USB/IP client of the ``shared-halts`` device (one device while any is open)."""
     return open_served("shared-halts")
+
+
+def open_blocking_writes() -> ServedControlDriver:
+    """A new USB/IP client of the ``blocking-writes`` device (one device while any is open)."""
+    return open_served("blocking-writes")

@@ -36,7 +36,8 @@ def test_controls_are_reachable_by_name() -> None:
     assert set(CONTROLS) == {
         "position-only", "latency-30ms", "no-ev", "over-limit", "swapped-channels",
         "inverted-phase", "frequency-off", "weak-actuator", "ignored-watchdog", "late-limits",
-        "no-ownership", "no-attribution", "shared-halts", "accepts-bad-crc", "drops-reports",
+        "no-ownership", "no-attribution", "shared-halts", "blocking-writes", "accepts-bad-crc",
+        "drops-reports",
         "reads-any-major",
         "silent-refusals", "unplayed-commit", "profile-raises-limits", "sticky-profile",
         "misdeclared-state", "wrapped-forces", "host-accepts-any-major",

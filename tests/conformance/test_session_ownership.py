@@ -18,7 +18,7 @@ from hcard.device.errors import DeviceError
 from hcard.device.protocol import State
 from hcard.device.uri import parse_uri
 from hcard_conformance.context import Context
-from hcard_conformance.device_checks.connections import CONNECTION_CASES, HALT_CASE
+from hcard_conformance.device_checks.connections import BOUND_CASES, CONNECTION_CASES, HALT_CASE
 from hcard_conformance.device_checks.session_ownership import (
     CASES,
     LOSS_THRESHOLD_S,
@@ -38,8 +38,11 @@ from tests.helpers.served_device import served_device
 pytestmark = pytest.mark.wall_clock
 
 
-SERVED_CASES = CASES + CONNECTION_CASES + (HALT_CASE,)
-"""The cases of a device reached over USB/IP by the usbip driver (connections told apart)."""
+LOOPBACK_CASES = (*CASES, *CONNECTION_CASES, HALT_CASE)
+"""The cases of a device reached over USB/IP by the usbip driver (connections told apart) in
+the host's own process (``usbip://loopback``: no TCP server for raw clients)."""
+SERVED_CASES = (*LOOPBACK_CASES, *BOUND_CASES)
+"""The cases of a device served over TCP (``usbip://HOST:PORT/BUSID``): PN15's too."""
 
 
 def run(name: str) -> dict[str, CheckResult]:
@@ -100,6 +103,10 @@ def test_the_reference_served_over_usbip_passes_twice_on_one_server() -> None:
             assert takeover.value == 0 and "the former owner's 4 requests refused" in \
                 takeover.detail
             assert results["halts-per-connection"].value == 0  # PN14
+            for case in BOUND_CASES:  # PN15: measured 0.997-1.001 of the share alone
+                bounded = results[case]
+                assert bounded.value >= 0.9 and bounded.threshold == 0.9, bounded.detail
+                assert "of the 1000 reports a second beside the client" in bounded.detail
 
 
 def test_the_no_attribution_control_fails_the_cases_of_connections_and_only_those() -> None:
@@ -147,16 +154,19 @@ def test_the_cases_of_connections_are_named_where_the_driver_tells_connections_a
     """USB/IP (one import per driver) names them; ``sim://``'s second host and a hidraw node
     shared by two processes are no connections of their own (PN12 attributes nothing)."""
     assert session_case_names(Context.for_driver("sim://")) == CASES
-    assert session_case_names(Context.for_driver("usbip://loopback")) == SERVED_CASES
+    assert session_case_names(Context.for_driver("usbip://loopback")) == LOOPBACK_CASES
     assert session_case_names(Context.for_driver("reference")) == CASES  # not run (no driver)
 
 
 def test_the_no_ownership_control_fails_every_case_of_sessions() -> None:
     """Protocol 1.1: no session at all, so none to attribute either; its pipes are still the
-    connections' own (``halts-per-connection`` passes)."""
+    connections' own (``halts-per-connection`` passes), and its connections are bounded as the
+    reference's (the cases of PN15 do not fail)."""
     results = run("control:no-ownership")
-    assert all(r.status == FAIL for c, r in results.items() if c != HALT_CASE), \
-        [r.detail for r in results.values()]
+    assert tuple(results) == SERVED_CASES
+    assert all(r.status == FAIL for c, r in results.items()
+               if c != HALT_CASE and c not in BOUND_CASES), [r.detail for r in results.values()]
+    assert_not_failed(results[c] for c in BOUND_CASES)
     for case in CONNECTION_CASES:
         assert math.isinf(results[case].value)
         assert "speaks protocol 1.1: no sessions" in results[case].detail
@@ -195,7 +205,7 @@ def test_sim_passes_with_a_second_host_on_the_simulated_device(uri: str) -> None
 
 def test_a_transport_that_cannot_share_one_device_is_unassessed_with_the_reason() -> None:
     results = run("usbip://loopback")  # every driver starts its own in-process device
-    assert [r.status for r in results.values()] == [UNASSESSED] * len(SERVED_CASES)
+    assert [r.status for r in results.values()] == [UNASSESSED] * len(LOOPBACK_CASES)
     assert all("reach two devices" in r.detail and "usbip:// or hid://" in r.detail
                for r in results.values())
 

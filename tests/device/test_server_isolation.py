@@ -1,6 +1,7 @@
 """Each client of a served device is isolated (spec/device-protocol.md rules PN10, PN12-PN15,
 PU12; the bounds of section 13), tested against a server in another process over TCP on
-127.0.0.1 with the hostile clients of ``usbip_clients.py``, each in a process of its own.
+127.0.0.1 with the hostile clients of ``hcard_conformance.usbip_clients``, each in a process
+of its own.
 
 The tests of the server fail against the server of before this isolation (usbip's
 ``serve_connection``, commit checked under the firmware's lock), which was run with them: its
@@ -49,6 +50,7 @@ from hcard.physics.profile_effects import FittedEffect
 from hcard.plugins.registry import get_registry
 from hcard.render.options import RenderOptions
 from hcard.track import straight_stroke, track_to_csv
+from hcard_conformance import usbip_clients as clients
 from hcard_device.card_check import (
     CHECK_TIMEOUT_S,
     WORKER_NICENESS,
@@ -59,7 +61,6 @@ from hcard_device.card_check import (
 )
 from hcard_device.usb.connection import DEFAULT_LIMITS, ReportPacer
 from hcard_device.usb.transport import MAX_CONNECTIONS
-from tests.helpers import usbip_clients as clients
 from tests.helpers.cards import large_valid_card
 from tests.helpers.hostile_cards import json_empty_components
 from tests.helpers.realtime import NotKept, in_real_time

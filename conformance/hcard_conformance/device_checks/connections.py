@@ -1,5 +1,5 @@
 """The cases of ``device.session-ownership`` that apply where the device tells its hosts'
-connections apart (spec/device-protocol.md PN10, PN12-PN14; spec/conformance.md 4.8, O5-O8).
+connections apart (spec/device-protocol.md PN10, PN12-PN15; spec/conformance.md 4.8, O5-O9).
 
 A USB/IP server knows which connection each request came from (one per importing host), and
 then a session belongs to the connection whose START or TAKE_OVER began it (PN12): the other
@@ -53,6 +53,25 @@ device cannot tell them apart, PN12 attributes nothing there, and these cases ar
     :data:`MIN_REPORTS_AFTER` while it reads :data:`IN_HALT_READ_S`). Metric: the effects on
     the other connection's pipes, and halts not kept; must be 0.
 
+``beside-non-reader``, ``beside-urb-flood``, ``beside-giant-transfer``, ``beside-out-flood``,
+``beside-idle-importers`` (PN15; O9), named only where the driver's URI is a USB/IP server's
+``usbip://HOST:PORT/BUSID`` (:data:`BOUND_CASES`): a driver reads whatever arrives, so a
+misbehaving client takes the transport's own protocol, spoken on raw sockets by
+:mod:`hcard_conformance.usbip_clients`. A well-behaved client (the hcard link, 4 interrupt-IN
+URBs outstanding) reads STATE reports :data:`BOUND_MEASURE_S` alone, then again beside one
+hostile client in a process of its own (started once it holds its connection and given
+:data:`BESIDE_SETTLE_S` to take effect): one that parks IN URBs and stops reading its socket,
+one that submits IN URBs far faster than reports complete them, one that declares a 2 GiB OUT
+transfer and feeds it, one that floods FINGER output reports, or 300 connections that import
+the device and do nothing. Metric: the share of STATE reports received beside the hostile
+client over the share received alone; must be at least the device's stated fraction
+(``--option delivery_share=F``, default :data:`DELIVERY_SHARE`), with no gap of
+:data:`MAX_ARRIVAL_GAP_S` or more between two reports. A run whose alone measurement shows the
+host could not keep real time (a share under :data:`MIN_ALONE_SHARE`, or the host not running
+for :data:`~hcard_conformance.realtime.HOST_LATE_S`), or that failed while the host did not run
+beside the hostile client, is not kept (QT3); a device that starves a connection fails every
+run.
+
 A run in which the owner's session ended by PN7 before a request could be judged (the host did
 not run for :data:`~hcard_conformance.realtime.HOST_LATE_S`, or its KEEPALIVEs left a gap of
 ``watchdog_ms``), or in which the one report carrying SESSION_BUSY may have been lost, is a run
@@ -88,11 +107,12 @@ from hcard.device.protocol import (
 from hcard.device.protocol.constants import Capability, TouchSource
 from hcard.device.protocol.usb_ids import IN_ENDPOINT, OUT_ENDPOINT
 from hcard.quantities import MS_PER_S, S_PER_US
+from hcard_conformance import usbip_clients
 from hcard_conformance.check_names import DEVICE_SESSION_OWNERSHIP as CHECK
 from hcard_conformance.context import Context
 from hcard_conformance.device_checks.common import LEVEL, READ_CATCH_UP_S
 from hcard_conformance.realtime import HostWatch, NotKept, device_lag, reasons
-from hcard_conformance.result import CheckResult, measured
+from hcard_conformance.result import CannotAssess, CheckResult, measured
 
 CONNECTION_CASES = ("other-connection-refused", "ends-despite-other-connection",
                     "takeover-attributed")
@@ -102,6 +122,30 @@ HALT_CASE = "halts-per-connection"
 HALT_METHODS = ("set_endpoint_halt", "endpoint_halted", "set_configuration")
 """What a driver offers for :data:`HALT_CASE` (:class:`hcard.device.transports.usbip_client.
 UsbipDriver` does)."""
+BOUND_CASES = {
+    "beside-non-reader": "non-reader",
+    "beside-urb-flood": "parked-urb-flood",
+    "beside-giant-transfer": "giant-out-urb",
+    "beside-out-flood": "out-report-flood",
+    "beside-idle-importers": "idle-importers",
+}
+"""The cases of PN15 (O9), named where the URI reaches a USB/IP server over TCP, and the
+hostile client each runs (:data:`hcard_conformance.usbip_clients.HOSTILE_KINDS`)."""
+DELIVERY_SHARE = 0.9
+"""O9's default: the share of STATE reports a connection receives beside a hostile client,
+over its share alone, at least (the reference device's stated fraction, spec/device-protocol.md
+section 13; a device class may state its own with ``--option delivery_share=F``)."""
+MAX_ARRIVAL_GAP_S = 1.0
+"""Longest time between two STATE reports of the well-behaved connection beside a hostile
+client, s: a stream stopped for that long is stopped (PN15), whatever the share."""
+BOUND_MEASURE_S = 1.0
+"""Length of each delivery measurement of the PN15 cases, s (1000 reports: a share to 0.1 %)."""
+BESIDE_SETTLE_S = 1.5
+"""Time a hostile client is given to take effect before the measurement beside it, s: the
+non-reader fills its socket's and the server's buffers in well under a second."""
+MIN_ALONE_SHARE = 0.5
+"""A run whose alone measurement received less than this share of the 1000 reports a second
+measured the host, not the device, and is not kept (QT3)."""
 CONNECTIONS_KEY = "separate-connections"
 """``Context.cache`` key of what the driver tells of its connections (read once per run)."""
 
@@ -136,10 +180,23 @@ class Connections:
     Attributes:
         separate: every driver is a connection the device tells apart (PN10, PN12).
         halts: the driver offers the standard endpoint requests (:data:`HALT_METHODS`).
+        server: the USB/IP server's (host, port) where the URI names one reached over TCP
+            (raw clients can then misbehave beside the driver: :data:`BOUND_CASES`).
     """
 
     separate: bool = False
     halts: bool = False
+    server: tuple[str, int] | None = None
+
+
+def usbip_server(driver: Driver) -> tuple[str, int] | None:
+    """(host, port) of the USB/IP server ``driver``'s URI names (``usbip://HOST:PORT/BUSID``),
+    None for another scheme or a device served in the host's process (``loopback``)."""
+    uri = getattr(driver, "uri", None)
+    if getattr(uri, "scheme", "") != "usbip" or getattr(uri, "loopback", True):
+        return None
+    host, port = getattr(uri, "host", ""), getattr(uri, "port", 0)
+    return (host, port) if host and port else None
 
 
 def connections(ctx: Context) -> Connections:
@@ -152,9 +209,10 @@ def connections(ctx: Context) -> Connections:
             with ctx.open_driver() as driver:
                 separate = bool(getattr(driver, "separate_connections", False))
                 halts = all(callable(getattr(driver, m, None)) for m in HALT_METHODS)
+                server = usbip_server(driver) if separate else None
         except DeviceError:
             return Connections()
-        ctx.cache[CONNECTIONS_KEY] = Connections(separate, separate and halts)
+        ctx.cache[CONNECTIONS_KEY] = Connections(separate, separate and halts, server)
     found: Connections = ctx.cache[CONNECTIONS_KEY]
     return found
 
@@ -165,7 +223,8 @@ def connection_case_names(ctx: Context) -> tuple[str, ...]:
     found = connections(ctx)
     if not found.separate:
         return ()
-    return CONNECTION_CASES + ((HALT_CASE,) if found.halts else ())
+    return (CONNECTION_CASES + ((HALT_CASE,) if found.halts else ())
+            + (tuple(BOUND_CASES) if found.server else ()))
 
 
 # ---------------------------------------------------------------------- the requests
@@ -708,3 +767,99 @@ def case_halts_per_connection(open_driver: Callable[[], Driver]) -> CheckResult:
         f"{IN_HALT_READ_S * MS_PER_S:.0f} ms")
     return measured(CHECK, LEVEL, HALT_CASE, "shared_pipe_effects", len(problems), 0,
                     unit="effects", detail=detail)
+
+
+# ---------------------------------------------------------------------- bounded connections
+
+@dataclass(frozen=True)
+class Beside:
+    """One run of a PN15 case: what the well-behaved connection received alone and beside
+    the hostile client, and how late the host ran meanwhile.
+
+    Attributes:
+        alone, beside: the two measurements.
+        late_alone, late_beside: why the host did not keep real time during each (empty when
+            it did).
+        hostile: what the hostile client did (``connections``, ``refused``, ``urbs``,
+            ``held``).
+    """
+
+    alone: usbip_clients.Delivery
+    beside: usbip_clients.Delivery
+    late_alone: str = ""
+    late_beside: str = ""
+    hostile: dict[str, int] = field(default_factory=dict)
+
+
+def measure_beside(server: tuple[str, int], kind: str, seconds: float = BOUND_MEASURE_S,
+                   settle_s: float = BESIDE_SETTLE_S) -> Beside:
+    """The well-behaved client's delivery alone, then beside the hostile client ``kind`` in a
+    process of its own (:func:`hcard_conformance.usbip_clients.hostile_process`), read at the
+    real-time priority where permitted, each under a :class:`HostWatch`."""
+    host, port = server
+    stats: dict[str, int] = {}
+
+    @contextlib.contextmanager
+    def hostile() -> Iterator[None]:
+        with usbip_clients.hostile_process(kind, host, port) as found:
+            yield
+        stats.update(found)
+
+    with usbip_clients.real_time_thread():
+        with HostWatch() as watch:
+            alone = usbip_clients.measure_delivery(host, port, seconds)
+        late_alone = watch.late
+        with HostWatch() as watch:
+            beside = usbip_clients.measure_delivery(host, port, seconds, beside=hostile,
+                                                    beside_settle_s=settle_s)
+        late_beside = watch.late
+    return Beside(alone, beside, late_alone, late_beside, stats)
+
+
+def judge_beside(case: str, run: Beside, share: float = DELIVERY_SHARE) -> CheckResult:
+    """``run``'s result for ``case`` (O9): the share beside over the share alone, at least
+    ``share``, and no arrival gap of :data:`MAX_ARRIVAL_GAP_S`.
+
+    Raises:
+        NotKept: the alone measurement shows the host could not keep real time, or the case
+            failed while the host did not run beside the hostile client (QT3).
+    """
+    alone, beside = run.alone, run.beside
+    low = (f"alone, the client received {alone.fraction:.3f} of the reports (under "
+           f"{MIN_ALONE_SHARE:g})" if alone.fraction < MIN_ALONE_SHARE else "")
+    if why := reasons(low, run.late_alone):
+        raise NotKept(why)
+    ratio = (beside.received * alone.seconds) / (alone.received * beside.seconds)  # exact
+    gap_s = beside.max_arrival_gap_ms / MS_PER_S
+    found = (f"{beside.fraction:.3f} of the 1000 reports a second beside the client, "
+             f"{alone.fraction:.3f} alone: {ratio:.3f} of its share (at least {share:g}); "
+             f"longest gap {beside.max_arrival_gap_ms:.0f} ms")
+    problems = []
+    if ratio < share:
+        problems.append("the share fell by more than the stated fraction")
+    if gap_s >= MAX_ARRIVAL_GAP_S:
+        problems.append(f"the STATE stream stopped for {gap_s:.1f} s "
+                        f"(gaps must stay under {MAX_ARRIVAL_GAP_S:g} s)")
+    if problems and run.late_beside:
+        raise NotKept(reasons(run.late_beside, f"the case failed so: {found}"))
+    did = ", ".join(f"{k} {v}" for k, v in sorted(run.hostile.items()))
+    lag = (f"; the device flagged {beside.lagged} of them REALTIME_LAG (PI4)"
+           if beside.lagged else "")
+    detail = f"{found}{lag}" + (f"; {'; '.join(problems)} (PN15)" if problems else "") + (
+        f"; the hostile client: {did}" if did else "")
+    result = measured(CHECK, LEVEL, case, "delivery_share", ratio, share, unit="ratio",
+                      detail=detail, higher_is_better=True)
+    return dataclasses.replace(result, passed=not problems, outcome="")  # outcome from passed
+
+
+def case_beside(open_driver: Callable[[], Driver], case: str,
+                share: float = DELIVERY_SHARE) -> CheckResult:
+    """One PN15 case (module docstring; rule PN15, O9), on the server of a driver opened on
+    the implementation's URI and held open meanwhile (it reads nothing: its IN URBs complete
+    and none is parked again), so that a device served while it has a client stays served."""
+    with open_driver() as holder:
+        server = usbip_server(holder)
+        if server is None:
+            raise CannotAssess(f"{holder.uri} names no USB/IP server reached over TCP: raw "
+                               "clients cannot misbehave beside the driver")
+        return judge_beside(case, measure_beside(server, BOUND_CASES[case]), share)

@@ -43,14 +43,18 @@ device (spec/device-protocol.md section 14).
 
 Where the driver opens a connection of its own that the device tells apart
 (:attr:`hcard.device.base.Driver.separate_connections`: USB/IP), the check also names the
-cases of :mod:`hcard_conformance.device_checks.connections` (rules PN12-PN14):
-``other-connection-refused``, ``ends-despite-other-connection``, ``takeover-attributed`` and,
-where the driver offers the standard endpoint requests, ``halts-per-connection``.
+cases of :mod:`hcard_conformance.device_checks.connections` (rules PN12-PN15):
+``other-connection-refused``, ``ends-despite-other-connection``, ``takeover-attributed``,
+where the driver offers the standard endpoint requests ``halts-per-connection`` and, where its
+URI reaches a USB/IP server over TCP, the cases of bounded connections (rule PN15)
+``beside-non-reader``, ``beside-urb-flood``, ``beside-giant-transfer``, ``beside-out-flood``
+and ``beside-idle-importers``.
 """
 
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 import threading
 import time
@@ -594,6 +598,9 @@ def check_session_ownership(ctx: Context) -> Iterator[CheckResult]:
                 lambda: conn.case_takeover_attributed(open_driver, read_lag_s),
             conn.HALT_CASE: lambda: conn.case_halts_per_connection(open_driver),
         }
+        share = float(ctx.options.get("delivery_share", conn.DELIVERY_SHARE))
+        cases.update({case: functools.partial(conn.case_beside, open_driver, case, share)
+                      for case in conn.BOUND_CASES})  # named where the URI is a TCP server
         for case in names[len(CASES):]:
             yield attempted_case(CHECK, LEVEL, case, cases[case])
 

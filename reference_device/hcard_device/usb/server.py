@@ -65,6 +65,7 @@ from typing import Any
 import usbip
 
 from hcard.device import in_process
+from hcard.device.priority import REALTIME_PRIORITY
 from hcard.device.transports.usbip_connect import DEFAULT_BUSID, DEFAULT_HOST, DEFAULT_PORT
 from hcard_device.card_check import CHECK_TIMEOUT_S, Checker, InlineChecker, ProcessChecker
 from hcard_device.usb.device import DEFAULT_IN_QUEUE, PRODUCTS, HcardHID, build_usb_device
@@ -75,10 +76,6 @@ SWITCH_INTERVAL_S = 0.0002
 """GIL switch interval of the server process, s (Python's default is 5 ms)."""
 JOIN_TIMEOUT_S = 2.0
 """Longest wait for a thread to end on stop, s."""
-REALTIME_PRIORITY = 10
-"""``SCHED_RR`` priority the server process asks for (1-99; any real-time priority runs before
-every ordinary process, and 10 leaves the kernel's own real-time threads, at 50 and above,
-ahead of it)."""
 NICE_INCREMENT = -10
 """Nice increment asked for when real-time scheduling is not permitted: ten steps give the
 server about nine times the CPU share of an ordinary process (each step is ~1.25x)."""

@@ -66,6 +66,10 @@ class ConnectionTable:
         log: writes one line to the server's log.
     """
 
+    connection_class: type[Connection] = Connection
+    """What serves each connection (a negative control serves them otherwise:
+    :mod:`hcard_device.served_controls`)."""
+
     def __init__(self, *, max_connections: int = MAX_CONNECTIONS,
                  limits: ConnectionLimits = DEFAULT_LIMITS,
                  log: Callable[[str], None] = DEFAULT_LOG) -> None:
@@ -87,8 +91,8 @@ class ConnectionTable:
         with self._lock:
             stopped, full = self._stopped, len(self._connections) >= self.max_connections
             if not (stopped or full):
-                connection = Connection(sock, next(self._numbers), peer, limits=self.limits,
-                                        log=self.log)
+                connection = self.connection_class(sock, next(self._numbers), peer,
+                                                   limits=self.limits, log=self.log)
                 self._connections[connection.number] = connection
             elif not stopped:
                 self.refused += 1

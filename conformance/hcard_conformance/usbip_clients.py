@@ -1,5 +1,7 @@
-"""USB/IP clients of a served device, well-behaved and hostile, for the isolation tests
-(tests/device/test_server_isolation.py) and bench/bench_server_isolation.py.
+"""USB/IP clients of a served device, well-behaved and hostile: the bounded-connections cases
+of ``device.session-ownership`` (rule PN15, :mod:`hcard_conformance.device_checks.connections`)
+judge an implementation with them, and the reference server's own isolation tests
+(tests/device/test_server_isolation.py) and bench/bench_server_isolation.py use them too.
 
 Each client speaks the URB phase of the kernel's ``Documentation/usb/usbip_protocol.rst`` on a
 raw socket (the import handshake through :func:`usbip.protocol.client_import`), so that it can
@@ -33,8 +35,10 @@ from dataclasses import dataclass, field
 
 from usbip import protocol
 
+from hcard.device.priority import REALTIME_PRIORITY
 from hcard.device.protocol import (
     INPUT_RATE_HZ,
+    FaultBits,
     Finger,
     UploadAction,
     UploadEnd,
@@ -43,7 +47,6 @@ from hcard.device.protocol import (
     upload_reports,
 )
 from hcard.device.transports.usbip_link import UsbipLink
-from hcard_device.usb.server import REALTIME_PRIORITY
 
 _SUBMIT = struct.Struct(">IIIIIIiiii8s")
 _IN, _OUT = 1, 0
@@ -119,6 +122,8 @@ class Delivery:
         max_stamp_gap_us: largest step of ``timestamp_us`` between consecutive reports, us
             (1000 when none is missing).
         lost: reports missing (sequence gaps).
+        lagged: reports the device flagged REALTIME_LAG (it produced them late on its own
+            clock, rule PI4).
     """
 
     seconds: float
@@ -126,6 +131,7 @@ class Delivery:
     max_arrival_gap_ms: float
     max_stamp_gap_us: int
     lost: int
+    lagged: int = 0
     arrivals: list[float] = field(default_factory=list, repr=False)
     stamps_us: list[int] = field(default_factory=list, repr=False)
     real_time: bool = False
@@ -194,6 +200,7 @@ def _measure_delivery(host: str, port: int, seconds: float, settle_s: float,
             arrivals: list[float] = []
             stamps: list[int] = []
             sequences: list[int] = []
+            lagged = 0
             t0 = time.monotonic()
             if worker is not None:
                 worker.start()
@@ -204,6 +211,7 @@ def _measure_delivery(host: str, port: int, seconds: float, settle_s: float,
                     arrivals.append(time.monotonic())
                     stamps.append(state.timestamp_us)
                     sequences.append(state.sequence)
+                    lagged += bool(state.faults & FaultBits.REALTIME_LAG)
             elapsed = time.monotonic() - t0
     finally:
         link.close()
@@ -211,7 +219,7 @@ def _measure_delivery(host: str, port: int, seconds: float, settle_s: float,
     stamp_steps = [(b - a) % (1 << 32) for a, b in itertools.pairwise(stamps)]
     lost = sum((b - a - 1) % (1 << 16) for a, b in itertools.pairwise(sequences))
     return Delivery(elapsed, len(set(sequences)), max(gaps, default=elapsed) * 1e3,
-                    max(stamp_steps, default=0), lost, arrivals, stamps)
+                    max(stamp_steps, default=0), lost, lagged, arrivals, stamps)
 
 
 def _read_for(link: UsbipLink, seconds: float) -> None:
@@ -539,7 +547,7 @@ def hostile_process(kind: str, host: str, port: int,
     slow the measuring client's process) until the block ends; yields a dict filled, after
     the block, with what it did (``connections``, ``refused``, ``urbs``, ``held``)."""
     process = subprocess.Popen(
-        [sys.executable, __file__, kind, host, str(port)], stdin=subprocess.PIPE,
+        [sys.executable, "-m", __name__, kind, host, str(port)], stdin=subprocess.PIPE,
         stdout=subprocess.PIPE, text=True)
     stats: dict[str, int] = {}
     try:
@@ -567,7 +575,12 @@ core is free."""
 
 
 def _main(kind: str, host: str, port: int) -> None:
-    """The process of :func:`hostile_process`: misbehave until stdin closes."""
+    """The process of :func:`hostile_process`: misbehave until stdin closes, at the ordinary
+    policy (a host measuring in real time starts it from a ``SCHED_RR`` thread, whose policy
+    a child inherits: a flooding client must not run ahead of the device) and
+    :data:`HOSTILE_NICENESS`."""
+    with contextlib.suppress(OSError):
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     os.nice(HOSTILE_NICENESS)
     client = HOSTILE_KINDS[kind](host, port)
     with client:
