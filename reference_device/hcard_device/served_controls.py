@@ -147,7 +147,7 @@ class BlockingWritesConnection(Connection):
                 except (BlockingIOError, InterruptedError):
                     select.select([], [self.sock], [], self.WAIT_S)
                 except OSError as exc:
-                    self._close_locked(f"socket error while sending ({exc.strerror or exc})")
+                    self._close_locked(f"socket error while sending ({exc})")
 
 
 class BlockingWritesServer(DeviceServer):

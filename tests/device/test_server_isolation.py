@@ -410,7 +410,14 @@ def test_take_over_stays_possible_and_moves_the_session_to_its_connection(served
             # the driver sends nothing after a loss (PN9); bypass it: now the other connection
             first._write_output(Control(Command.KEEPALIVE).encode())
             second.keepalive()
-            assert second.counters().rejected_requests - before == 1
+            # the two connections' requests reach the firmware on threads of their own: the
+            # refusal is counted when the former owner's report arrives, which a GET on the
+            # other connection may overtake; read until it shows, at most 1 s
+            deadline = time.monotonic() + 1.0
+            while (refused := second.counters().rejected_requests - before) < 1 \
+                    and time.monotonic() < deadline:
+                time.sleep(0.01)
+            assert refused == 1
             second.stop()
 
     in_real_time(one_run, "a takeover between two connections")
