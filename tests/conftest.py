@@ -16,10 +16,13 @@ import pytest
 # shows its values as a failing assert in a test does.
 pytest.register_assert_rewrite("tests.helpers")
 
-FIRST = ("test_guest.py",)
+FIRST = ("test_guest.py", "test_served_conformance.py")
 """Test files run before the others: the QEMU guest tier emulates a whole machine in software,
 and its timing bounds are the first to go on a machine that has been busy for minutes (the
-real-time device tests before it)."""
+real-time device tests before it); the whole suite twice against one served reference, whose
+`device.latency` was not kept in three attempts in two CI runs once the PN15 tests (hostile
+USB/IP clients, in-process served controls) had run before it in the same worker, and passes
+alone (the cause is not yet found: see the issue 28 note)."""
 
 
 WALL_CLOCK_LANE = "wall-clock"
