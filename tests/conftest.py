@@ -22,7 +22,7 @@ and its timing bounds are the first to go on a machine that has been busy for mi
 real-time device tests before it); the whole suite twice against one served reference, whose
 `device.latency` was not kept in three attempts in two CI runs once the PN15 tests (hostile
 USB/IP clients, in-process served controls) had run before it in the same worker, and passes
-alone (the cause is not yet found: see the issue 28 note)."""
+alone (the cause is not yet found)."""
 
 
 WALL_CLOCK_LANE = "wall-clock"
