@@ -4,10 +4,12 @@ that fault, by the count of what they lost; the wire reader agrees with protobuf
 
 from __future__ import annotations
 
+import gzip
 import json
 
 import pytest
-from google.protobuf import json_format
+from google.protobuf import descriptor_pb2, json_format
+from google.protobuf.message import Message
 from google.protobuf.unknown_fields import UnknownFieldSet
 
 from hcard import card_io
@@ -155,3 +157,44 @@ def test_the_wire_reader_on_bytes_from_the_encoding_guide() -> None:
     for broken in (bytes([0x08, 0x96]), bytes([0x0A, 0x05, 0x08]), bytes([0x0B])):
         with pytest.raises(WireError):
             unknown_fields(broken, pb.Card.DESCRIPTOR)
+
+
+PUBLIC_PROTOBUF = REPO / "tests" / "data" / "public" / "protobuf" / "testprotos.pb.gz"
+
+
+def _runtime_unknown(message: Message, path: str = "") -> list[tuple[str, int]]:
+    """(path, number) of every unknown field protobuf's runtime kept in ``message``."""
+    found = [(path, u.field_number) for u in UnknownFieldSet(message)]
+    for field, value in message.ListFields():
+        if field.type != field.TYPE_MESSAGE:
+            continue
+        where = f"{path}.{field.name}" if path else field.name
+        items = enumerate(value) if field.is_repeated else [(None, value)]
+        for index, item in items:
+            found += _runtime_unknown(item, where if index is None else f"{where}[{index}]")
+    return found
+
+
+def test_the_wire_reader_agrees_with_protobuf_on_a_file_protoc_wrote() -> None:
+    """The protobuf project's own FileDescriptorSet (41 files; tests/data/public/protobuf):
+    its custom options and editions features are fields ``descriptor_pb2`` does not define.
+    The wire reader finds exactly the unknown fields, at exactly the paths, that protobuf's
+    runtime keeps (89 of them in that file)."""
+    data = gzip.decompress(PUBLIC_PROTOBUF.read_bytes())
+    descriptors = descriptor_pb2.FileDescriptorSet.FromString(data)
+    assert len(descriptors.file) == 41
+    runtime = sorted(_runtime_unknown(descriptors))
+    assert len(runtime) == 89
+    found = unknown_fields(data, descriptor_pb2.FileDescriptorSet.DESCRIPTOR)
+    assert sorted((f.path, f.number) for f in found) == runtime
+
+
+def test_hostile_wire_bytes_are_errors_not_hangs() -> None:
+    """A length prefix of 2 GiB on 6 bytes, a varint of 11 continuation bytes, a group tag and
+    field number 0 are each a WireError at once."""
+    for hostile in (bytes([0x2A, 0x80, 0x80, 0x80, 0x80, 0x08, 0x00]),  # textures, 2 GiB
+                    bytes([0x08]) + b"\xff" * 11,
+                    bytes([0x2B, 0x2C]),  # field 5 as a start and end group
+                    bytes([0x00, 0x01])):
+        with pytest.raises(WireError):
+            unknown_fields(hostile, pb.Card.DESCRIPTOR)
