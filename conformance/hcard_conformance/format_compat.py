@@ -63,8 +63,7 @@ def _expected_card(ctx: Context, entry: CompatEntry) -> pb.Card:
 
 
 def _listed_unknown(entry: CompatEntry) -> list[WireField]:
-    return [WireField(u["path"], int(u["number"]), int(u["wire_type"]),
-                      bytes.fromhex(u["payload_hex"])) for u in entry.unknown]
+    return [WireField.from_json(row) for row in entry.unknown]
 
 
 def _read_problems(ctx: Context, entry: CompatEntry) -> tuple[list[str], str]:
@@ -145,13 +144,16 @@ def _scalar_problem(field: FieldDescriptor, written: Any, value: Any, where: str
 
 
 def _is_zero(message: Message, field: FieldDescriptor) -> bool:
+    """Whether ``field`` of ``message`` holds its zero value (F2 lets a writer leave it out);
+    -0.0 is not zero (its bits differ)."""
     if field.is_repeated:
         return len(getattr(message, field.name)) == 0
     if field.type == FieldDescriptor.TYPE_MESSAGE:
         return not message.HasField(field.name)
     value = getattr(message, field.name)
-    return bool(value == 0 and not (isinstance(value, float) and math.copysign(1, value) < 0)) \
-        if not isinstance(value, str) else value == ""
+    if isinstance(value, float):
+        return value == 0 and math.copysign(1.0, value) > 0
+    return not value
 
 
 def json_writer_problems(obj: Any, message: Message, where: str = "") -> list[str]:
@@ -174,9 +176,10 @@ def json_writer_problems(obj: Any, message: Message, where: str = "") -> list[st
                 problems.append(f"{at}: {len(value)} values expected")
                 continue
             for i, (w, v) in enumerate(zip(written, value, strict=True)):
-                problems += json_writer_problems(w, v, f"{at}[{i}]") \
-                    if field.type == FieldDescriptor.TYPE_MESSAGE \
-                    else [p for p in [_scalar_problem(field, w, v, f"{at}[{i}]")] if p]
+                if field.type == FieldDescriptor.TYPE_MESSAGE:
+                    problems += json_writer_problems(w, v, f"{at}[{i}]")
+                elif problem := _scalar_problem(field, w, v, f"{at}[{i}]"):
+                    problems.append(problem)
         elif field.type == FieldDescriptor.TYPE_MESSAGE:
             problems += json_writer_problems(written, value, at)
         elif problem := _scalar_problem(field, written, value, at):

@@ -11,6 +11,7 @@ by the card schema and are an error here.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 from google.protobuf.descriptor import Descriptor, FieldDescriptor
 
@@ -32,6 +33,32 @@ class WireField:
     number: int
     wire_type: int
     payload: bytes
+
+    def encoded(self) -> bytes:
+        """Tag and payload, as the field appears in its message."""
+        return varint(self.number << 3 | self.wire_type) + self.payload
+
+    def as_json(self) -> dict[str, Any]:
+        """The field as the vectors' manifest lists it (``compat[].unknown``)."""
+        return {"path": self.path, "number": self.number, "wire_type": self.wire_type,
+                "payload_hex": self.payload.hex()}
+
+    @classmethod
+    def from_json(cls, row: dict[str, Any]) -> WireField:
+        """The field a manifest row (:meth:`as_json`) lists."""
+        return cls(str(row["path"]), int(row["number"]), int(row["wire_type"]),
+                   bytes.fromhex(row["payload_hex"]))
+
+
+def varint(value: int) -> bytes:
+    """``value`` (>= 0) as a protobuf varint: 7 bits a byte, least significant first."""
+    out = bytearray()
+    while True:
+        byte = value & 0x7F
+        value >>= 7
+        out.append(byte | (0x80 if value else 0))
+        if not value:
+            return bytes(out)
 
 
 def _varint(data: bytes, at: int) -> tuple[int, int]:

@@ -13,18 +13,28 @@ the world, each carrying the content of one vector card.
     the binary form under a JSON name and the JSON form under a binary one: read from the
     content, as the card.
 
-Every unknown field is listed (:class:`UnknownField`) so that a check can look for it in
-re-written bytes without trusting the reader that wrote them.
+Every unknown field is listed (a :class:`~hcard_conformance.wire_fields.WireField`) so that a
+check can look for it in re-written bytes without trusting the reader that wrote them.
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 from hcard import card_io
 from hcard.v1 import card_pb2 as pb
 from hcard_conformance.vectors.cards import vector_cards
+from hcard_conformance.wire_fields import (
+    WIRE_FIXED32,
+    WIRE_FIXED64,
+    WIRE_LEN,
+    WIRE_VARINT,
+    WireField,
+    varint,
+)
 
 COMPAT_CARD = "checkerboard"
 """The vector card whose content every compatibility vector carries (two textures, each with
@@ -32,60 +42,18 @@ components: unknown fields can sit at every depth)."""
 LATER_MINOR = 9
 """The minor version of the writer that added the unknown fields."""
 
-WIRE_VARINT, WIRE_FIXED64, WIRE_LEN, WIRE_FIXED32 = 0, 1, 2, 5
-"""Protobuf wire types (encoding guide: VARINT, I64, LEN, I32)."""
-
-
-@dataclass(frozen=True)
-class UnknownField:
-    """One field this version of the format does not define.
-
-    Attributes:
-        path: the message that holds it, as a field path of the card (``""``: the card,
-            ``"textures[1].components[0]"``).
-        number: its field number.
-        wire_type: its protobuf wire type.
-        payload: its value as it follows the tag on the wire (a varint's bytes, 8 or 4 bytes,
-            or a length prefix and the bytes).
-    """
-
-    path: str
-    number: int
-    wire_type: int
-    payload: bytes
-
-    def encoded(self) -> bytes:
-        """Tag and payload, as they appear in the message."""
-        return _varint(self.number << 3 | self.wire_type) + self.payload
-
-    def as_json(self) -> dict[str, object]:
-        """The manifest's description of the field."""
-        return {"path": self.path, "number": self.number, "wire_type": self.wire_type,
-                "payload_hex": self.payload.hex()}
-
-
-def _varint(value: int) -> bytes:
-    out = bytearray()
-    while True:
-        byte = value & 0x7F
-        value >>= 7
-        out.append(byte | (0x80 if value else 0))
-        if not value:
-            return bytes(out)
-
-
 def _length_delimited(data: bytes) -> bytes:
-    return _varint(len(data)) + data
+    return varint(len(data)) + data
 
 
-LEADING_FIELD = UnknownField("", 900, WIRE_VARINT, _varint(300))
+LEADING_FIELD = WireField("", 900, WIRE_VARINT, varint(300))
 """Written before every known field of the card (F1: readers accept any field order)."""
-UNKNOWN_FIELDS: tuple[UnknownField, ...] = (
+UNKNOWN_FIELDS: tuple[WireField, ...] = (
     LEADING_FIELD,
-    UnknownField("", 901, WIRE_LEN, _length_delimited(b"\x08\x01\x12\x04v1.9")),
-    UnknownField("metadata", 902, WIRE_LEN, _length_delimited(b"written by hcard 1.9")),
-    UnknownField("textures[1]", 903, WIRE_FIXED64, bytes.fromhex("000000000000d03f")),  # 0.25
-    UnknownField("textures[1].components[0]", 904, WIRE_FIXED32, bytes.fromhex("0000803f")),
+    WireField("", 901, WIRE_LEN, _length_delimited(b"\x08\x01\x12\x04v1.9")),
+    WireField("metadata", 902, WIRE_LEN, _length_delimited(b"written by hcard 1.9")),
+    WireField("textures[1]", 903, WIRE_FIXED64, bytes.fromhex("000000000000d03f")),  # 0.25
+    WireField("textures[1].components[0]", 904, WIRE_FIXED32, bytes.fromhex("0000803f")),
 )
 """The unknown fields of ``unknown-fields.hcard``, in the order they are written."""
 
@@ -111,7 +79,7 @@ class CompatVector:
     minor: int
     rule: str
     description: str
-    unknown: tuple[UnknownField, ...] = ()
+    unknown: tuple[WireField, ...] = ()
 
     @property
     def file_name(self) -> str:
@@ -119,14 +87,15 @@ class CompatVector:
         return f"{self.name}{self.extension}"
 
 
-def _message_at(card: pb.Card, path: str) -> object:
-    """The sub-message of ``card`` at field path ``path`` (``""``: the card)."""
-    node: object = card
+def _at(root: Any, path: str, child: Callable[[Any, str], Any]) -> Any:
+    """What ``path`` (``"textures[1].components[0]"``; ``""``: ``root``) names in ``root``,
+    each name looked up by ``child(node, name)`` (a message's attribute, an object's key)."""
+    node = root
     for part in path.split(".") if path else []:
         name, _, index = part.partition("[")
-        node = getattr(node, name)
+        node = child(node, name)
         if index:
-            node = node[int(index.rstrip("]"))]  # type: ignore[index]
+            node = node[int(index.rstrip("]"))]
     return node
 
 
@@ -145,19 +114,8 @@ def unknown_fields_binary() -> bytes:
     card = later_minor_card()
     for unknown in UNKNOWN_FIELDS:
         if unknown is not LEADING_FIELD:
-            _message_at(card, unknown.path).MergeFromString(unknown.encoded())  # type: ignore[attr-defined]
+            _at(card, unknown.path, getattr).MergeFromString(unknown.encoded())
     return LEADING_FIELD.encoded() + card.SerializeToString(deterministic=True)
-
-
-def _object_at(obj: dict[str, object], path: str) -> dict[str, object]:
-    node: object = obj
-    for part in path.split(".") if path else []:
-        name, _, index = part.partition("[")
-        node = node[name]  # type: ignore[index]
-        if index:
-            node = node[int(index.rstrip("]"))]  # type: ignore[index]
-    assert isinstance(node, dict)
-    return node
 
 
 def unknown_fields_json() -> bytes:
@@ -165,7 +123,7 @@ def unknown_fields_json() -> bytes:
     :data:`UNKNOWN_JSON_KEYS` added."""
     obj = json.loads(card_io.to_json(later_minor_card()))
     for path, key, value in UNKNOWN_JSON_KEYS:
-        _object_at(obj, path)[key] = value
+        _at(obj, path, dict.__getitem__)[key] = value
     return (json.dumps(obj, indent=2) + "\n").encode("utf-8")
 
 
