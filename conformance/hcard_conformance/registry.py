@@ -251,7 +251,7 @@ BUILTIN_CHECKS: tuple[LazyCheck, ...] = (
     LazyCheck(check_names.DEVICE_SATURATION, "device",
               "a corner force past its STATE field reads as the range's end, not wrapped (PI2)",
               "hcard_conformance.device_checks.saturation:check_saturation",
-              "hcard_conformance.device_checks.saturation:reports_host_forces",
+              "hcard_conformance.wire_protocol:speaks_wire_protocol",
               cases_target="hcard_conformance.device_checks.saturation:SATURATION_CASES"),
 )
 """The built-in checks, in level order: the one place their names (spelled in

@@ -47,6 +47,12 @@ class TimingClass:
     keeps_real_time: bool
     why: str
 
+    @property
+    def report_wait_s(self) -> float:
+        """Longest a host of this class reads on for a report that shows what it just sent,
+        s: the D3 latency of the device applying it plus the host's read lag."""
+        return self.latency_s + self.read_lag_s
+
 
 REAL_TIME = TimingClass(
     "real-time", 0.010, 0.001, 0.010, True,

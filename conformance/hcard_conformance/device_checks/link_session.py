@@ -91,6 +91,23 @@ class LinkSession:
         self.states += got
         return got
 
+    def run_until_echoed(self, seconds: float, longest_s: float, count: int = 1,
+                         ) -> list[State]:
+        """:meth:`run` for ``seconds`` (s), then on until ``count`` reports echo a FINGER the
+        host sent since :meth:`HostFinger.mark` (``host_time_echo_us``), at most ``longest_s``
+        (s) longer: a device applies a host's reports in order, so such a report shows what
+        the host sent before that FINGER. On a device without HOST_FINGER, the reports of
+        ``seconds`` alone."""
+        got = self.run(seconds)
+        if not self.finger.host_finger:
+            return got
+        echoes = self.finger.after_us
+        deadline = self.driver.clock() + longest_s
+        while sum(s.host_time_echo_us in echoes for s in got) < count \
+                and self.driver.clock() < deadline:
+            got += self.run(POLL_S)
+        return got
+
     def restore(self) -> None:
         """STOP unless the device was RUNNING when found; give the touch source back to the
         internal sensor when it had it."""

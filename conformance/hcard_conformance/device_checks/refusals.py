@@ -59,7 +59,7 @@ from hcard.device.protocol.constants import STREAM_FRAMES_PER_REPORT
 from hcard_conformance.check_names import DEVICE_REFUSALS as CHECK
 from hcard_conformance.context import Context
 from hcard_conformance.device_checks.common import LEVEL, on_one_driver
-from hcard_conformance.device_checks.link_session import HOST_PAUSE_MAX_S, POLL_S, LinkSession
+from hcard_conformance.device_checks.link_session import HOST_PAUSE_MAX_S, LinkSession
 from hcard_conformance.realtime import NotKept, attempted_case, device_lag, reasons
 from hcard_conformance.result import CannotAssess, CheckResult
 from hcard_conformance.timing import REAL_TIME, timing_class
@@ -191,23 +191,8 @@ def judge(case: str, refusal: Refusal, before: State, after: list[State],
                        float(abs(counted - refusal.rejections)), 0.0, "requests", detail)
 
 
-def read_past(session: LinkSession, longest_s: float) -> list[State]:
-    """The reports read for :data:`AFTER_S` and then on, at most ``longest_s`` (s) longer,
-    until one echoes a FINGER the host sent after the request (:meth:`HostFinger.mark`); on a
-    device without HOST_FINGER, those of :data:`AFTER_S` alone."""
-    finger = session.finger
-    after = session.run(AFTER_S)
-    if not finger.host_finger:
-        return after
-    deadline = session.driver.clock() + longest_s
-    while not any(s.host_time_echo_us in finger.after_us for s in after) \
-            and session.driver.clock() < deadline:
-        after += session.run(POLL_S)
-    return after
-
-
 def measure_refusals(driver: Driver, wants: Callable[[str], bool] | None = None,
-                     lag_s: float = REAL_TIME.latency_s + REAL_TIME.read_lag_s,
+                     lag_s: float = REAL_TIME.report_wait_s,
                      ) -> Iterator[CheckResult]:
     """The cases of ``device.refusals`` on one open driver (module docstring); with ``wants``,
     only the cases it is true of. ``lag_s``: how much longer than :data:`AFTER_S` the host
@@ -227,7 +212,7 @@ def measure_refusals(driver: Driver, wants: Callable[[str], bool] | None = None,
                 note = refusal.send(driver)
                 session.finger.mark()
                 session.finger.send()
-                after = read_past(session, lag_s)
+                after = session.run_until_echoed(AFTER_S, lag_s)
                 result = judge(case, refusal, before[-1], after, note)
                 if result.passed:
                     return result
@@ -246,7 +231,6 @@ def measure_refusals(driver: Driver, wants: Callable[[str], bool] | None = None,
 def check_refusals(ctx: Context) -> Iterator[CheckResult]:
     """Malformed, unknown and refused reports are ignored, counted and flagged, and the device
     keeps running (PT7, PO4, PO5, PE1-PE3)."""
-    timing = timing_class(ctx)
-    lag_s = timing.latency_s + timing.read_lag_s
+    lag_s = timing_class(ctx).report_wait_s
     yield from on_one_driver(ctx, CHECK, REFUSAL_CASES,
                              lambda driver, wants: measure_refusals(driver, wants, lag_s))

@@ -26,10 +26,9 @@ from hcard_conformance.check_names import DEVICE_SATURATION as CHECK
 from hcard_conformance.context import Context
 from hcard_conformance.device_checks.common import LEVEL, on_one_driver
 from hcard_conformance.device_checks.host_finger import HostFinger
-from hcard_conformance.device_checks.link_session import POLL_S, LinkSession
+from hcard_conformance.device_checks.link_session import LinkSession
 from hcard_conformance.result import CannotAssess, CheckResult
 from hcard_conformance.timing import REAL_TIME, timing_class
-from hcard_conformance.wire_protocol import speaks_wire_protocol
 
 SATURATION_CASES = ("corner-force",)
 """The cases of ``device.saturation``."""
@@ -80,7 +79,7 @@ def judge(states: list[State], shares: tuple[float, float, float, float]) -> Che
 
 
 def measure_saturation(driver: Driver, wants: Callable[[str], bool] | None = None,
-                       lag_s: float = REAL_TIME.latency_s + REAL_TIME.read_lag_s,
+                       lag_s: float = REAL_TIME.report_wait_s,
                        ) -> Iterator[CheckResult]:
     """``corner-force`` on one open driver (module docstring). The host reads :data:`READ_S`,
     then on until :data:`MIN_REPORTS` reports apply the sample, at most ``lag_s`` longer (s:
@@ -101,27 +100,15 @@ def measure_saturation(driver: Driver, wants: Callable[[str], bool] | None = Non
     try:
         session.finger.mark()
         session.finger.send()
-        echoes = session.finger.after_us
-        read = session.run(READ_S)
-        deadline = driver.clock() + lag_s
-        while sum(s.host_time_echo_us in echoes for s in read) < MIN_REPORTS \
-                and driver.clock() < deadline:
-            read += session.run(POLL_S)
-        pressed = [s for s in read if s.host_time_echo_us in echoes]
+        read = session.run_until_echoed(READ_S, lag_s, MIN_REPORTS)
+        pressed = [s for s in read if s.host_time_echo_us in session.finger.after_us]
         yield judge(pressed, shares)
     finally:
         session.restore()
 
 
-def reports_host_forces(ctx: Context) -> bool:
-    """The implementation speaks the protocol itself (:func:`speaks_wire_protocol`); whether
-    its forces follow the host's finger the check finds out."""
-    return speaks_wire_protocol(ctx)
-
-
 def check_saturation(ctx: Context) -> Iterator[CheckResult]:
     """A corner force past its field's range reads as the range's end (PI2)."""
-    timing = timing_class(ctx)
-    lag_s = timing.latency_s + timing.read_lag_s
+    lag_s = timing_class(ctx).report_wait_s
     yield from on_one_driver(ctx, CHECK, SATURATION_CASES,
                              lambda driver, wants: measure_saturation(driver, wants, lag_s))
