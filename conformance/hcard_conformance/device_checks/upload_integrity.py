@@ -94,6 +94,9 @@ SEE_TIMEOUT_S = 1.0
 MIN_PLAYING_REPORTS = 10
 """Fewest reports that must show the card in force around an attempt (a device that stops
 reporting while it refuses an upload shows nothing playing)."""
+COMMITS = (UploadAction.COMMIT, UploadAction.COMMIT_PROFILE)
+"""UPLOAD_END actions whose SET the device holds until its checks end (PU12): the host waits
+for it up to the driver's commit timeout, not the 1 s of any other request."""
 PROBE = "probe"
 """Step of an attempt: GET UPLOAD_STATUS now; it must already be FAILED with the result."""
 UPLOAD_CASES = ("bad-crc", "truncated", "out-of-order", "interrupted", "restarted", "oversize",
@@ -122,10 +125,6 @@ class LinkCard:
         """CRC-32 of :attr:`data` (protocol 9.3)."""
         return crc32(self.data)
 
-
-COMMITS = (UploadAction.COMMIT, UploadAction.COMMIT_PROFILE)
-"""UPLOAD_END actions whose SET the device holds until its checks end (PU12): the host waits
-for it up to the driver's commit timeout, not the 1 s of any other request."""
 
 def clipped_card(info: DeviceInfo) -> LinkCard:
     """A valid card that asks more than any device renders: uniform UV 0 (no friction left:
