@@ -109,5 +109,19 @@ class ImageError(InputError):
     """An image cannot be encoded (not an image, empty, too large)."""
 
 
+class AssetError(InputError):
+    """Another tool's asset (a Tanvas or TPad bitmap, an Interhaptics .haps, an MPEG .hjif)
+    cannot be imported: the message names the file, the field (a JSON path such as
+    ``perceptions[0].channels[1].bands[0]``) and why."""
+
+    def __init__(self, reason: str, *, source: str | os.PathLike[str] | None = None,
+                 field: str = "") -> None:
+        self.reason = reason
+        self.source = str(source) if source is not None else None
+        self.field = field
+        where = ": ".join(part for part in (self.source, field) if part)
+        super().__init__(f"{where}: {reason}" if where else reason)
+
+
 class PluginError(HcardError):
     """A requested plugin is missing or unusable."""

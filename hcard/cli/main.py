@@ -23,6 +23,7 @@ COMMAND_MODULES = {
     "encode": "encode_cmd", "info": "card_cmds", "validate": "card_cmds",
     "render": "render_cmd", "preview": "preview_cmd", "predict": "predict_cmd",
     "plugins": "plugins_cmd", "calibrate": "calibrate_cmd",
+    "import": "interchange_cmds", "export": "interchange_cmds",
 }
 """Each core command's module under ``hcard.cli``, imported only when the command runs: ``hcard
 validate`` loads the card modules and not the renderer or the calibration loop
@@ -33,6 +34,8 @@ hook (``hcard device`` and ``hcard play`` from ``hcard_device``, ``hcard conform
 COMMAND_SUMMARIES = {
     "calibrate": "Fit a model to recordings, find what it lacks, verify it.",
     "encode": "Encode a grayscale IMAGE: black is high friction, white low.",
+    "export": "Export CARD to another tool's format: .hjif, Tanvas or TPad bitmaps.",
+    "import": "Import SOURCE, another tool's haptic asset, into a card.",
     "info": "Describe each CARD: metadata, surface, grid and every texture.",
     "plugins": "List installed encoders, predictors, drivers, effects, checks.",
     "predict": "Evaluate a physics predictor MODEL at a point or over a sweep.",

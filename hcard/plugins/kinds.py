@@ -257,6 +257,100 @@ class CheckPlugin(Plugin, Protocol):
         """``CheckResult`` objects, one per case, on the conformance ``Context`` ``ctx``."""
 
 
+@dataclass(frozen=True)
+class Loss:
+    """What a target format cannot hold of a card, as an export states it.
+
+    Attributes:
+        field: the card's property lost, one of :data:`LOSS_FIELDS` (``"channel"``,
+            ``"locking"``, ``"orientation"``, ``"friction-scale"``, ``"phase"``, ...).
+        detail: one line: what the format does instead, with the card's values.
+        carried: where the export keeps it anyway (an extension the format allows, e.g. the
+            PNG text chunk ``hcard``), or ``""`` when it is gone.
+    """
+
+    field: str
+    detail: str
+    carried: str = ""
+
+    def as_json(self) -> dict[str, str]:
+        """The loss as a JSON object (``hcard export --json``)."""
+        return {"field": self.field, "detail": self.detail, "carried": self.carried}
+
+
+LOSS_FIELDS = ("channel", "locking", "orientation", "friction-scale", "phase", "taxtel-map",
+               "components", "metadata")
+"""The properties of a card an export may lose (spec/interchange.md section 1)."""
+
+
+@dataclass
+class ExportResult:
+    """What an exporter produced: the files to write and what the format could not hold.
+
+    Attributes:
+        files: ``(suffix, bytes)`` pairs: the main file first (its suffix ``""``: written to
+            the output path as given), then companions written beside it as the output path
+            with its suffix replaced (``".gltf"``). ``hcard export`` writes them all or none.
+        losses: what the target format cannot hold of this card.
+        stats: named figures for the summary (resolution, sizes, fidelity in JND).
+    """
+
+    files: list[tuple[str, bytes]]
+    losses: list[Loss] = field(default_factory=list)
+    stats: dict[str, Any] = field(default_factory=dict)
+
+
+@runtime_checkable
+class ImporterPlugin(Plugin, Protocol):
+    """Kind ``importer`` (hook ``hcard_importers``): reads another tool's asset into a card.
+
+    ``hcard import`` picks the importer by content (:meth:`recognises`, on the file's first
+    :data:`SNIFF_BYTES`) or by name (``--from``), checks its options (:meth:`options`) before
+    reading the file, then calls :meth:`read`. The result's ``stats`` hold the fidelity of the
+    card to the source in JND (``rms_error_jnd``, ``max_error_jnd``), as ``hcard encode``'s.
+    """
+
+    @property
+    def suffixes(self) -> tuple[str, ...]:
+        """File suffixes of the format, lower case with the dot (``(".haps",)``)."""
+
+    def recognises(self, head: bytes) -> int:
+        """How surely ``head`` (the file's first bytes) is this format: 0 not, 1 the container
+        fits (a PNG: several bitmap formats share it), 2 certain (a key only it uses)."""
+
+    def options(self, **values: Any) -> dict[str, Any]:
+        """``values`` checked with the importer's defaults filled in; raise
+        :class:`~hcard.errors.UsageError` naming the option when one is bad."""
+
+    def read(self, source: Path, *, progress: Callable[[str], None] | None = None,
+             **options: Any) -> EncodeResult:
+        """The card of ``source``; raise an HcardError naming the file and field on bad
+        input (in bounded time and memory, whatever the file holds)."""
+
+
+@runtime_checkable
+class ExporterPlugin(Plugin, Protocol):
+    """Kind ``exporter`` (hook ``hcard_exporters``): writes a card in another tool's format.
+
+    ``hcard export --to NAME`` checks the options (:meth:`options`), then calls :meth:`write`
+    and writes the files it returns atomically, all or none."""
+
+    @property
+    def suffix(self) -> str:
+        """The main file's usual suffix (``".hjif"``)."""
+
+    def options(self, **values: Any) -> dict[str, Any]:
+        """``values`` checked with the exporter's defaults filled in (UsageError if bad)."""
+
+    def write(self, card: pb.Card, *, progress: Callable[[str], None] | None = None,
+              **options: Any) -> ExportResult:
+        """The files of ``card`` in this format and what the format cannot hold of it."""
+
+
+SNIFF_BYTES = 4096
+"""Bytes of a file ``hcard import`` hands to :meth:`ImporterPlugin.recognises`."""
+
+
 @runtime_checkable
 class CommandPlugin(Protocol):
     """A subcommand of ``hcard`` (hook ``hcard_commands``), loaded only when it runs.
@@ -315,6 +409,10 @@ KIND_TABLE: tuple[Kind, ...] = (
          "calibration effects: physical effects a fitted model may lack"),
     Kind("conformance-check", "hcard_conformance_checks", CheckPlugin, "conformance_checks",
          "conformance checks run by ``hcard conformance``"),
+    Kind("importer", "hcard_importers", ImporterPlugin, "importers",
+         "importers: readers of other tools' assets (bitmaps, .haps, .hjif) into cards"),
+    Kind("exporter", "hcard_exporters", ExporterPlugin, "exporters",
+         "exporters: writers of cards in other tools' formats"),
 )
 """Every plugin kind: its name, its hook, its Protocol, its registry property and what it is,
 in the order ``hcard plugins`` lists them. The hooks (:mod:`hcard.plugins.hookspecs`), the
@@ -338,7 +436,9 @@ __all__ = [
     "KIND_NAMED",
     "KIND_OF_HOOK",
     "KIND_TABLE",
+    "LOSS_FIELDS",
     "PROTOCOL_OF_KIND",
+    "SNIFF_BYTES",
     "CheckPlugin",
     "CommandPlugin",
     "DeviceProfilePlugin",
@@ -347,8 +447,12 @@ __all__ = [
     "EncodeResult",
     "Encoder",
     "EncoderPlugin",
+    "ExportResult",
+    "ExporterPlugin",
+    "ImporterPlugin",
     "Kind",
     "LazyCommand",
+    "Loss",
     "Plugin",
     "PredictorPlugin",
 ]

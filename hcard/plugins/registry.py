@@ -304,6 +304,8 @@ class PluginRegistry:
     device_profiles = _PluginsOfKind()
     calibration_effects = _PluginsOfKind()
     conformance_checks = _PluginsOfKind()
+    importers = _PluginsOfKind()
+    exporters = _PluginsOfKind()
 
     @property
     def commands(self) -> dict[str, CommandPlugin]:

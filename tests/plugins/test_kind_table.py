@@ -32,11 +32,11 @@ def _one_of_each_kind() -> types.ModuleType:
 
 
 def test_the_table_gives_the_kinds_their_order_and_protocols() -> None:
-    # The six kinds of ARCHITECTURE.md's table, in the order `hcard plugins` lists them.
+    # The eight kinds of ARCHITECTURE.md's table, in the order `hcard plugins` lists them.
     assert KINDS == ("encoder", "predictor", "driver", "device-profile", "calibration-effect",
-                     "conformance-check")
+                     "conformance-check", "importer", "exporter")
     assert {row.name: row.protocol for row in KIND_TABLE} == PROTOCOL_OF_KIND
-    assert len({row.hook for row in KIND_TABLE}) == len({row.attribute for row in KIND_TABLE}) == 6
+    assert len({row.hook for row in KIND_TABLE}) == len({row.attribute for row in KIND_TABLE}) == 8
 
 
 def test_pluggy_knows_one_hook_per_kind_and_the_command_hook() -> None:
