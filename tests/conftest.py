@@ -8,6 +8,7 @@ import contextlib
 import os
 import shutil
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -92,3 +93,32 @@ def pytest_unconfigure(config: pytest.Config) -> None:
     patch, directory = config.stash[_CACHE_DIRECTORY]
     patch.undo()
     shutil.rmtree(directory, ignore_errors=True)
+
+
+def _scheduling() -> tuple[int, int, int]:
+    """The calling thread's scheduling policy, its real-time priority and the nice value."""
+    return (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority,
+            os.getpriority(os.PRIO_PROCESS, 0))
+
+
+@pytest.fixture(autouse=True)
+def _scheduling_given_back() -> Iterator[None]:
+    """Every test leaves the process's scheduling as it found it. The processes a test
+    starts inherit its main thread's: one test that kept ``SCHED_RR`` (an in-process ``hcard
+    device serve`` that returned) made every later ``hcard play`` and served device of its
+    worker real-time, and real-time processes of one priority take turns in 100 ms slices on
+    2 cores; the tests that then failed, minutes later, were not the one at fault. This one is
+    named instead, and the scheduling is put back for the next. (The compute worker's nice
+    value, raised once for its whole run by :func:`pytest_runtest_setup`, is not a change
+    the tests make.)"""
+    before = _scheduling()
+    yield
+    after = _scheduling()
+    if after[:2] != before[:2] or after[2] < before[2]:
+        with contextlib.suppress(OSError):
+            os.sched_setscheduler(0, before[0], os.sched_param(before[1]))
+            os.setpriority(os.PRIO_PROCESS, 0, before[2])
+        pytest.fail(f"the test left this process's scheduling at policy {after[0]}, priority "
+                    f"{after[1]}, nice {after[2]} (it was {before[0]}, {before[1]}, nice "
+                    f"{before[2]}): the processes started after it would inherit it",
+                    pytrace=False)

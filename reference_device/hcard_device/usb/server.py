@@ -53,12 +53,13 @@ falls behind, the reports it produced late say so (fault REALTIME_LAG, rule PI4)
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from types import FrameType, TracebackType
 from typing import Any
 
@@ -88,7 +89,8 @@ def raise_priority() -> str:
     user; EPERM is not an error). The loops it protects sleep between steps (the firmware every
     :data:`~hcard_device.firmware.REALTIME_PERIOD_S`), so they never hold a CPU; the kernel
     also keeps 5 % of every CPU for ordinary processes whatever real-time threads do
-    (``sched_rt_runtime_us``). Returns what was granted, for the banner."""
+    (``sched_rt_runtime_us``). Returns what was granted, for the banner. A caller that goes on
+    after serving uses :func:`raised_priority`, which gives the priority back."""
     try:
         os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(REALTIME_PRIORITY))
         return f"SCHED_RR {REALTIME_PRIORITY}"
@@ -99,6 +101,26 @@ def raise_priority() -> str:
     except OSError:
         return f"nice {os.nice(0)} (no higher priority permitted)"
 
+
+@contextlib.contextmanager
+def raised_priority() -> Iterator[str]:
+    """:func:`raise_priority` for the block, and the calling thread's scheduling policy, its
+    priority and its nice value as they were afterwards, however the block ends. ``serve``
+    runs in the calling process (``hcard device serve`` in a test's process, through click's
+    runner): without this, a serve that returned (a busy port) left that process's main thread
+    at ``SCHED_RR``, and everything it started later (``hcard play`` processes, servers)
+    inherited it: two real-time processes of one priority on two cores take turns in 100 ms
+    slices, and a host starved that long trips the device's watchdog (found in CI)."""
+    policy = os.sched_getscheduler(0)
+    param = os.sched_getparam(0)
+    nice = os.getpriority(os.PRIO_PROCESS, 0)
+    try:
+        yield raise_priority()
+    finally:
+        with contextlib.suppress(OSError):
+            os.sched_setscheduler(0, policy, param)
+        with contextlib.suppress(OSError):
+            os.setpriority(os.PRIO_PROCESS, 0, nice)
 
 
 def make_firmware(variant: str, seed: int = 0,
@@ -272,8 +294,19 @@ def serve(variant: str = "evita", host: str = DEFAULT_HOST, port: int = DEFAULT_
     """
     # The firmware thread computes for up to a millisecond at a time; with the default 5 ms
     # GIL switch interval the USB/IP threads would wait that long to answer a URB.
+    switch_interval = sys.getswitchinterval()
     sys.setswitchinterval(SWITCH_INTERVAL_S)
-    priority = raise_priority()  # before any thread starts: they inherit it
+    try:
+        with raised_priority() as priority:  # before any thread starts: they inherit it
+            return _serve(variant, host, port, seed, echo, effects, priority)
+    finally:
+        sys.setswitchinterval(switch_interval)
+
+
+def _serve(variant: str, host: str, port: int, seed: int, echo: Callable[[str, bool], None],
+           effects: Mapping[str, Mapping[str, float]] | None, priority: str) -> int:
+    """The body of :func:`serve`, at the priority it was granted (``priority``, for the
+    banner)."""
     try:
         server = DeviceServer(variant, host=host, port=port, seed=seed, effects=effects)
     except ValueError as exc:
