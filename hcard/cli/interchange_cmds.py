@@ -144,10 +144,11 @@ def export(card: Path, to_format: str, output: Path, as_json: bool, **values: An
         except UsageError as exc:
             raise click.UsageError(_as_options(str(exc))) from None
         the_card = load(card)
-        for path in (output, *companions(output, [])):
-            _check_writable(path, "export")
+        _check_writable(output, "export")
         result = exporter.write(the_card, progress=_progress("export"), **options)
         paths = [output, *companions(output, [suffix for suffix, _ in result.files[1:]])]
+        for path in paths[1:]:
+            _check_writable(path, f"{exporter.name} export's companion")
         try:
             write_atomically_together([(path, data) for path, (_, data)
                                        in zip(paths, result.files, strict=True)])
