@@ -5,19 +5,21 @@
 # (Encoder: IOJson::loadFile -> in-memory model -> IOJson::writeFile). Its exit code is
 # always 255 for .hjif input, even when loading fails: judge acceptance by an empty stderr.
 #
-# Usage: scripts/build_mpeg_reference.sh [SNAPSHOT_GIT_DIR] [BUILD_DIR]
+# Usage: MIRROR=DIR scripts/build_mpeg_reference.sh [SNAPSHOT_GIT_DIR] [BUILD_DIR]
+#   MIRROR            folder holding bare git clones <owner>+<name>/repo of the reference
+#                     software and of the third-party sources below (git clone --bare
+#                     https://github.com/<owner>/<name> "$MIRROR/<owner>+<name>/repo")
 #   SNAPSHOT_GIT_DIR  bare git dir of MPEGGroup/HapticReferenceSoftware
-#                     (default /work/.mirror/MPEGGroup+HapticReferenceSoftware/repo)
+#                     (default $MIRROR/MPEGGroup+HapticReferenceSoftware/repo)
 #   BUILD_DIR         default <repo root>/build/mpeg-reference
-#   MIRROR            env var: folder holding bare git dirs <owner>+<name>/repo of the
-#                     third-party sources below (default: the snapshot's parent's parent)
+# The tests that run the result find it through HCARD_MPEG_REFERENCE=<printed path>.
 # Idempotent: re-running with an existing build for the same snapshot commit only prints the path.
 set -euo pipefail
 
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
-SNAP=${1:-/work/.mirror/MPEGGroup+HapticReferenceSoftware/repo}
+MIRROR=${MIRROR:?set MIRROR to the folder of bare clones <owner>+<name>/repo (see the top)}
+SNAP=${1:-$MIRROR/MPEGGroup+HapticReferenceSoftware/repo}
 OUT=$(mkdir -p "${2:-$ROOT/build/mpeg-reference}" && cd "${2:-$ROOT/build/mpeg-reference}" && pwd)
-MIRROR=${MIRROR:-$(cd "$SNAP/../.." && pwd)}
 BIN=$OUT/build/source/Encoder/Encoder
 REV=$(git --git-dir="$SNAP" rev-parse HEAD)
 

@@ -10,7 +10,7 @@ SHA-256, so a test reads exactly the bytes its figures were measured on.
 Run from the repository root, with internet access::
 
     python scripts/fetch_public_samples.py            # from raw.githubusercontent.com
-    python scripts/fetch_public_samples.py --mirror /work/.mirror
+    python scripts/fetch_public_samples.py --mirror DIR
                                    # from local bare snapshots <owner>+<repo>/repo (git show)
     python scripts/fetch_public_samples.py --list     # what it would fetch, and what is here
 

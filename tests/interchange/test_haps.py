@@ -17,8 +17,8 @@ from hcard.errors import AssetError, UsageError
 from hcard.v1 import card_pb2 as pb
 from hcard.validate import require_valid
 from hcard_builtins.formats.haps import DEFAULT_LENGTH_UNIT_MM, HapsImporter
+from tests.helpers.public_samples import fetched_sample
 
-FETCHED = Path(__file__).resolve().parents[1] / "data" / "public" / "fetched"
 """Where scripts/fetch_public_samples.py puts the Unity_CoreSDK samples (their EULA keeps them
 out of the repository)."""
 JND = 0.08
@@ -271,12 +271,8 @@ def test_recognises_haps_keys_only() -> None:
 # --- the public samples (Interhaptics/Unity_CoreSDK, fetched: their EULA keeps them out) ------
 
 def fetched(name: str) -> Path:
-    path = FETCHED / name
-    if not path.is_file():
-        pytest.skip(f"{name} not fetched (scripts/fetch_public_samples.py brings it from "
-                    "Interhaptics/Unity_CoreSDK Assets/HapticEffects; its EULA keeps it out of "
-                    "the repository)")
-    return path
+    return fetched_sample("Interhaptics/Unity_CoreSDK", f"Assets/HapticEffects/{name}",
+                          "its EULA keeps it out of the repository")
 
 
 def test_public_texture_sample_within_its_bounds() -> None:
