@@ -38,8 +38,8 @@ def card_friction(card: pb.Card, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     out = np.empty(x.shape)
     for t, texture in enumerate(card.textures):
         here = index == t
-        sums = {pb.CHANNEL_UV: 0.0, pb.CHANNEL_EV: 0.0, pb.CHANNEL_BIPOLAR: 0.0}
-        sums = {key: np.zeros(int(here.sum())) for key in sums}
+        sums = {key: np.zeros(int(here.sum()))
+                for key in (pb.CHANNEL_UV, pb.CHANNEL_EV, pb.CHANNEL_BIPOLAR)}
         sums[texture.channel] += texture.baseline - 1.0
         for c in texture.components:
             if c.domain != pb.DOMAIN_SPATIAL:

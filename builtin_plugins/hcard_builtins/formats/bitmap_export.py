@@ -172,9 +172,10 @@ def losses(fmt: BitmapFormat, card: pb.Card, plan: RasterPlan, figures: GrayFigu
             found.append(Loss(name, (
                 f"the {name}s of {spatial} grating(s) are kept only as the picture draws them "
                 "(a re-encoding estimates them from the pixels)"), CARRIED))
+    black, white = fmt.gray_ends(friction_range)
     found.append(Loss("friction-scale", (
-        f"relative friction becomes gray levels: gray 0 = {fmt.gray_ends(friction_range)[0]:g}"
-        f", 255 = {fmt.gray_ends(friction_range)[1]:g} ({abs(friction_range[1] - friction_range[0]) / 255:.4f} a level); "
+        f"relative friction becomes gray levels: gray 0 = {black:g}, 255 = {white:g} "
+        f"({abs(white - black) / 255:.4f} a level); "
         f"the card spans {figures.lowest:.3f} .. {figures.highest:.3f}, "
         f"{figures.clipped_low + figures.clipped_high} pixel(s) clipped"), CARRIED))
     found.append(Loss("taxtel-map", (

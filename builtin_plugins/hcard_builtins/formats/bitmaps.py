@@ -130,7 +130,7 @@ class BitmapImporter:
     @property
     def description(self) -> str:
         """One line."""
-        low, high = self.format.friction_range
+        _low, _high = self.format.friction_range
         black, white = self.format.gray_ends(self.format.friction_range)
         return (f"{self.format.label} friction bitmap (PNG, channel {self.format.channel}, "
                 f"gray 0 = {black:g}, 255 = {white:g} by default) to card, through the image "

@@ -2,11 +2,11 @@
 the header, the stated resolution (pHYs) and the ``hcard`` text chunk of the bitmap exports
 (spec/interchange/bitmaps.md IB11-IB14).
 
-Only the chunks before the first IDAT are walked (the extension chunk must precede the image
-data, rule IB11, so a reader never scans the pixel data for it), at most
-:data:`MAX_CHUNKS_BEFORE_DATA` of them, each skipped by a seek unless it is the header, pHYs or
-a text chunk, of which only the keyword is read unless the keyword is ``hcard``. The pixels
-themselves are Pillow's (through the image encoder's bounded loader).
+Every chunk's CRC is checked, the image data's too (Pillow does not check IDAT's), reading
+the file once in blocks: at most :data:`MAX_CHUNKS_BEFORE_DATA` chunks before the image data
+and :data:`MAX_CHUNKS` in all. The ``hcard`` chunk is looked for only before the image data (it
+must precede it, rule IB11, so that its first bytes tell the format). The pixels themselves are
+Pillow's (through the image encoder's bounded loader).
 """
 
 from __future__ import annotations
@@ -29,6 +29,10 @@ HCARD_KEYWORD = b"hcard"
 TEXT_CHUNKS = (b"tEXt", b"zTXt", b"iTXt")
 MAX_CHUNKS_BEFORE_DATA = 1000
 """Most chunks a PNG may have before its image data (a real file has a dozen at most)."""
+MAX_CHUNKS = 100_000
+"""Most chunks a PNG may have in all (64 megapixels in 8 KiB IDAT chunks take about 8000)."""
+_BLOCK_BYTES = 1 << 20
+"""Chunk data is read this much at a time to check its CRC."""
 MAX_HCARD_CHUNK_BYTES = 4 * math.ceil(limits.MAX_CARD_BYTES / 3) + 65536
 """Largest ``hcard`` chunk accepted, bytes: the base64 text of the largest card (rule F6's
 16 MiB) and 64 KiB for the rest of the JSON. The same bound holds for the text a compressed
@@ -122,48 +126,74 @@ def _walk(stream: BinaryIO, path: Path) -> PngFacts:
     dpi: tuple[float, float] | None = None
     hcard: str | None = None
     hcard_type = ""
-    for index in range(MAX_CHUNKS_BEFORE_DATA + 1):
+    before_data = True
+    for index in range(MAX_CHUNKS):
         header = stream.read(8)
         if len(header) < 8:
-            raise AssetError("the file ends before its image data (truncated PNG)",
-                             source=path, field=f"PNG chunk {index}")
+            where = "before its image data" if before_data else "before its IEND chunk"
+            raise AssetError(f"the file ends {where} (truncated PNG)", source=path,
+                             field=f"PNG chunk {index}")
         length, raw_kind = struct.unpack(">I4s", header)
         kind = raw_kind.decode("latin-1")
         if index == 0:
             width, height = _ihdr(stream, path, raw_kind, length)
             continue
-        if raw_kind in (b"IDAT", b"IEND"):
+        if raw_kind == b"IDAT":
+            before_data = False
+        elif before_data and index > MAX_CHUNKS_BEFORE_DATA:
+            raise AssetError(f"more than {MAX_CHUNKS_BEFORE_DATA} chunks before the image "
+                             "data", source=path, field="PNG chunks")
+        if before_data and raw_kind in TEXT_CHUNKS and _keyword(stream, length) == HCARD_KEYWORD:
+            if hcard is not None:
+                raise AssetError("a second hcard chunk: a PNG carries at most one (IB11)",
+                                 source=path, field=chunk_field(kind))
+            hcard, hcard_type = _hcard_text(stream, path, raw_kind, length), kind
+            continue
+        data = _checked_data(stream, path, raw_kind, length, 9)
+        if before_data and raw_kind == b"pHYs" and length == 9:
+            dpi = _phys(data)
+        if raw_kind == b"IEND":
             return PngFacts(width, height, dpi, hcard, hcard_type)
-        if index == MAX_CHUNKS_BEFORE_DATA:
-            break
-        if raw_kind == b"pHYs" and length == 9:
-            dpi = _phys(stream.read(9))
-            stream.seek(4, 1)
-        elif raw_kind in TEXT_CHUNKS:
-            start = stream.tell()
-            keyword = stream.read(min(length, _KEYWORD_BYTES)).split(b"\0", 1)[0]
-            if keyword == HCARD_KEYWORD:
-                if hcard is not None:
-                    raise AssetError("a second hcard chunk: a PNG carries at most one (IB11)",
-                                     source=path, field=chunk_field(kind))
-                stream.seek(start)
-                hcard, hcard_type = _hcard_text(stream, path, raw_kind, length), kind
-            stream.seek(start + length + 4)
-        else:
-            stream.seek(length + 4, 1)
-    raise AssetError(f"more than {MAX_CHUNKS_BEFORE_DATA} chunks before the image data",
-                     source=path, field="PNG chunks")
+    raise AssetError(f"more than {MAX_CHUNKS} chunks", source=path, field="PNG chunks")
+
+
+def _keyword(stream: BinaryIO, length: int) -> bytes:
+    """The keyword of the text chunk whose data starts at the stream's position (which it
+    leaves there)."""
+    start = stream.tell()
+    keyword = stream.read(min(length, _KEYWORD_BYTES)).split(b"\0", 1)[0]
+    stream.seek(start)
+    return keyword
+
+
+def _checked_data(stream: BinaryIO, path: Path, kind: bytes, length: int, keep: int) -> bytes:
+    """The first ``keep`` bytes of a chunk's data, after reading all of it in blocks and its
+    CRC, which must match (IB7)."""
+    field = f"PNG chunk {kind.decode('latin-1')}"
+    crc, left, kept = zlib.crc32(kind), length, b""
+    while left:
+        block = stream.read(min(left, _BLOCK_BYTES))
+        if not block:
+            raise AssetError("the file ends inside the chunk (truncated PNG)", source=path,
+                             field=field)
+        crc = zlib.crc32(block, crc)
+        if len(kept) < keep:
+            kept += block[:keep - len(kept)]
+        left -= len(block)
+    stored = stream.read(4)
+    if len(stored) < 4:
+        raise AssetError("the file ends inside the chunk (truncated PNG)", source=path,
+                         field=field)
+    if struct.unpack(">I", stored)[0] != crc:
+        raise AssetError("CRC mismatch: the chunk is corrupt", source=path, field=field)
+    return kept
 
 
 def _ihdr(stream: BinaryIO, path: Path, kind: bytes, length: int) -> tuple[int, int]:
     if kind != b"IHDR" or length != 13:
         raise AssetError("the first chunk is not a 13-byte IHDR (corrupt PNG)", source=path,
                          field="PNG chunk IHDR")
-    data = stream.read(13)
-    stream.seek(4, 1)
-    if len(data) < 13:
-        raise AssetError("the file ends inside its header (truncated PNG)", source=path,
-                         field="PNG chunk IHDR")
+    data = _checked_data(stream, path, kind, length, 13)
     width, height = struct.unpack(">II", data[:8])
     return int(width), int(height)
 
