@@ -98,3 +98,13 @@ def test_a_bad_chunk_on_the_command_line_is_one_line(tmp_path: Path):
     source.write_bytes(png_with(hcard_chunk(extension(card="%%%"))))
     result = run_hcard("import", source, "-o", tmp_path / "x.hcard")
     assert_one_line_error(result, str(source), 'PNG chunk iTXt "hcard" card: not base64')
+
+
+def test_the_import_summary_states_the_tanvas_polarity(tmp_path: Path):
+    """IB1: the encoder's summary line of the channel says white = 1.6, black = 1 for a
+    Tanvas import (the encoder's own default says black = high)."""
+    result = run_hcard("import", plain_png(tmp_path), "--from", "tanvas", "-o",
+                       tmp_path / "x.hcard")
+    assert "channel     ev: white = 1.6, black = 1 relative friction" in result.output
+    tpad = run_hcard("import", plain_png(tmp_path), "--from", "tpad", "-o", tmp_path / "y.hcard")
+    assert "channel     uv: black = 1, white = 0.3 relative friction" in tpad.output

@@ -442,6 +442,7 @@ def _stats(
         "channel": opts.channel,
         "locking": opts.locking,
         "friction_range": opts.friction_range,
+        "white_is": opts.white_is,
         "textures": len(card.textures),
         "components": sum(len(t.components) for t in card.textures),
         "textured_taxtels": int(textured.sum()),
