@@ -345,6 +345,14 @@ def _write_preview(png: bytes, path: Path) -> None:
         raise CardError(write_reason(exc, "write the preview"), source=path) from None
 
 
+def _ends(stats: dict[str, Any], high: float, low: float) -> str:
+    """``black = HIGH, white = LOW``, or the reverse for an image whose white is the high end
+    (the encoder's ``white_is``, a Tanvas bitmap)."""
+    if stats.get("white_is") == "high":
+        return f"white = {high:g}, black = {low:g}"
+    return f"black = {high:g}, white = {low:g}"
+
+
 def summary_lines(s: dict[str, Any]) -> list[str]:
     """The text summary of an encode (``s``: the encoder's stats plus the output fields)."""
     pitch_x, pitch_y = s["pixel_pitch_mm"]
@@ -367,7 +375,7 @@ def summary_lines(s: dict[str, Any]) -> list[str]:
         f"textures    {s['textures']} in the palette{merged}; {s['textured_taxtels']} of "
         f"{taxtels} taxtels carry gratings",
         f"components  {s['components']} in total",
-        f"channel     {s['channel']}: black = {high:g}, white = {low:g} relative friction; "
+        f"channel     {s['channel']}: {_ends(s, high, low)} relative friction; "
         f"locking {s['locking']}",
         f"card size   {card_bytes} bytes (binary); raw 8-bit bitmap at 0.1 mm: {raw} bytes "
         f"(card = {100.0 * card_bytes / raw:.3g} % of it)",

@@ -38,7 +38,7 @@ from hcard.v1 import card_pb2 as pb
 
 from .analysis import Target, TaxtelTextures, analyse_image
 from .geometry import Geometry, resolve_geometry
-from .loading import DEFAULT_MAX_PIXELS, GrayImage, ImageHeader, load_gray
+from .loading import DEFAULT_MAX_PIXELS, TRANSPARENT_GRAYS, GrayImage, ImageHeader, load_gray
 from .palette import Palette, build_palette
 from .reconstruct import FrictionMap, ReconstructionError, reconstruction_error
 from .spectral import tile_centres
@@ -52,6 +52,9 @@ DEFAULT_FRICTION_RANGE: dict[str, tuple[float, float]] = {
 """Relative friction of white and black per channel (UV only lowers friction, EV only raises)."""
 CHANNELS = NAMES
 LOCKINGS = ("auto", "position", "velocity")
+WHITE_IS = ("low", "high")
+"""Polarities of the gray scale: white is the low end of the friction range (the encoder's own
+convention, black = high friction) or the high end (Tanvas bitmaps)."""
 PROGRESS_MIN_PIXELS = 1_000_000
 """Images larger than this (pixels) report their stages through the progress callback."""
 DEFAULT_COMPONENTS = 8
@@ -90,6 +93,12 @@ class EncodeOptions:
         friction_range: relative friction of white and of black, ``(low, high)``; ``None`` for
             the channel's default (:data:`DEFAULT_FRICTION_RANGE`).
         max_pixels: largest image accepted, pixels (a guard against decompression bombs).
+        white_is: ``"low"``: white is the low end of the friction range and black the high end
+            (the default, thesis section 5.4.2); ``"high"``: the reverse (gray levels are
+            inverted after decoding, exactly: ``full_scale - gray``).
+        transparent: what a transparent pixel shows before the friction mapping, ``"white"``
+            (the default) or ``"black"``: the image is composited over it
+            (:func:`.loading.load_gray`).
         title: card title; ``None`` for the image file's stem.
         author, licence: card metadata.
     """
@@ -107,6 +116,8 @@ class EncodeOptions:
     locking: str = "auto"
     friction_range: tuple[float, float] | None = None
     max_pixels: int = DEFAULT_MAX_PIXELS
+    white_is: str = "low"
+    transparent: str = "white"
     title: str | None = None
     author: str = ""
     licence: str = ""
@@ -159,6 +170,12 @@ class EncodeOptions:
             raise ValueError(f"locking must be one of {', '.join(LOCKINGS)}, got {self.locking!r}")
         if self.max_pixels < 1:
             raise ValueError(f"max_pixels must be at least 1, got {self.max_pixels}")
+        if self.white_is not in WHITE_IS:
+            raise ValueError(f"white_is must be one of {', '.join(WHITE_IS)}, "
+                             f"got {self.white_is!r}")
+        if self.transparent not in TRANSPARENT_GRAYS:
+            raise ValueError(f"transparent must be one of {', '.join(TRANSPARENT_GRAYS)}, "
+                             f"got {self.transparent!r}")
         for name in ("title", "author", "licence"):
             text = getattr(self, name)
             if text is not None and len(text) > limits.MAX_TEXT_LENGTH:
@@ -236,7 +253,10 @@ def encode_image(
                          width_mm=opts.width_mm, height_mm=opts.height_mm, dpi=opts.dpi,
                          embedded_dpi=header.dpi, source=header.path)
 
-    image = load_gray(path, max_pixels=opts.max_pixels, check_header=check_geometry)
+    image = load_gray(path, max_pixels=opts.max_pixels, check_header=check_geometry,
+                      transparent=opts.transparent)
+    if opts.white_is == "high":
+        image = inverted(image)
     large = image.width * image.height > PROGRESS_MIN_PIXELS
 
     def say(line: str) -> None:
@@ -301,6 +321,13 @@ def encode_image(
     return EncodeResult(card=card, stats=stats, log=log, maps=maps)
 
 
+def inverted(image: GrayImage) -> GrayImage:
+    """``image`` with its gray scale reversed, ``full_scale - gray`` (exact for the integer
+    types): the encoder's black = high friction for an image whose white is high friction."""
+    pixels = (image.full_scale - image.pixels.astype(np.float64)).astype(image.pixels.dtype)
+    return replace(image, pixels=pixels)
+
+
 def _target(opts: EncodeOptions) -> Target | None:
     """The error target of ``opts`` in relative friction, or None."""
     if opts.max_error is None:
@@ -334,6 +361,7 @@ def make_card(
     """The card message for an analysed image."""
     textures = palette.textures
     low, high = opts.friction_limits
+    high_end, low_end = ("black", "white") if opts.white_is == "low" else ("white", "black")
     frequency = np.hypot(textures.k[..., 0], textures.k[..., 1])
     orientation, phase = orientation_and_phase(textures)
     amplitude = np.abs(textures.coef)
@@ -364,7 +392,8 @@ def make_card(
         licence=opts.licence,
         description=(
             f"Encoded from {image.path.name} ({image.width} x {image.height} pixels): "
-            f"black = relative friction {high:g}, white = {low:g}, channel {opts.channel}."
+            f"{high_end} = relative friction {high:g}, {low_end} = {low:g}, "
+            f"channel {opts.channel}."
         ),
     )
     card.metadata.generator = GENERATOR
@@ -413,6 +442,7 @@ def _stats(
         "channel": opts.channel,
         "locking": opts.locking,
         "friction_range": opts.friction_range,
+        "white_is": opts.white_is,
         "textures": len(card.textures),
         "components": sum(len(t.components) for t in card.textures),
         "textured_taxtels": int(textured.sum()),

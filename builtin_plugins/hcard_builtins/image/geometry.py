@@ -233,8 +233,8 @@ def resolve_geometry(
     # (6.5 GB) from a 32-pixel image.
     tile_w = max(1, min(math.ceil(taxtel_mm * ppx - 1e-9), width_px))
     tile_h = max(1, min(math.ceil(taxtel_mm * ppy - 1e-9), height_px))
-    col_start, col_owned = _spans(cols, taxtel_mm * ppx, width_px, tile_w)
-    row_start, row_owned = _spans(rows, taxtel_mm * ppy, height_px, tile_h)
+    col_start, col_owned = taxtel_spans(cols, taxtel_mm * ppx, width_px, tile_w)
+    row_start, row_owned = taxtel_spans(rows, taxtel_mm * ppy, height_px, tile_h)
     # Tiles end inside the image where it is large enough (see the module docstring).
     col_tile = np.minimum(col_start, max(width_px - tile_w, 0))
     row_tile = np.minimum(row_start, max(height_px - tile_h, 0))
@@ -260,7 +260,7 @@ def resolve_geometry(
     )
 
 
-def _spans(
+def taxtel_spans(
     count: int, taxtel_px: float, size_px: int, tile_px: int
 ) -> tuple[np.ndarray, np.ndarray]:
     """First pixel and number of owned pixels of each of ``count`` taxtels along one axis.

@@ -10,8 +10,9 @@ under the pixel limit, took 34 s and 1.0 GB), and whatever the caller checks on 
 (``check_header``: the encoder's surface and grid, which refused a 64,000,000 x 1 image only
 after its 221 MB were decoded).
 
-Gray follows ITU-R 601 luma (Pillow mode ``"L"``); transparent images are composited over white;
-16-bit gray images keep their 16 bits; an EXIF orientation tag is applied, so the surface is
+Gray follows ITU-R 601 luma (Pillow mode ``"L"``); transparent images are composited over white
+(or over black, ``transparent="black"``: formats whose zero drive is black); 16-bit gray images
+keep their 16 bits; an EXIF orientation tag is applied, so the surface is
 the picture as viewers show it. Black is 0, white is :attr:`GrayImage.full_scale`.
 """
 
@@ -37,6 +38,8 @@ _HEADER_BYTES = 64
 _ALPHA_MODES = frozenset({"RGBA", "RGBa", "LA", "La", "PA"})
 _SIXTEEN_BIT_MODES = frozenset({"I;16", "I;16L", "I;16B", "I;16N"})
 _EXIF_ORIENTATION = 0x0112
+TRANSPARENT_GRAYS: dict[str, int] = {"white": 255, "black": 0}
+"""The backgrounds a transparent image may be composited over, by name: their 8-bit gray."""
 _pillow_limit_lock = threading.Lock()
 
 
@@ -89,7 +92,8 @@ class ImageHeader:
 
 
 def load_gray(path: str | Path, *, max_pixels: int = DEFAULT_MAX_PIXELS,
-              check_header: Callable[[ImageHeader], None] | None = None) -> GrayImage:
+              check_header: Callable[[ImageHeader], None] | None = None,
+              transparent: str = "white") -> GrayImage:
     """Read an image file as gray levels (black = 0).
 
     Args:
@@ -97,6 +101,8 @@ def load_gray(path: str | Path, *, max_pixels: int = DEFAULT_MAX_PIXELS,
         max_pixels: largest accepted width x height, pixels; checked from the header before
             decoding, with the memory decoding takes (:func:`check_decode_bytes`).
         check_header: called with the header before decoding; it raises to refuse the image.
+        transparent: what a transparent pixel shows, ``"white"`` or ``"black"``: the image is
+            composited over it (:data:`TRANSPARENT_GRAYS`).
 
     Raises:
         ImageError: the file is missing, a directory, empty, not an image, declares zero width
@@ -105,6 +111,9 @@ def load_gray(path: str | Path, *, max_pixels: int = DEFAULT_MAX_PIXELS,
     """
     if max_pixels < 1:
         raise ValueError(f"max_pixels must be at least 1, got {max_pixels}")
+    if transparent not in TRANSPARENT_GRAYS:
+        raise ValueError(f"transparent must be one of {', '.join(TRANSPARENT_GRAYS)}, "
+                         f"got {transparent!r}")
     file = Path(path)
     head = _read_head(file)
     png_size = png_header_size(head)
@@ -121,7 +130,7 @@ def load_gray(path: str | Path, *, max_pixels: int = DEFAULT_MAX_PIXELS,
             upright = _upright(image)
         except (OSError, SyntaxError, ValueError, EOFError, struct.error, zlib.error) as exc:
             raise ImageError(f"{file}: corrupt or truncated image data ({exc})") from None
-        pixels, full_scale = to_gray(upright, file)
+        pixels, full_scale = to_gray(upright, file, transparent=transparent)
         return GrayImage(pixels, full_scale, _dpi_of(image), image.mode, file)
     finally:
         image.close()
@@ -216,10 +225,12 @@ def png_header_size(head: bytes) -> tuple[int, int] | None:
     return int(width), int(height)
 
 
-def to_gray(image: Image.Image, file: Path) -> tuple[np.ndarray, float]:
+def to_gray(image: Image.Image, file: Path, *, transparent: str = "white"
+            ) -> tuple[np.ndarray, float]:
     """Gray levels of a loaded Pillow image and the value of white.
 
-    8-bit and colour images become ``uint8`` ITU-R 601 luma; alpha is composited over white;
+    8-bit and colour images become ``uint8`` ITU-R 601 luma; alpha is composited over white
+    (``transparent="black"``: over black);
     16-bit gray stays ``uint16``; 32-bit integer images (mode ``"I"``) are read as 16-bit values
     clipped to 0..65535; float images (mode ``"F"``) as 0..255 like Pillow's own conversion.
     """
@@ -237,9 +248,10 @@ def to_gray(image: Image.Image, file: Path) -> tuple[np.ndarray, float]:
         if mode == "F":
             return np.clip(np.asarray(image, dtype=np.float32), 0.0, 255.0), 255.0
         if mode in _ALPHA_MODES:
-            white = Image.new("RGBA", image.size, (255, 255, 255, 255))
+            level = TRANSPARENT_GRAYS[transparent]
+            background = Image.new("RGBA", image.size, (level, level, level, 255))
             return np.asarray(
-                Image.alpha_composite(white, image.convert("RGBA")).convert("L")
+                Image.alpha_composite(background, image.convert("RGBA")).convert("L")
             ), 255.0
         if mode in ("1", "RGB", "RGBX", "CMYK", "YCbCr"):
             return np.asarray(image.convert("L")), 255.0

@@ -192,8 +192,11 @@ def error_figures(residual: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, n
 def over_target(residual: np.ndarray, owned: np.ndarray, target: float) -> np.ndarray:
     """``(n,)`` whether the 95th percentile (nearest rank) of the absolute ``residual`` ``(n,
     nh, nw)`` over each tile's ``owned`` pixels exceeds ``target``: more than ``owned - rank``
-    of them do (the residual is zero on pixels a tile does not own)."""
+    of them do (the residual is zero on pixels a tile does not own). No tiles, none over (a
+    reshape of zero tiles to ``(0, -1)`` raised: every tile of an image within the target)."""
     n = residual.shape[0]
+    if n == 0:
+        return np.zeros(0, dtype=bool)
     flat = residual.reshape(n, -1)
     beyond = np.count_nonzero((flat > target) | (flat < -target), axis=1)
     return beyond > owned - (95 * owned + 99) // 100
