@@ -41,7 +41,8 @@ _EXPORT_OPTIONS = ("px_per_mm",)
               "tpad, haps, hjif. Default: recognised from the file's content.")
 @click.option("--width-mm", type=float, default=None,
               help="Physical width of the surface, mm. Bitmaps: default from the image's "
-              "stated resolution, else 254 dpi; .haps/.hjif: the texture's length.")
+              "stated resolution, else the format's screen (spec/interchange/bitmaps.md); "
+              ".haps/.hjif: the texture's length.")
 @click.option("--height-mm", type=float, default=None,
               help="Physical height of the surface, mm (bitmaps: default keeps the aspect).")
 @click.option("--dpi", type=float, default=None,
@@ -123,7 +124,7 @@ def import_(source: Path, output: Path, from_format: str | None, as_json: bool,
               "pixels).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 def export(card: Path, to_format: str, output: Path, as_json: bool, **values: Any) -> None:
-    """Export CARD to another tool's format: .hjif, Tanvas or TPad bitmaps.
+    """Export CARD to another tool's format: .hjif, Tanvas, TPad.
 
     States what the target format cannot hold of this card (channel, locking, orientation,
     relative-friction scale, phase convention, the taxtel map) and where the export keeps it

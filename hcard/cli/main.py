@@ -34,7 +34,7 @@ hook (``hcard device`` and ``hcard play`` from ``hcard_device``, ``hcard conform
 COMMAND_SUMMARIES = {
     "calibrate": "Fit a model to recordings, find what it lacks, verify it.",
     "encode": "Encode a grayscale IMAGE: black is high friction, white low.",
-    "export": "Export CARD to another tool's format: .hjif, Tanvas or TPad bitmaps.",
+    "export": "Export CARD to another tool's format: .hjif, Tanvas, TPad.",
     "import": "Import SOURCE, another tool's haptic asset, into a card.",
     "info": "Describe each CARD: metadata, surface, grid and every texture.",
     "plugins": "List installed encoders, predictors, drivers, effects, checks, formats.",

@@ -13,8 +13,7 @@ import pytest
 
 from hcard.v1 import card_pb2 as pb
 from hcard_builtins.formats.bitmaps import TanvasImporter, TPadImporter
-
-FETCHED = Path(__file__).resolve().parents[1] / "data" / "public" / "fetched"
+from tests.helpers.public_samples import fetched_sample
 
 # repo, path, importer, --dpi (None: the PNG's pHYs), measured rms and p95 in JND at
 # --max-error 1 (bounds: 1.25 x measured, rounded up)
@@ -44,10 +43,7 @@ STORED_DPI = {72.009, 96.012, 119.99, 143.993, 95.987}
                          ids=[Path(s[1]).name for s in SAMPLES])
 def test_public_bitmap_imports(repo: str, path: str, name: str, dpi: float | None, rms: float,
                                p95: float):
-    source = FETCHED / repo / path
-    if not source.is_file():
-        pytest.skip(f"{repo} {path} not fetched (no licence stated: run "
-                    "scripts/fetch_public_samples.py)")
+    source = fetched_sample(repo, path, "its project states no licence")
     result = IMPORTERS[name].read(source, max_error=1.0, dpi=dpi)
     stats = result.stats
     stored = None
