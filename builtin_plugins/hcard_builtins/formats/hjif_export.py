@@ -44,8 +44,11 @@ TICK_MM = 0.025
 """Length of one position tick, mm (IJ5)."""
 PHASE_BUDGET_RAD = 0.02
 """Largest phase error a segment of a rounded-frequency grating may reach at its ends (IJ12)."""
-MAX_SEGMENTS = 8
+MAX_SEGMENTS = 64
 """Most effects (segments) per grating band (IJ12)."""
+SEGMENT_BUDGET = 16384
+"""Most grating effects in one export: each band gets ``SEGMENT_BUDGET // gratings`` at most
+(about 150 bytes each: an export stays under 3 MB, far below the reader's 16 MiB)."""
 CHANNEL_ORDER = ("uv", "ev", "bipolar")
 MODALITY = {"uv": FRICTION, "ev": ELECTROTACTILE, "bipolar": FRICTION}
 """Perception modality of each card channel (IJ2)."""
@@ -110,13 +113,16 @@ def export_card(card: pb.Card) -> tuple[dict[str, Any], list[Loss], dict[str, An
     extension_textures = []
     for t, texture in enumerate(card.textures):
         extension_textures.append(_texture_extension(texture))
+    gratings = sum(1 for t in card.textures for c in t.components
+                   if c.domain == pb.DOMAIN_SPATIAL)
+    cap = max(1, min(MAX_SEGMENTS, SEGMENT_BUDGET // max(1, gratings)))
     max_bands = 0
     for p, ch in enumerate(used):
         channels = []
         for t, texture in enumerate(card.textures):
             if NAMES.get(texture.channel) != ch:
                 continue
-            bands = _bands(texture, ranges[ch], axis, length_ticks)
+            bands = _bands(texture, ranges[ch], axis, length_ticks, cap)
             max_bands = max(max_bands, len(bands))
             channels.append({
                 "id": t, "description": f"hcard palette texture {t}", "gain": 1.0,
@@ -165,7 +171,7 @@ def _perception(pid: int, ch: str, rng: tuple[float, float], axis: Axis,
 
 
 def _bands(texture: pb.Texture, rng: tuple[float, float], axis: Axis,
-           length_ticks: int) -> list[dict[str, Any]]:
+           length_ticks: int, cap: int) -> list[dict[str, Any]]:
     """The curve band of the baseline, then one vectorial band per spatial grating in the
     texture's order (IJ9-IJ13)."""
     mid, half = (rng[0] + rng[1]) / 2, (rng[1] - rng[0]) / 2
@@ -179,7 +185,7 @@ def _bands(texture: pb.Texture, rng: tuple[float, float], axis: Axis,
     for component in texture.components:
         if component.domain != pb.DOMAIN_SPATIAL:
             continue
-        grating = grating_of(component, half, axis, length_ticks)
+        grating = grating_of(component, half, axis, length_ticks, cap)
         effects = [{
             "effect_type": "Basis", "position": start, "phase": phase, "base_signal": "Sine",
             "keyframes": [{"relative_position": 0, "amplitude_modulation": grating.amplitude,
@@ -193,16 +199,16 @@ def _bands(texture: pb.Texture, rng: tuple[float, float], axis: Axis,
 
 
 def grating_of(component: pb.Component, half: float, axis: Axis,
-               length_ticks: int) -> Grating:
+               length_ticks: int, cap: int = MAX_SEGMENTS) -> Grating:
     """A spatial component as sine effects (IJ10-IJ13): frequency rounded to whole cycles
     per unit (at least 1), amplitude ``A / half`` in float32, the cosine phase turned into a
-    sine phase, and as many segments (at most 8) as keep the phase error of the rounding
+    sine phase, and as many segments (at most ``cap``) as keep the phase error of the rounding
     within :data:`PHASE_BUDGET_RAD` at their ends, each anchored at its middle."""
     k = component.frequency
     f_int = max(1, round(k * axis.unit_mm))
     dk = k - f_int / axis.unit_mm
     length_mm = length_ticks * TICK_MM
-    count = min(MAX_SEGMENTS, max(1, math.ceil(math.pi * abs(dk) * length_mm
+    count = min(cap, max(1, math.ceil(math.pi * abs(dk) * length_mm
                                                / PHASE_BUDGET_RAD - 1e-12)))
     bounds = [round(j * length_ticks / count) for j in range(count + 1)]
     phi_sine = component.phase + math.pi / 2

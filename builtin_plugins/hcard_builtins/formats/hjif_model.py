@@ -437,33 +437,10 @@ def sine_phase(phase: float) -> float:
 
 
 def format_number(value: float) -> str:
-    """``value`` as rapidjson's ``Writer::Double`` prints it: the shortest digits that read
-    back as the same double (Grisu2), laid out by its ``Prettify``: ``1.0``, ``0.001234``,
-    ``12340000000.0``, ``1e-7``, ``1.234e30``."""
-    if value == 0:
-        return "-0.0" if math.copysign(1.0, value) < 0 else "0.0"
-    sign = "-" if value < 0 else ""
-    mantissa, _, exponent = repr(abs(value)).partition("e")
-    whole, _, fraction = mantissa.partition(".")
-    # the value is digits x 10^k: shortest round-trip digits, no leading or trailing zeros
-    k = (int(exponent) if exponent else 0) - len(fraction)
-    digits = (whole + fraction).lstrip("0")
-    stripped = digits.rstrip("0")
-    k += len(digits) - len(stripped)
-    digits = stripped
-    n = len(digits)
-    kk = n + k
-    if 0 <= k and kk <= 21:
-        text = digits + "0" * k + ".0"
-    elif 0 < kk <= 21:
-        text = digits[:kk] + "." + digits[kk:]
-    elif -6 < kk <= 0:
-        text = "0." + "0" * -kk + digits
-    elif n == 1:
-        text = f"{digits}e{kk - 1}"
-    else:
-        text = f"{digits[0]}.{digits[1:]}e{kk - 1}"
-    return sign + text
+    """``value`` as rapidjson's ``Writer::Double`` prints it (:mod:`.grisu_number`)."""
+    from .grisu_number import format_double
+
+    return format_double(value)
 
 
 _ESCAPES = {'"': '\\"', "\\": "\\\\", "\b": "\\b", "\f": "\\f", "\n": "\\n", "\r": "\\r",
