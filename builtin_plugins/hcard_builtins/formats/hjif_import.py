@@ -571,7 +571,8 @@ def _card(reading: Reading, width: float, height: float,
     card = build.card(width, height, taxtel_mm=taxtel if taxtel is not None else width,
                       textures=textures, texture_index=index,
                       title=opts.title if opts.title is not None else meta.get(
-                          "title", reading.source.stem[:limits.MAX_TEXT_LENGTH]),
+                          "title", "" if reading.extension is not None
+                          else reading.source.stem[:limits.MAX_TEXT_LENGTH]),
                       author=opts.author if opts.author is not None else meta.get("author", ""),
                       licence=opts.licence if opts.licence is not None else meta.get(
                           "licence", ""),
