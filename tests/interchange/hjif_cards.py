@@ -99,3 +99,32 @@ def friction_of(texture: pb.Texture, x_mm: Any) -> Any:
             total = total + c.amplitude * np.cos(2 * math.pi * c.frequency * math.cos(
                 c.orientation) * np.asarray(x_mm) + c.phase)
     return total
+
+
+@pytest.fixture
+def hjif_registered() -> Any:
+    """The registry with the hjif importer and exporter. The built-in ``formats`` entry point
+    provides them once its sibling modules (``bitmaps``, ``haps``) are in the tree; until
+    then (a branch with only this format) they are registered here, in code, and the registry
+    is rediscovered afterwards."""
+    import types
+    import warnings
+
+    from hcard.plugins.hookspecs import hookimpl
+    from hcard.plugins.registry import get_registry
+    from hcard_builtins.formats.hjif import HjifExporter, HjifImporter
+
+    registry = get_registry()
+    if "hjif" in registry.importers and "hjif" in registry.exporters:
+        yield registry
+        return
+    plugin = types.ModuleType("hjif_formats_only")
+    plugin.hcard_importers = hookimpl(lambda: [HjifImporter()])  # type: ignore[attr-defined]
+    plugin.hcard_exporters = hookimpl(lambda: [HjifExporter()])  # type: ignore[attr-defined]
+    registry.register(plugin, package="hcard-tests", version="0")
+    yield registry
+    from hcard.plugins.records import HcardPluginWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HcardPluginWarning)
+        get_registry(refresh=True)

@@ -403,7 +403,7 @@ def _version_ok(version: str) -> bool:
 
 
 def _join(path: str, key: str) -> str:
-    return f"{path}.{key}" if path else key
+    return f"{path}.{key}" if path and not key.startswith("[") else path + key
 
 
 def _kind(value: Any) -> str:
