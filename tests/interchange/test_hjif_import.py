@@ -77,7 +77,7 @@ def test_ij73_a_constant_friction_texture_is_one_taxtel(tmp_path) -> None:
     assert texture.components[0].frequency == 2.0
     assert texture.components[0].amplitude == pytest.approx(0.175)
     assert result.stats["max_error_jnd"] < 1e-9
-    assert "hand" == card.metadata.title and card.metadata.description == "hand written"
+    assert card.metadata.title == "hand" and card.metadata.description == "hand written"
 
 
 def test_ij73_amplitude_modulation_becomes_per_taxtel_amplitudes(tmp_path) -> None:
@@ -154,7 +154,8 @@ CASES = {
                      ["not JSON", "nested 41 arrays and objects deep, more than 32"]),
     "nan": (_with(lambda d: None).replace('"gain": 1.0', '"gain": NaN'),
             ["not JSON", "NaN is not JSON"]),
-    "infinite": (_with(lambda d: None).replace('"amplitude_modulation": 0.5', '"amplitude_modulation": 1e999', 1),
+    "infinite": (_with(lambda d: None).replace('"amplitude_modulation": 0.5',
+                                               '"amplitude_modulation": 1e999', 1),
                  ["perceptions[0].channels[0].bands[1].effects[0].keyframes[0]"
                   ".amplitude_modulation", "inf is not a finite number"]),
     "float_band_limit": (_with(lambda d: d["perceptions"][0]["channels"][0]["bands"][1].update(
@@ -184,7 +185,8 @@ CASES = {
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
-def test_ij27_a_bad_file_is_one_line_naming_file_path_and_reason(hjif_registered, tmp_path, case) -> None:
+def test_ij27_a_bad_file_is_one_line_naming_file_path_and_reason(hjif_registered, tmp_path,
+                                                                case) -> None:
     text, fragments = CASES[case]
     path, result = _hostile(tmp_path, text)
     assert_one_line_error(result, str(path), *fragments)
@@ -216,10 +218,10 @@ def test_ij27_a_file_over_16_mib_is_refused_before_it_is_parsed(hjif_registered,
 
 
 def test_ij27_a_pipe_is_read_only_up_to_the_limit() -> None:
+    from pathlib import Path
+
     from hcard.errors import AssetError
     from hcard_builtins.formats.hjif_import import ImportOptions, import_file
-
-    from pathlib import Path
 
     with pytest.raises(AssetError, match="more than 16777216 bytes"):
         import_file(Path("/dev/zero"), ImportOptions())
@@ -247,8 +249,9 @@ def test_ij56_a_companion_naming_an_unknown_channel_is_refused(hjif_registered, 
     result = export(mixed_card())
     (tmp_path / "m.hjif").write_bytes(result.files[0][1])
     gltf = json.loads(result.files[1][1])
-    from hcard_builtins.formats.gltf_material import png_gray
     import base64
+
+    from hcard_builtins.formats.gltf_material import png_gray
 
     ids = np.full((8, 12), 9, dtype=np.uint8)
     gltf["images"][0]["uri"] = "data:image/png;base64," + base64.b64encode(

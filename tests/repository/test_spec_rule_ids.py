@@ -128,7 +128,9 @@ def outside_references(text: str) -> list[tuple[int, str]]:
 
 
 def spec_documents() -> dict[str, str]:
-    return {path.name: path.read_text(encoding="utf-8") for path in sorted(SPEC.glob("*.md"))}
+    """Every spec document by its path under spec/ (``README.md``, ``interchange/hjif.md``)."""
+    return {path.relative_to(SPEC).as_posix(): path.read_text(encoding="utf-8")
+            for path in sorted(SPEC.rglob("*.md"))}
 
 
 @functools.cache

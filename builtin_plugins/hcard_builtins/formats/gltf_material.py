@@ -147,12 +147,13 @@ def _haptic_image(doc: Any, path: Path) -> int:
         ext = material.get("extensions", {}).get(MATERIAL) if isinstance(material, dict) else None
         if not isinstance(ext, dict):
             continue
-        for i, entry in enumerate(ext.get("friction", [])):
+        for i in range(len(ext.get("friction", []))):
             where = ["materials", m, "extensions", MATERIAL, "friction", i]
             if _get(doc, [*where, "type"], str, path) != REFERENCE:
                 continue
             texture = _get(doc, [*where, "index"], int, path)
-            return _get(doc, ["textures", texture, "source"], int, path)  # type: ignore[no-any-return]
+            source: int = _get(doc, ["textures", texture, "source"], int, path)
+            return source
     raise AssetError(f"no material with an {MATERIAL} friction texture of type {REFERENCE}",
                      source=path, field="materials")
 

@@ -136,7 +136,7 @@ def format_double(value: float) -> str:
     digits, k = _grisu2(abs(value))
     n = len(digits)
     kk = n + k
-    if 0 <= k and kk <= 21:
+    if k >= 0 and kk <= 21:
         text = digits + "0" * k + ".0"
     elif 0 < kk <= 21:
         text = digits[:kk] + "." + digits[kk:]

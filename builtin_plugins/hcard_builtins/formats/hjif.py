@@ -50,8 +50,8 @@ class HjifImporter:
                              f"(it takes {', '.join(IMPORT_OPTIONS)})")
         for name, low in (("width_mm", 0.0), ("taxtel_mm", limits.MIN_TAXTEL_MM)):
             value = values.get(name)
-            if value is not None and not (math.isfinite(value)
-                                          and low < value <= limits.MAX_SURFACE_MM
+            if value is not None and not ((math.isfinite(value)
+                                          and low < value <= limits.MAX_SURFACE_MM)
                                           or value == low > 0):
                 raise UsageError(f"{name} must be a number of mm in {low:g}..."
                                  f"{limits.MAX_SURFACE_MM:g}, got {value}")

@@ -7,6 +7,7 @@ into the glTF companion (IJ50-IJ55).
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
@@ -110,9 +111,7 @@ def export_card(card: pb.Card) -> tuple[dict[str, Any], list[Loss], dict[str, An
     length_ticks = max(1, math.ceil(math.hypot(card.surface.width_mm, card.surface.height_mm)
                                     / TICK_MM - 1e-9))
     perceptions = []
-    extension_textures = []
-    for t, texture in enumerate(card.textures):
-        extension_textures.append(_texture_extension(texture))
+    extension_textures = [_texture_extension(texture) for texture in card.textures]
     gratings = sum(1 for t in card.textures for c in t.components
                    if c.domain == pb.DOMAIN_SPATIAL)
     cap = max(1, min(MAX_SEGMENTS, SEGMENT_BUDGET // max(1, gratings)))
@@ -213,7 +212,7 @@ def grating_of(component: pb.Component, half: float, axis: Axis,
     bounds = [round(j * length_ticks / count) for j in range(count + 1)]
     phi_sine = component.phase + math.pi / 2
     segments = []
-    for start, end in zip(bounds[:-1], bounds[1:], strict=True):
+    for start, end in itertools.pairwise(bounds):
         s_mm, seg_mm = start * TICK_MM, (end - start) * TICK_MM
         phase = phi_sine + 2 * math.pi * k * s_mm + math.pi * dk * seg_mm
         segments.append((start, end - start, sine_phase(phase)))

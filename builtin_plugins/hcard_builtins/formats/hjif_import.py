@@ -182,7 +182,8 @@ def extension_of(doc: Document, source: Path) -> dict[str, Any] | None:
     r.integer({"rows": grid[1]}, "rows", f"{EXT}.grid", low=1, high=limits.MAX_GRID_ROWS)
     ranges = r.obj(ext.get("ranges", {}), f"{EXT}.ranges")
     for key in ranges:
-        r.string({"channel": key}, "channel", f"{EXT}.ranges", choices=tuple(DEFAULT_FRICTION_RANGE))
+        r.string({"channel": key}, "channel", f"{EXT}.ranges",
+                 choices=tuple(DEFAULT_FRICTION_RANGE))
         low, high = _pair(r, ranges, key, 0.0, limits.MAX_RELATIVE_FRICTION, path=f"{EXT}.ranges")
         if not low < high:
             raise r.fail(f"{EXT}.ranges.{key}", f"{low:g}..{high:g} is empty")
@@ -276,7 +277,7 @@ def _from_extension(reading: Reading, channels: list[tuple[Perception, Channel]]
         texture = _texture_from_extension(reading, entry, perception, channel, t)
         textures.append(texture)
         _place(reading, perception, channel, _range(reading, entry["channel"]),
-               lambda u, texture=texture: hjif_eval.texture_profile(texture, u))
+               _profile_of(texture))
     (width, height), (tw, th), (cols, rows) = ext["surface"], ext["taxtel"], ext["grid"]
     index = _index_from_map(reading, taxtel_map, cols, rows, {t: t for t in range(len(textures))})
     meta = ext.get("metadata", {})
@@ -292,7 +293,8 @@ def _texture_from_extension(reading: Reading, entry: dict[str, Any], perception:
     tick_mm = unit_mm / reading.doc.timescale
     where = f"{EXT}.textures[{t}]"
     if not channel.bands or channel.bands[0].band_type != "Curve":
-        raise AssetError("the extension expects the baseline as curve band 0", source=reading.source,
+        raise AssetError("the extension expects the baseline as curve band 0",
+                         source=reading.source,
                          field=f"{channel.path}.bands[0]")
     baseline = mid + half * _first_amplitude(channel.bands[0], reading, 0.0)
     components = []
@@ -305,7 +307,8 @@ def _texture_from_extension(reading: Reading, entry: dict[str, Any], perception:
         if b >= len(channel.bands) or channel.bands[b].band_type != "VectorialWave" or not (
                 channel.bands[b].effects):
             raise AssetError(f"component {c} names band {b}, which is not a vectorial band "
-                             "with effects", source=reading.source, field=f"{where}.components[{c}]")
+                             "with effects", source=reading.source,
+                             field=f"{where}.components[{c}]")
         band = channel.bands[b]
         first = min(band.effects, key=lambda e: e.position)
         f_written = _first_frequency(first)
@@ -362,7 +365,7 @@ def _from_companion(reading: Reading, channels: list[tuple[Perception, Channel]]
         texture = _texture_at(reading, perception, channel, ch, None)
         textures.append(texture)
         _place(reading, perception, channel, _range(reading, ch),
-               lambda u, texture=texture: hjif_eval.texture_profile(texture, u))
+               _profile_of(texture))
     rows, cols = taxtel_map.ids.shape
     if taxtel_map.surface_mm is None:
         raise AssetError("the glTF companion gives no surface rectangle (POSITION bounds)",
@@ -381,7 +384,7 @@ def _along_x(reading: Reading, channels: list[tuple[Perception, Channel]]) -> pb
         raise AssetError(f"the channels are {width:g} mm long, outside 0..{limits.MAX_SURFACE_MM:g}"
                          " mm; give --width-mm", source=reading.source, field="perceptions")
     constant = all(_is_constant(c) for _, c in channels)
-    taxtel = reading.opts.taxtel_mm or (width if constant else DEFAULT_TAXTEL_MM)
+    taxtel = reading.opts.taxtel_mm or (width if constant else min(DEFAULT_TAXTEL_MM, width))
     cols = build.grid_count(width, taxtel)
     if cols > limits.MAX_GRID_COLS or len(channels) > limits.MAX_GRID_ROWS:
         raise AssetError(f"{cols} taxtels along x for {len(channels)} channel(s) exceed the "
@@ -394,7 +397,7 @@ def _along_x(reading: Reading, channels: list[tuple[Perception, Channel]]) -> pb
         ch = _generic_channel(perception)
         row = []
         for col in range(cols):
-            x_mm = min((col + 0.5) * taxtel, width)
+            x_mm = (col * taxtel + min((col + 1) * taxtel, width)) / 2
             texture = _texture_at(reading, perception, channel, ch, x_mm)
             key = texture.SerializeToString(deterministic=True)
             if key not in palette:
@@ -415,6 +418,15 @@ def _along_x(reading: Reading, channels: list[tuple[Perception, Channel]]) -> pb
         reading.note(f"{len(channels)} channels without a glTF companion: one row of taxtels "
                      "each, in file order")
     return _card(reading, width, taxtel * len(channels), taxtel, textures, index, {})
+
+
+def _profile_of(texture: pb.Texture) -> Callable[[np.ndarray], np.ndarray]:
+    """The friction of ``texture`` along its gratings' axes (IJ60)."""
+
+    def friction(u: np.ndarray) -> np.ndarray:
+        return hjif_eval.texture_profile(texture, u)
+
+    return friction
 
 
 def _row_friction(textures: list[pb.Texture], row: list[int], taxtel: float
