@@ -268,3 +268,15 @@ def test_options_that_do_not_apply_are_usage_errors(hjif_registered, tmp_path) -
     result = run_hcard("import", path, "-o", tmp_path / "o.hcard", "--dpi", "100")
     assert_one_line_error(result, "--dpi: not an option of the hjif importer", status=2,
                           after_usage=True)
+
+
+def test_a_bad_option_value_is_a_usage_error(hjif_registered, tmp_path) -> None:
+    path = tmp_path / "ok.hjif"
+    path.write_text(json.dumps(_document()))
+    result = run_hcard("import", path, "-o", tmp_path / "o.hcard", "--taxtel-mm", "0.01")
+    assert_one_line_error(result, "--taxtel-mm must be a number of mm in 0.05..10000, got 0.01",
+                          status=2, after_usage=True)
+    result = run_hcard("import", path, "-o", tmp_path / "o.hcard", "--friction-range", "1",
+                       "0.5")
+    assert_one_line_error(result, "--friction-range must satisfy 0 <= LO < HI <= 4, got 1 0.5",
+                          status=2, after_usage=True)

@@ -48,13 +48,15 @@ class HjifImporter:
         if unknown:
             raise UsageError(f"{', '.join(unknown)}: not an option of the hjif importer "
                              f"(it takes {', '.join(IMPORT_OPTIONS)})")
-        for name, low in (("width_mm", 0.0), ("taxtel_mm", limits.MIN_TAXTEL_MM)):
+        for name, low, open_low in (("width_mm", 0.0, True),
+                                    ("taxtel_mm", limits.MIN_TAXTEL_MM, False)):
             value = values.get(name)
-            if value is not None and not ((math.isfinite(value)
-                                          and low < value <= limits.MAX_SURFACE_MM)
-                                          or value == low > 0):
-                raise UsageError(f"{name} must be a number of mm in {low:g}..."
-                                 f"{limits.MAX_SURFACE_MM:g}, got {value}")
+            if value is None:
+                continue
+            above = value > low if open_low else value >= low
+            if not (math.isfinite(value) and above and value <= limits.MAX_SURFACE_MM):
+                raise UsageError(f"{name} must be a number of mm in {low:g}.."
+                                 f"{limits.MAX_SURFACE_MM:g}, got {value:g}")
         if values.get("friction_range") is not None:
             low, high = (float(v) for v in values["friction_range"])
             if not (math.isfinite(low) and math.isfinite(high)
