@@ -242,7 +242,7 @@ def _importer_for(source: Path, name: str | None) -> ImporterPlugin:
         if name not in importers:
             raise click.UsageError(f"--from {name}: no such importer; installed: "
                                    f"{', '.join(sorted(importers)) or 'none'}")
-        return importers[name]  # type: ignore[no-any-return]
+        return importers[name]
     try:
         with source.open("rb") as file:
             head = file.read(SNIFF_BYTES)
@@ -261,7 +261,7 @@ def _importer_for(source: Path, name: str | None) -> ImporterPlugin:
             f"the content fits {' and '.join(chosen)} alike (a bitmap does not say whose "
             f"polarity it has: Tanvas white = most friction, TPad white = slipperiest); "
             f"name one with --from", source=source)
-    return importers[chosen[0]]  # type: ignore[no-any-return]
+    return importers[chosen[0]]
 
 
 def _exporter_named(name: str) -> ExporterPlugin:
@@ -271,7 +271,7 @@ def _exporter_named(name: str) -> ExporterPlugin:
     if name not in exporters:
         raise click.UsageError(f"--to {name}: no such exporter; installed: "
                                f"{', '.join(sorted(exporters)) or 'none'}")
-    return exporters[name]  # type: ignore[no-any-return]
+    return exporters[name]
 
 
 def _as_options(message: str) -> str:

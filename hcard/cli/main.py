@@ -37,7 +37,7 @@ COMMAND_SUMMARIES = {
     "export": "Export CARD to another tool's format: .hjif, Tanvas, TPad.",
     "import": "Import SOURCE, another tool's haptic asset, into a card.",
     "info": "Describe each CARD: metadata, surface, grid and every texture.",
-    "plugins": "List installed encoders, predictors, drivers, effects, checks, formats.",
+    "plugins": "List installed plugins: encoders, predictors, drivers, formats.",
     "predict": "Evaluate a physics predictor MODEL at a point or over a sweep.",
     "preview": "Draw CARD as a PNG picture of its taxtels and textures.",
     "render": "Render CARD along a finger track into target friction.",

@@ -33,7 +33,7 @@ def format_table(infos: list[PluginInfo]) -> str:
 @verbosity_options
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
 def plugins(as_json: bool) -> None:
-    """List installed encoders, predictors, drivers, effects, checks, formats.
+    """List installed plugins: encoders, predictors, drivers, formats.
 
     Plugins come from the ``hcard.plugins`` entry-point group (the built-ins too). A plugin that
     cannot be loaded is reported as a warning on stderr and skipped; the command still exits 0.

@@ -127,6 +127,7 @@ def read_taxtel_map(path: Path) -> TaxtelMap:
             (or a file beside the glTF) of at most 1024 x 1024 pixels.
     """
     from hcard.bounded_read import InputTooLarge, read_bounded
+    from hcard.file_errors import read_reason
     from hcard.json_text import JsonInputError, parse_json
 
     try:
@@ -134,7 +135,7 @@ def read_taxtel_map(path: Path) -> TaxtelMap:
     except (JsonInputError, InputTooLarge) as exc:
         raise AssetError(f"glTF companion: {exc}", source=path) from None
     except OSError as exc:
-        raise AssetError(f"glTF companion cannot be read: {exc.strerror}", source=path) from None
+        raise AssetError(read_reason(exc, "a glTF companion"), source=path) from None
     image_index = _haptic_image(doc, path)
     uri = _get(doc, ["images", image_index, "uri"], str, path)
     ids = _decode_png(_image_bytes(uri, path, f"images[{image_index}].uri"), path)

@@ -111,13 +111,14 @@ def import_file(source: Path, opts: ImportOptions) -> EncodeResult:
             message names the file, the JSON path and why.
     """
     from hcard.bounded_read import MAX_JSON_FILE_BYTES, InputTooLarge, read_bounded
+    from hcard.file_errors import read_reason
 
     try:
         data = read_bounded(source, MAX_JSON_FILE_BYTES)
     except InputTooLarge as exc:
         raise AssetError(str(exc), source=source) from None
     except OSError as exc:
-        raise AssetError(f"cannot be read: {exc.strerror}", source=source) from None
+        raise AssetError(read_reason(exc, "an .hjif file"), source=source) from None
     doc = read_document(source, data)
     reading = Reading(doc, source, opts, extension_of(doc, source))
     for perception in doc.perceptions:
