@@ -45,7 +45,7 @@ def friction_of_halves(card: pb.Card) -> tuple[float, float]:
 
 def test_tanvas_black_is_natural_friction_and_white_the_most_ev(tmp_path: Path):
     """IB1, IB3: gray 0 = 1.0 and 255 = 1.6 on channel EV, on the two halves of an image."""
-    result = TanvasImporter().read(halves(tmp_path / "t.png", 0, 255), taxtel_mm=5.0)
+    result = TanvasImporter().read(halves(tmp_path / "t.png", 0, 255), taxtel_mm=5.0, dpi=254.0)
     left, right = friction_of_halves(result.card)
     assert left == pytest.approx(1.0, abs=1e-6) and right == pytest.approx(1.6, abs=1e-6)
     assert {t.channel for t in result.card.textures} == {pb.CHANNEL_EV}
@@ -65,9 +65,10 @@ def test_mid_gray_maps_linearly_in_each_polarity(tmp_path: Path):
     """IB3: gray 128 is 1 + 0.6 * 128/255 = 1.30118 (Tanvas) and 1 - 0.7 * 128/255 = 0.64863
     (TPad); with --friction-range 1 2 Tanvas gray 51 is 1.2."""
     path = halves(tmp_path / "g.png", 128, 51)
-    tanvas = friction_of_halves(TanvasImporter().read(path).card)
+    tanvas = friction_of_halves(TanvasImporter().read(path, dpi=254.0).card)
     tpad = friction_of_halves(TPadImporter().read(path).card)
-    ranged = friction_of_halves(TanvasImporter().read(path, friction_range=(1.0, 2.0)).card)
+    ranged = friction_of_halves(TanvasImporter().read(path, friction_range=(1.0, 2.0),
+                                                      dpi=254.0).card)
     assert tanvas == pytest.approx((1.301176, 1.12), abs=1e-5)
     assert tpad == pytest.approx((0.648627, 0.86), abs=1e-5)
     assert ranged == pytest.approx((1.501961, 1.2), abs=1e-5)
@@ -81,7 +82,7 @@ def test_transparent_pixels_are_natural_friction_in_both_formats(tmp_path: Path)
     rgba[:, :50, 3] = 0
     rgba[:, 50:, 3] = 102
     path = save_png(rgba, tmp_path / "a.png", dpi=254.0)
-    assert friction_of_halves(TanvasImporter().read(path).card) == pytest.approx(
+    assert friction_of_halves(TanvasImporter().read(path, dpi=254.0).card) == pytest.approx(
         (1.0, 1.24), abs=1e-5)
     assert friction_of_halves(TPadImporter().read(path).card) == pytest.approx(
         (1.0, 0.72), abs=1e-5)
@@ -99,7 +100,7 @@ def test_colour_is_luma_16_bit_keeps_its_levels_and_palettes_are_read(tmp_path: 
     deep = np.full((60, 100), 32768, dtype=np.uint16)
     path = tmp_path / "d.png"
     Image.fromarray(deep).save(path, dpi=(254, 254))
-    assert friction_of_halves(TanvasImporter().read(path).card)[0] == pytest.approx(
+    assert friction_of_halves(TanvasImporter().read(path, dpi=254.0).card)[0] == pytest.approx(
         1 + 0.6 * 32768 / 65535, abs=1e-6)
     palette = Image.fromarray(np.where(np.arange(100) < 50, 0, 1).astype(np.uint8)[None, :]
                               .repeat(60, axis=0), mode="P")
@@ -110,14 +111,19 @@ def test_colour_is_luma_16_bit_keeps_its_levels_and_palettes_are_read(tmp_path: 
 
 
 def test_size_comes_from_options_then_phys_then_the_format_default(tmp_path: Path):
-    """IB5: --dpi, else pHYs, else Tanvas 149.4 dpi (100 px = 17.00 mm) and TPad 254 dpi."""
+    """IB5: --dpi, else the Tanvas screen, 149.4 dpi (100 px = 17.00 mm) whatever the pHYs;
+    TPad: pHYs, else 254 dpi. (The other tests give Tanvas reads ``dpi=254.0``, their images'
+    stated resolution, so that a taxtel holds whole pixels.)"""
     plain = save_png(np.zeros((60, 100), dtype=np.uint8), tmp_path / "n.png")
     tanvas = TanvasImporter().read(plain).stats
     assert tanvas["width_mm"] == pytest.approx(100 * 25.4 / 149.4)
     assert "assumed 149.4 dpi, the Tanvas default" in tanvas["size_source"]
     assert TPadImporter().read(plain).stats["width_mm"] == pytest.approx(10.0)
-    stated = halves(tmp_path / "s.png", 0, 0)
-    assert TanvasImporter().read(stated).stats["width_mm"] == pytest.approx(10.0)
+    stated = halves(tmp_path / "s.png", 0, 0)  # 100 x 60 pixels at a stated 254 dpi
+    assert TPadImporter().read(stated).stats["width_mm"] == pytest.approx(10.0)
+    screen = TanvasImporter().read(stated).stats
+    assert screen["width_mm"] == pytest.approx(100 * 25.4 / 149.4)
+    assert "a Tanvas bitmap pixel is a screen pixel" in screen["size_source"]
     assert TanvasImporter().read(stated, dpi=127.0).stats["width_mm"] == pytest.approx(20.0)
     assert TanvasImporter().read(stated, width_mm=50.0).stats["height_mm"] == pytest.approx(30.0)
 
@@ -314,7 +320,7 @@ def test_round_trip_without_the_chunk_is_within_the_stated_tolerance(
     card = build.card(30.0, 20.0, taxtel_mm=5.0, textures=textures,
                       texture_index=(np.arange(24) // 3) % 2)
     data = exporter().write(card).files[0][1]
-    result = importer().read(without_chunk(data, tmp_path / "s.png"), max_error=0.5)
+    result = importer().read(without_chunk(data, tmp_path / "s.png"), max_error=0.5, dpi=254.0)
     assert result.stats["embedded_card"] is False
     assert (result.card.surface.width_mm, result.card.surface.height_mm) == (30.0, 20.0)
     x, y = np.meshgrid(np.arange(0.025, 30, 0.05), np.arange(0.025, 20, 0.05))
@@ -339,7 +345,7 @@ def test_an_edited_export_is_encoded_from_its_pixels(tmp_path: Path):
     keep = PngInfo()
     keep.add_itxt("hcard", info["hcard"])
     Image.fromarray(pixels).save(path, pnginfo=keep, dpi=info["dpi"])
-    result = TanvasImporter().read(path)
+    result = TanvasImporter().read(path, dpi=254.0)
     assert result.stats["embedded_card"] is False
     assert "the pixels differ from those" in result.log[0]
     assert friction_of_halves(result.card) == pytest.approx((1.6, 1.0), abs=1e-6)

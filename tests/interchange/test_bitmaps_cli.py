@@ -29,7 +29,8 @@ def test_a_plain_png_is_a_tie_and_from_names_the_format(tmp_path: Path):
     source = plain_png(tmp_path)
     tie = run_hcard("import", source, "-o", tmp_path / "x.hcard")
     assert_one_line_error(tie, str(source), "fits tanvas and tpad alike", "--from")
-    done = run_hcard("import", source, "--from", "tanvas", "-o", tmp_path / "x.hcard")
+    done = run_hcard("import", source, "--from", "tanvas", "--dpi", "254", "-o",
+                     tmp_path / "x.hcard")
     assert done.exit_code == 0, done.output
     assert done.output.startswith("format      tanvas: Tanvas bitmap, gray 0 = relative "
                                   "friction 1, 255 = 1.6 (channel ev)")

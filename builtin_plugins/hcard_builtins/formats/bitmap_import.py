@@ -65,7 +65,7 @@ def encoded_result(fmt: BitmapFormat, source: Path, facts: PngFacts, options: di
                    progress: Callable[[str], None] | None, notes: list[str]) -> EncodeResult:
     """The card the image encoder makes of the pixels in the format's polarity (IB1-IB7)."""
     sized = any(options[name] is not None for name in ("width_mm", "height_mm", "dpi"))
-    assumed = not sized and facts.dpi is None
+    assumed = not sized and (facts.dpi is None or fmt.pixel_is_screen_pixel)
     encode = EncodeOptions(
         width_mm=options["width_mm"], height_mm=options["height_mm"],
         dpi=fmt.default_dpi if assumed else options["dpi"], taxtel_mm=options["taxtel_mm"],
@@ -77,7 +77,9 @@ def encoded_result(fmt: BitmapFormat, source: Path, facts: PngFacts, options: di
     if assumed:
         result.stats["size_source"] = (
             f"assumed {fmt.default_dpi:g} dpi, the {fmt.label} default ({fmt.dpi_reason}): "
-            "no size given and no pHYs in the PNG")
+            + ("no size given; a Tanvas bitmap pixel is a screen pixel, whatever the PNG's "
+               "pHYs says" if fmt.pixel_is_screen_pixel else
+               "no size given and no pHYs in the PNG"))
     black, white = fmt.gray_ends(options["friction_range"])
     result.stats.update({
         "format_detail": (f"{fmt.label} bitmap, gray 0 = relative friction {black:g}, "

@@ -54,6 +54,10 @@ class BitmapFormat:
         default_dpi: screen resolution assumed when neither the options nor the PNG give a
             size, dots per inch.
         dpi_reason: why that resolution, for the summary.
+        pixel_is_screen_pixel: the format's runtime draws one bitmap pixel per screen pixel
+            (Tanvas), so the screen's resolution sizes the surface and a PNG's stated
+            resolution (pHYs: an authoring tool's setting, 72 dpi from Photoshop) does not;
+            False when the runtime stretches the bitmap (TPad) and pHYs is the best guess.
     """
 
     name: str
@@ -63,6 +67,7 @@ class BitmapFormat:
     friction_range: tuple[float, float]
     default_dpi: float
     dpi_reason: str
+    pixel_is_screen_pixel: bool = False
 
     def gray_ends(self, friction_range: tuple[float, float]) -> tuple[float, float]:
         """Relative friction of gray 0 and of gray 255 for ``friction_range`` (IB3)."""
@@ -74,6 +79,7 @@ TANVAS = BitmapFormat(
     name="tanvas", label="Tanvas", channel="ev", white_is="high",
     friction_range=(1.0, 1.6), default_dpi=149.4,
     dpi_reason="the Mimo Vue HD TanvasTouch screen, 10.1 in at 1280 x 800 pixels",
+    pixel_is_screen_pixel=True,
 )
 TPAD = BitmapFormat(
     name="tpad", label="TPad", channel="uv", white_is="low",
