@@ -72,3 +72,25 @@ def test_import_json_summary(hjif_registered, tmp_path) -> None:
     assert summary["textures"] == 3 and summary["cols"] == 12
     assert summary["max_error_jnd"] < 0.0125
     assert load(tmp_path / "b.json").metadata.title == "renamed"
+
+
+def test_an_export_whose_extension_outgrows_the_recognised_head_is_still_recognised(
+        hjif_registered, tmp_path) -> None:
+    """IJ70: 40 textures make the top-level description (the extension) longer than the 4096
+    bytes hcard import recognises a format by, so "perceptions" lies past them."""
+    from hcard import build
+
+    textures = [build.texture(1.1 + 0.01 * t, [build.spatial(0.5 + 0.05 * t, 0.05)],
+                              channel="ev", name=f"ridge-{t}") for t in range(40)]
+    card = build.card(40.0, 5.0, taxtel_mm=1.0, textures=textures,
+                      texture_index=list(range(40)) * 5)
+    save(card, tmp_path / "wide.hcard")
+    assert run_hcard("export", tmp_path / "wide.hcard", "--to", "hjif", "-o",
+                     tmp_path / "wide.hjif").exit_code == 0
+    head = (tmp_path / "wide.hjif").read_bytes()[:4096]
+    assert b'"perceptions"' not in head
+    result = run_hcard("import", tmp_path / "wide.hjif", "-o", tmp_path / "back.hcard")
+    assert result.exit_code == 0, result.output
+    back = load(tmp_path / "back.hcard")
+    assert [t.name for t in back.textures] == [f"ridge-{t}" for t in range(40)]
+    assert list(back.grid.texture_index) == list(card.grid.texture_index)

@@ -34,11 +34,15 @@ class HjifImporter:
 
     def recognises(self, head: bytes) -> int:
         """2 for a JSON object whose first bytes hold ``"perceptions"`` and ``"timescale"`` or
-        ``"version"`` (IJ70), else 0."""
+        ``"version"``, or ``"version"``, ``"profile"`` and ``"level"`` (the keys the reference
+        software writes first: a long top-level ``description``, as an hcard export's
+        extension, puts ``"perceptions"`` past the first 4096 bytes) (IJ70), else 0."""
         text = head.lstrip(b"\xef\xbb\xbf \t\r\n")
-        if not text.startswith(b"{") or b'"perceptions"' not in head:
+        if not text.startswith(b"{"):
             return 0
-        return 2 if b'"timescale"' in head or b'"version"' in head else 0
+        if b'"perceptions"' in head and (b'"timescale"' in head or b'"version"' in head):
+            return 2
+        return 2 if all(key in head for key in (b'"version"', b'"profile"', b'"level"')) else 0
 
     def options(self, **values: Any) -> dict[str, Any]:
         """``values`` checked (UsageError naming the option): ``width_mm`` and ``taxtel_mm``
