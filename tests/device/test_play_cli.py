@@ -194,20 +194,11 @@ def test_device_list_rejects_a_bad_host():
     assert result.exit_code == 2 and "the port must be a number" in result.output
 
 
-def test_device_serve_reports_a_busy_port():
-    with socket.socket() as busy:
-        busy.bind(("127.0.0.1", 0))
-        busy.listen(1)
-        port = busy.getsockname()[1]
-        result = CliRunner().invoke(cli, ["device", "serve", "--port", str(port)])
-    assert result.exit_code == 1
-    assert f"cannot serve on 127.0.0.1:{port}" in result.output
-
-
-def test_a_serve_that_returns_gives_back_the_priority_and_switch_interval_it_took():
-    """`hcard device serve` runs in the calling process: a serve that returned left its main
-    thread at SCHED_RR (root), so every process it started later inherited real-time
-    scheduling (the CI failure of two `hcard play` taking turns in 100 ms slices)."""
+def test_device_serve_reports_a_busy_port_and_gives_back_what_it_took():
+    """`hcard device serve` runs in the calling process: a serve that returned used to leave
+    its main thread at SCHED_RR (root), so every process it started later inherited real-time
+    scheduling (the CI failure of two `hcard play` taking turns in 100 ms slices); it gives
+    back the scheduling and the switch interval it took."""
     before = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority,
               os.getpriority(os.PRIO_PROCESS, 0), sys.getswitchinterval())
     with socket.socket() as busy:
@@ -216,6 +207,7 @@ def test_a_serve_that_returns_gives_back_the_priority_and_switch_interval_it_too
         port = busy.getsockname()[1]
         result = CliRunner().invoke(cli, ["device", "serve", "--port", str(port)])
     assert result.exit_code == 1
+    assert f"cannot serve on 127.0.0.1:{port}" in result.output
     after = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority,
              os.getpriority(os.PRIO_PROCESS, 0), sys.getswitchinterval())
     assert after == before

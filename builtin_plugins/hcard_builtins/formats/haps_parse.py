@@ -14,10 +14,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from hcard.bounded_read import InputTooLarge, read_bounded
 from hcard.errors import AssetError
-from hcard.file_errors import read_reason
 from hcard.json_text import JsonInputError, parse_json
+
+from .asset_files import read_asset
 
 MAX_HAPS_BYTES = 16 * 1024 * 1024
 """Largest .haps file read, bytes (the public samples are 2-12 kB; Haptic Composer's longest
@@ -181,12 +181,7 @@ def read_haps(source: Path) -> HapsTexture:
         AssetError: the file is too large, not JSON, not a .haps object, or its texture
             perception is missing, empty or holds a bad value (the message names the field).
     """
-    try:
-        data = read_bounded(source, MAX_HAPS_BYTES)
-    except InputTooLarge as exc:
-        raise AssetError(str(exc), source=source) from None
-    except OSError as exc:
-        raise AssetError(read_reason(exc, "a .haps file"), source=source) from None
+    data = read_asset(source, MAX_HAPS_BYTES, "a .haps file")
     try:
         root = parse_json(data, max_depth=MAX_HAPS_DEPTH)
     except JsonInputError as exc:

@@ -110,15 +110,11 @@ def import_file(source: Path, opts: ImportOptions) -> EncodeResult:
         AssetError: the file (or its glTF companion, or its extension) is not acceptable; the
             message names the file, the JSON path and why.
     """
-    from hcard.bounded_read import MAX_JSON_FILE_BYTES, InputTooLarge, read_bounded
-    from hcard.file_errors import read_reason
+    from hcard.bounded_read import MAX_JSON_FILE_BYTES
 
-    try:
-        data = read_bounded(source, MAX_JSON_FILE_BYTES)
-    except InputTooLarge as exc:
-        raise AssetError(str(exc), source=source) from None
-    except OSError as exc:
-        raise AssetError(read_reason(exc, "an .hjif file"), source=source) from None
+    from .asset_files import read_asset
+
+    data = read_asset(source, MAX_JSON_FILE_BYTES, "an .hjif file")
     doc = read_document(source, data)
     reading = Reading(doc, source, opts, extension_of(doc, source))
     for perception in doc.perceptions:
