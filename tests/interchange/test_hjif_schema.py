@@ -114,6 +114,17 @@ def test_ij13_phases_are_float32_within_the_schema(document) -> None:
         assert float(np.float32(phase)) == phase
 
 
+def test_ij13_each_effect_has_one_frequency_keyframe(document) -> None:
+    """The reference accumulates phase across frequency keyframes with a millisecond factor
+    in its code: a second one at a timescale other than 1000 inverts the signal after it."""
+    effects = [effect for perception in document["perceptions"]
+               for channel in perception["channels"] for band in channel["bands"]
+               for effect in band["effects"] if band["band_type"] == "VectorialWave"]
+    assert effects
+    for effect in effects:
+        assert sum("frequency_modulation" in key for key in effect["keyframes"]) == 1
+
+
 def test_ij28_level_follows_the_channel_and_band_counts(document) -> None:
     channels = max(len(p["channels"]) for p in document["perceptions"])
     bands = max(len(c["bands"]) for p in document["perceptions"] for c in p["channels"])
