@@ -23,7 +23,11 @@ from typing import Any
 
 import click
 
-from hcard.calibration.measurement import Measurement, MeasurementError, read_measurement
+from hcard.calibration.lab.column_map import ColumnMap, read_column_map
+from hcard.calibration.lab.detect import LAB_SUFFIXES
+from hcard.calibration.lab.propose import propose
+from hcard.calibration.lab.reading import open_lab_file, read_recording
+from hcard.calibration.measurement import Measurement, MeasurementError
 from hcard.calibration.plan import (
     DEFAULT_DURATION_S,
     DEFAULT_VERIFY_DURATION_S,
@@ -49,14 +53,19 @@ class CalibrateUsageError(UsageError):
     """Options of ``hcard calibrate`` that do not fit together."""
 
 
-def recording_paths(data: tuple[Path, ...]) -> list[Path]:
-    """The CSV files named by DATA: files as given, directories by their ``*.csv`` (sorted)."""
+def recording_paths(data: tuple[Path, ...], lab: bool = False) -> list[Path]:
+    """The recordings named by DATA: files as given, directories by their ``*.csv`` (sorted),
+    or with a column map (``lab``) by every suffix of a lab file (spec/lab-recordings.md LR9,
+    :data:`~hcard.calibration.lab.detect.LAB_SUFFIXES`)."""
     paths: list[Path] = []
+    suffixes = LAB_SUFFIXES if lab else (".csv",)
     for item in data:
         if item.is_dir():
-            found = sorted(item.glob("*.csv"))
+            found = sorted(p for p in item.iterdir()
+                           if p.is_file() and p.suffix.lower() in suffixes)
             if not found:
-                raise MeasurementError(f"{item}: no .csv recordings in this directory")
+                raise MeasurementError(f"{item}: no {'/'.join(suffixes)} recordings in this "
+                                       "directory")
             paths.extend(found)
         elif item.exists():
             paths.append(item)
@@ -118,6 +127,36 @@ def calibrate_group() -> None:
       hcard calibrate rec.csv -o calib/
       hcard calibrate rec.csv -o calib/ --verify usbip://127.0.0.1:3240/1-1
     """
+
+
+# -- map ---------------------------------------------------------------------------------------
+@calibrate_group.command("map")
+@click.argument("file", type=INPUT_FILE)
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the proposed map here (default: print it).")
+def map_command(file: Path, output: Path | None) -> None:
+    """Propose a column map for the lab file FILE (.mat, HDF5, CSV/TSV).
+
+    Prints, on standard error, what it could not decide (e.g. "channel ai3: unknown
+    quantity, set quantity"); edit the map, then: hcard calibrate --map MAP FILE ...
+    """
+    lab = open_lab_file(file)
+    try:
+        proposal = propose(lab)
+    finally:
+        lab.close()
+    text = json.dumps(proposal.column_map, indent=2) + "\n"
+    if output is None:
+        click.echo(text, nl=False)
+    else:
+        with writing(output, MeasurementError):
+            output.write_text(text, encoding="utf-8")
+        click.echo(f"wrote {output}", err=True)
+    if proposal.sample_rate_hz is not None:
+        click.echo(f"sample rate from the time variable: {proposal.sample_rate_hz:.6g} Hz",
+                   err=True)
+    for line in proposal.undecided:
+        click.echo(f"undecided: {line}", err=True)
 
 
 # -- plan ---------------------------------------------------------------------------------------
@@ -261,6 +300,9 @@ def _verification_files(measurements: list[Measurement], card: Path | None,
 @calibrate_group.command("run")
 @verbosity_options
 @click.argument("data", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("--map", "map_path", type=INPUT_FILE, metavar="RIG.json",
+              help="Read DATA (.mat, HDF5, CSV/TSV with the lab's column names) through this "
+                   "column map (spec/lab-recordings.md).")
 @click.option("--model", "-m", "model_name",
               help="Calibrate this bare predictor (see `hcard predict --list`) instead of the "
                    "recordings' device profile.")
@@ -317,6 +359,7 @@ def _verification_files(measurements: list[Measurement], card: Path | None,
                    "explains.")
 def calibrate_command(
     data: tuple[Path, ...],
+    map_path: Path | None,
     model_name: str | None,
     profile_path: Path | None,
     finger_name: str,
@@ -395,8 +438,9 @@ def calibrate_command(
         if not quiet():
             click.echo(f"[{time.perf_counter() - started:6.1f} s] {text}", err=True)
 
-    paths = recording_paths(data)
-    measurements = [read_measurement(path) for path in paths]
+    column_map: ColumnMap | None = read_column_map(map_path) if map_path else None
+    paths = recording_paths(data, lab=column_map is not None)
+    measurements = [read_recording(path, column_map) for path in paths]
     base, base_profile, voltage_form = _base_of(measurements, model_name, profile_path,
                                                 finger_name)
     if verify_uri is not None:
