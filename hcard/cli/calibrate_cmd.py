@@ -551,3 +551,7 @@ def _verify(uri: str, files: tuple[Path, Path], profile: DeviceProfile, timeout:
 
 
 COMMANDS = [calibrate_group]
+
+from hcard.cli.calibrate_population_cmd import population_command  # noqa: E402
+
+calibrate_group.add_command(population_command)
