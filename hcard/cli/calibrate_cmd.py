@@ -131,6 +131,7 @@ def calibrate_group() -> None:
 
 # -- map ---------------------------------------------------------------------------------------
 @calibrate_group.command("map")
+@verbosity_options
 @click.argument("file", type=INPUT_FILE)
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
               help="Write the proposed map here (default: print it).")
@@ -138,7 +139,12 @@ def map_command(file: Path, output: Path | None) -> None:
     """Propose a column map for the lab file FILE (.mat, HDF5, CSV/TSV).
 
     Prints, on standard error, what it could not decide (e.g. "channel ai3: unknown
-    quantity, set quantity"); edit the map, then: hcard calibrate --map MAP FILE ...
+    quantity, set quantity"); edit the map, then calibrate with it (spec/lab-recordings.md).
+
+    \b
+    Examples:
+      hcard calibrate map rig1/p03_trial1.mat -o rig1.json
+      hcard calibrate --map rig1.json rig1/ -o calib/
     """
     lab = open_lab_file(file)
     try:
