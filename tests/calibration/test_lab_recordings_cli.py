@@ -188,4 +188,4 @@ def test_a_matrix_where_one_channel_is_expected(tmp_path: Path) -> None:
     mat = _mat(tmp_path, **{**GOOD, "fn": np.ones((10, 2))})
     line = _cli_error(["calibrate", "--map", str(_map(tmp_path)), str(mat)])
     assert line == (f"Error: {mat}: variable 'fn': shape (10, 2) is not one column; map one "
-                    "channel per variable")
+                    "channel per variable, or a matrix's column K as NAME(:,K)")

@@ -16,7 +16,9 @@ from hcard.calibration.lab.source import (
     MAX_VARIABLES,
     as_column,
     check_shape,
+    matrix_column,
     missing,
+    split_column,
 )
 
 
@@ -77,6 +79,18 @@ class Hdf5File:
         return bool(kind is not None and np.asarray(kind).tobytes().strip(b"\0") == b"char")
 
     def array(self, name: str) -> np.ndarray:
+        base, column = split_column(name)
+        if column is not None:
+            matrix = self._dataset(base)
+            if matrix.dtype.kind not in "biuf" or self._is_matlab_char(matrix):
+                raise LabRecordingError(f"{self.path}: variable {base!r}: not real numbers")
+            if matrix.ndim != 2:
+                raise LabRecordingError(f"{self.path}: variable {base!r}: shape "
+                                        f"{tuple(matrix.shape)} is not a matrix of samples "
+                                        "by channels")
+            # MATLAB v7.3 stores an N-by-k matrix transposed, as k-by-N
+            value = np.asarray(matrix[()]).T if self.matlab else np.asarray(matrix[()])
+            return matrix_column(self.path, base, value, column)
         dataset = self._dataset(name)
         check_shape(self.path, name, tuple(dataset.shape))
         if dataset.dtype.kind not in "biuf" or self._is_matlab_char(dataset):

@@ -18,7 +18,9 @@ from hcard.calibration.lab.source import (
     MAX_VARIABLES,
     as_column,
     check_shape,
+    matrix_column,
     missing,
+    split_column,
 )
 
 
@@ -41,11 +43,11 @@ class MatFile:
         self._top = {name: (tuple(shape), kind) for name, shape, kind in listing}
         self._loaded: dict[str, Any] = {}
 
-    def _load(self, top: str) -> Any:
+    def _load(self, top: str, *, matrix: bool = False) -> Any:
         if top not in self._top:
             raise missing(self.path, top, self.variables())
         shape, kind = self._top[top]
-        if kind not in ("struct", "char"):
+        if kind not in ("struct", "char") and not matrix:
             check_shape(self.path, top, shape)
         if top not in self._loaded:
             try:
@@ -57,12 +59,12 @@ class MatFile:
             self._loaded[top] = data[top]
         return self._loaded[top]
 
-    def _value(self, name: str) -> Any:
+    def _value(self, name: str, *, matrix: bool = False) -> Any:
         parts = name.split(".")
         if len(parts) > MAX_DEPTH:
             raise LabRecordingError(f"{self.path}: variable {name!r}: nested {len(parts)} "
                                     f"deep, more than {MAX_DEPTH}")
-        value = self._load(parts[0])
+        value = self._load(parts[0], matrix=matrix)
         for depth, field in enumerate(parts[1:], start=1):
             reached = ".".join(parts[:depth])
             if isinstance(value, np.ndarray) and value.dtype == object:
@@ -105,6 +107,12 @@ class MatFile:
                 found[name] = tuple(np.shape(child))
 
     def array(self, name: str) -> np.ndarray:
+        base, column = split_column(name)
+        if column is not None:
+            value = self._value(base, matrix=True)
+            if isinstance(value, str):
+                raise LabRecordingError(f"{self.path}: variable {base!r}: text, not numbers")
+            return matrix_column(self.path, base, np.asarray(value), column)
         value = self._value(name)
         if isinstance(value, str):
             raise LabRecordingError(f"{self.path}: variable {name!r}: text, not numbers")

@@ -3,6 +3,7 @@ check that a variable is one column of numbers (spec/lab-recordings.md LR10, LR1
 
 from __future__ import annotations
 
+import re
 from typing import Protocol
 
 import numpy as np
@@ -51,7 +52,8 @@ def check_shape(path: str, name: str, shape: tuple[int, ...]) -> int:
     long_axes = [n for n in shape if n != 1]
     if len(long_axes) > 1:
         raise LabRecordingError(f"{path}: variable {name!r}: shape {shape} is not one column; "
-                                "map one channel per variable")
+                                "map one channel per variable, or a matrix's column K as "
+                                "NAME(:,K)")
     count = int(np.prod(shape)) if shape else 1
     if count > MAX_SAMPLES:
         raise LabRecordingError(f"{path}: variable {name!r}: {count} samples, more than "
@@ -66,6 +68,38 @@ def as_column(path: str, name: str, value: np.ndarray) -> np.ndarray:
                                 "real numbers")
     check_shape(path, name, tuple(value.shape))
     return np.asarray(value, dtype=np.float64).reshape(-1)
+
+
+_COLUMN_OF = re.compile(r"^(?P<base>.+)\(:,\s*(?P<column>[1-9][0-9]{0,5})\)$")
+"""A column of a matrix, MATLAB style and counted from 1: ``dataQ(:,2)`` (LR10)."""
+
+
+def split_column(name: str) -> tuple[str, int | None]:
+    """``name`` split into the variable and the column it selects, counted from 1
+    (``"dataQ(:,2)"`` -> ``("dataQ", 2)``); ``(name, None)`` when it selects none."""
+    found = _COLUMN_OF.match(name)
+    if found is None:
+        return name, None
+    return found["base"], int(found["column"])
+
+
+def matrix_column(path: str, name: str, value: np.ndarray, column: int) -> np.ndarray:
+    """Column ``column`` (from 1) of the 2-D real matrix ``value`` (samples along axis 0) as
+    a 1-D float64 array; LabRecordingError when ``value`` is not such a matrix or has fewer
+    columns."""
+    if value.dtype.kind not in "biuf":
+        raise LabRecordingError(f"{path}: variable {name!r}: holds {value.dtype} values, not "
+                                "real numbers")
+    if value.ndim != 2:
+        raise LabRecordingError(f"{path}: variable {name!r}: shape {tuple(value.shape)} is "
+                                "not a matrix of samples by channels")
+    if column > value.shape[1]:
+        raise LabRecordingError(f"{path}: variable {name!r}: has {value.shape[1]} columns, "
+                                f"not {column}")
+    if value.shape[0] > MAX_SAMPLES:
+        raise LabRecordingError(f"{path}: variable {name!r}: {value.shape[0]} samples, more "
+                                f"than {MAX_SAMPLES}")
+    return np.asarray(value[:, column - 1], dtype=np.float64)
 
 
 def missing(path: str, name: str, known: dict[str, tuple[int, ...]]) -> LabRecordingError:
