@@ -1,7 +1,8 @@
 """Fetch the public asset files the interchange tests read but the repository may not include.
 
 Their projects publish them without a licence that allows redistribution (TanvasProject,
-DrivingStudy-TanvasTouch and TPadSoftware state none; the Interhaptics SDK's files are "all
+DrivingStudy-TanvasTouch, TPadSoftware and data-driven-playback-of-natural-tactile-texture
+state none; the Interhaptics SDK's files are "all
 rights reserved" under its EULA), so they are not in ``tests/data/public/``: this script brings
 them into ``tests/data/public/fetched/<owner>+<repo>/<path>`` (git-ignored), and the tests that
 read them skip, saying so, when they are absent. Every file is pinned to a commit and a
@@ -53,6 +54,11 @@ TANVAS = ("CaritaRoti/TanvasProject", "3d630ee59e776adf38687682e58a1aa307ca197d"
 KNOB = ("brockel27/DrivingStudy-TanvasTouch", "18a0b933ea3fd04d0566aedcf88edd4e7e5f85ad")
 TPAD = ("TPadTabletProject/TPadSoftware", "6e169106fdacee4fa300240ad0ec7d7d3d3e6016")
 INTERHAPTICS = ("Interhaptics/Unity_CoreSDK", "3f1f9144d7c8c27f4d958020e7c1e8670bcbd120")
+GRIGORII = ("romangrigorii/data-driven-playback-of-natural-tactile-texture",
+            "58cd7fcdec94f82f504bb17b2e547ee64c70bde9")
+"""A real finger-on-glass tribometer recording (Northwestern, 10 kHz, NI-DAQ ``dataQ`` of
+lateral force, normal force, vibrometer, EA current monitor, encoder); no licence stated.
+Read by examples/public_data/grigorii-tribometer/ and tests/calibration/test_public_data.py."""
 
 SAMPLES: tuple[Sample, ...] = ()
 """Filled in below from :data:`_TABLE` (repository, path, SHA-256)."""
@@ -79,6 +85,8 @@ _TABLE = (
      "941bb9e8487b360335a0285435bdd0cdc4d710ed09dcdec2c78f78f310515812"),
     (INTERHAPTICS, "Assets/HapticEffects/Swipe_Amplitude10.haps",
      "941bb9e8487b360335a0285435bdd0cdc4d710ed09dcdec2c78f78f310515812"),
+    (GRIGORII, "matlab/DAQ/data/data_temp.mat",
+     "38083f173ecfc7bc98fd96e48451f8c27cf49dd32989ff63daedc2d7e0785248"),
 )
 SAMPLES = tuple(Sample(repo, commit, path, digest) for (repo, commit), path, digest in _TABLE)
 
