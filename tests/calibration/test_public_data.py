@@ -1,4 +1,4 @@
-"""The calibration loop on public real measurements (issue 30, must-show 4), with the figures
+"""The calibration loop on public real measurements (a lab's own data), with the figures
 examples/public_data/*/README.md reports, and the matrix-column addressing (``NAME(:,K)``,
 spec/lab-recordings.md LR10) their DAQ files need."""
 

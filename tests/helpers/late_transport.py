@@ -90,3 +90,31 @@ class LateReaderDriver(SimDriver):
             self.advance(step)
             waited += step
         return data
+
+
+STALL_PERIOD_S = 0.12
+"""Period of :class:`StallingReaderDriver`'s stalls, s."""
+STALL_S = 0.06
+"""How long each stall of :class:`StallingReaderDriver`'s host lasts, s (a QEMU guest's host
+was seen to read nothing for more than 20 ms while its reports were held in the emulated
+USB stack)."""
+
+
+class StallingReaderDriver(LateReaderDriver):
+    """``sim://`` E-ViTa behind a host that reads every report :data:`STALL_LAG_S` late and,
+    for :data:`STALL_S` of every :data:`STALL_PERIOD_S` of the device's clock, reads nothing
+    (the reports wait and are read together after the stall)."""
+
+    def __init__(self) -> None:
+        super().__init__(lag_s=STALL_LAG_S)
+
+    def _due(self) -> bytes | None:
+        if self.clock() % STALL_PERIOD_S < STALL_S:
+            self._held.extend(self._pending)
+            self._pending.clear()
+            return None
+        return super()._due()
+
+
+STALL_LAG_S = 0.01
+"""How late :class:`StallingReaderDriver`'s host reads a report outside its stalls, s."""

@@ -40,13 +40,15 @@ from scipy.optimize import brentq, minimize_scalar
 from scipy.stats import chi2
 from scipy.stats import t as student_t
 
+from hcard.errors import InputError
+
 LEVEL = 0.95
 """Coverage of every interval reported."""
 
 
-class RandomEffectsError(ValueError):
+class RandomEffectsError(InputError, ValueError):
     """Estimates that a random-effects model cannot pool (fewer than two, a non-positive or
-    non-finite standard error)."""
+    non-finite standard error): a study that cannot give a population, as bad input does."""
 
 
 @dataclass(frozen=True)
