@@ -15,6 +15,7 @@ import click
 
 from hcard.calibration.population.grouping import GROUPINGS
 from hcard.calibration.splits import SPLITS
+from hcard.cli.executor_options import executor_options, options_of
 from hcard.cli.input_files import INPUT_FILE
 from hcard.cli.verbosity import quiet, verbosity_options
 from hcard.plugins.registry import get_registry
@@ -48,11 +49,13 @@ from hcard.plugins.registry import get_registry
               required=True, help="Directory for population.md, population.json, forest.png.")
 @click.option("--no-figures", is_flag=True, help="Skip the forest plot.")
 @click.option("--json", "as_json", is_flag=True, help="Print population.json to stdout.")
+@executor_options
 def population_command(data: tuple[Path, ...], by: str, model_name: str | None,
                        profile_path: Path | None, finger_name: str, effects: tuple[str, ...],
                        excluded: tuple[str, ...], free_text: str | None, split: str,
                        test_fraction: str, seed: int, min_improvement: str, max_effects: int,
-                       output: Path, no_figures: bool, as_json: bool) -> None:
+                       output: Path, no_figures: bool, as_json: bool, scheduler: str | None,
+                       workers: int | None) -> None:
     """Fit every participant's recordings alone and pool the parameters into a population.
 
     Two-stage mixed effects: each participant (sidecar `participant`, or --by) is fitted on
@@ -62,10 +65,15 @@ def population_command(data: tuple[Path, ...], by: str, model_name: str | None,
     criterion; a participant whose own decision differs is flagged. Each participant is also
     predicted as one never seen, with the population mean of the others.
 
+    Every participant's fits are tasks on a local Dask cluster (--workers), on the cluster of
+    --scheduler ADDRESS, or in this process (--workers 0); each task reads its own
+    participant's recordings, and the result is the same wherever it ran.
+
     \b
     Examples:
       hcard calibrate population recordings/ -o population/ --model dimensionless-group
       hcard calibrate population a.csv b.csv c.csv -o pop/ --by session --effect load-index
+      hcard calibrate population study/ -o pop/ -m dimensionless-group --scheduler tcp://h:8786
     """
     # the CLI helpers of `hcard calibrate run` are imported here: calibrate_cmd imports this
     # module to attach the command to its group
@@ -80,6 +88,7 @@ def population_command(data: tuple[Path, ...], by: str, model_name: str | None,
         _free_parameters,
         recording_paths,
     )
+    from hcard.executor import Executor
 
     started = time.perf_counter()
     held_out = _fraction(test_fraction, "--test-fraction")
@@ -96,15 +105,24 @@ def population_command(data: tuple[Path, ...], by: str, model_name: str | None,
         if not quiet():
             click.echo(f"[{time.perf_counter() - started:6.1f} s] {text}", err=True)
 
-    measurements = [read_measurement(path) for path in recording_paths(data)]
+    paths = recording_paths(data)
+    measurements = [read_measurement(path) for path in paths]
     groups = group_recordings(measurements, by)
     base, _, _ = _base_of(measurements, model_name, profile_path, finger_name)
     say(f"read {len(measurements)} recording(s) of {len(groups)} {by}s; base {base.name}")
-    result = fit_population(groups, base, candidates, free=_free_parameters(base, free_text),
-                            split=split, test_fraction=held_out, seed=seed,
-                            min_improvement=improvement, max_effects=max_effects, by=by,
-                            progress=say)
-    files = write_population_report(result, output, figures=not no_figures)
+    # the tasks get file paths and read their participant's recordings where they run
+    where = {id(m): str(path) for m, path in zip(measurements, paths, strict=True)}
+    files = {label: [where[id(m)] for m in ms] for label, ms in groups.items()}
+    del measurements, groups
+    options = options_of(scheduler, workers)
+    say(f"fitting {options.describe()}")
+    with Executor(options) as executor:
+        result = fit_population(files, base, candidates,
+                                free=_free_parameters(base, free_text), split=split,
+                                test_fraction=held_out, seed=seed,
+                                min_improvement=improvement, max_effects=max_effects, by=by,
+                                progress=say, executor=executor)
+    report = write_population_report(result, output, figures=not no_figures)
     for part in result.failed:
         click.echo(f"warning: {by} {part.label} left out: {part.error}", err=True)
     if as_json:
@@ -121,5 +139,5 @@ def population_command(data: tuple[Path, ...], by: str, model_name: str | None,
     for part in flagged:
         click.echo(f"  {part.label}: " + "; ".join(f"{why} {effect}"
                                                   for effect, why in part.flags.items()))
-    click.echo(f"report: {files.markdown}  (also {files.json.name}"
-               f"{', ' + ', '.join(p.name for p in files.figures) if files.figures else ''})")
+    click.echo(f"report: {report.markdown}  (also {report.json.name}"
+               f"{', ' + ', '.join(p.name for p in report.figures) if report.figures else ''})")

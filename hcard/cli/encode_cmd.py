@@ -16,8 +16,10 @@ import hcard.limits as limits
 from hcard.atomic import write_atomically, write_atomically_together
 from hcard.bounded_read import DEFAULT_MAX_PIXELS, STDIN
 from hcard.card_io import checked_bytes, format_for_path, save, to_bytes
+from hcard.cli.executor_options import executor_options, options_of
 from hcard.cli.verbosity import quiet, verbosity_options
 from hcard.errors import CardError, HcardError, UsageError
+from hcard.executor import Executor, ExecutorOptions
 from hcard.file_errors import write_reason
 from hcard.validate import require_valid
 
@@ -28,7 +30,7 @@ if TYPE_CHECKING:
 
 @click.command()
 @verbosity_options
-@click.argument("image", type=click.Path(path_type=Path))
+@click.argument("images", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option(
     "-o",
     "--output",
@@ -148,8 +150,9 @@ if TYPE_CHECKING:
     help="Also write a PNG preview of the card to this file.",
 )
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of text.")
+@executor_options
 def encode(
-    image: Path,
+    images: tuple[Path, ...],
     output: Path,
     width_mm: float | None,
     height_mm: float | None,
@@ -169,8 +172,13 @@ def encode(
     licence: str,
     preview: Path | None,
     as_json: bool,
+    scheduler: str | None,
+    workers: int | None,
 ) -> None:
-    """Encode a grayscale IMAGE: black is high friction, white low.
+    """Encode a grayscale IMAGE: black is high friction, white low. Several IMAGEs: -o is a
+    directory, each card is written there as NAME.hcard, the images encoded as tasks on a
+    local Dask cluster (--workers, --scheduler); an image that fails is named, the others
+    are written, and the exit status is 1.
 
     The image is cut into taxtels; each taxtel's friction becomes a baseline plus up to
     --components gratings (frequency, orientation, amplitude, phase), and similar taxtels
@@ -186,6 +194,7 @@ def encode(
       hcard encode button.png -o button.hcard --max-error 1
       hcard encode map.png -o map.hcard.json --taxtel-mm 2 --channel ev --preview map-p.png
       hcard encode photo.png -o - --dpi 300 | hcard info -
+      hcard encode a.png b.png c.png -o cards/ --workers 2
     """
     _single_threaded_blas()
     try:
@@ -213,6 +222,10 @@ def encode(
         )
     except UsageError as exc:
         raise click.UsageError(_option_names(str(exc))) from None
+    if len(images) > 1:
+        _encode_many(images, output, options, preview, options_of(scheduler, workers))
+        return
+    image = images[0]
     to_stdout = str(output) == STDIN
     if output.suffix.lower() in IMAGE_SUFFIXES:
         raise click.UsageError(
@@ -273,6 +286,47 @@ _OPTION_FIELDS = (
     "merge_tolerance",
     "max_pixels",
 )
+
+
+def encode_to_file(job: tuple[str, str, dict[str, Any]]) -> dict[str, Any]:
+    """Task: encode image ``job[0]`` with the encoder options ``job[2]`` and write the card
+    atomically to ``job[1]``; returns the encoder's statistics. Raises what the encoder, the
+    validation or the write raise."""
+    image, card, options = job
+    _single_threaded_blas()
+    result = _image_encoder().encode(Path(image), progress=None, **options)
+    require_valid(result.card, source=Path(image))
+    save(result.card, Path(card), check=False)
+    return dict(result.stats)
+
+
+def _encode_many(images: tuple[Path, ...], output: Path, options: dict[str, Any],
+                 preview: Path | None, where: ExecutorOptions) -> None:
+    """Encode every image to ``output``/STEM.hcard on the executor; name each failure and
+    exit with status 1 when any failed."""
+    if preview is not None:
+        raise click.UsageError("--preview takes one image; encode the others alone")
+    if str(output) == STDIN or (output.exists() and not output.is_dir()):
+        raise click.UsageError(f"-o {output}: with several images, -o is a directory")
+    stems = [image.stem for image in images]
+    twice = sorted({stem for stem in stems if stems.count(stem) > 1})
+    if twice:
+        raise click.UsageError(f"several images would make the same card: {', '.join(twice)}")
+    output.mkdir(parents=True, exist_ok=True)
+    jobs = [(str(image), (str(image), str(output / f"{image.stem}.hcard"), options))
+            for image in images]
+    failed = 0
+    with Executor(where) as executor:
+        for outcome in executor.map(encode_to_file, jobs, _progress):
+            card = output / f"{Path(outcome.key).stem}.hcard"
+            if outcome.ok:
+                click.echo(f"{outcome.key} -> {card}")
+            else:
+                failed += 1
+                click.echo(f"error: {outcome.key}: {outcome.error}", err=True)
+    if failed:
+        click.echo(f"{failed} of {len(images)} image(s) failed", err=True)
+        sys.exit(1)
 
 
 def _single_threaded_blas() -> None:
