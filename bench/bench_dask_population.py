@@ -3,7 +3,10 @@ wall time, and each worker's peak memory (dask's per-worker memory after the fit
 
     python bench/bench_dask_population.py [N_PARTICIPANTS]
 
-On a 2-core machine expect about 1.6-1.9x at 2 workers and no further gain at 4 (two cores).
+Measured on the 2-core build machine, idle, 100 participants (items sent in batches, about 4
+per worker thread): in process 3.1 s; 1 worker 0.74x (the scheduler's and the transfers' cost
+with no second core to gain), 2 workers 1.33x, 4 workers 1.17x (two cores); each worker
+~134 MiB. Without batches (a task per participant) 2 workers gave 0.82x.
 Studies from hcard.calibration.population.synthetic (independent of the fitting code).
 """
 

@@ -111,6 +111,32 @@ def test_a_task_that_fails_once_is_retried_and_one_that_always_fails_is_named(
     assert (tmp_path / "c.count").read_text() == "xxx"  # 1 run + 2 retries
 
 
+def test_items_are_sent_in_batches_and_a_failure_stays_its_items_own(tmp_path: Path) -> None:
+    """A cluster gets about 4 batches per worker thread (a task costs the scheduler a few ms,
+    a participant's fit ~20 ms): 9 items on one thread go as 3 batches of 3, and the one item
+    that always fails is named, after 1 + 2 attempts, while the 8 others, its batch's two
+    included, are done."""
+    from hcard.executor import batch_size
+
+    assert [batch_size(n, threads) for n, threads in ((9, 1), (100, 2), (3, 4), (1, 1))] == [
+        3, 13, 1, 1]
+    items = [(f"i{n}", str(tmp_path / f"i{n}")) for n in range(9)]
+    items[4] = ("bad", str(tmp_path / "bad.count"))
+    lines: list[str] = []
+    with Executor(ExecutorOptions(workers=1, processes=False)) as cluster:
+        outcomes = list(cluster.map(_fail_once_or_always, items, lines.append))
+    assert sorted(o.key for o in outcomes if o.ok) == sorted(
+        key for key, _ in items if key != "bad")
+    assert [(o.key, o.error, o.attempts) for o in outcomes if not o.ok] == [
+        ("bad", "ValueError: no good: bad.count", 3)]
+    assert (tmp_path / "bad.count").read_text() == "xxx"
+    assert len(lines) == 9
+
+
+def _fail_once_or_always(path: str) -> str:
+    return always_fails(path) if path.endswith(".count") else fail_once(path)
+
+
 def test_the_command_runs_on_the_cluster_at_the_address_given(tmp_path: Path) -> None:
     from dask.distributed import LocalCluster
 
