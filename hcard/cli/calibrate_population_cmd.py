@@ -24,6 +24,10 @@ from hcard.plugins.registry import get_registry
 @click.command("population")
 @verbosity_options
 @click.argument("data", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("--map", "maps", multiple=True, metavar="[GLOB=]RIG.json",
+              help="Read lab files (.mat, HDF5, CSV/TSV) through this column map "
+              "(spec/lab-recordings.md); repeat with GLOB= for a study on several rigs, the "
+              "first pattern that matches a file's path choosing its map.")
 @click.option("--by", type=click.Choice(GROUPINGS), default="participant", show_default=True,
               help="Sidecar label the recordings are grouped by (session: session.label).")
 @click.option("--model", "-m", "model_name", help="Calibrate this bare predictor.")
@@ -50,7 +54,8 @@ from hcard.plugins.registry import get_registry
 @click.option("--no-figures", is_flag=True, help="Skip the forest plot.")
 @click.option("--json", "as_json", is_flag=True, help="Print population.json to stdout.")
 @executor_options
-def population_command(data: tuple[Path, ...], by: str, model_name: str | None,
+def population_command(data: tuple[Path, ...], maps: tuple[str, ...], by: str,
+                       model_name: str | None,
                        profile_path: Path | None, finger_name: str, effects: tuple[str, ...],
                        excluded: tuple[str, ...], free_text: str | None, split: str,
                        test_fraction: str, seed: int, min_improvement: str, max_effects: int,
@@ -74,10 +79,12 @@ def population_command(data: tuple[Path, ...], by: str, model_name: str | None,
       hcard calibrate population recordings/ -o population/ --model dimensionless-group
       hcard calibrate population a.csv b.csv c.csv -o pop/ --by session --effect load-index
       hcard calibrate population study/ -o pop/ -m dimensionless-group --scheduler tcp://h:8786
+      hcard calibrate population rig1/ rig2/ -o pop/ -m dimensionless-group \
+          --map 'rig1/*=rig1.json' --map 'rig2/*=rig2.json'
     """
     # the CLI helpers of `hcard calibrate run` are imported here: calibrate_cmd imports this
     # module to attach the command to its group
-    from hcard.calibration.measurement import read_measurement
+    from hcard.calibration.lab.rigs import RigMaps
     from hcard.calibration.population.grouping import group_recordings
     from hcard.calibration.population.population_fit import fit_population
     from hcard.calibration.population.report import population_document, write_population_report
@@ -105,13 +112,15 @@ def population_command(data: tuple[Path, ...], by: str, model_name: str | None,
         if not quiet():
             click.echo(f"[{time.perf_counter() - started:6.1f} s] {text}", err=True)
 
-    paths = recording_paths(data)
-    measurements = [read_measurement(path) for path in paths]
+    rigs = RigMaps.parse(maps)
+    recordings = [rigs.file(path) for path in recording_paths(data, lab=bool(rigs))]
+    measurements = [recording.read() for recording in recordings]
     groups = group_recordings(measurements, by)
     base, _, _ = _base_of(measurements, model_name, profile_path, finger_name)
     say(f"read {len(measurements)} recording(s) of {len(groups)} {by}s; base {base.name}")
-    # the tasks get file paths and read their participant's recordings where they run
-    where = {id(m): str(path) for m, path in zip(measurements, paths, strict=True)}
+    # the tasks get file names (and maps) and read their participant's recordings where they
+    # run
+    where = {id(m): recording for m, recording in zip(measurements, recordings, strict=True)}
     files = {label: [where[id(m)] for m in ms] for label, ms in groups.items()}
     del measurements, groups
     options = options_of(scheduler, workers)

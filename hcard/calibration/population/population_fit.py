@@ -28,6 +28,7 @@ import numpy as np
 from hcard.calibration.dataset import CalibrationData, prepare
 from hcard.calibration.fit import FitResult
 from hcard.calibration.judges import check_arguments, earns_place, usable_effects
+from hcard.calibration.lab.rigs import RecordingFile
 from hcard.calibration.measurement import Measurement, read_measurement
 from hcard.calibration.model_pool import ModelPool, held_out_criterion, model_of
 from hcard.calibration.population.grouping import PopulationError
@@ -39,7 +40,7 @@ from hcard.physics import Predictor, PredictorError
 from hcard.physics.effects import Effect
 
 Progress = Callable[[str], None]
-Recording = Measurement | str | os.PathLike[str]
+Recording = Measurement | RecordingFile | str | os.PathLike[str]
 """A recording as a task takes it: a file path (read on the worker) or one already read."""
 
 
@@ -192,7 +193,8 @@ class ParticipantTask:
 
     def data(self) -> CalibrationData:
         """The participant's recordings read (on the worker) and prepared."""
-        measurements = [r if isinstance(r, Measurement) else read_measurement(r)
+        measurements = [r if isinstance(r, Measurement)
+                        else r.read() if isinstance(r, RecordingFile) else read_measurement(r)
                         for r in self.recordings]
         return prepare(measurements, split=self.split, test_fraction=self.test_fraction,
                        seed=self.seed, rezero=self.rezero)
@@ -401,6 +403,8 @@ def _source(recording: Recording) -> str:
     """A recording's file name for the report."""
     if isinstance(recording, Measurement):
         return recording.source
+    if isinstance(recording, RecordingFile):
+        return recording.path
     return os.fspath(recording)
 
 
