@@ -85,7 +85,7 @@ def population_command(data: tuple[Path, ...], maps: tuple[str, ...], by: str,
     # the CLI helpers of `hcard calibrate run` are imported here: calibrate_cmd imports this
     # module to attach the command to its group
     from hcard.calibration.lab.rigs import RigMaps
-    from hcard.calibration.population.grouping import group_recordings
+    from hcard.calibration.population.grouping import group_recordings, without_samples
     from hcard.calibration.population.population_fit import fit_population
     from hcard.calibration.population.report import population_document, write_population_report
     from hcard.cli.calibrate_cmd import (
@@ -114,7 +114,8 @@ def population_command(data: tuple[Path, ...], maps: tuple[str, ...], by: str,
 
     rigs = RigMaps.parse(maps)
     recordings = [rigs.file(path) for path in recording_paths(data, lab=bool(rigs))]
-    measurements = [recording.read() for recording in recordings]
+    # one recording in memory at a time: its labels and conditions are kept, not its samples
+    measurements = [without_samples(recording.read()) for recording in recordings]
     groups = group_recordings(measurements, by)
     base, _, _ = _base_of(measurements, model_name, profile_path, finger_name)
     say(f"read {len(measurements)} recording(s) of {len(groups)} {by}s; base {base.name}")

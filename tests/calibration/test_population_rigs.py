@@ -117,3 +117,17 @@ def test_a_recording_no_pattern_matches_is_named_before_any_fit(tmp_path: Path) 
         "--map", f"*={tmp_path / 'nowhere.json'}", *ARGUMENTS])
     assert missing.exit_code == 1
     assert "nowhere.json: no such file" in missing.output
+
+
+def test_the_command_keeps_no_recordings_samples_while_it_groups(tmp_path: Path) -> None:
+    """What the client keeps of each recording to group and choose the base: its conditions,
+    its source and one sample (its 840 samples are read again by its task)."""
+    from hcard.calibration.lab.rigs import RecordingFile
+    from hcard.calibration.population.grouping import label_of, without_samples
+
+    own, _rig_a, _rig_b = _two_rig_study(tmp_path)
+    full = RecordingFile(str(own / "p002.csv")).read()
+    kept = without_samples(full)
+    assert (len(full), len(kept)) == (840, 1)
+    assert kept.conditions == full.conditions and kept.source == full.source
+    assert label_of(kept, "participant") == "P002"

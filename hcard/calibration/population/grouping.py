@@ -20,6 +20,16 @@ class PopulationError(InputError):
     """Recordings or fits that cannot make a population (the message names what and where)."""
 
 
+def without_samples(m: Measurement) -> Measurement:
+    """``m``'s conditions, source and first sample only: what grouping and the choice of the
+    base model read, kept for every recording while the samples of each are dropped as soon
+    as it is read (a study's recordings are never all in memory at once; the tasks read their
+    own again where they run)."""
+    return Measurement(t=m.t[:1].copy(), normal_force=m.normal_force[:1].copy(),
+                       lateral_force=m.lateral_force[:1].copy(), conditions=m.conditions,
+                       source=m.source)
+
+
 def label_of(m: Measurement, by: str) -> str | None:
     """The label of recording ``m`` under the grouping ``by`` (:data:`GROUPINGS`), or None when
     its sidecar has none (an empty or blank string counts as none).
