@@ -54,6 +54,7 @@ from hcard.calibration.residuals import (
     ResidualReport,
     analyse_residuals,
     bin_labels,
+    interactions,
     joint_structure,
 )
 from hcard.calibration.results import (
@@ -223,6 +224,8 @@ def residual_structure(
     settings: LoopSettings,
     time_ordered: bool,
     noise: NoiseModel | None = None,
+    residual: np.ndarray | None = None,
+    regressors: Mapping[str, np.ndarray] | None = None,
 ) -> Structure:
     """Where the residual analysed in ``analysis`` is still structured (:class:`Structure`):
     regressors with p < ``alpha`` and ``eta^2 >= min_eta2`` (those below it as ``small``), the
@@ -231,7 +234,10 @@ def residual_structure(
     ``noise`` (:func:`~hcard.calibration.noise.time_structure_threshold`) and, without a
     ``noise`` model (no lifts or rests to measure it on), the residual's block means vary more
     than an AR(1) noise fitted to the residual gives (p < ``alpha``,
-    :func:`~hcard.calibration.noise.ar1_block_test`, K29)."""
+    :func:`~hcard.calibration.noise.ar1_block_test`, K29); given the ``residual`` analysed
+    and its ``regressors`` (aligned, regressor SI units), every pair of regressors whose
+    interaction explains ``min_eta2`` beyond their main effects at ``alpha`` over the number
+    of pairs (:func:`~hcard.calibration.residuals.interactions`, K28)."""
     rho = analysis.time.lag1_autocorrelation
     threshold = time_structure_threshold(settings.min_autocorrelation, noise)
     significant = analysis.structured(settings.alpha, 0.0)
@@ -260,6 +266,10 @@ def residual_structure(
         noise=noise,
         min_eta2=settings.min_eta2,
         detectable=detectable,
+        interactions=() if residual is None or regressors is None else tuple(
+            (" x ".join(found.names), found.eta2, found.p_value)
+            for found in interactions(residual, regressors, analysis.effective_samples,
+                                      settings.alpha, settings.min_eta2)),
     )
 
 

@@ -588,7 +588,9 @@ def calibrate(
             break
 
     current = search.current
-    structure = residual_structure(current.analysis, settings, data.time_ordered, data.noise)
+    structure = residual_structure(current.analysis, settings, data.time_ordered, data.noise,
+                                   current.fit.residuals[search.analyse.used],
+                                   search.analyse.regressors)
     names = tuple(e.name for e in search.added)
     comparison = runner_up(current, pool, data, settings)
     verdict = verdict_of(structure, names, comparison)

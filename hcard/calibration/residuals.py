@@ -391,3 +391,87 @@ def analyse_residuals(
         time=time,
         effective_samples=n_eff,
     )
+
+
+INTERACTION_BINS = 5
+"""Quantile bins per regressor of the interaction test (:func:`interaction_structure`): 25
+cells for a pair, each with enough samples for its mean."""
+
+
+@dataclass(frozen=True)
+class InteractionStats:
+    """The residual's structure in the combination of two regressors beyond each alone.
+
+    Attributes:
+        names: the two regressors.
+        eta2: share of the residual's variance that the cell means of the pair explain beyond
+            the additive fit of their two one-way bin means (two-way ANOVA interaction sum of
+            squares over the total).
+        f_statistic: interaction F, ``(SS_int / df_int) / (SS_within / (n - cells))``.
+        p_value: its p-value, corrected for autocorrelation like the one-way tests.
+    """
+
+    names: tuple[str, str]
+    eta2: float
+    f_statistic: float
+    p_value: float
+
+
+def interaction_structure(residual: np.ndarray, first: np.ndarray, second: np.ndarray,
+                          names: tuple[str, str], n_eff: float,
+                          bins: int = INTERACTION_BINS) -> InteractionStats:
+    """Two-way ANOVA of ``residual`` on ``first`` x ``second`` binned (:func:`bin_labels`,
+    ``bins`` each): the variance the pair's cells explain beyond the sum of their main effects
+    (spec/calibration.md K28). A residual ``c (L - L_mean)(A - A_mean)`` has no structure
+    against the load ``L`` or the amplitude ``A`` alone; its cells hold it all."""
+    r = np.asarray(residual, dtype=np.float64)
+    a = bin_labels(np.asarray(first, dtype=np.float64), bins)
+    b = bin_labels(np.asarray(second, dtype=np.float64), bins)
+    na, nb = int(a.max()) + 1, int(b.max()) + 1
+    total = float(np.sum((r - r.mean()) ** 2))
+    if na < 2 or nb < 2 or total <= 0:
+        return InteractionStats(names, 0.0, 0.0, 1.0)
+    cell = a * nb + b
+    counts = np.bincount(cell, minlength=na * nb)
+    sums = np.bincount(cell, weights=r, minlength=na * nb)
+    means = sums / np.maximum(counts, 1)
+    within = float(np.sum((r - means[cell]) ** 2))
+    # the additive fit: one-hot of both factors (the first level of the second dropped)
+    design = np.zeros((r.size, na + nb - 1))
+    design[np.arange(r.size), a] = 1.0
+    rows = np.flatnonzero(b > 0)
+    design[rows, na + b[rows] - 1] = 1.0
+    coef, *_ = np.linalg.lstsq(design, r, rcond=None)
+    additive = float(np.sum((r - design @ coef) ** 2))
+    cells = int(np.count_nonzero(counts))
+    df_int = cells - (na + nb - 1)
+    df_within = r.size - cells
+    if df_int < 1 or df_within < 1:
+        return InteractionStats(names, 0.0, 0.0, 1.0)
+    ss_int = max(additive - within, 0.0)
+    if within <= 0:
+        return InteractionStats(names, ss_int / total, math.inf, 0.0)
+    f_stat = (ss_int / df_int) / (within / df_within)
+    scale = min(n_eff / r.size, 1.0)
+    dof = max(n_eff - cells, 1.0)
+    p_value = float(stats.f.sf(f_stat * scale, df_int, dof))
+    return InteractionStats(names, ss_int / total, float(f_stat), p_value)
+
+
+def interactions(residual: np.ndarray, regressors: Mapping[str, np.ndarray], n_eff: float,
+                 alpha: float, min_eta2: float) -> list[InteractionStats]:
+    """Every pair of ``regressors`` (each varying) whose interaction (:func:`interaction_
+    structure`) is significant at ``alpha`` divided by the number of pairs (Bonferroni) and
+    explains at least ``min_eta2`` of ``residual``'s variance, strongest first (K28)."""
+    varying = [name for name, x in regressors.items() if np.ptp(np.asarray(x)) > 0]
+    pairs = [(p, q) for i, p in enumerate(varying) for q in varying[i + 1:]]
+    if not pairs:
+        return []
+    level = alpha / len(pairs)
+    found = [
+        found_pair for p, q in pairs
+        if (found_pair := interaction_structure(residual, regressors[p], regressors[q],
+                                                (p, q), n_eff)).p_value < level
+        and found_pair.eta2 >= min_eta2
+    ]
+    return sorted(found, key=lambda s: -s.eta2)

@@ -168,6 +168,8 @@ class Structure:
         min_eta2: the practical threshold of ``eta^2``.
         detectable: ``(name, eta2)``: the smallest ``eta^2`` each regressor's F-test detects
             with 80 % power at the residual's effective sample count.
+        interactions: ``("a x b", eta2, p)`` of each pair of regressors whose interaction
+            explains at least ``min_eta2`` beyond their main effects (spec/calibration.md K28).
     """
 
     regressors: tuple[tuple[str, float, float], ...]
@@ -179,15 +181,18 @@ class Structure:
     noise: NoiseModel | None = None
     min_eta2: float = 0.10
     detectable: tuple[tuple[str, float], ...] = ()
+    interactions: tuple[tuple[str, float, float], ...] = ()
 
     @property
     def any(self) -> bool:
         """Whether any structure is left."""
-        return bool(self.regressors) or self.in_time
+        return bool(self.regressors) or self.in_time or bool(self.interactions)
 
     def describe(self) -> str:
         """Where the structure is, in words."""
         parts = [f"{name} (eta2 {eta2:.2f})" for name, eta2, _ in self.regressors]
+        parts += [f"the interaction {name} (eta2 {eta2:.2f} beyond each alone)"
+                  for name, eta2, _ in self.interactions]
         if self.in_time:
             where = f"in time (lag-1 autocorrelation {self.autocorrelation:.2f}"
             if self.noise is not None and self.noise.lag1 > 0:
