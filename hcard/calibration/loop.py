@@ -192,6 +192,18 @@ class EffectSearch:
             self.analyse.regressors, self.claimed, self.settings)
         return foreign is None or eta2 >= self.settings.signature_eta2
 
+    def selection_test(self, effect: Effect, model: ModelFit) -> tuple[float, bool]:
+        """K9 (c) for ``effect`` entering ``model`` (spec/calibration.md K27), the one test of
+        every path that adds an effect (a round's single candidate, a pair, a swap): the share
+        of ``model``'s residual against the effect's signature, foreign structure taken out
+        (:func:`~hcard.calibration.judges.beyond_foreign_structure`), and whether it reaches
+        ``signature_eta2``."""
+        eta2, _ = beyond_foreign_structure(effect, model.analysis,
+                                           model.fit.residuals[self.analyse.used],
+                                           self.analyse.regressors, self.claimed,
+                                           self.settings)
+        return eta2, eta2 >= self.settings.signature_eta2
+
     def returns_to_own(self, key: EffectSet, own: EffectSet, n_eff: float) -> bool:
         """Whether a move from the set ``own`` (fitted in full) to the screened set ``key``
         would be undone by the pruning that follows it, whatever ``key``'s full fit: ``key``
@@ -235,7 +247,7 @@ class EffectSearch:
         stay = self._confirm_doubtful(scores, fresh, own, own_score, n_eff)
         self._record_sets(round_number, scores, fresh, reference, note, n_eff)
         if not stay:
-            chosen = self._move(round_number, chosen, scores, own, own_score)
+            chosen = self._move(round_number, chosen, scores, own, own_score, reference)
         return self.prune(round_number, chosen, n_eff)
 
     def _score_sets(
@@ -329,13 +341,24 @@ class EffectSearch:
         scores: Mapping[EffectSet, tuple[Sequence[Effect], FitResult, float]],
         own: EffectSet,
         own_score: float,
+        reference: ModelFit,
     ) -> list[Effect]:
-        """The set of ``scores`` of lowest ``H`` below ``own_score`` whose every new effect is
-        :meth:`credited` (``chosen`` when there is none)."""
+        """The set of ``scores`` of lowest ``H`` below ``own_score`` whose every new effect
+        passes the selection test on the ``reference`` model's residual (:meth:`selection_test`,
+        K27: the test a round applies to a single candidate) and is :meth:`credited`
+        (``chosen`` when there is none)."""
         for key in sorted(scores, key=lambda k: scores[k][2]):
             if key == own or scores[key][2] >= own_score:
                 break
             effects = scores[key][0]
+            refused = [e.name for e in effects
+                       if e not in chosen and e not in self.added
+                       and not self.selection_test(e, reference)[1]]
+            if refused:
+                self.say(f"round {round_number}: not moved to {' + '.join(sorted(key))}: the "
+                         f"residual shows no structure against the signature of "
+                         f"{', '.join(refused)} (K27)")
+                continue
             uncredited = [e.name for e in effects
                           if e not in chosen and not self.credited(e, effects)]
             if uncredited:
@@ -385,10 +408,7 @@ class EffectSearch:
         current, pool = self.current, self.pool
         tried: list[tuple[Candidate, FitResult | None]] = []
         for effect in remaining:
-            eta2, _ = beyond_foreign_structure(effect, current.analysis,
-                                                current.fit.residuals[self.analyse.used],
-                                                self.analyse.regressors, self.claimed,
-                                                self.settings)
+            eta2, _ = self.selection_test(effect, current)
             tic = time.perf_counter()
             key = self._key_with(effect.name)
             try:

@@ -53,7 +53,7 @@ def test_a_pure_load_by_amplitude_interaction_is_reported_k28() -> None:
     assert structure.regressors == ()
     # ... the pair's cells do
     assert [name for name, _, _ in structure.interactions] == ["normal_force x amplitude"]
-    name, eta2, p = structure.interactions[0]
+    _, eta2, p = structure.interactions[0]
     assert eta2 > 0.3 and p < 1e-6
     assert structure.any and "interaction normal_force x amplitude" in structure.describe()
     alone = interaction_structure(residual, x["normal_force"], x["speed"],
