@@ -11,8 +11,7 @@ against speed in the base residual) refuses it, and the move is not made; the ru
 
 from __future__ import annotations
 
-from hcard.calibration.judges import beyond_foreign_structure, claimed_regressors, \
-    usable_effects
+from hcard.calibration.judges import beyond_foreign_structure, claimed_regressors, usable_effects
 from hcard.calibration.loop import EffectSearch, ResidualAnalyser
 from hcard.calibration.model_pool import ModelPool
 from hcard.calibration.results import LoopSettings
@@ -37,7 +36,8 @@ def test_a_move_never_brings_in_an_effect_its_own_test_refuses_k27() -> None:
     load, speed = (next(e for e in usable if e.name == n)
                    for n in ("occlusion-drift", "ultrasonic-speed"))
     base_fit = search.current
-    # the single-effect test of round 1: occlusion-drift passes (eta2 0.41), ultrasonic-speed does not (0.0)
+    # the single-effect test of round 1: occlusion-drift passes (eta2 0.41),
+    # ultrasonic-speed does not (0.0)
     eta2_load, ok_load = search.selection_test(load, base_fit)
     eta2_speed, ok_speed = search.selection_test(speed, base_fit)
     assert ok_load and eta2_load > 0.05
