@@ -84,7 +84,9 @@ from hcard.calibration.model_pool import (
     ModelPool,
     held_out_criterion,
 )
+from hcard.calibration.noise import detectable_eta2
 from hcard.calibration.residuals import (
+    MIN_BIN_COUNT,
     ResidualReport,
     analyse_residuals,
     effective_samples,
@@ -203,6 +205,38 @@ class EffectSearch:
                                            self.analyse.regressors, self.claimed,
                                            self.settings)
         return eta2, eta2 >= self.settings.signature_eta2
+
+    def refused_by_move_test(self, effect: Effect, effects: Sequence[Effect],
+                             reference: ModelFit) -> bool:
+        """Whether a move to the set ``effects`` must leave out its new ``effect``
+        (spec/calibration.md K27): the effect shows no structure against its signature
+        (:meth:`selection_test`) on the residual of the round's model ``reference``, nor on
+        the residual of ``effects`` without it (the model it enters: two effects that cancel
+        show their structures only one at a time), while at least one of those two tests had
+        the power to see it: its F-test over the signature's bins detects ``min_eta2`` with
+        80 % power at that residual's ``n_eff`` (:func:`~hcard.calibration.noise.
+        detectable_eta2`). A signature test without that power (a load index over a few force
+        levels, a residual correlated over whole strokes) is no evidence of absence; the move
+        is then judged by ``H`` and :meth:`credited`. The set without ``effect`` that is not
+        fitted counts as a test that saw nothing without power."""
+        without = self.pool.fitted_set([e for e in effects if e is not effect], exact=True)
+        seen = [(reference.analysis, reference.fit.residuals[self.analyse.used])]
+        if without is not None:
+            seen.append((self.analyse(without), without.residuals[self.analyse.used]))
+        powered = False
+        for analysis, residual in seen:
+            eta2, _ = beyond_foreign_structure(effect, analysis, residual,
+                                               self.analyse.regressors, self.claimed,
+                                               self.settings)
+            if eta2 >= self.settings.signature_eta2:
+                return False
+            powered = powered or any(
+                detectable_eta2(analysis.effective_samples,
+                                int(np.count_nonzero(
+                                    analysis.regressors[name].bin_counts >= MIN_BIN_COUNT)),
+                                self.settings.alpha) <= self.settings.min_eta2
+                for name in effect.signature if name in analysis.regressors)
+        return powered
 
     def returns_to_own(self, key: EffectSet, own: EffectSet, n_eff: float) -> bool:
         """Whether a move from the set ``own`` (fitted in full) to the screened set ``key``
@@ -344,16 +378,17 @@ class EffectSearch:
         reference: ModelFit,
     ) -> list[Effect]:
         """The set of ``scores`` of lowest ``H`` below ``own_score`` whose every new effect
-        passes the selection test on the ``reference`` model's residual (:meth:`selection_test`,
-        K27: the test a round applies to a single candidate) and is :meth:`credited`
-        (``chosen`` when there is none)."""
+        is not refused by the selection test (:meth:`refused_by_move_test`, K27: the test a
+        round applies to a single candidate, on the ``reference`` model's residual and on that
+        of the set without the effect) and is :meth:`credited` (``chosen`` when there is
+        none)."""
         for key in sorted(scores, key=lambda k: scores[k][2]):
             if key == own or scores[key][2] >= own_score:
                 break
             effects = scores[key][0]
             refused = [e.name for e in effects
                        if e not in chosen and e not in self.added
-                       and not self.selection_test(e, reference)[1]]
+                       and self.refused_by_move_test(e, effects, reference)]
             if refused:
                 self.say(f"round {round_number}: not moved to {' + '.join(sorted(key))}: the "
                          f"residual shows no structure against the signature of "

@@ -458,12 +458,22 @@ def interaction_structure(residual: np.ndarray, first: np.ndarray, second: np.nd
     return InteractionStats(names, ss_int / total, float(f_stat), p_value)
 
 
+TIME_REGRESSORS = frozenset({"time", "contact_time", "occlusion_time"})
+"""Regressors that order the recording in time, left out of the interaction test (K28):
+structure in time is judged by the time tests (K10, K29), and a regressor blocked in time
+(an amplitude held for a session) splits each time bin into shorter stretches of time, so a
+trend in time reads as an interaction with it (eta2 0.35 for amplitude x time on a
+residual whose structure was the trend)."""
+
+
 def interactions(residual: np.ndarray, regressors: Mapping[str, np.ndarray], n_eff: float,
                  alpha: float, min_eta2: float) -> list[InteractionStats]:
-    """Every pair of ``regressors`` (each varying) whose interaction (:func:`interaction_
-    structure`) is significant at ``alpha`` divided by the number of pairs (Bonferroni) and
-    explains at least ``min_eta2`` of ``residual``'s variance, strongest first (K28)."""
-    varying = [name for name, x in regressors.items() if np.ptp(np.asarray(x)) > 0]
+    """Every pair of ``regressors`` (each varying, none of :data:`TIME_REGRESSORS`) whose
+    interaction (:func:`interaction_structure`) is significant at ``alpha`` divided by the
+    number of pairs (Bonferroni) and explains at least ``min_eta2`` of ``residual``'s
+    variance, strongest first (K28)."""
+    varying = [name for name, x in regressors.items()
+               if name not in TIME_REGRESSORS and np.ptp(np.asarray(x)) > 0]
     pairs = [(p, q) for i, p in enumerate(varying) for q in varying[i + 1:]]
     if not pairs:
         return []

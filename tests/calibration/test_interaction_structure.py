@@ -70,3 +70,24 @@ def test_pure_noise_is_not_an_interaction_k28() -> None:
         noise = np.random.default_rng(10_000 + seed).normal(0.0, SIGMA_N, x["speed"].size)
         alarms += bool(judged(noise, x).interactions)
     assert alarms <= 2  # at most 1 %
+
+
+def test_a_trend_in_time_is_not_an_interaction_with_a_regressor_blocked_in_time_k28() -> None:
+    """A residual that drifts in time (three sine periods over the recording), the amplitude
+    held for blocks of two strokes: crossed with time, the amplitude splits each time bin into
+    shorter stretches and the trend reads as an interaction (in the search, amplitude x time
+    eta2 0.35 next to the time structure). Pairs with a time-like regressor are not tested;
+    the trend is the time tests' to judge (K10, K29)."""
+    x = design(0)
+    n = x["speed"].size
+    t = np.arange(n) / 100.0  # s
+    rng = np.random.default_rng(2)
+    x["amplitude"] = np.repeat(rng.permutation(np.resize(AMPLITUDES, 20)), n // 20)
+    x["time"] = t
+    x["occlusion_time"] = t
+    residual = 20e-3 * np.sin(2 * np.pi * 3 * t / t[-1]) + rng.normal(0.0, SIGMA_N, n)
+    alone = interaction_structure(residual, x["amplitude"], x["time"], ("amplitude", "time"),
+                                  float(n))
+    assert alone.eta2 > 0.2 and alone.p_value < 1e-6  # flagged without the exclusion
+    structure = judged(residual, x)
+    assert all("time" not in name for name, _, _ in structure.interactions)

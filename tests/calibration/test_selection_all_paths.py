@@ -4,8 +4,9 @@
 The recording is the independent generator's (tests/helpers/independent_recordings.py, numpy
 from the thesis formulas): an ultrasonic plate with occlusion hidden (Fig. 1.11, tau_o 20 s)
 and no speed effect. A move to the pair occlusion-drift + ultrasonic-speed, scored as the best by
-``H``, is offered to the search's move step: ultrasonic-speed's own round test (structure
-against speed in the base residual) refuses it, and the move is not made; the rule before K27
+``H``, is offered to the search's move step: ultrasonic-speed shows no structure against speed
+in the base residual nor in occlusion-drift's (the model it would enter), and the second test
+had the power to see it (``n_eff`` ~15,000), so the move is not made; the rule before K27
 (:meth:`credited`, foreign structure only) would have made it.
 """
 
@@ -53,7 +54,9 @@ def test_a_move_never_brings_in_an_effect_its_own_test_refuses_k27() -> None:
         speed, search.analyse(without), without.residuals[data.used],
         search.analyse.regressors, search.claimed, settings)
     assert foreign is None and search.credited(speed, [load, speed])
-    # K27: the move is refused, and the decision is recorded
+    # K27: refused on both residuals, the second test powered; the move is not made and the
+    # decision is recorded
+    assert search.refused_by_move_test(speed, [load, speed], base_fit)
     chosen = search._move(1, [], scores, frozenset(), 0.0, base_fit)
     assert chosen == []
     assert any("no structure against the signature of ultrasonic-speed (K27)" in line
