@@ -172,13 +172,27 @@ as residual structure against the normal force. A median keeps the steps of a lo
 changes from stroke to stroke where a mean would smear them."""
 
 
-def accumulated_contact_time(t: np.ndarray, contact: np.ndarray) -> np.ndarray:
+CONTACT_GAP_PERIODS = 5.0
+"""A sample interval longer than this many median sample periods is a gap in the recording,
+not contact time, even where both samples around it are in contact (spec/calibration.md K30):
+a recording that leaves out its lift samples would otherwise count every lift as contact."""
+
+
+def accumulated_contact_time(t: np.ndarray, contact: np.ndarray,
+                             gap_periods: float = CONTACT_GAP_PERIODS) -> np.ndarray:
     """Time spent in contact up to each sample, s: the sum of the sample intervals that end in
-    contact (the dynamic occlusion time of Fig. 1.11b, which stops while the finger is
-    lifted). ``t`` in s, ascending; ``contact`` boolean, same shape."""
+    contact (the dynamic occlusion time of Fig. 1.11b, which stops while the finger is lifted),
+    each at most ``gap_periods`` median sample periods long; a longer interval is a gap (lift
+    samples left out of the recording, K30) and adds one median period, as the first contact
+    sample after a lifted one does. ``t`` in s, ascending;
+    ``contact`` boolean, same shape."""
     t = np.asarray(t, dtype=np.float64)
-    steps = np.diff(t, prepend=t[:1]) * np.asarray(contact, dtype=bool)
-    return np.cumsum(steps)
+    touching = np.asarray(contact, dtype=bool)
+    steps = np.diff(t, prepend=t[:1])
+    if t.size > 1:
+        period = float(np.median(steps[1:]))
+        steps = np.where(steps > gap_periods * period, period, steps)
+    return np.cumsum(steps * touching)
 
 
 def smoothed_within(values: np.ndarray, t: np.ndarray, runs: np.ndarray,
