@@ -228,7 +228,10 @@ def residual_structure(
     regressors with p < ``alpha`` and ``eta^2 >= min_eta2`` (those below it as ``small``), the
     detectable ``eta^2`` of each regressor's F-test, and structure in time when
     ``time_ordered`` and the lag-1 autocorrelation reaches the threshold set by the sensor
-    ``noise`` (:func:`~hcard.calibration.noise.time_structure_threshold`)."""
+    ``noise`` (:func:`~hcard.calibration.noise.time_structure_threshold`) and, without a
+    ``noise`` model (no lifts or rests to measure it on), the residual's block means vary more
+    than an AR(1) noise fitted to the residual gives (p < ``alpha``,
+    :func:`~hcard.calibration.noise.ar1_block_test`, K29)."""
     rho = analysis.time.lag1_autocorrelation
     threshold = time_structure_threshold(settings.min_autocorrelation, noise)
     significant = analysis.structured(settings.alpha, 0.0)
@@ -243,10 +246,14 @@ def residual_structure(
         )
         for name, s in analysis.regressors.items()
     )
+    block = analysis.time.beyond_noise
+    # K29: without a measured noise model, a correlated residual is structured in time only
+    # when it holds more slow variance than an AR(1) noise fitted to it
+    beyond = noise is not None or block is None or block.p_value < settings.alpha
     return Structure(
         regressors=tuple(item for item in significant if item[1] >= settings.min_eta2),
         autocorrelation=rho,
-        in_time=time_ordered and rho >= threshold,
+        in_time=time_ordered and rho >= threshold and beyond,
         dominant_frequency_hz=analysis.time.dominant_frequency_hz,
         small=tuple(item for item in significant if item[1] < settings.min_eta2),
         time_threshold=threshold,

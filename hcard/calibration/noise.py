@@ -108,3 +108,77 @@ def detectable_eta2(
     if shortfall(1.0 - 1e-9) < 0:
         return 1.0
     return float(optimize.brentq(shortfall, 1e-12, 1.0 - 1e-9, xtol=1e-10))
+
+
+MIN_BLOCK = 64
+"""Fewest samples in a block of :func:`ar1_block_test`."""
+
+BLOCK_CORRELATION_TIMES = 20.0
+"""Block length of :func:`ar1_block_test` in the AR(1) noise's correlation times
+``(1 + a) / (1 - a)`` samples: the blocks' means are then nearly independent under the noise
+model (their correlation ~ ``a / (L (1 - a)^2)``, 0.08 at ``a`` = 0.73)."""
+
+MIN_BLOCKS = 8
+"""Fewest blocks :func:`ar1_block_test` decides on."""
+
+
+@dataclass(frozen=True)
+class BlockTest:
+    """Whether a residual is structured in time beyond an AR(1) noise fitted to it.
+
+    Attributes:
+        lag1: the AR(1) coefficient ``a`` fitted from the first differences,
+            ``a = 1 + 2 r_d`` with ``r_d`` their lag-1 autocorrelation (a slow drift hardly
+            changes the differences, so it does not inflate ``a``).
+        sigma: the AR(1) noise's marginal standard deviation from the differences,
+            ``var(d) / (2 (1 - a))``, output unit.
+        block: samples per block.
+        blocks: blocks used.
+        ratio: variance of the block means over the AR(1) prediction of it.
+        p_value: one-sided (more variance than the noise gives), of ``ln(ratio)`` against a
+            normal of variance ``2/(blocks - 1)`` (the block variance's sampling spread) plus
+            the fitted noise's, ``(1/(1 + a) + 2/(1 - a))^2 4/n``; 0 when too few blocks
+            (the test cannot clear the residual).
+    """
+
+    lag1: float
+    sigma: float
+    block: int
+    blocks: int
+    ratio: float
+    p_value: float
+
+
+def ar1_block_test(residual: np.ndarray) -> BlockTest:
+    """Test ``residual`` (in time order) for structure slower than an AR(1) noise
+    (spec/calibration.md K29): fit ``e_i = a e_(i-1) + w_i`` to its first differences
+    (:class:`BlockTest`), cut it into blocks of ``max(MIN_BLOCK, BLOCK_CORRELATION_TIMES (1 + a)
+    / (1 - a))`` samples and compare the variance of the block means with the AR(1) one,
+    ``sigma^2 / L (1 + 2 sum_k (1 - k/L) a^k)``. Coloured sensor noise gives a ratio near 1;
+    a drift or a level that changes from stroke to stroke gives more."""
+    from scipy import stats  # here: scipy.stats costs ~0.6 s to import
+
+    r = np.asarray(residual, dtype=np.float64)
+    d = np.diff(r)
+    dc = d - d.mean() if d.size else d
+    power = float(np.dot(dc, dc))
+    if d.size < 3 or power <= 0:
+        return BlockTest(0.0, 0.0, 0, 0, math.nan, 0.0)
+    r_d = float(np.dot(dc[:-1], dc[1:]) / power)
+    a = float(np.clip(1.0 + 2.0 * r_d, 0.0, 0.99))
+    sigma2 = power / d.size / (2.0 * (1.0 - a))
+    block = max(MIN_BLOCK, math.ceil(BLOCK_CORRELATION_TIMES * (1.0 + a) / (1.0 - a)))
+    blocks = r.size // block
+    if blocks < MIN_BLOCKS:
+        return BlockTest(a, math.sqrt(sigma2), block, blocks, math.nan, 0.0)
+    means = r[: blocks * block].reshape(blocks, block).mean(axis=1)
+    k = np.arange(1, block)
+    predicted = sigma2 / block * (1.0 + 2.0 * float(np.sum((1.0 - k / block) * a**k)))
+    ratio = float(np.var(means, ddof=1) / predicted)
+    # ln(ratio): sampling spread of the block variance, 2/(m - 1), plus that of the fitted
+    # noise: the prediction goes as var(d) (1 + a) / (1 - a)^2, d ln / da = 1/(1 + a) +
+    # 2/(1 - a), with var(a) = 4 var(r_d) ~ 4/n
+    slope = 1.0 / (1.0 + a) + 2.0 / (1.0 - a)
+    spread = math.sqrt(2.0 / (blocks - 1) + slope**2 * 4.0 / d.size)
+    p = float(stats.norm.sf(math.log(max(ratio, 1e-300)) / spread))
+    return BlockTest(a, math.sqrt(sigma2), block, blocks, ratio, p)

@@ -18,11 +18,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import stats
 
+from hcard.calibration.noise import BlockTest, ar1_block_test
 from hcard.physics import PredictorError
 
 DEFAULT_BINS = 10
@@ -78,6 +79,9 @@ class TimeStats:
             spectrum (Hz), or None without a sample rate.
         dominant_power_fraction: share of the residual's (non-DC) spectral power at that peak,
             or None without a sample rate.
+        beyond_noise: the residual against an AR(1) noise fitted to it
+            (:func:`~hcard.calibration.noise.ar1_block_test`, spec/calibration.md K29), or None
+            when the samples are not in time order.
     """
 
     lag1_autocorrelation: float
@@ -86,6 +90,7 @@ class TimeStats:
     lags: int
     dominant_frequency_hz: float | None
     dominant_power_fraction: float | None
+    beyond_noise: BlockTest | None = None
 
 
 @dataclass(frozen=True)
@@ -376,10 +381,13 @@ def analyse_residuals(
                 "value(s) (NaN or inf)"
             )
         results[name] = _regressor_stats(name, r, x, bins, n_eff)
+    time = _time_stats(in_time, sample_rate_hz)
+    if time_ordered:
+        time = replace(time, beyond_noise=ar1_block_test(r))
     return ResidualReport(
         n=r.size,
         rms=float(np.sqrt(np.mean(r**2))),
         regressors=results,
-        time=_time_stats(in_time, sample_rate_hz),
+        time=time,
         effective_samples=n_eff,
     )
