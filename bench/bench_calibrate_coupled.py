@@ -1,5 +1,5 @@
 """``hcard calibrate`` of a 1e5-sample coupled-stimulator recording with the air layer hidden,
-in CPU seconds against the 60 s goal (issue 31), and whether its answers are the baseline's.
+in CPU seconds against the goal of 60 s, and whether its answers are the baseline's.
 
 Run: ``python bench/bench_calibrate_coupled.py [--duration 100s] [--no-evita] [--cache DIR]``
 

@@ -55,7 +55,7 @@ def test_gaps_without_lift_samples_are_not_contact_time_k30() -> None:
     assert abs(params[2] - TAU_S) < 3 * sd[2]
     assert sd[2] < 0.5  # s: the test can tell 12 s from the clock-time answer below
     # what clock time (the rule before K30) gives: tau 1.49 times too long, far outside
-    clock, clock_cov = curve_fit(occlusion_law, t - t[0], force, p0=(0.2, 1.0, 20.0))
+    clock, _ = curve_fit(occlusion_law, t - t[0], force, p0=(0.2, 1.0, 20.0))
     assert clock[2] == pytest.approx(TAU_S * (STROKE_S + LIFT_S) / STROKE_S, rel=0.05)
     assert abs(clock[2] - TAU_S) > 10 * sd[2]
 
