@@ -25,6 +25,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from hcard.calibration import forward_cache
 from hcard.physics import Parameter, Predictor, PredictorError, Variable
 from hcard.physics.effects import SEPARATOR, Effect, EffectHost
 from hcard.physics.profile import DeviceProfile, channels_of
@@ -205,7 +206,8 @@ def _model_class(profile: DeviceProfile, effects: tuple[Effect, ...], envelope: 
             reaction = fn
             total = np.ones(np.broadcast(*arrays.values()).shape)
             if self._uv is not None:
-                total = total * self._uv.forward(**_take(self._uv, arrays))
+                total = total * forward_cache.forward(
+                    (type(self), "uv"), self._uv, _take(self._uv, arrays))
             if self._ev is not None:
                 effective = dict(arrays)
                 effective["voltage"] = gain * arrays["voltage"] / (
@@ -217,7 +219,8 @@ def _model_class(profile: DeviceProfile, effects: tuple[Effect, ...], envelope: 
                     total = total * np.where(fn > 0, 1.0 + force / fn, 1.0)
                 reaction = fn + force  # Eq. 3.1: the attraction adds to the normal force
             if self._finger is not None:
-                total = total * self._finger.forward(**_take(self._finger, arrays))
+                total = total * forward_cache.forward(
+                    (type(self), "finger"), self._finger, _take(self._finger, arrays))
             # the finger's effects act on the friction as a whole, a load index on the
             # reaction force Fn + F_e (Eq. 2.35 with Eq. 3.1)
             finger_inputs = {**arrays, "reaction_force": reaction}

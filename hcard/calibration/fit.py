@@ -22,6 +22,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from hcard.calibration.blas_threads import on_one_blas_thread
+from hcard.calibration.forward_cache import caching_forwards
 from hcard.physics import Predictor, PredictorError
 
 UNIDENTIFIABLE = 1e-8
@@ -325,28 +326,29 @@ def fit_predictor(
             raise PredictorError(f"fit failed: model gives non-finite output at {shown}")
         return r * w_train
 
-    active = ~_held_parameters(residual, x0, low, high)
-    held = tuple(name for name, on in zip(names, active, strict=True) if not on)
+    with caching_forwards():  # a Jacobian's steps re-evaluate only the parts they move
+        active = ~_held_parameters(residual, x0, low, high)
+        held = tuple(name for name, on in zip(names, active, strict=True) if not on)
 
-    def active_residual(xa: np.ndarray) -> np.ndarray:
-        x = x0.copy()
-        x[active] = xa
-        return residual(x)
+        def active_residual(xa: np.ndarray) -> np.ndarray:
+            x = x0.copy()
+            x[active] = xa
+            return residual(x)
 
-    if active.any():
-        solution = least_squares(active_residual, x0[active], bounds=(low[active], high[active]),
-                                 method="trf", x_scale=1.0, ftol=COST_TOLERANCE,
-                                 max_nfev=max_evaluations)
-        x = x0.copy()
-        x[active] = np.clip(solution.x, low[active], high[active])
-        success, message = bool(solution.success), str(solution.message)
-        jac = np.asarray(solution.jac, dtype=np.float64)
-    else:
-        x, success, message = x0.copy(), True, "no free parameter moves the training residual"
-        jac = np.zeros((n_train, 0))
-    fitted = predictor.with_params(**physical(x))
+        if active.any():
+            solution = least_squares(active_residual, x0[active],
+                                     bounds=(low[active], high[active]), method="trf",
+                                     x_scale=1.0, ftol=COST_TOLERANCE, max_nfev=max_evaluations)
+            x = x0.copy()
+            x[active] = np.clip(solution.x, low[active], high[active])
+            success, message = bool(solution.success), str(solution.message)
+            jac = np.asarray(solution.jac, dtype=np.float64)
+        else:
+            x, success, message = x0.copy(), True, "no free parameter moves the training residual"
+            jac = np.zeros((n_train, 0))
+        fitted = predictor.with_params(**physical(x))
 
-    residuals = y - model(x, arrays, n)
+        residuals = y - model(x, arrays, n)
     rss = float(np.sum((residuals[train_mask] * w_train) ** 2))
     dof = n_train - int(np.count_nonzero(active))
     covariance = np.full((len(names), len(names)), np.nan)

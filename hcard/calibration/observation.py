@@ -21,6 +21,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from hcard.calibration import forward_cache
 from hcard.physics import Parameter, Predictor, PredictorError, Variable
 
 FRICTION_COEFFICIENT = "friction_coefficient"
@@ -108,7 +109,8 @@ def lateral_force_model(model: Predictor) -> Predictor:
             return self._inner
 
         def _forward(self, **given: np.ndarray) -> np.ndarray:
-            out = self._inner.forward(**{k: given[k] for k in inner_inputs})
+            out = forward_cache.forward(
+                (type(self), "inner"), self._inner, {k: given[k] for k in inner_inputs})
             fn = given["normal_force"]
             if output == "relative_friction":
                 mu = self._values[mu0] if mu0 else self._values[FRICTION_COEFFICIENT]

@@ -36,10 +36,10 @@ from hcard.calibration.plan import (
     protocol,
     verification,
 )
-from hcard.calibration.splits import SPLITS
 from hcard.cli.errors import EXIT_FAILED, UserErrorGroup, option_values
 from hcard.cli.input_files import INPUT_FILE
 from hcard.cli.options import plugin_option, quantity_option
+from hcard.cli.search_options import search_options
 from hcard.cli.verbosity import quiet, verbosity_options
 from hcard.errors import HcardError, UsageError
 from hcard.file_errors import writing
@@ -327,15 +327,7 @@ def _verification_files(measurements: list[Measurement], card: Path | None,
               help="Base parameters to fit (default: the model's calibrated parameters).")
 @click.option("--param", "params", multiple=True, metavar="NAME=VALUE",
               help="Start or fixed value of a base parameter, with unit (repeatable).")
-@click.option("--split", type=click.Choice(SPLITS), default="stroke", show_default=True,
-              help="Hold out whole strokes, or the last time block of each recording.")
-@click.option("--test-fraction", default="25%", show_default=True,
-              help="Share of strokes (or time) held out.")
-@click.option("--seed", default=0, show_default=True, help="Seed of the stroke draw.")
-@click.option("--min-improvement", default="5%", show_default=True,
-              help="Held-out RMSE fall an added effect must bring.")
-@click.option("--max-effects", default=4, show_default=True, type=click.IntRange(min=0),
-              help="Most effects added.")
+@search_options("the model")
 @click.option("--output", "-o", type=click.Path(file_okay=False, path_type=Path),
               default=Path("calibration"), show_default=True,
               help="Directory for report.md, report.json, profile.json and the figures.")

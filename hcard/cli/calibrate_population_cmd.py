@@ -14,9 +14,9 @@ from pathlib import Path
 import click
 
 from hcard.calibration.population.grouping import GROUPINGS
-from hcard.calibration.splits import SPLITS
 from hcard.cli.executor_options import executor_options, options_of
 from hcard.cli.input_files import INPUT_FILE
+from hcard.cli.search_options import search_options
 from hcard.cli.verbosity import quiet, verbosity_options
 from hcard.plugins.registry import get_registry
 
@@ -40,15 +40,7 @@ from hcard.plugins.registry import get_registry
 @click.option("--exclude", "excluded", multiple=True, metavar="NAME",
               help="Leave this effect out of the candidates (repeatable).")
 @click.option("--free", "free_text", metavar="P1,P2", help="Base parameters to fit.")
-@click.option("--split", type=click.Choice(SPLITS), default="stroke", show_default=True,
-              help="Each participant's held-out split: whole strokes or the last time block.")
-@click.option("--test-fraction", default="25%", show_default=True,
-              help="Share of strokes (or time) held out.")
-@click.option("--seed", default=0, show_default=True, help="Seed of the stroke draw.")
-@click.option("--min-improvement", default="5%", show_default=True,
-              help="Held-out RMSE fall an effect must bring a participant.")
-@click.option("--max-effects", default=4, show_default=True, type=click.IntRange(min=0),
-              help="Most effects added to the population.")
+@search_options("the population")
 @click.option("--output", "-o", type=click.Path(file_okay=False, path_type=Path),
               required=True, help="Directory for population.md, population.json, forest.png.")
 @click.option("--no-figures", is_flag=True, help="Skip the forest plot.")
