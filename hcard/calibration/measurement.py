@@ -19,11 +19,9 @@ from typing import Any
 import numpy as np
 
 from hcard.atomic import atomic_outputs, write_atomically_together
-from hcard.bounded_read import MAX_JSON_FILE_BYTES, InputTooLarge, read_bounded
 from hcard.csv_rows import format_rows, numeric_table, read_csv_text
 from hcard.errors import InputError
-from hcard.file_errors import reading
-from hcard.json_text import JsonInputError, parse_json
+from hcard.json_file import read_json_file
 from hcard.quantities import COLUMN_UNITS
 from hcard.terminal_text import clipped
 
@@ -251,17 +249,9 @@ def _relative_references(conditions: dict[str, Any], sidecar: Path) -> dict[str,
 
 def _read_sidecar(path: Path) -> dict[str, Any]:
     source = str(path)
-    try:
-        with reading(path, MeasurementError, "a conditions sidecar",
-                     missing="the conditions sidecar"):
-            raw = read_bounded(path, MAX_JSON_FILE_BYTES)
-    except InputTooLarge as exc:
-        raise MeasurementError(f"{source}: {exc} (the conditions sidecar)") from None
-    try:
-        data = parse_json(raw)
-    except JsonInputError as exc:
-        where = source if exc.line is None else f"{source}:{exc.line}:{exc.column}"
-        raise MeasurementError(f"{where}: bad sidecar JSON ({exc.reason})") from None
+    data = read_json_file(path, MeasurementError, what="a conditions sidecar",
+                          named="the conditions sidecar", label="sidecar",
+                          missing="the conditions sidecar")
     if not isinstance(data, dict):
         raise MeasurementError(f"{source}: bad sidecar JSON (the top level must be an object)")
     if not isinstance(data.get("device"), str) or not data["device"].strip():

@@ -14,10 +14,8 @@ import re
 from dataclasses import dataclass, field
 from typing import Any
 
-from hcard.bounded_read import MAX_JSON_FILE_BYTES, InputTooLarge, read_bounded
 from hcard.calibration.lab.errors import ColumnMapError
-from hcard.file_errors import reading
-from hcard.json_text import JsonInputError, parse_json
+from hcard.json_file import read_json_file
 from hcard.quantities import COLUMN_UNITS
 
 MAP_VERSION = 1
@@ -115,18 +113,9 @@ def read_column_map(path: str | os.PathLike[str]) -> ColumnMap:
         ColumnMapError: the file is missing, too large, not JSON, or breaks LR2-LR8 (an
             unknown quantity or unit, a gain that is not a finite non-zero number, ...).
     """
-    source = str(path)
-    try:
-        with reading(path, ColumnMapError, "a column map"):
-            raw = read_bounded(path, MAX_JSON_FILE_BYTES)
-    except InputTooLarge as exc:
-        raise ColumnMapError(f"{source}: {exc} (a column map)") from None
-    try:
-        data = parse_json(raw)
-    except JsonInputError as exc:
-        where = source if exc.line is None else f"{source}:{exc.line}:{exc.column}"
-        raise ColumnMapError(f"{where}: bad column map JSON ({exc.reason})") from None
-    return parse_column_map(data, source)
+    data = read_json_file(path, ColumnMapError, what="a column map", named="a column map",
+                          label="column map")
+    return parse_column_map(data, str(path))
 
 
 def parse_column_map(data: Any, source: str = "column map") -> ColumnMap:
