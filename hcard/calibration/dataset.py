@@ -379,6 +379,21 @@ def contact_time(t: np.ndarray, contact: np.ndarray) -> np.ndarray:
     return np.where(contact, time_since_change(contact, t), 0.0)
 
 
+def sliding(speed: np.ndarray | None, contact: np.ndarray) -> np.ndarray | bool:
+    """The contact samples that slide (spec/measurement-format.md rule MS5): where a recording has a speed column and
+    some of its contact samples move, a contact sample whose speed is exactly 0 is a finger at
+    rest on the surface (a touch-down before the first speed estimate, rule R4). Its lateral
+    force is static friction, any value up to the sliding friction, which no sliding-friction
+    model (Eqs. 1.7, 2.30, 4.1) describes, so it is neither fitted nor held out. True for every
+    sample without a speed column or when no contact sample moves."""
+    if speed is None:
+        return True
+    moving = speed != 0
+    if not np.logical_or.reduce(moving & contact):
+        return True
+    return moving
+
+
 def split_masks(m: Measurement, label: str, split: str, test_fraction: float, seed: int,
                 threshold: float, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Masks ``(train, test)`` of the samples of ``m`` (``label`` names it in errors):
@@ -487,7 +502,7 @@ class _Parts:
                 f"{label}: no sample in contact (fn >= {threshold * MN_PER_N:.3g} mN)"
             )
         train, test = split_masks(m, label, split, test_fraction, seed + index, threshold,
-                                  keep)
+                                  keep & sliding(m.speed, keep))
         self.train.append(train)
         self.test.append(test)
 

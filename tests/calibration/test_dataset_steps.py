@@ -11,6 +11,8 @@ from hcard.calibration.dataset import (
     check_recordings,
     contact_time,
     recording_columns,
+    prepare,
+    sliding,
     split_masks,
 )
 from hcard.calibration.measurement import Measurement, MeasurementError
@@ -90,3 +92,28 @@ def test_recordings_that_cannot_be_calibrated_together_are_refused() -> None:
     with pytest.raises(MeasurementError, match=r"plate frequency .* some recordings but not all"):
         check_recordings([strokes(), strokes(frequency_hz=None)], "stroke", 0.25)
     check_recordings([strokes(), strokes()], "time", 0.25)
+
+
+def test_a_finger_at_rest_is_in_no_split_rule_ms5() -> None:
+    """The first sample of each contact has no speed estimate (0): its lateral force is static
+    friction, here 0 N against 0.2 N sliding, and prepare fits and holds out only the sliding
+    samples; it keeps its stroke, and its contact time counts."""
+    m = strokes()
+    touch_downs = np.arange(40) % 10 == 2
+    m.speed[touch_downs] = 0.0
+    m.lateral_force[touch_downs] = 0.0
+    data = prepare([m])
+    assert not np.any(data.used[touch_downs])
+    assert np.count_nonzero(data.used) == 28  # 32 in contact, 4 at rest
+    assert data.inputs["contact_time"][touch_downs] == pytest.approx(0.0)
+    assert data.inputs["contact_time"][np.arange(40) % 10 == 3] == pytest.approx(0.01)
+    assert sliding(None, np.ones(3, dtype=bool)) is True
+
+
+def test_a_recording_that_never_slides_is_fitted_whole() -> None:
+    """A press without motion (every speed 0) has no sliding sample to prefer: every contact
+    sample is in a split, as without a speed column."""
+    m = strokes()
+    m.speed[:] = 0.0
+    data = prepare([m])
+    assert np.count_nonzero(data.used) == 32
