@@ -25,7 +25,11 @@ what a right answer is:
   when it added none. For a hit, each hidden parameter the library effect shares by name is
   compared with its fitted value: ``|z| = |fitted - truth| / uncertainty`` (``within`` when
   ``|z| <= 2``, the stated uncertainty's 95 % interval); and the rendered friction error on the
-  held-out textures before / after (``cut``, goal >= 2x);
+  held-out textures before / after (``cut``, goal >= 2x, for an effect on the UV or EV
+  channel: a finger effect scales the friction with and without modulation alike and leaves
+  the rendering unchanged, spec/device-profile.md DP4). An effect whose parameter the base
+  model's finger already fits (load-index: ``finger.load_index``) is a ``hit`` when no effect
+  is added and that base parameter is recovered;
 - out of the library: ``reported`` when no effect was added and the verdict is "not explained"
   (with where the residual lies: the report's structure description); ``wrong`` when an effect
   was added; ``missed`` otherwise;
@@ -69,6 +73,7 @@ class Run:
     case: str
     seed: int
     in_library: bool
+    channel: str = ""
     outcome: str = "error"
     verdict: str = ""
     added: tuple[str, ...] = ()
@@ -99,11 +104,15 @@ def listed_effects() -> dict[str, dict[str, float]]:
             for name, effect in HIDDEN_EFFECTS.items() if DEVICE in effect.devices}
 
 
-def library_effects() -> set[str]:
-    """Names of the calibration effects installed."""
+def library_effects() -> dict[str, str]:
+    """The calibration effects installed: name -> the channel it acts on (uv, ev, finger)."""
+    from hcard.physics.profile_effects import channel_of
     from hcard.plugins.registry import get_registry
 
-    return set(get_registry().calibration_effects)
+    out = {}
+    for name, effect in get_registry().calibration_effects.items():
+        out[name] = channel_of(effect() if isinstance(effect, type) else effect)
+    return out
 
 
 class Server:
@@ -181,6 +190,14 @@ def score(run: Run, report: dict, truth: dict[str, float]) -> None:
         else:
             run.outcome = "reported" if "not explained" in run.verdict else "missed"
         return
+    base = {name: report["after"]["parameters"].get(f"finger.{name}") for name in truth}
+    if truth and all(entry and entry["fitted"] for entry in base.values()):
+        # the base finger model has the parameter (load-index: finger.load_index): the right
+        # answer is no effect added and the base's value recovered
+        run.outcome = "wrong" if run.added else "hit"
+        if run.outcome == "hit":
+            run.recovered = recovered(run, {n: e for n, e in base.items() if e}, truth)
+        return
     if run.added == (run.case,):
         run.outcome = "hit"
     elif ambiguous and run.runner_up == (run.case,):
@@ -192,24 +209,31 @@ def score(run: Run, report: dict, truth: dict[str, float]) -> None:
     if run.outcome != "hit":
         return
     (entry,) = [e for e in report["effects_added"] if e["name"] == run.case]
+    run.recovered = recovered(run, entry["parameters"], truth)
+
+
+def recovered(run: Run, fitted: dict[str, dict], truth: dict[str, float]) -> bool | None:
+    """Whether every hidden parameter that ``fitted`` has by name lies within
+    :data:`WITHIN_Z` stated uncertainties of its truth (None: none to compare); each
+    comparison is listed in ``run.parameters``."""
     checks = []
     for name, value in truth.items():
-        fitted = entry["parameters"].get(name)
-        if fitted is None:
+        entry = fitted.get(name)
+        if entry is None:
             continue
-        sigma = fitted.get("uncertainty")
-        z = (fitted["value"] - value) / sigma if sigma else math.inf
+        sigma = entry.get("uncertainty")
+        z = (entry["value"] - value) / sigma if sigma else math.inf
         checks.append(abs(z) <= WITHIN_Z)
-        run.parameters.append(f"{name} {fitted['value']:.4g} +- {sigma or math.nan:.2g} "
+        run.parameters.append(f"{name} {entry['value']:.4g} +- {sigma or math.nan:.2g} "
                               f"(truth {value:.4g}, z {z:+.1f})")
-    run.recovered = all(checks) if checks else None
+    return all(checks) if checks else None
 
 
-def one(case: str, seed: int, truth: dict[str, float], in_library: bool, plan: Path,
+def one(case: str, seed: int, truth: dict[str, float], channel: str, plan: Path,
         transport: str, keep: Path) -> Run:
     """One case, one seed; a play that lost its session to this host's stall is run again
     (at most twice)."""
-    run = Run(case, seed, in_library)
+    run = Run(case, seed, bool(channel), channel)
     effect = None if case == "none" else case
     tic = time.perf_counter()
     for attempt in range(1, 4):
@@ -268,11 +292,12 @@ def rates(runs: list[Run]) -> list[str]:
 
         hits = [r for r in group if r.outcome == "hit"]
         recovered = sum(r.recovered is True for r in hits)
-        cut = sum((r.cut or 0) >= MIN_CUT for r in hits)
+        rendered = [r for r in hits if r.channel in ("uv", "ev")]
+        cut = sum((r.cut or 0) >= MIN_CUT for r in rendered)
         out.append(f"{kind:16s} {len(group):4d} {count('hit'):>6s} {count('undecided'):>9s} "
                    f"{count('wrong'):>6s} {count('missed'):>6s} {count('reported'):>8s} "
                    f"{count('none'):>5s} {count('false alarm'):>11s} {count('error'):>6s} "
-                   f"{recovered:>4d}/{len(hits):<4d} {cut:>3d}/{len(hits):<3d}")
+                   f"{recovered:>4d}/{len(hits):<4d} {cut:>3d}/{len(rendered):<3d}")
     return out
 
 
@@ -303,7 +328,7 @@ def main() -> int:
     runs = []
     for case in cases:
         for seed in range(1, options.seeds + 1):
-            run = one(case, seed, hidden.get(case, {}), case in library, plan,
+            run = one(case, seed, hidden.get(case, {}), library.get(case, ""), plan,
                       options.transport, keep)
             runs.append(run)
             print(line(run), flush=True)
