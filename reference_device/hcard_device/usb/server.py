@@ -141,7 +141,9 @@ def make_firmware(variant: str, seed: int = 0,
     if variant not in PRODUCTS:
         raise ValueError(f"unknown device {variant!r}; known: {', '.join(PRODUCTS)}")
     config = variant_config(variant)
-    hidden = HiddenPhysics(device_profile(config), resolve(variant, effects))
+    hidden = HiddenPhysics(device_profile(config), resolve(variant, effects),
+                           frame_rate_hz=config.frame_rate_hz,
+                           ambient_pressure_pa=config.ambient_pressure_pa)
     return Firmware(DeviceSimulation(config, seed=seed, hidden=hidden))
 
 
