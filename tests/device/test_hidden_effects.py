@@ -19,7 +19,7 @@ from hcard.device.recording import recording
 from hcard.device.uri import parse_uri
 from hcard.track import make_track
 from hcard_builtins.physics.electrovibration import AirLayer
-from hcard_device.sim.hidden import HiddenEffectError, parse_assignments, resolve
+from hcard_device.sim.hidden import HIDDEN_EFFECTS, HiddenEffectError, parse_assignments, resolve
 
 EV_CARD = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[
     build.texture(1.0, channel="ev", name="plain"), build.texture(1.1, channel="ev", name="ev")],
@@ -118,7 +118,11 @@ def test_nothing_the_device_says_names_the_effect():
 
 def test_serve_lists_and_checks_effects():
     listing = CliRunner().invoke(cli, ["device", "serve", "--list-effects"])
-    assert listing.exit_code == 0 and listing.output.startswith("air-layer (coupled;")
+    assert listing.exit_code == 0
+    lines = listing.output.splitlines()
+    assert [line.split(" ", 1)[0] for line in lines] == list(HIDDEN_EFFECTS)
+    assert "air-layer (coupled; air_gap=1e-05 m): air between" in listing.output
+    assert "force-sensor-resonance (evita/coupled; natural_frequency=150 Hz, " in listing.output
     refused = CliRunner().invoke(cli, ["device", "serve", "--device", "evita", "--effect",
                                        "air-layer", "--port", "0"])
     assert refused.exit_code == 2  # a bad option value (README: exit status)
