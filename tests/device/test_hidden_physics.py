@@ -143,7 +143,7 @@ def test_skin_recovery_counts_strokes_since_the_finger_rested():
         (0.2, True, 50.0, 0), (0.2, True, -50.0, 1), (0.2, True, 50.0, 2),
         (0.2, False, 0.0, None), (0.2, True, 50.0, 3),
         (0.8, False, 0.0, None), (0.2, True, -50.0, 0), (0.2, True, 50.0, 1)]
-    t, x, contact, expected = [0.0], [20.0], [True], []
+    t, x, contact = [0.0], [20.0], [True]
     for duration, touching, velocity, _ in legs:
         for _ in range(20):
             t.append(t[-1] + duration / 20)
@@ -155,7 +155,7 @@ def test_skin_recovery_counts_strokes_since_the_finger_rested():
     hidden = simulate(config, {"skin-recovery": {"depth": 0.3, "strokes": 2.0}}, track, 22000)
     start = 0.0
     for duration, touching, _, k in legs:
-        middle = int(round((start + duration / 2) * RATE))
+        middle = round((start + duration / 2) * RATE)
         start += duration
         if not touching:
             continue
