@@ -38,6 +38,7 @@ from hcard.device.protocol.constants import (
     StateFlags,
 )
 from hcard.device.state_log import state_field
+from hcard.device.uri import stated_ambient_pressure
 from hcard.quantities import M_PER_MM, S_PER_US
 from hcard.render.touch import speed_estimate
 from hcard.track import FingerTrack
@@ -193,6 +194,9 @@ def sidecar(result: PlayResult, *, track_path: str | None = None,
     }
     if result.limits_at_start is not None:
         conditions["limits_at_start"] = limits_record(result.limits_at_start)
+    pressure = stated_ambient_pressure(result.uri)
+    if pressure is not None:  # the air around an in-process device's plate
+        conditions["ambient_pressure_pa"] = pressure
     if has_ev:
         conditions["voltage_form"] = "envelope"
         conditions["carrier_frequency_hz"] = float(info.ev_carrier_hz)

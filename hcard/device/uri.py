@@ -14,7 +14,10 @@
 ``sim://`` and ``loopback``: ``effect=NAME[,NAME]`` switches effects on and ``NAME.PARAM=VALUE``
 sets a parameter (units accepted; it switches its effect on too), as ``hcard device serve
 --effect`` does: ``sim://coupled?effect=air-layer&air-layer.air_gap=8um``
-(the reference device's hidden effects). The model options are checked by the provider of
+(the reference device's hidden effects, ``hcard device serve --list-effects``), and
+``ambient_pressure`` (units accepted, ``ambient_pressure=50kPa``) the air around its plate (one
+atmosphere by default; a play records it in the sidecar as ``ambient_pressure_pa``). The model
+options are checked by the provider of
 in-process devices (:mod:`hcard.device.in_process`). Parsing never touches a device.
 """
 
@@ -58,6 +61,8 @@ class DeviceUri:
         variant: device model served in-process (``sim``, ``loopback``): evita or coupled.
         seed: random seed of the in-process simulation.
         effects: physical effects hidden in the in-process device: name -> parameter values.
+        ambient_pressure_pa: air pressure around the in-process device's plate, Pa (None: one
+            atmosphere, not stated).
         options: every query option, as given.
     """
 
@@ -72,6 +77,7 @@ class DeviceUri:
     variant: str = DEFAULT_VARIANT
     seed: int = 0
     effects: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
+    ambient_pressure_pa: float | None = None
     options: Mapping[str, str] = field(default_factory=dict)
 
     @property
@@ -81,6 +87,35 @@ class DeviceUri:
 
     def __str__(self) -> str:
         return self.text
+
+
+def ambient_pressure(text: str) -> float:
+    """The ``ambient_pressure`` option's value in Pa (units accepted: ``50kPa``, ``0.5atm``).
+
+    Raises:
+        ValueError: not a pressure, or not finite and > 0.
+    """
+    import math
+
+    from hcard.quantities import parse_quantity
+
+    value = parse_quantity(text.strip(), "Pa")
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(f"ambient_pressure {text!r} must be a pressure > 0")
+    return value
+
+
+def stated_ambient_pressure(text: str) -> float | None:
+    """The ambient pressure (Pa) the query of the device URI ``text`` states, None when it
+    states none or a malformed one (an in-process device's option, which a recording keeps as
+    its condition ``ambient_pressure_pa``)."""
+    value = dict(parse_qsl(urlsplit(str(text)).query)).get("ambient_pressure")
+    if value is None:
+        return None
+    try:
+        return ambient_pressure(value)
+    except ValueError:
+        return None
 
 
 def uri_error(text: str, scheme: str, reason: str) -> UriError:

@@ -106,20 +106,31 @@ def device() -> None:
               show_default=True, help="E-ViTa (UV) or the coupled UV+EV stimulator.")
 @click.option("--seed", default=0, show_default=True, type=int,
               help="Seed of the simulation's noise.")
+@click.option("--ambient-pressure", "ambient_pressure", default=None, metavar="PRESSURE",
+              help="Air pressure around the plate, units accepted (50kPa; default one "
+                   "atmosphere); acts only through a hidden squeeze-film-share.")
 @hidden_effect_options("in the hardware; nothing the device reports names it")
-def serve(host: str, port: int, variant: str, seed: int, effect_names: tuple[str, ...],
-          assignments: tuple[str, ...], list_effects: bool) -> None:
+def serve(host: str, port: int, variant: str, seed: int, ambient_pressure: str | None,
+          effect_names: tuple[str, ...], assignments: tuple[str, ...],
+          list_effects: bool) -> None:
     """Serve a simulated device as USB-HID over USB/IP until Ctrl-C or SIGTERM.
 
     On any Linux host, `usbip attach -r HOST -b 1-1` turns it into a /dev/hidraw device.
     With --effect the hardware hides a physical effect from its own profile, for a calibration
-    to find from recordings alone (sim://...?effect=NAME does the same in process).
+    to find from recordings alone (sim://...?effect=NAME does the same in process); several
+    --effect options hide several at once. --list-effects lists them with their devices and
+    true (default) parameters: the calibration library's effects (load-index,
+    occlusion-drift, actuator-bandwidth, charge-leakage, ultrasonic-speed, air-layer,
+    skin-recovery, squeeze-film-share, finger-geometry) and two that no library effect
+    explains (plate-load-damping, force-sensor-resonance).
 
     \b
     Examples:
       hcard device serve
       hcard device serve --device coupled --port 0
       hcard device serve --device coupled --effect air-layer --effect-param air-layer.air_gap=8um
+      hcard device serve --effect force-sensor-resonance --effect plate-load-damping
+      hcard device serve --effect squeeze-film-share --ambient-pressure 50kPa
     """
     from hcard_device.usb.server import serve as serve_device
 
@@ -127,8 +138,17 @@ def serve(host: str, port: int, variant: str, seed: int, effect_names: tuple[str
         echo_hidden_effects()
         return
     effects = hidden_effects(effect_names, assignments, variant)
+    pressure = None
+    if ambient_pressure is not None:
+        from hcard.device.uri import ambient_pressure as parse_pressure
+
+        try:
+            pressure = parse_pressure(ambient_pressure)
+        except ValueError as exc:
+            raise click.BadParameter(str(exc), param_hint="--ambient-pressure") from None
     status = serve_device(variant, host, port, seed, effects=effects,
-                          echo=lambda message, error: click.echo(message, err=error))
+                          echo=lambda message, error: click.echo(message, err=error),
+                          ambient_pressure_pa=pressure)
     if status:
         raise SystemExit(status)
 

@@ -37,7 +37,7 @@ from hcard.device.base import DEFAULT_TIMEOUT_S, DeviceListing, Driver
 from hcard.device.errors import DeviceError, DeviceStall
 from hcard.device.protocol import INPUT_RATE_HZ, ProtocolError, State
 from hcard.device.transports.usb_descriptors import read_hid_descriptor, read_report_descriptor
-from hcard.device.uri import DeviceUri, parse_uri, uri_error
+from hcard.device.uri import DeviceUri, ambient_pressure, parse_uri, uri_error
 from hcard_device.usb.device import PRODUCTS, STALL_STATUS, build_usb_device
 from hcard_device.usb.server import DeviceServer, make_firmware
 
@@ -129,8 +129,9 @@ class SimDriver(Driver):
 
     @classmethod
     def resolve_model(cls, uri: DeviceUri, variant: str, options: dict[str, str]) -> DeviceUri:
-        """``uri`` with its model options (``device``, ``seed``, ``effect``, ``EFFECT.PARAM``)
-        checked and the hidden effects resolved with their defaults (:mod:`.sim.hidden`).
+        """``uri`` with its model options (``device``, ``seed``, ``effect``, ``EFFECT.PARAM``,
+        ``ambient_pressure``) checked and the hidden effects resolved with their defaults
+        (:mod:`.sim.hidden`).
 
         Raises:
             UriError: an unknown option, device or effect, a bad seed or parameter value.
@@ -139,11 +140,11 @@ class SimDriver(Driver):
 
         text = uri.text
         assignments = [f"{key}={value}" for key, value in options.items() if "." in key]
-        unknown = sorted(set(options) - {"device", "seed", "effect"}
+        unknown = sorted(set(options) - {"device", "seed", "effect", "ambient_pressure"}
                          - {k for k in options if "." in k})
         if unknown:
             raise uri_error(text, uri.scheme, f"unknown option(s) {', '.join(unknown)} "
-                            "(known: device, seed, effect, EFFECT.PARAM)")
+                            "(known: device, seed, effect, EFFECT.PARAM, ambient_pressure)")
         if variant not in PRODUCTS:
             raise uri_error(text, uri.scheme,
                             f"unknown device {variant!r} (known: {', '.join(PRODUCTS)})")
@@ -155,22 +156,30 @@ class SimDriver(Driver):
             effects = resolve(variant, parse_assignments(names, assignments))
         except HiddenEffectError as exc:
             raise uri_error(text, uri.scheme, str(exc)) from None
+        pressure = None
+        if "ambient_pressure" in options:
+            try:
+                pressure = ambient_pressure(options["ambient_pressure"])
+            except ValueError as exc:
+                raise uri_error(text, uri.scheme, str(exc)) from None
         return DeviceUri(uri.text, uri.scheme, host=uri.host, port=uri.port, busid=uri.busid,
-                         variant=variant, seed=int(seed_text), effects=effects, options=options)
+                         variant=variant, seed=int(seed_text), effects=effects, options=options,
+                         ambient_pressure_pa=pressure)
 
     @classmethod
     def serve_in_process(cls, uri: DeviceUri) -> DeviceServer:
         """Start the device of a ``loopback`` URI in this process (the driver that connects
         through it stops it)."""
         server = DeviceServer(variant=uri.variant, seed=uri.seed, loopback=True,
-                              effects=uri.effects)
+                              effects=uri.effects, ambient_pressure_pa=uri.ambient_pressure_pa)
         server.start()
         return server
 
     @classmethod
     def open(cls, uri: DeviceUri | str, *, timeout_s: float = DEFAULT_TIMEOUT_S) -> SimDriver:
         uri = parse_uri(uri) if isinstance(uri, str) else uri
-        return cls(uri, make_firmware(uri.variant, uri.seed, uri.effects),
+        return cls(uri, make_firmware(uri.variant, uri.seed, uri.effects,
+                                      ambient_pressure_pa=uri.ambient_pressure_pa),
                    timeout_s=timeout_s)
 
     @classmethod

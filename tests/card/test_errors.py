@@ -42,7 +42,7 @@ def test_every_exception_class_derives_from_the_root():
     # The walk reaches all four packages (at least the classes named in hcard.errors' tree).
     assert {"hcard.errors.CardError", "hcard.device.errors.DeviceTimeout",
             "hcard_conformance.result.CannotAssess", "hcard.physics.predictor.PredictorError",
-            "hcard_device.sim.hidden.HiddenEffectError"} <= set(classes)
+            "hcard_device.sim.hidden.catalogue.HiddenEffectError"} <= set(classes)
     outside = sorted(name for name, cls in classes.items() if not issubclass(cls, HcardError))
     assert outside == []
 

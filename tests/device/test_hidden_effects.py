@@ -19,7 +19,7 @@ from hcard.device.recording import recording
 from hcard.device.uri import parse_uri
 from hcard.track import make_track
 from hcard_builtins.physics.electrovibration import AirLayer
-from hcard_device.sim.hidden import HiddenEffectError, parse_assignments, resolve
+from hcard_device.sim.hidden import HIDDEN_EFFECTS, HiddenEffectError, parse_assignments, resolve
 
 EV_CARD = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[
     build.texture(1.0, channel="ev", name="plain"), build.texture(1.1, channel="ev", name="ev")],
@@ -118,10 +118,78 @@ def test_nothing_the_device_says_names_the_effect():
 
 def test_serve_lists_and_checks_effects():
     listing = CliRunner().invoke(cli, ["device", "serve", "--list-effects"])
-    assert listing.exit_code == 0 and listing.output.startswith("air-layer (coupled;")
+    assert listing.exit_code == 0
+    lines = listing.output.splitlines()
+    assert [line.split(" ", 1)[0] for line in lines] == list(HIDDEN_EFFECTS)
+    assert "air-layer (coupled; air_gap=1e-05 m): air between" in listing.output
+    assert "force-sensor-resonance (evita/coupled; natural_frequency=150 Hz, " in listing.output
     refused = CliRunner().invoke(cli, ["device", "serve", "--device", "evita", "--effect",
                                        "air-layer", "--port", "0"])
     assert refused.exit_code == 2  # a bad option value (README: exit status)
     assert "effect air-layer needs the coupled device, not evita" in refused.output
     malformed = CliRunner().invoke(cli, ["device", "serve", "--effect-param", "air-layer=1"])
     assert malformed.exit_code == 2 and "expected EFFECT.PARAM=VALUE" in malformed.output
+
+
+def assignment(name: str) -> str:
+    """``NAME.PARAM=VALUE`` of the effect's first parameter, at a value off its default."""
+    parameter = HIDDEN_EFFECTS[name].parameters[0]
+    low, high = parameter.bounds
+    value = parameter.default * 0.9 if parameter.default else 0.5 * (low + high)
+    return f"{name}.{parameter.name}={value!r}"
+
+
+@pytest.mark.parametrize("name", sorted(HIDDEN_EFFECTS))
+def test_every_effect_is_served_from_the_uri_and_the_command_line(name):
+    from hcard_device.device_cmd import hidden_effects
+
+    text = assignment(name)
+    key, value = text.split("=")
+    parameter = key.split(".", 1)[1]
+    uri = parse_uri(f"sim://coupled?seed=1&effect={name}&{text}")
+    assert uri.effects[name][parameter] == pytest.approx(float(value))
+    assert set(uri.effects[name]) == {p.name for p in HIDDEN_EFFECTS[name].parameters}
+    assert hidden_effects((name,), (text,), "coupled") == {name: {parameter: float(value)}}
+    if "evita" in HIDDEN_EFFECTS[name].devices:
+        assert parse_uri(f"sim://evita?effect={name}").effects[name]
+    else:
+        with pytest.raises(UriError, match=f"effect {name} needs the coupled device, not evita"):
+            parse_uri(f"sim://evita?effect={name}")
+
+
+def test_several_effects_at_once_through_a_served_device_and_the_pressure_in_the_sidecar():
+    effects = "squeeze-film-share,force-sensor-resonance,plate-load-damping,charge-leakage"
+    query = f"device=coupled&seed=3&effect={effects}&ambient_pressure=50kPa"
+    uv_card = build.card(20.0, 10.0, taxtel_mm=10.0, textures=[
+        build.texture(0.6, channel="uv", name="uv"), build.texture(1.3, channel="ev", name="ev")],
+        texture_index=[0, 1])
+    with open_device(f"usbip://loopback?{query}") as hidden:
+        m = recording(play(hidden, uv_card, slow_stroke(0.5)))
+    with open_device("usbip://loopback?device=coupled&seed=3") as plain:
+        own = recording(play(plain, uv_card, slow_stroke(0.5)))
+    # the device's own profile names its own models (its leakage at the carrier is
+    # "ev-charge-leakage"), never a hidden effect; nothing else names one
+    assert m.conditions["profile"]["content"]["effects"] == []
+    text = json.dumps({k: v for k, v in m.conditions.items() if k != "profile"}).lower()
+    for name in effects.split(","):
+        assert name not in text
+    assert "?" not in m.conditions["session"]["uri"]
+    assert m.conditions["ambient_pressure_pa"] == pytest.approx(50e3)
+    assert "ambient_pressure_pa" not in own.conditions
+    def uv_patch(rec):  # the mean lateral force on the UV patch (x < 9 mm), N
+        return float(np.mean(rec.lateral_force[rec.contact & (rec.t > 0.05) & (rec.x < 0.009)]))
+
+    # less of the reduction at half an atmosphere and under the finger's load
+    assert uv_patch(m) > uv_patch(own) + 0.01
+
+
+def test_the_ambient_pressure_is_checked():
+    with pytest.raises(UriError, match="not a unit of Pa"):
+        parse_uri("sim://coupled?ambient_pressure=3mm")
+    with pytest.raises(UriError, match="must be a pressure > 0"):
+        parse_uri("sim://coupled?ambient_pressure=0")
+    assert parse_uri("sim://coupled?ambient_pressure=0.5atm").ambient_pressure_pa == (
+        pytest.approx(50662.5))
+    refused = CliRunner().invoke(cli, ["device", "serve", "--ambient-pressure", "1kHz",
+                                       "--port", "0"])
+    assert refused.exit_code == 2 and "--ambient-pressure" in refused.output

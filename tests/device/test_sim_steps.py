@@ -67,6 +67,14 @@ CASES = [
     (COUPLED, "bipolar", 1, None, False),
     (COUPLED, "mixed", 2, None, True),
     (COUPLED, "mixed", 3, {"air-layer": {}}, False),
+    # every effect with a state (the finger's history, the leakage, the lag, the sensor), at once
+    (COUPLED, "mixed", 6, {name: {} for name in (
+        "occlusion-drift", "skin-recovery", "charge-leakage", "actuator-bandwidth",
+        "force-sensor-resonance", "plate-load-damping", "finger-geometry", "load-index",
+        "ultrasonic-speed")}, True),
+    (EVITA, "strong", 8, {name: {} for name in (
+        "occlusion-drift", "skin-recovery", "actuator-bandwidth", "force-sensor-resonance")},
+     True),
 ]
 
 

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from hcard.physics.device_limits import COUPLED_STIMULATOR_LIMITS, DeviceLimits
+from hcard.quantities import ATMOSPHERE_PA
 from hcard.rates import DEFAULT_FRAME_RATE_HZ, TOUCH_RATE_HZ
 
 EVITA_LIMITS = replace(COUPLED_STIMULATOR_LIMITS, max_voltage=0.0, plate_frequency=60_750.0)
@@ -82,6 +83,8 @@ class DeviceConfig:
             host-driven output ramps to zero, s.
         ramp_down_s: duration of the linear ramp to zero of the commands (watchdog, stop), s.
         stream_queue_frames: capacity of the direct frame-streaming queue, frames.
+        ambient_pressure_pa: air pressure around the plate, Pa (one atmosphere; it acts only
+            through a hidden ``squeeze-film-share``, :mod:`.hidden`).
     """
 
     name: str
@@ -105,6 +108,7 @@ class DeviceConfig:
     watchdog_s: float = 0.1
     ramp_down_s: float = 0.01
     stream_queue_frames: int = 2000
+    ambient_pressure_pa: float = ATMOSPHERE_PA
     sources: dict[str, str] = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -116,7 +120,7 @@ class DeviceConfig:
             "frame_rate_hz", "loop_rate_hz", "touch_rate_hz",
             "plate_quality_factor", "full_drive_amplitude_m", "pi_dead_time_s",
             "amplifier_slew_v_per_s", "mu0", "psi_star",
-            "watchdog_s", "ramp_down_s",
+            "watchdog_s", "ramp_down_s", "ambient_pressure_pa",
         )
         for name in positive:
             value = float(getattr(self, name))

@@ -313,10 +313,9 @@ class FingerPhysics:
         )
         uv, ev = self.profile.forward(amplitude_m, voltage_v, truth.speed_m_s, truth.normal_force_n,
                                       trusted=trusted)
-        hidden = self.hidden.ev_force(voltage_v, truth.normal_force_n) if self.hidden else None
-        if hidden is not None:
-            with np.errstate(divide="ignore", invalid="ignore"):
-                ev = np.where(truth.normal_force_n > 0, 1.0 + hidden / truth.normal_force_n, 1.0)
+        if self.hidden:
+            uv = self.hidden.uv(uv, truth)
+            ev = self.hidden.ev(ev, voltage_v, truth.normal_force_n)
         return np.where(truth.contact, uv * ev, 1.0)
 
     def coefficient(self, truth: FingerTruth) -> np.ndarray:
@@ -344,6 +343,31 @@ class FingerPhysics:
         out = np.zeros(pressing.shape[0])
         out[pressing] = mu
         return out
+
+    def respond(self, amplitude_m: np.ndarray, voltage_v: np.ndarray, truth: FingerTruth,
+                coefficient: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The friction felt (:meth:`friction`) and the lateral force measured
+        (:meth:`lateral_force`) over the next frames of the simulation, from the plate loop's
+        measured amplitude (m) and the amplifier's voltage envelope (V), one per frame. With
+        hidden effects (:mod:`.hidden`) the amplitude and voltage under the finger, the finger's
+        friction coefficient and the sensor's reading are theirs; their state moves on by
+        these frames (call once per step, in order)."""
+        hidden = self.hidden
+        if not hidden:
+            friction = self.friction(amplitude_m, voltage_v, truth, measured=True)
+            return friction, self.lateral_force(friction, truth, coefficient)
+        history = hidden.advance(truth)
+        amplitude_m = hidden.amplitude(amplitude_m, truth)
+        voltage_v = hidden.voltage(voltage_v, history)
+        friction = self.friction(amplitude_m, voltage_v, truth, measured=True)
+        if coefficient is None:
+            coefficient = self.coefficient(truth)
+        factor = hidden.finger_factor(truth, history)
+        if factor is not None:
+            coefficient = coefficient * factor
+        force = hidden.sensor(coefficient * friction * truth.normal_force_n)
+        force = force + self._draws.take(friction.shape[0]) * self.lateral_noise_n
+        return friction, force
 
     def lateral_force(self, friction: np.ndarray, truth: FingerTruth,
                       coefficient: np.ndarray | None = None) -> np.ndarray:

@@ -527,6 +527,7 @@ class DeviceSimulation:
         self._last_feed = self.time_s
         if isinstance(self._finger, HostFinger):
             self._finger = HostFinger(self.config.surface_mm)
+            self._new_finger()
             self._history = TouchSamples.empty()
             self._pending = TouchSamples.empty()
             self._forget_render_time_line()
@@ -572,6 +573,7 @@ class DeviceSimulation:
             if not self.host_driven:
                 self._last_feed = self.time_s
             self._finger = HostFinger(self.config.surface_mm)
+            self._new_finger()
             self._host_clock.reset()
             self._forget_render_time_line()
         host_s = None
@@ -630,6 +632,7 @@ class DeviceSimulation:
         may have been rendered ahead of the device clock (:meth:`_render_time`), and the
         panel's, timed by the device clock, would not follow them."""
         self._finger = TrackFinger(track, self.time_s, self.config.surface_mm)
+        self._new_finger()
         self._history = TouchSamples.empty()
         self._pending = TouchSamples.empty()
         self._forget_render_time_line()
@@ -747,8 +750,7 @@ class DeviceSimulation:
             faults[ev_run.current_limited] |= int(FaultBits.CURRENT_LIMIT)
         else:
             voltage, current = np.zeros(n), np.zeros(n)
-        friction = self.finger_physics.friction(amplitude, voltage, truth, measured=True)
-        lateral = self.finger_physics.lateral_force(friction, truth, coefficient)
+        friction, lateral = self.finger_physics.respond(amplitude, voltage, truth, coefficient)
 
         self._frame += n
         return SimBlock._of(
@@ -774,6 +776,12 @@ class DeviceSimulation:
         )
 
     # -- pieces ----------------------------------------------------------------------------
+    def _new_finger(self) -> None:
+        """A new finger on the plate: the history hidden effects keep of it starts over."""
+        hidden = self.finger_physics.hidden
+        if hidden is not None:
+            hidden.new_finger()
+
     def _invalid(self) -> None:
         self.counts.invalid_requests += 1
         self._events |= int(FaultBits.INVALID_REQUEST)

@@ -124,14 +124,18 @@ def raised_priority() -> Iterator[str]:
 
 
 def make_firmware(variant: str, seed: int = 0,
-                  effects: Mapping[str, Mapping[str, float]] | None = None) -> Any:
+                  effects: Mapping[str, Mapping[str, float]] | None = None, *,
+                  ambient_pressure_pa: float | None = None) -> Any:
     """A :class:`~hcard_device.firmware.Firmware` on a fresh simulation of ``variant``, with
-    the physical ``effects`` hidden in its hardware (:mod:`hcard_device.sim.hidden`).
+    the physical ``effects`` hidden in its hardware (:mod:`hcard_device.sim.hidden`), in air at
+    ``ambient_pressure_pa`` (Pa; None: one atmosphere).
 
     Raises:
         ValueError: an unknown variant, or an effect it cannot have
             (:class:`~hcard_device.sim.hidden.HiddenEffectError`).
     """
+    from dataclasses import replace
+
     from hcard_device.firmware import Firmware
     from hcard_device.profiles import variant_config
     from hcard_device.sim import DeviceSimulation
@@ -141,7 +145,11 @@ def make_firmware(variant: str, seed: int = 0,
     if variant not in PRODUCTS:
         raise ValueError(f"unknown device {variant!r}; known: {', '.join(PRODUCTS)}")
     config = variant_config(variant)
-    hidden = HiddenPhysics(device_profile(config), resolve(variant, effects))
+    if ambient_pressure_pa is not None:
+        config = replace(config, ambient_pressure_pa=ambient_pressure_pa)
+    hidden = HiddenPhysics(device_profile(config), resolve(variant, effects),
+                           frame_rate_hz=config.frame_rate_hz,
+                           ambient_pressure_pa=config.ambient_pressure_pa)
     return Firmware(DeviceSimulation(config, seed=seed, hidden=hidden))
 
 
@@ -158,6 +166,7 @@ class DeviceServer:
         in_queue: STATE reports each connection's IN queue holds before dropping the oldest.
         effects: physical effects hidden in the hardware (:mod:`hcard_device.sim.hidden`:
             name -> parameter values), checked here.
+        ambient_pressure_pa: the air pressure around the plate, Pa (None: one atmosphere).
         firmware_factory: builds the firmware instead of :func:`make_firmware` (negative
             controls of the conformance suite serve a deliberately faulty one).
         max_connections: connections served at once.
@@ -176,6 +185,7 @@ class DeviceServer:
                  port: int = DEFAULT_PORT, seed: int = 0, loopback: bool = False,
                  nodelay: bool = True, in_queue: int = DEFAULT_IN_QUEUE,
                  effects: Mapping[str, Mapping[str, float]] | None = None,
+                 ambient_pressure_pa: float | None = None,
                  firmware_factory: Callable[[], Any] | None = None,
                  max_connections: int = MAX_CONNECTIONS, check_in_process: bool = True,
                  log: Callable[[str], None] = DEFAULT_LOG) -> None:
@@ -184,6 +194,7 @@ class DeviceServer:
         if variant not in PRODUCTS:
             raise ValueError(f"unknown device {variant!r}; known: {', '.join(PRODUCTS)}")
         self.effects = resolve(variant, effects)
+        self.ambient_pressure_pa = ambient_pressure_pa
         self.variant = variant
         self.host = host
         self.seed = seed
@@ -223,7 +234,8 @@ class DeviceServer:
             OSError: the address cannot be bound.
         """
         self.firmware = (self.firmware_factory() if self.firmware_factory is not None
-                         else make_firmware(self.variant, self.seed, self.effects))
+                         else make_firmware(self.variant, self.seed, self.effects,
+                                            ambient_pressure_pa=self.ambient_pressure_pa))
         self.checker = (ProcessChecker(CHECK_TIMEOUT_S, log=self.log).start()
                         if self.check_in_process else InlineChecker())
         self.firmware.checker = self.checker
@@ -286,11 +298,13 @@ def _print(message: str, error: bool = False) -> None:
 
 def serve(variant: str = "evita", host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
           seed: int = 0, *, echo: Callable[[str, bool], None] = _print,
-          effects: Mapping[str, Mapping[str, float]] | None = None) -> int:
+          effects: Mapping[str, Mapping[str, float]] | None = None,
+          ambient_pressure_pa: float | None = None) -> int:
     """Serve until SIGINT or SIGTERM; returns the exit status (0 on a clean stop).
 
     ``echo(message, error)`` prints a line (to stderr when ``error``), flushed at once;
-    ``effects`` are hidden in the hardware and never named on the wire or in the banner.
+    ``effects`` are hidden in the hardware and never named on the wire or in the banner;
+    ``ambient_pressure_pa``: the air around the plate, Pa (None: one atmosphere).
     """
     # The firmware thread computes for up to a millisecond at a time; with the default 5 ms
     # GIL switch interval the USB/IP threads would wait that long to answer a URB.
@@ -298,17 +312,20 @@ def serve(variant: str = "evita", host: str = DEFAULT_HOST, port: int = DEFAULT_
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     try:
         with raised_priority() as priority:  # before any thread starts: they inherit it
-            return _serve(variant, host, port, seed, echo, effects, priority)
+            return _serve(variant, host, port, seed, echo, effects, priority,
+                          ambient_pressure_pa)
     finally:
         sys.setswitchinterval(switch_interval)
 
 
 def _serve(variant: str, host: str, port: int, seed: int, echo: Callable[[str, bool], None],
-           effects: Mapping[str, Mapping[str, float]] | None, priority: str) -> int:
+           effects: Mapping[str, Mapping[str, float]] | None, priority: str,
+           ambient_pressure_pa: float | None = None) -> int:
     """The body of :func:`serve`, at the priority it was granted (``priority``, for the
     banner)."""
     try:
-        server = DeviceServer(variant, host=host, port=port, seed=seed, effects=effects)
+        server = DeviceServer(variant, host=host, port=port, seed=seed, effects=effects,
+                              ambient_pressure_pa=ambient_pressure_pa)
     except ValueError as exc:
         echo(f"error: {exc}", True)
         return 1
@@ -354,14 +371,20 @@ def main(argv: list[str] | None = None) -> int:
                         help="hide a physical effect in the hardware (repeatable)")
     parser.add_argument("--effect-param", action="append", default=[],
                         metavar="EFFECT.PARAM=VALUE", help="a hidden effect's parameter")
+    parser.add_argument("--ambient-pressure", default=None, metavar="PRESSURE",
+                        help="air pressure around the plate (default one atmosphere)")
     args = parser.parse_args(argv)
+    from hcard.device.uri import ambient_pressure
     from hcard_device.sim.hidden import HiddenEffectError, parse_assignments
 
     try:
         effects = parse_assignments(args.effect, args.effect_param)
-    except HiddenEffectError as exc:
+        pressure = (None if args.ambient_pressure is None
+                    else ambient_pressure(args.ambient_pressure))
+    except (HiddenEffectError, ValueError) as exc:
         parser.error(str(exc))
-    return serve(args.device, args.host, args.port, args.seed, effects=effects)
+    return serve(args.device, args.host, args.port, args.seed, effects=effects,
+                 ambient_pressure_pa=pressure)
 
 
 if __name__ == "__main__":
