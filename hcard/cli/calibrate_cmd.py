@@ -216,8 +216,16 @@ def write_plan(directory: Path, device: str, plan: Plan, check: Plan) -> list[Pa
               show_default=True, help="Length of the verification track.")
 @click.option("--seed", default=0, show_default=True, type=int,
               help="Seed of the order of forces and speeds.")
+@click.option("--separate", "separate", metavar="A,B",
+              help="Instead: the experiment that separates effects A and B where a calibration "
+                   "could not (separate.hcard, separate.csv, design.json); --duration then "
+                   "overrides the designed length.")
+@click.option("--from", "from_dir", type=click.Path(file_okay=False, path_type=Path),
+              metavar="CALIB_DIR",
+              help="--separate: design from this calibration's output (its profile.json and "
+                   "report.json: fitted values, noise) instead of the device class's profile.")
 def plan_command(device: str, output: Path, duration: str, verify_duration: str,
-                 seed: int) -> None:
+                 seed: int, separate: str | None, from_dir: Path | None) -> None:
     """Write the calibration protocol for a device class, and the held-out verification.
 
     The protocol card holds lanes of target levels (an amplitude staircase, UV steps, a voltage
@@ -231,7 +239,25 @@ def plan_command(device: str, output: Path, duration: str, verify_duration: str,
     Examples:
       hcard calibrate plan --device uv -o plan/
       hcard calibrate plan --device coupled -o plan/ --duration 2min --seed 3
+      hcard calibrate plan --device coupled --separate air-layer,finger-geometry \
+          --from calib/ -o separate/
     """
+    if separate is not None:
+        given = None
+        source = click.get_current_context().get_parameter_source("duration")
+        if source is not click.core.ParameterSource.DEFAULT:
+            given = quantity_option(duration, "s", "--duration")
+        written, lines = plan_separation(separate, device, output, from_dir, given, seed)
+        for path in written:
+            click.echo(str(path))
+        for line in lines:
+            click.echo(line)
+        click.echo(f"next: hcard play {output / SEPARATE_CARD} --track "
+                   f"{output / SEPARATE_TRACK} --device URI -o separate.csv, then calibrate "
+                   "it with the first recordings")
+        return
+    if from_dir is not None:
+        raise CalibrateUsageError("--from designs a separating experiment; give --separate A,B")
     seconds = quantity_option(duration, "s", "--duration")
     verify_seconds = quantity_option(verify_duration, "s", "--verify-duration")
     plan = protocol(device, duration_s=seconds, seed=seed)
@@ -243,6 +269,58 @@ def plan_command(device: str, output: Path, duration: str, verify_duration: str,
                f"{check.track.t[-1]:.1f} s")
     click.echo(f"next: hcard play {output / PROTOCOL_CARD} --track {output / PROTOCOL_TRACK} "
                f"--device URI -o rec.csv")
+
+
+SEPARATE_CARD, SEPARATE_TRACK, DESIGN_JSON = "separate.hcard", "separate.csv", "design.json"
+
+
+def plan_separation(pair_text: str, device: str, output: Path, from_dir: Path | None,
+                    duration_s: float | None, seed: int) -> tuple[list[Path], list[str]]:
+    """Design the experiment separating the effects ``pair_text`` (``"A,B"``) on ``device``,
+    from a calibration folder or the class's profile, and write its card, track and
+    ``design.json`` into ``output``; the paths written and the design in a few lines."""
+    from hcard.calibration.separation import design, separating_plan
+    from hcard.calibration.separation_inputs import (
+        check_device,
+        effect_pair,
+        from_class,
+        from_folder,
+    )
+
+    a, b = effect_pair(pair_text)
+    if from_dir is not None:
+        pair, noise = from_folder(from_dir, a, b)
+        check_device(device, pair)
+    else:
+        pair, noise = from_class(device, a, b)
+    found = design(pair, noise, duration_s=duration_s)
+    plan = separating_plan(found, seed=seed)
+    return write_separation(output, device, found, plan), found.describe()
+
+
+def write_separation(directory: Path, device: str, found: Any, plan: Plan) -> list[Path]:
+    """Write a separating experiment's card, track and ``design.json`` (with the sessions)."""
+    from hcard.atomic import write_atomically
+    from hcard.card_io import save
+    from hcard.track import track_to_csv
+
+    with writing(directory, HcardError, "create"):
+        directory.mkdir(parents=True, exist_ok=True)
+    save(plan.card, directory / SEPARATE_CARD)
+    write_atomically(directory / SEPARATE_TRACK, track_to_csv(plan.track).encode())
+    description = {
+        **found.to_dict(),
+        "device": device,
+        "card": SEPARATE_CARD,
+        "track": SEPARATE_TRACK,
+        "lanes": list(plan.lanes),
+        "track_duration_s": float(plan.track.t[-1] - plan.track.t[0]),
+        "sessions": [{"lane": lane, "force_n": force, "speeds_mm_s": list(speeds)}
+                     for lane, force, speeds in plan.sessions],
+    }
+    write_atomically(directory / DESIGN_JSON,
+                     (json.dumps(description, indent=2) + "\n").encode())
+    return [directory / SEPARATE_CARD, directory / SEPARATE_TRACK, directory / DESIGN_JSON]
 
 
 # -- the loop -----------------------------------------------------------------------------------
