@@ -430,6 +430,11 @@ def _verification_files(measurements: list[Measurement], card: Path | None,
               type=click.IntRange(min=0),
               help="Stroke-block bootstrap refits for the final model's uncertainties (0: the "
                    "fit's Jacobian uncertainties only).")
+@click.option("--settle", is_flag=True,
+              help="When the verdict is ambiguous between two effects: design the experiment "
+                   "that separates them, play it on the --verify device, calibrate all "
+                   "recordings together and report the settled verdict (spec/calibration.md "
+                   "K34).")
 @click.option("--strict", is_flag=True,
               help="Exit with status 1 (a failed check) when structure is left that no effect "
                    "explains.")
@@ -458,6 +463,7 @@ def calibrate_command(
     contact_threshold: str | None,
     bootstrap: int,
     strict: bool,
+    settle: bool,
 ) -> None:
     """Fit the device's model to the recordings DATA, add the effects it lacks, report.
 
@@ -535,6 +541,20 @@ def calibrate_command(
     for text in prepared.warnings:
         click.echo(f"warning: {text}", err=True)
     result = calibrate(prepared, base, candidates, free=free, settings=settings, progress=say)
+    separation: dict[str, Any] | None = None
+    if settle and verify_uri is None:
+        raise CalibrateUsageError("--settle plays the separating experiment on the --verify "
+                                  "device; give --verify URI")
+    if settle and _ambiguous_pair(result) is not None:
+        extra, separation = _settle(result, base_profile, voltage_form, output, verify_uri or "",
+                                    timeout, seed, say)
+        measurements = [*measurements, extra]
+        prepared = prepare(measurements, split=split, test_fraction=held_out, seed=seed,
+                           rezero=not no_rezero, contact_threshold_n=threshold_n)
+        say("calibrating all recordings together")
+        result = calibrate(prepared, base, candidates, free=free, settings=settings,
+                           progress=say)
+        separation["after"] = _comparison_figures(result)
     if bootstrap >= 2:
         say(f"stroke-block bootstrap of the final model: {bootstrap} refits")
         result = with_bootstrap(result, bootstrap, seed=seed, progress=say)
@@ -549,7 +569,18 @@ def calibrate_command(
     say("writing the report")
     files = write_report(result, output, figures=not no_figures, profile=profile,
                          rendering=rendering)
+    if separation is not None:
+        _record_separation(files.json, separation)
     click.echo(result.summary)
+    if separation is not None:
+        b, a = separation["before"], separation["after"]
+        click.echo(f"separating experiment ({separation['recording']}): before, {b['text']}; "
+                   f"after, {a['text']}")
+    elif _ambiguous_pair(result) is not None:
+        first, second = _ambiguous_pair(result) or ("", "")
+        click.echo(f"to separate them: hcard calibrate plan --device coupled --separate "
+                   f"{first},{second} --from {output} -o separate/ (or run again with --settle "
+                   "--verify URI)")
     for name in result.effects_added:
         fitted = ", ".join(
             f"{short} = {value:.4g} ± {sigma:.2g} {unit}".rstrip()
@@ -566,6 +597,82 @@ def calibrate_command(
     )
     if strict and result.verdict == NOT_EXPLAINED:
         sys.exit(EXIT_FAILED)
+
+
+def _ambiguous_pair(result: Any) -> tuple[str, str] | None:
+    """The two single effects an ambiguous verdict lies between, else None."""
+    from hcard.calibration.results import AMBIGUOUS
+
+    runner = result.comparison
+    if result.verdict != AMBIGUOUS or runner is None:
+        return None
+    if len(runner.chosen) != 1 or len(runner.runner_up) != 1:
+        return None
+    return runner.chosen[0], runner.runner_up[0]
+
+
+def _comparison_figures(result: Any) -> dict[str, Any]:
+    runner = result.comparison
+    figures: dict[str, Any] = {"verdict": result.verdict,
+                               "effects": list(result.effects_added)}
+    if runner is not None:
+        figures.update(runner_up=list(runner.runner_up),
+                       criterion_margin=runner.criterion_margin,
+                       rmse_margin=runner.rmse_margin, ambiguous=runner.ambiguous)
+    chosen = " + ".join(result.effects_added) or "base model"
+    figures["text"] = (f"{chosen} ({result.verdict}"
+                       + (f"; runner-up {' + '.join(runner.runner_up)}: held-out criterion "
+                          f"{runner.criterion_margin:+.1f}, held-out RMSE "
+                          f"{100 * runner.rmse_margin:+.1f} %" if runner is not None else "")
+                       + ")")
+    return figures
+
+
+def _settle(result: Any, base_profile: DeviceProfile | None, voltage_form: str, output: Path,
+            uri: str, timeout: float, seed: int, say: Any) -> tuple[Measurement, dict[str, Any]]:
+    """Design the separating experiment from ``result``, play it on ``uri``; the recording
+    and what was done (spec/calibration.md K34)."""
+    from hcard.calibration.profile import profile_of
+    from hcard.calibration.report.writer import write_report
+    from hcard.device.record_play import play_and_record
+
+    first, second = _ambiguous_pair(result) or ("", "")
+    folder = output / "before-separation"
+    say(f"ambiguous between {first} and {second}: writing this run to {folder}")
+    write_report(result, folder, figures=False,
+                 profile=profile_of(result, base_profile, voltage_form=voltage_form))
+    say("designing the separating experiment")
+    device = "coupled"
+    written, lines = plan_separation(f"{first},{second}", device, output, folder, None, seed)
+    for line in lines:
+        say(line)
+    from hcard.card_io import load
+    from hcard.track import read_track_csv
+
+    recording = output / "separate-recording.csv"
+    say(f"playing the separating experiment on {uri}")
+    play_and_record(uri, load(written[0]), read_track_csv(written[1]), recording,
+                    card_path=str(written[0]), track_path=str(written[1]), timeout_s=timeout)
+    design_json = json.loads(written[2].read_text(encoding="utf-8"))
+    return read_recording(recording, None), {
+        "design": DESIGN_JSON,
+        "recording": recording.name,
+        "before_folder": folder.name,
+        "before": _comparison_figures(result),
+        "conditions": design_json["conditions"],
+        "expected": design_json["expected"],
+        "duration_s": design_json["duration_s"],
+    }
+
+
+def _record_separation(report_json: Path, separation: dict[str, Any]) -> None:
+    """Add the separating experiment to report.json (``separation``)."""
+    from hcard.atomic import write_atomically
+
+    content = json.loads(report_json.read_text(encoding="utf-8"))
+    content["separation"] = separation
+    write_atomically(report_json, (json.dumps(content, indent=2, allow_nan=False) + "\n")
+                     .encode())
 
 
 def _error(value: float, unit: str) -> str:
