@@ -149,7 +149,7 @@ def _check_device(device: str) -> None:
         raise PlanError(f"unknown device class {device!r}; classes: {', '.join(DEVICE_CLASSES)}")
 
 
-def _lane_card(lanes: Sequence[tuple[str, tuple[float, ...], str]], taxtel_mm: float,
+def lane_card(lanes: Sequence[tuple[str, tuple[float, ...], str]], taxtel_mm: float,
                title: str, description: str) -> pb.Card:
     """A card whose rows are ``lanes`` (name, targets along x, channel); one texture per
     (channel, level), named ``"<channel> <level>"``; rows past the lanes are plain."""
@@ -185,7 +185,7 @@ def _lanes(table: dict[str, tuple[tuple[float, ...], str, tuple[str, ...]]],
 def protocol_card(device: str) -> pb.Card:
     """The protocol card of a device class (module docstring)."""
     _check_device(device)
-    return _lane_card(_lanes(PROTOCOL_LANES, device), PROTOCOL_TAXTEL_MM,
+    return lane_card(_lanes(PROTOCOL_LANES, device), PROTOCOL_TAXTEL_MM,
                       f"hcard calibration protocol ({device})",
                       "Lanes of target levels for strokes along x (spec/calibration.md 6).")
 
@@ -193,12 +193,12 @@ def protocol_card(device: str) -> pb.Card:
 def verification_card(device: str) -> pb.Card:
     """The held-out textures of a device class (module docstring)."""
     _check_device(device)
-    return _lane_card(_lanes(VERIFY_LANES, device), VERIFY_TAXTEL_MM,
+    return lane_card(_lanes(VERIFY_LANES, device), VERIFY_TAXTEL_MM,
                       f"hcard calibration verification ({device})",
                       "Held-out levels between plain patches (spec/calibration.md 6).")
 
 
-def _session_track(
+def session_track(
     sessions: Sequence[tuple[int, float, tuple[float, float]]],
     rate_hz: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -269,7 +269,7 @@ def _plan(card: pb.Card, lanes: list[tuple[str, tuple[float, ...], str]],
         raise PlanError(f"the track rate must be at least 10 Hz, got {rate_hz}")
     rng = np.random.default_rng(seed)
     chosen = _sessions(list(range(len(lanes))), forces, speeds, duration_s, rng)
-    t, x, y, fn, contact = _session_track(chosen, rate_hz)
+    t, x, y, fn, contact = session_track(chosen, rate_hz)
     track = make_track(t, x, y, fn, contact, source="calibration plan")
     sessions = tuple((lanes[row][0], force, pair) for row, force, pair in chosen)
     return Plan(card, track, tuple(name for name, _, _ in lanes), sessions)

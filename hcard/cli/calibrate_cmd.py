@@ -216,8 +216,16 @@ def write_plan(directory: Path, device: str, plan: Plan, check: Plan) -> list[Pa
               show_default=True, help="Length of the verification track.")
 @click.option("--seed", default=0, show_default=True, type=int,
               help="Seed of the order of forces and speeds.")
+@click.option("--separate", "separate", metavar="A,B",
+              help="Instead: the experiment that separates effects A and B where a calibration "
+                   "could not (separate.hcard, separate.csv, design.json); --duration then "
+                   "overrides the designed length.")
+@click.option("--from", "from_dir", type=click.Path(file_okay=False, path_type=Path),
+              metavar="CALIB_DIR",
+              help="--separate: design from this calibration's output (its profile.json and "
+                   "report.json: fitted values, noise) instead of the device class's profile.")
 def plan_command(device: str, output: Path, duration: str, verify_duration: str,
-                 seed: int) -> None:
+                 seed: int, separate: str | None, from_dir: Path | None) -> None:
     """Write the calibration protocol for a device class, and the held-out verification.
 
     The protocol card holds lanes of target levels (an amplitude staircase, UV steps, a voltage
@@ -231,7 +239,25 @@ def plan_command(device: str, output: Path, duration: str, verify_duration: str,
     Examples:
       hcard calibrate plan --device uv -o plan/
       hcard calibrate plan --device coupled -o plan/ --duration 2min --seed 3
+      hcard calibrate plan --device coupled --separate air-layer,finger-geometry \
+          --from calib/ -o separate/
     """
+    if separate is not None:
+        given = None
+        source = click.get_current_context().get_parameter_source("duration")
+        if source is not click.core.ParameterSource.DEFAULT:
+            given = quantity_option(duration, "s", "--duration")
+        written, lines = plan_separation(separate, device, output, from_dir, given, seed)
+        for path in written:
+            click.echo(str(path))
+        for line in lines:
+            click.echo(line)
+        click.echo(f"next: hcard play {output / SEPARATE_CARD} --track "
+                   f"{output / SEPARATE_TRACK} --device URI -o separate.csv, then calibrate "
+                   "it with the first recordings")
+        return
+    if from_dir is not None:
+        raise CalibrateUsageError("--from designs a separating experiment; give --separate A,B")
     seconds = quantity_option(duration, "s", "--duration")
     verify_seconds = quantity_option(verify_duration, "s", "--verify-duration")
     plan = protocol(device, duration_s=seconds, seed=seed)
@@ -243,6 +269,58 @@ def plan_command(device: str, output: Path, duration: str, verify_duration: str,
                f"{check.track.t[-1]:.1f} s")
     click.echo(f"next: hcard play {output / PROTOCOL_CARD} --track {output / PROTOCOL_TRACK} "
                f"--device URI -o rec.csv")
+
+
+SEPARATE_CARD, SEPARATE_TRACK, DESIGN_JSON = "separate.hcard", "separate.csv", "design.json"
+
+
+def plan_separation(pair_text: str, device: str, output: Path, from_dir: Path | None,
+                    duration_s: float | None, seed: int) -> tuple[list[Path], list[str]]:
+    """Design the experiment separating the effects ``pair_text`` (``"A,B"``) on ``device``,
+    from a calibration folder or the class's profile, and write its card, track and
+    ``design.json`` into ``output``; the paths written and the design in a few lines."""
+    from hcard.calibration.separation import design, separating_plan
+    from hcard.calibration.separation_inputs import (
+        check_device,
+        effect_pair,
+        from_class,
+        from_folder,
+    )
+
+    a, b = effect_pair(pair_text)
+    if from_dir is not None:
+        pair, noise = from_folder(from_dir, a, b)
+        check_device(device, pair)
+    else:
+        pair, noise = from_class(device, a, b)
+    found = design(pair, noise, duration_s=duration_s)
+    plan = separating_plan(found, seed=seed)
+    return write_separation(output, device, found, plan), found.describe()
+
+
+def write_separation(directory: Path, device: str, found: Any, plan: Plan) -> list[Path]:
+    """Write a separating experiment's card, track and ``design.json`` (with the sessions)."""
+    from hcard.atomic import write_atomically
+    from hcard.card_io import save
+    from hcard.track import track_to_csv
+
+    with writing(directory, HcardError, "create"):
+        directory.mkdir(parents=True, exist_ok=True)
+    save(plan.card, directory / SEPARATE_CARD)
+    write_atomically(directory / SEPARATE_TRACK, track_to_csv(plan.track).encode())
+    description = {
+        **found.to_dict(),
+        "device": device,
+        "card": SEPARATE_CARD,
+        "track": SEPARATE_TRACK,
+        "lanes": list(plan.lanes),
+        "track_duration_s": float(plan.track.t[-1] - plan.track.t[0]),
+        "sessions": [{"lane": lane, "force_n": force, "speeds_mm_s": list(speeds)}
+                     for lane, force, speeds in plan.sessions],
+    }
+    write_atomically(directory / DESIGN_JSON,
+                     (json.dumps(description, indent=2) + "\n").encode())
+    return [directory / SEPARATE_CARD, directory / SEPARATE_TRACK, directory / DESIGN_JSON]
 
 
 # -- the loop -----------------------------------------------------------------------------------
@@ -352,6 +430,11 @@ def _verification_files(measurements: list[Measurement], card: Path | None,
               type=click.IntRange(min=0),
               help="Stroke-block bootstrap refits for the final model's uncertainties (0: the "
                    "fit's Jacobian uncertainties only).")
+@click.option("--settle", is_flag=True,
+              help="When the verdict is ambiguous between two effects: design the experiment "
+                   "that separates them, play it on the --verify device, calibrate all "
+                   "recordings together and report the settled verdict (spec/calibration.md "
+                   "K34).")
 @click.option("--strict", is_flag=True,
               help="Exit with status 1 (a failed check) when structure is left that no effect "
                    "explains.")
@@ -380,6 +463,7 @@ def calibrate_command(
     contact_threshold: str | None,
     bootstrap: int,
     strict: bool,
+    settle: bool,
 ) -> None:
     """Fit the device's model to the recordings DATA, add the effects it lacks, report.
 
@@ -457,6 +541,20 @@ def calibrate_command(
     for text in prepared.warnings:
         click.echo(f"warning: {text}", err=True)
     result = calibrate(prepared, base, candidates, free=free, settings=settings, progress=say)
+    separation: dict[str, Any] | None = None
+    if settle and verify_uri is None:
+        raise CalibrateUsageError("--settle plays the separating experiment on the --verify "
+                                  "device; give --verify URI")
+    if settle and _ambiguous_pair(result) is not None:
+        extra, separation = _settle(result, base_profile, voltage_form, output, verify_uri or "",
+                                    timeout, seed, say)
+        measurements = [*measurements, extra]
+        prepared = prepare(measurements, split=split, test_fraction=held_out, seed=seed,
+                           rezero=not no_rezero, contact_threshold_n=threshold_n)
+        say("calibrating all recordings together")
+        result = calibrate(prepared, base, candidates, free=free, settings=settings,
+                           progress=say)
+        separation["after"] = _comparison_figures(result)
     if bootstrap >= 2:
         say(f"stroke-block bootstrap of the final model: {bootstrap} refits")
         result = with_bootstrap(result, bootstrap, seed=seed, progress=say)
@@ -471,7 +569,18 @@ def calibrate_command(
     say("writing the report")
     files = write_report(result, output, figures=not no_figures, profile=profile,
                          rendering=rendering)
+    if separation is not None:
+        _record_separation(files.json, separation)
     click.echo(result.summary)
+    if separation is not None:
+        b, a = separation["before"], separation["after"]
+        click.echo(f"separating experiment ({separation['recording']}): before, {b['text']}; "
+                   f"after, {a['text']}")
+    elif _ambiguous_pair(result) is not None:
+        first, second = _ambiguous_pair(result) or ("", "")
+        click.echo(f"to separate them: hcard calibrate plan --device coupled --separate "
+                   f"{first},{second} --from {output} -o separate/ (or run again with --settle "
+                   "--verify URI)")
     for name in result.effects_added:
         fitted = ", ".join(
             f"{short} = {value:.4g} ± {sigma:.2g} {unit}".rstrip()
@@ -488,6 +597,82 @@ def calibrate_command(
     )
     if strict and result.verdict == NOT_EXPLAINED:
         sys.exit(EXIT_FAILED)
+
+
+def _ambiguous_pair(result: Any) -> tuple[str, str] | None:
+    """The two single effects an ambiguous verdict lies between, else None."""
+    from hcard.calibration.results import AMBIGUOUS
+
+    runner = result.comparison
+    if result.verdict != AMBIGUOUS or runner is None:
+        return None
+    if len(runner.chosen) != 1 or len(runner.runner_up) != 1:
+        return None
+    return runner.chosen[0], runner.runner_up[0]
+
+
+def _comparison_figures(result: Any) -> dict[str, Any]:
+    runner = result.comparison
+    figures: dict[str, Any] = {"verdict": result.verdict,
+                               "effects": list(result.effects_added)}
+    if runner is not None:
+        figures.update(runner_up=list(runner.runner_up),
+                       criterion_margin=runner.criterion_margin,
+                       rmse_margin=runner.rmse_margin, ambiguous=runner.ambiguous)
+    chosen = " + ".join(result.effects_added) or "base model"
+    figures["text"] = (f"{chosen} ({result.verdict}"
+                       + (f"; runner-up {' + '.join(runner.runner_up)}: held-out criterion "
+                          f"{runner.criterion_margin:+.1f}, held-out RMSE "
+                          f"{100 * runner.rmse_margin:+.1f} %" if runner is not None else "")
+                       + ")")
+    return figures
+
+
+def _settle(result: Any, base_profile: DeviceProfile | None, voltage_form: str, output: Path,
+            uri: str, timeout: float, seed: int, say: Any) -> tuple[Measurement, dict[str, Any]]:
+    """Design the separating experiment from ``result``, play it on ``uri``; the recording
+    and what was done (spec/calibration.md K34)."""
+    from hcard.calibration.profile import profile_of
+    from hcard.calibration.report.writer import write_report
+    from hcard.device.record_play import play_and_record
+
+    first, second = _ambiguous_pair(result) or ("", "")
+    folder = output / "before-separation"
+    say(f"ambiguous between {first} and {second}: writing this run to {folder}")
+    write_report(result, folder, figures=False,
+                 profile=profile_of(result, base_profile, voltage_form=voltage_form))
+    say("designing the separating experiment")
+    device = "coupled"
+    written, lines = plan_separation(f"{first},{second}", device, output, folder, None, seed)
+    for line in lines:
+        say(line)
+    from hcard.card_io import load
+    from hcard.track import read_track_csv
+
+    recording = output / "separate-recording.csv"
+    say(f"playing the separating experiment on {uri}")
+    play_and_record(uri, load(written[0]), read_track_csv(written[1]), recording,
+                    card_path=str(written[0]), track_path=str(written[1]), timeout_s=timeout)
+    design_json = json.loads(written[2].read_text(encoding="utf-8"))
+    return read_recording(recording, None), {
+        "design": DESIGN_JSON,
+        "recording": recording.name,
+        "before_folder": folder.name,
+        "before": _comparison_figures(result),
+        "conditions": design_json["conditions"],
+        "expected": design_json["expected"],
+        "duration_s": design_json["duration_s"],
+    }
+
+
+def _record_separation(report_json: Path, separation: dict[str, Any]) -> None:
+    """Add the separating experiment to report.json (``separation``)."""
+    from hcard.atomic import write_atomically
+
+    content = json.loads(report_json.read_text(encoding="utf-8"))
+    content["separation"] = separation
+    write_atomically(report_json, (json.dumps(content, indent=2, allow_nan=False) + "\n")
+                     .encode())
 
 
 def _error(value: float, unit: str) -> str:

@@ -8,7 +8,6 @@ The device side lives in :mod:`hcard_device.usb`, the drivers in :mod:`hcard.dev
 
 from __future__ import annotations
 
-import contextlib
 from collections.abc import Callable
 from pathlib import Path
 
@@ -305,12 +304,10 @@ def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Pat
       hcard play card.hcard --device sim://evita --track stroke.csv -o rec.csv
       hcard play card.hcard --device usbip://127.0.0.1:3240/1-1 --track stroke.csv -o rec.csv
     """
-    from hcard.device import PlayTooLong, open_device
+    from hcard.device import PlayTooLong
     from hcard.device.play import check_play_length
-    from hcard.device.play import play as play_track
     from hcard.device.play_summary import summary
-    from hcard.device.priority import real_time_host
-    from hcard.device.recording import write_recording
+    from hcard.device.record_play import play_and_record
     from hcard.physics.profile import DeviceProfile
     from hcard.physics.profile_format import read_profile_bytes
 
@@ -329,16 +326,9 @@ def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Pat
     if profile_path is not None:
         profile_bytes = read_profile_bytes(profile_path)
         DeviceProfile.from_json(profile_bytes, source=str(profile_path))  # checked before use
-    with open_device(uri, timeout_s=timeout) as driver, \
-            real_time_host() if driver.realtime else contextlib.nullcontext():
-        result = play_track(driver, loaded, track, profile=profile_bytes,
-                            whole_session=True)
-    try:
-        write_recording(result, output, track_path=str(track_path), card_path=str(card))
-    except ValueError as exc:
-        raise HcardError(f"{output}: {exc}") from None
-    except OSError as exc:
-        raise HcardError(write_failure(output, exc)) from None
+    result = play_and_record(uri, loaded, track, output, card_path=str(card),
+                             track_path=str(track_path), timeout_s=timeout,
+                             profile=profile_bytes)
     click.echo(f"{output}: {len(result.states)} reports from {uri}")
     for line in summary(result):
         click.echo(printable(f"  {line}"))
