@@ -380,12 +380,14 @@ def contact_time(t: np.ndarray, contact: np.ndarray) -> np.ndarray:
 
 
 def sliding(speed: np.ndarray | None, contact: np.ndarray) -> np.ndarray | bool:
-    """The contact samples that slide (spec/measurement-format.md rule MS5): where a recording has a speed column and
-    some of its contact samples move, a contact sample whose speed is exactly 0 is a finger at
-    rest on the surface (a touch-down before the first speed estimate, rule R4). Its lateral
-    force is static friction, any value up to the sliding friction, which no sliding-friction
-    model (Eqs. 1.7, 2.30, 4.1) describes, so it is neither fitted nor held out. True for every
-    sample without a speed column or when no contact sample moves."""
+    """The contact samples that slide (spec/measurement-format.md rule MS5).
+
+    Where a recording has a speed column and some of its contact samples move, a contact
+    sample whose speed is exactly 0 is a finger at rest on the surface (a touch-down before
+    the first speed estimate, rule R4). Its lateral force is static friction, any value up to
+    the sliding friction, which no sliding-friction model (Eqs. 1.7, 2.30, 4.1) describes, so
+    it is neither fitted nor held out. True for every sample without a speed column or when
+    no contact sample moves."""
     if speed is None:
         return True
     moving = speed != 0

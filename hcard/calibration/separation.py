@@ -57,7 +57,7 @@ from hcard.calibration.plan import (
     session_track,
 )
 from hcard.physics import Predictor
-from hcard.physics.effects import SEPARATOR, Effect
+from hcard.physics.effects import SEPARATOR, Effect, augment
 from hcard.physics.profile import DeviceProfile, channels_of
 from hcard.physics.profile_effects import channel_of
 
@@ -188,7 +188,7 @@ class Conditions:
             "normal_force", "speed", "level", "voltage", "amplitude", "weight")))
 
 
-def conditions(profile: DeviceProfile, channel: str, forces: Sequence[float],
+def conditions(profile: DeviceProfile, channel: str, forces: Sequence[float] | np.ndarray,
                levels: Sequence[float], speeds_mm_s: Sequence[float]) -> Conditions:
     """Every (force, level, speed) with the actuation the device's own profile renders it by
     (the inverse of its channel at that force and speed, clipped at its limits), weight 1."""
@@ -251,7 +251,7 @@ class Pair:
         from hcard.calibration.device_model import profile_model
 
         base = profile_model(self.profile, envelope=True, finger=self.finger)
-        model = base.with_effects([effect])
+        model = augment(base, [effect])
         return model.with_params(**{
             (name if name in base.params else f"{effect.name}{SEPARATOR}{name}"): value
             for name, value in values.items()})

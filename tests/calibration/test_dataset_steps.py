@@ -10,8 +10,8 @@ from hcard.calibration.dataset import (
     ATMOSPHERE_PA,
     check_recordings,
     contact_time,
-    recording_columns,
     prepare,
+    recording_columns,
     sliding,
     split_masks,
 )
