@@ -15,6 +15,9 @@ Each run is what a lab does, each step a fresh ``hcard`` process:
    ``hcard calibrate plan --device coupled``, made once);
 3. ``hcard calibrate rec.csv --verify URI --verify-card verify.hcard --verify-track verify.csv``:
    the loop, then the held-out textures played without and with the fitted profile.
+   ``squeeze-film-share`` shows only across ambient pressures: with ``--transport sim`` the
+   protocol is played at one atmosphere and at 50 kPa and both recordings calibrated together
+   (:data:`OTHER_PRESSURES`).
 
 A case is an effect the device lists (``hcard device serve --list-effects``) at its default
 (hidden) parameters, or ``none``. Whether the library has an effect of the same name decides
@@ -61,6 +64,11 @@ WITHIN_Z = 2.0
 the hidden truth."""
 MIN_CUT = 2.0
 """The fitted profile must cut the rendered friction error at least this many times."""
+OTHER_PRESSURES = {"squeeze-film-share": ("50kPa",)}
+"""Cases that show only across conditions: the protocol is played again at these ambient
+pressures and every recording calibrated together (``--transport sim`` only: a play over USB/IP
+cannot learn the pressure around a served device's plate, so there the case is one recording at
+one atmosphere, where the effect is invisible by its nature, Eq. 2.10)."""
 READY = re.compile(r"at (usbip://127\.0\.0\.1:\d+/\S+)")
 HOST_SILENCE = "of silence from this host"
 """A play that lost its session because this host stalled (spec QT3): measured again."""
@@ -156,13 +164,16 @@ def sim_uri(seed: int, effect: str | None) -> str:
     return f"sim://{DEVICE}?seed={seed}" + (f"&effect={effect}" if effect else "")
 
 
-def loop(uri: str, plan: Path, out: Path) -> dict:
-    """Play the protocol on ``uri``, calibrate, verify on ``uri``: the report."""
+def loop(uri: str, plan: Path, out: Path, also: tuple[str, ...] = ()) -> dict:
+    """Play the protocol on ``uri`` (and on each of ``also``: the same device under other
+    conditions), calibrate on every recording, verify on ``uri``: the report."""
     out.mkdir(parents=True, exist_ok=True)
-    recording = out / "rec.csv"
-    hcard("play", plan / "protocol.hcard", "--track", plan / "protocol.csv", "--device", uri,
-          "-o", recording, "-q")
-    hcard("calibrate", recording, "-o", out / "calib", "--verify", uri, "--quiet",
+    recordings = []
+    for index, where in enumerate((uri, *also)):
+        recordings.append(out / ("rec.csv" if index == 0 else f"rec-{index}.csv"))
+        hcard("play", plan / "protocol.hcard", "--track", plan / "protocol.csv", "--device",
+              where, "-o", recordings[-1], "-q")
+    hcard("calibrate", *recordings, "-o", out / "calib", "--verify", uri, "--quiet",
           "--no-figures", "--verify-card", plan / "verify.hcard", "--verify-track",
           plan / "verify.csv")
     return json.loads((out / "calib" / "report.json").read_text())
@@ -243,7 +254,9 @@ def one(case: str, seed: int, truth: dict[str, float], channel: str, plan: Path,
                 with Server(seed, effect) as uri:
                     report = loop(uri, plan, out)
             else:
-                report = loop(sim_uri(seed, effect), plan, out)
+                uri = sim_uri(seed, effect)
+                also = tuple(f"{uri}&ambient_pressure={p}" for p in OTHER_PRESSURES.get(case, ()))
+                report = loop(uri, plan, out, also)
         except (RuntimeError, subprocess.TimeoutExpired) as exc:
             run.error = str(exc)
             if HOST_SILENCE in run.error and attempt < 3:
