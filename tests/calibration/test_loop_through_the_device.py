@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 
 from hcard.calibration.measurement import read_measurement
-from hcard.calibration.results import AMBIGUOUS
+from hcard.calibration.results import AMBIGUOUS, NOT_EXPLAINED
 from hcard.physics.profile import DeviceProfile
 from tests.helpers.cli import run_hcard
 from tests.helpers.realtime import NotKept, in_real_time
@@ -146,3 +146,36 @@ def test_served_device_in_real_time(plan, tmp_path):
     assert_found_and_cut(report, 10e-6)
     conditions = report["data"]["conditions"][0] if "conditions" in report["data"] else {}
     assert "air" not in json.dumps(conditions)
+
+
+@pytest.fixture(scope="module")
+def coupled_plan(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("coupled-plan")
+    invoke("calibrate", "plan", "--device", "coupled", "--duration", PLAN_S,
+           "--verify-duration", VERIFY_S, "-o", out)
+    return out
+
+
+def test_sim_device_with_a_hidden_ultrasonic_speed_law(coupled_plan, tmp_path):
+    """The device's UV reduction scales with (U / 25 mm/s)^-0.5 (Fig. 2.21e) in its physics:
+    the loop names ultrasonic-speed alone, recovers both parameters within three stated
+    uncertainties, and the fitted profile cuts the rendered friction error at least 2x."""
+    report = run_loop("sim://coupled?seed=1&effect=ultrasonic-speed", coupled_plan, tmp_path)
+    assert [e["name"] for e in report["profile"]["effects"]] == ["ultrasonic-speed"], \
+        report["verdict"]
+    (effect,) = report["effects_added"]
+    for name, truth in (("speed_exponent", -0.5), ("reference_speed", 0.025)):
+        entry = effect["parameters"][name]
+        assert abs(entry["value"] - truth) < 3 * entry["uncertainty"], (name, entry)
+    rendering = report["rendering"]
+    assert rendering["before"]["patch_rms"] > MIN_CUT * rendering["after"]["patch_rms"], rendering
+
+
+def test_sim_device_with_a_load_damped_plate_is_not_explained(coupled_plan, tmp_path):
+    """The finger's load damps the mode under it (A / (1 + Fn / 2 N)) while the sensing piezos
+    report the undamped amplitude: no library effect describes that, so the loop adds none,
+    says "not explained" and places the structure in the interaction of load and amplitude."""
+    report = run_loop("sim://coupled?seed=1&effect=plate-load-damping", coupled_plan, tmp_path)
+    assert report["effects_added"] == []
+    assert report["verdict"] == NOT_EXPLAINED
+    assert "normal_force x amplitude" in report["structure"]["description"]
