@@ -477,6 +477,7 @@ class _Parts:
     strokes: list[np.ndarray] = field(default_factory=list)
     lifted: list[np.ndarray] = field(default_factory=list)
     lifted_force: list[np.ndarray] = field(default_factory=list)
+    times: list[np.ndarray] = field(default_factory=list)
 
     def add(self, m: Measurement, index: int, *, split: str, test_fraction: float, seed: int,
             rest_s: float, rezero: bool, contact_threshold_n: float | None) -> None:
@@ -517,6 +518,7 @@ class _Parts:
         contact = in_contact(m, threshold)
         self.lifted.append(~contact)
         self.lifted_force.append(lateral)
+        self.times.append(m.t)
         columns = recording_columns(m, index, ids, contact, force, rest_s)
         for name, values in columns.items():
             if values is not None:
@@ -602,5 +604,6 @@ def prepare(
         contact_threshold_n=tuple(parts.thresholds),
         warnings=tuple(parts.warnings),
         strokes=np.concatenate(parts.strokes),
-        noise=measure_noise(np.concatenate(parts.lifted_force), np.concatenate(parts.lifted)),
+        noise=measure_noise(np.concatenate(parts.lifted_force), np.concatenate(parts.lifted),
+                            np.concatenate(parts.times)),
     )

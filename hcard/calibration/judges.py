@@ -48,7 +48,13 @@ import numpy as np
 from hcard.calibration.dataset import CalibrationData
 from hcard.calibration.fit import FitResult
 from hcard.calibration.model_pool import held_out_criterion
-from hcard.calibration.noise import NoiseModel, detectable_eta2, time_structure_threshold
+from hcard.calibration.noise import (
+    EXCESS_MIN_LAG1,
+    NoiseModel,
+    beyond_noise,
+    detectable_eta2,
+    time_structure_threshold,
+)
 from hcard.calibration.residuals import (
     MIN_BIN_COUNT,
     ResidualReport,
@@ -256,14 +262,22 @@ def residual_structure(
     # K29: without a measured noise model, a correlated residual is structured in time only
     # when it holds more slow variance than an AR(1) noise fitted to it
     beyond = noise is not None or block is None or block.p_value < settings.alpha
+    # K37: with a measured noise model, the variance beyond the sensor noise, when it is a
+    # practical share of the residual and correlated in time, is structure in time whatever
+    # the lag-1 of the whole residual (a sensor resonance dilutes it with white noise)
+    share, excess_lag1, p_excess = beyond_noise(analysis.rms, rho, analysis.effective_samples,
+                                                noise)
+    excess = (share >= settings.min_eta2 and excess_lag1 >= EXCESS_MIN_LAG1
+              and p_excess < settings.alpha)
     return Structure(
         regressors=tuple(item for item in significant if item[1] >= settings.min_eta2),
         autocorrelation=rho,
-        in_time=time_ordered and rho >= threshold and beyond,
+        in_time=time_ordered and beyond and (rho >= threshold or excess),
         dominant_frequency_hz=analysis.time.dominant_frequency_hz,
         small=tuple(item for item in significant if item[1] < settings.min_eta2),
         time_threshold=threshold,
         noise=noise,
+        beyond_noise=share,
         min_eta2=settings.min_eta2,
         detectable=detectable,
         interactions=() if residual is None or regressors is None else tuple(

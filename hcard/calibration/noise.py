@@ -28,6 +28,18 @@ from hcard.quantities import MN_PER_N
 MIN_RUN = 10
 """Lifted samples a run needs to count for the noise model."""
 
+SETTLE_S = 0.05
+"""Start of each lifted run left out of the noise model, s: the sensor's response to the
+lift-off, a step from the friction force to 0, is not its noise. A lateral-force sensor with a
+resonance at 150 Hz and damping ratio 0.1 rings for 1/(zeta omega) = 11 ms per e-fold: its
+first 50 ms made the noise of a device that has it read 23 mN with lag-1 0.41 for its 7.7 mN
+white noise (bench/bench_device_hit_rates.py, force-sensor-resonance)."""
+
+EXCESS_MIN_LAG1 = 0.25
+"""Lag-1 autocorrelation the residual's variance beyond the sensor noise needs to count as
+structure in time (:func:`beyond_noise`): anything slower than an oscillation at a fifth of the
+sample rate (``cos(2 pi / 5) = 0.31``)."""
+
 DEFAULT_POWER = 0.8
 """Probability of detection the stated power refers to."""
 
@@ -57,13 +69,17 @@ class NoiseModel:
         )
 
 
-def measure_noise(values: np.ndarray, lifted: np.ndarray) -> NoiseModel | None:
+def measure_noise(values: np.ndarray, lifted: np.ndarray, t: np.ndarray | None = None,
+                  settle_s: float = SETTLE_S) -> NoiseModel | None:
     """The :class:`NoiseModel` of ``values`` (N) over the runs of ``lifted`` samples (module
-    docstring); None without a run of :data:`MIN_RUN` samples."""
+    docstring), each without its first ``settle_s`` seconds when the sample times ``t`` (s)
+    are given (:data:`SETTLE_S`); None without a run of :data:`MIN_RUN` samples."""
     v = np.asarray(values, dtype=np.float64)
     edges = np.flatnonzero(np.diff(np.concatenate([[0], np.asarray(lifted, np.int8), [0]])))
     centred: list[np.ndarray] = []
     for start, end in zip(edges[::2], edges[1::2], strict=True):
+        if t is not None:
+            start += int(np.searchsorted(t[start:end] - t[start], settle_s * (1.0 - 1e-9)))
         if end - start >= MIN_RUN:
             run = v[start:end]
             centred.append(run - run.mean())
@@ -72,11 +88,24 @@ def measure_noise(values: np.ndarray, lifted: np.ndarray) -> NoiseModel | None:
     power = sum(float(np.dot(run, run)) for run in centred)
     lagged = sum(float(np.dot(run[:-1], run[1:])) for run in centred)
     samples = sum(run.size for run in centred)
-    # each run loses one degree of freedom to its mean
-    sigma = math.sqrt(power / max(samples - len(centred), 1))
-    lag1 = lagged / power if power > 0 else 0.0
-    return NoiseModel(sigma=sigma, lag1=float(np.clip(lag1, -1.0, 1.0)), samples=samples,
-                      runs=len(centred))
+    lag1 = float(np.clip(lagged / power, -1.0, 1.0)) if power > 0 else 0.0
+    # each run loses to its mean the variance of that mean: for AR(1) noise, more than one
+    # sample's worth (_mean_loss)
+    kept = sum(run.size - _mean_loss(run.size, lag1) for run in centred)
+    sigma = math.sqrt(power / max(kept, 1.0))
+    return NoiseModel(sigma=sigma, lag1=lag1, samples=samples, runs=len(centred))
+
+
+def _mean_loss(length: int, lag1: float) -> float:
+    """``L Var(mean) / sigma^2`` of ``length`` samples of AR(1) noise of lag-1 ``lag1``:
+    ``1 + 2 sum_k (1 - k/L) a^k`` (k = 1 .. L-1), what removing a run's mean takes from
+    ``E[sum (x - mean)^2] = sigma^2 (L - loss)``; 1 for white noise, clipped below ``L``."""
+    a = max(lag1, 0.0)
+    if a == 0.0 or length < 2:
+        return 1.0
+    k = np.arange(1, length)
+    loss = 1.0 + 2.0 * float(np.sum((1.0 - k / length) * a**k))
+    return min(loss, length - 1.0)
 
 
 def time_structure_threshold(base: float, noise: NoiseModel | None) -> float:
@@ -86,6 +115,27 @@ def time_structure_threshold(base: float, noise: NoiseModel | None) -> float:
     if noise is None or noise.lag1 <= 0:
         return base
     return max(base, noise.lag1 + (1.0 - noise.lag1) / 2.0)
+
+
+def beyond_noise(rms: float, lag1: float, effective: float, noise: NoiseModel | None
+                 ) -> tuple[float, float, float]:
+    """The share of a residual's variance beyond the sensor ``noise``, that excess's lag-1
+    autocorrelation, and the p-value of the excess: with residual variance ``s_r^2 = rms^2``
+    (N^2), lag-1 ``rho`` and ``effective`` independent samples, noise ``s_n^2`` and ``a``, the
+    share is ``1 - s_n^2 / s_r^2``, the excess's lag-1 covariance over its variance
+    ``(rho s_r^2 - a s_n^2) / (s_r^2 - s_n^2)``, and the p-value the F-test's of the variance
+    ratio ``s_r^2 / s_n^2`` with ``effective`` and the noise's effective ``m (1 - a) / (1 + a)``
+    degrees of freedom (``m`` samples). ``(0, 0, 1)`` without a noise model or when the
+    residual holds no more than the noise."""
+    if noise is None or not rms > noise.sigma:
+        return 0.0, 0.0, 1.0
+    from scipy import stats  # here: scipy.stats costs ~0.6 s to import
+
+    total, floor = rms * rms, noise.sigma * noise.sigma
+    a = max(noise.lag1, 0.0)
+    noise_dof = max(noise.samples * (1.0 - a) / (1.0 + a) - noise.runs, 1.0)
+    p_value = float(stats.f.sf(total / floor, max(effective - 1.0, 1.0), noise_dof))
+    return 1.0 - floor / total, (lag1 * total - noise.lag1 * floor) / (total - floor), p_value
 
 
 def detectable_eta2(

@@ -170,6 +170,8 @@ class Structure:
             with 80 % power at the residual's effective sample count.
         interactions: ``("a x b", eta2, p)`` of each pair of regressors whose interaction
             explains at least ``min_eta2`` beyond their main effects (spec/calibration.md K28).
+        beyond_noise: share of the residual's variance beyond the sensor noise (0 without a
+            noise model; :func:`~hcard.calibration.noise.beyond_noise`, K37).
     """
 
     regressors: tuple[tuple[str, float, float], ...]
@@ -182,6 +184,7 @@ class Structure:
     min_eta2: float = 0.10
     detectable: tuple[tuple[str, float], ...] = ()
     interactions: tuple[tuple[str, float, float], ...] = ()
+    beyond_noise: float = 0.0
 
     @property
     def any(self) -> bool:
@@ -193,14 +196,19 @@ class Structure:
         parts = [f"{name} (eta2 {eta2:.2f})" for name, eta2, _ in self.regressors]
         parts += [f"the interaction {name} (eta2 {eta2:.2f} beyond each alone)"
                   for name, eta2, _ in self.interactions]
+        timed = ""
         if self.in_time:
             where = f"in time (lag-1 autocorrelation {self.autocorrelation:.2f}"
             if self.noise is not None and self.noise.lag1 > 0:
                 where += f" against {self.noise.lag1:.2f} of the sensor noise"
+            if self.beyond_noise > 0:
+                where += f"; {self.beyond_noise:.0%} of its variance beyond the sensor noise"
             if self.dominant_frequency_hz is not None:
                 where += f", dominant frequency {self.dominant_frequency_hz:.3g} Hz"
-            parts.append(where + ")")
-        return "against " + ", ".join(parts) if parts else "none"
+            timed = where + ")"
+        if not parts:
+            return timed or "none"
+        return "against " + ", ".join(parts) + (f", and {timed}" if timed else "")
 
     def describe_small(self) -> str:
         """The small but significant structure, in words (empty when there is none)."""

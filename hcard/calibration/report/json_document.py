@@ -166,6 +166,7 @@ def report_dict(
             ],
             "small_description": result.structure.describe_small(),
             "time_threshold": result.structure.time_threshold,
+            "variance_beyond_noise": result.structure.beyond_noise,
             "noise": None
             if result.structure.noise is None
             else {
