@@ -143,22 +143,32 @@ class CalibrationData:
         return {name: values[mask] for name, values in self.inputs.items()}
 
 
-def strokes_since_rest(t: np.ndarray, ids: np.ndarray, rest_s: float = REST_S) -> np.ndarray:
+def strokes_since_rest(t: np.ndarray, ids: np.ndarray, rest_s: float = REST_S,
+                       moving: np.ndarray | None = None) -> np.ndarray:
     """Per sample, the number of strokes since the finger last rested (0, 1, 2, ...).
 
     ``ids`` are stroke ids (-1 out of contact, :func:`hcard.calibration.splits.stroke_ids`).
     A rest is a pause longer than ``rest_s`` (s) between the last sample of one stroke and the
     first of the next, or the start of the recording. Samples out of contact get -1.
+
+    ``moving`` (per sample, the finger slides; default: every sample): only strokes that slide
+    count. A stroke id without a moving sample (a finger held still at a touch-down, or a
+    pause between two slides) is no pass over the skin (Figs. 2.25-2.26), so it takes the
+    count of the sliding strokes before it and does not advance it: a touch-down hold followed
+    by an out-and-back slide counts 0, 0, 1, not 0, 1, 2.
     """
     out = np.full(ids.shape, -1, dtype=np.int64)
     strokes = np.unique(ids[ids >= 0])
-    count = 0
+    slid = 0  # sliding strokes since the last rest
     last_end = -math.inf
     for stroke in strokes:
         where = np.flatnonzero(ids == stroke)
         start, end = float(t[where[0]]), float(t[where[-1]])
-        count = 0 if start - last_end > rest_s else count + 1
-        out[where] = count
+        if start - last_end > rest_s:
+            slid = 0
+        out[where] = slid
+        if moving is None or bool(np.any(moving[where])):
+            slid += 1
         last_end = end
     return out
 
@@ -427,6 +437,8 @@ def recording_columns(m: Measurement, index: int, ids: np.ndarray, contact: np.n
     s."""
     n = len(m)
     speed = m.speed
+    slides = sliding(speed, contact)
+    moving = None if isinstance(slides, bool) else slides
     pressure = m.conditions.get("ambient_pressure_pa") or ATMOSPHERE_PA
     frequency = m.plate_frequency
     if frequency is None and m.conditions.get("plate_frequency_hz"):
@@ -442,7 +454,7 @@ def recording_columns(m: Measurement, index: int, ids: np.ndarray, contact: np.n
         "time": m.t - m.t[0],
         "contact_time": contact_time(m.t, contact),
         "occlusion_time": accumulated_contact_time(m.t, contact),
-        "stroke": strokes_since_rest(m.t, ids, rest_s).astype(np.float64),
+        "stroke": strokes_since_rest(m.t, ids, rest_s, moving).astype(np.float64),
         "pressure": np.full(n, float(pressure)),
         "observed": force,
         "recording": np.full(n, float(index)),

@@ -275,3 +275,54 @@ def test_no_applicable_candidate_is_said_plainly() -> None:
     assert result.candidates == ()
     assert "No effect of the library could be tried" in result.summary
     assert result.verdict == NOT_EXPLAINED
+
+
+def test_strokes_since_rest_counts_only_strokes_that_slide() -> None:
+    # a touch-down hold (id 0, still), out (1), back (2); a pause in contact (3, still), out (4)
+    t = np.arange(10) * 0.1
+    ids = np.array([0, 0, 1, 1, 2, 2, 3, 3, 4, 4])
+    moving = np.array([0, 0, 1, 1, 1, 1, 0, 0, 1, 1], dtype=bool)
+    assert strokes_since_rest(t, ids, rest_s=0.5, moving=moving).tolist() == [
+        0, 0, 0, 0, 1, 1, 2, 2, 2, 2]
+
+
+def _hold_out_back(contacts: int, rate_hz: float = 1000.0) -> Measurement:
+    """``contacts`` touches, each a 10 ms hold, a slide out and a slide back, 0.6 s lifts
+    between them (longer than REST_S: each touch starts rested), with the stroke column the
+    device's recording writes (the track's strokes: the hold is one of them)."""
+    hold, slide, lift, speed = 10, 300, 600, 0.1
+    xs, vs, ids, touching = [], [], [], []
+    stroke = 0
+    for _ in range(contacts):
+        for n, v in ((hold, 0.0), (slide, speed), (slide, -speed)):
+            vs += [v] * n
+            ids += [stroke] * n
+            touching += [True] * n
+            stroke += 1
+        vs += [0.0] * lift
+        ids += [stroke - 1] * lift
+        touching += [False] * lift
+    v = np.array(vs)
+    xs = 0.001 + np.cumsum(v) / rate_hz
+    contact = np.array(touching)
+    n = v.shape[0]
+    fn = np.where(contact, 0.5, 0.0)
+    return Measurement(t=np.arange(n) / rate_hz, normal_force=fn, lateral_force=0.3 * fn,
+                       amplitude=np.zeros(n), x=xs, y=np.full(n, 0.005), speed=v,
+                       stroke=np.array(ids), contact=contact)
+
+
+def test_prepared_stroke_is_the_devices_strokes_since_rest() -> None:
+    """The loop's ``stroke`` input is the reference device's ``k`` (skin-recovery): a hold at
+    touch-down is no stroke, so the first slide after a rest is stroke 0 (before: 1, and the
+    effect at the device's true parameters raised the held-out error instead of cutting it)."""
+    from types import SimpleNamespace
+
+    from hcard_device.sim.hidden.finger_clock import FingerClock
+
+    m = _hold_out_back(3)
+    data = prepare([m], rezero=False)
+    history = FingerClock(1e-3).advance(SimpleNamespace(contact=m.contact, x_mm=m.x * 1e3))
+    used = data.used
+    assert np.array_equal(data.inputs["stroke"][used], history.stroke[used])
+    assert set(data.inputs["stroke"][used].tolist()) == {0.0, 1.0}
