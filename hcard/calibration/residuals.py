@@ -485,3 +485,31 @@ def interactions(residual: np.ndarray, regressors: Mapping[str, np.ndarray], n_e
         and found_pair.eta2 >= min_eta2
     ]
     return sorted(found, key=lambda s: -s.eta2)
+
+
+def linear_share(residual: np.ndarray, regressor: np.ndarray, effective: float
+                 ) -> tuple[float, float]:
+    """The share of ``residual``'s variance along a straight line in ``regressor`` (the
+    squared Pearson correlation ``r^2``) and its two-sided p-value from the t-test of ``r``
+    with ``effective`` independent samples; ``(0, 1)`` for a constant regressor or residual."""
+    from scipy import stats  # here: scipy.stats costs ~0.6 s to import
+
+    x = np.asarray(regressor, dtype=np.float64) - float(np.mean(regressor))
+    y = np.asarray(residual, dtype=np.float64) - float(np.mean(residual))
+    sxx, syy = float(np.dot(x, x)), float(np.dot(y, y))
+    if sxx <= 0.0 or syy <= 0.0:
+        return 0.0, 1.0
+    r2 = min(float(np.dot(x, y)) ** 2 / (sxx * syy), 1.0)
+    dof = max(effective - 2.0, 1.0)
+    t2 = r2 * dof / max(1.0 - r2, 1e-300)
+    return r2, float(stats.f.sf(t2, 1.0, dof))
+
+
+def mostly_one_value(regressor: np.ndarray) -> bool:
+    """Whether one value holds at least half of ``regressor``'s samples (a regressor that is
+    mostly 0 with a tail of both signs, whose quantile bins merge)."""
+    values = np.asarray(regressor, dtype=np.float64)
+    if values.size == 0:
+        return False
+    _, counts = np.unique(values, return_counts=True)
+    return 2 * int(counts.max()) >= values.size

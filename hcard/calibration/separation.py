@@ -46,7 +46,6 @@ from hcard.calibration.plan import (
     FORCES_N,
     PLAIN,
     PROTOCOL_TAXTEL_MM,
-    REST_S,
     SPEEDS_MM_S,
     STROKE_X_MM,
     UV_STAIRCASE,
@@ -54,6 +53,7 @@ from hcard.calibration.plan import (
     Plan,
     PlanError,
     lane_card,
+    lift_after,
     session_track,
 )
 from hcard.physics import Predictor
@@ -535,10 +535,11 @@ def _support(pair: Pair, protocol: Conditions, candidates: Conditions, share: fl
 
 def _contact_share() -> float:
     """Share of a session's time in contact (strokes there and back at the protocol's mean
-    speed pair, then the rest)."""
+    speed pair, then the mean lift: a short one and a rest every pair)."""
     length = (STROKE_X_MM[1] - STROKE_X_MM[0]) / 1e3
     mean = float(np.mean([length / (s / 1e3) for s in SPEEDS_MM_S])) * 2
-    return mean / (mean + REST_S)
+    lift = (lift_after(0) + lift_after(1)) / 2.0
+    return mean / (mean + lift)
 
 
 def _expected(pair: Pair, protocol: Conditions, chosen: Conditions, noise: Noise,
@@ -650,7 +651,7 @@ def separating_plan(result: Design, *, seed: int = 0, rate_hz: float = 100.0) ->
     while elapsed < result.duration_s:
         pick = int(np.argmax(owed + 1e-9 * rng.random(owed.size)))
         pair = pairs[k % len(pairs)]
-        seconds = length / pair[0] + length / pair[1] + REST_S
+        seconds = length / pair[0] + length / pair[1] + lift_after(k)
         owed[pick] -= seconds
         sessions.append((levels.index(float(chosen.level[pick])),
                          float(chosen.normal_force[pick]), pair))

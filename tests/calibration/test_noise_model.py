@@ -13,7 +13,7 @@ from scipy import signal
 
 from hcard.calibration.judges import residual_structure
 from hcard.calibration.noise import SETTLE_S, NoiseModel, beyond_noise, measure_noise
-from hcard.calibration.residuals import analyse_residuals
+from hcard.calibration.residuals import MIN_BIN_COUNT, analyse_residuals
 from hcard.calibration.results import LoopSettings
 
 RATE_HZ = 1000.0
@@ -126,3 +126,32 @@ def test_beyond_noise_of_a_residual_no_larger_than_the_noise_is_nothing() -> Non
     assert share == pytest.approx(0.75)
     assert lag1 == pytest.approx((0.5 * 4e-4 - 0.5 * 1e-4) / 3e-4)
     assert p < 1e-6
+
+
+def test_a_signature_regressor_that_is_mostly_zero_counts_by_its_linear_trend() -> None:
+    """An actuator's lag leaves a residual proportional to the amplitude's recent change,
+    which is 0 on 87 % of the samples and signed on the rest: its quantile bins merge to a few
+    and their eta2 is small, the linear share is not (K9 (c), judges._signature_eta2). A
+    residual without that trend passes neither."""
+    from hcard.calibration.judges import beyond_foreign_structure
+    from hcard.plugins.registry import get_registry
+
+    rng = np.random.default_rng(11)
+    n = 20000
+    change = np.where(rng.random(n) < 0.13, rng.normal(0, 1e-6, n), 0.0)
+    effect = get_registry().calibration_effects["actuator-bandwidth"]
+    settings = LoopSettings()
+    for slope, expected in ((-4e3, True), (0.0, False)):
+        residual = slope * change + rng.normal(0, SIGMA_N, n)
+        regressors = {"amplitude_history": change}
+        analysis = analyse_residuals(residual, regressors, bins=settings.bins,
+                                     sample_rate_hz=RATE_HZ)
+        binned = analysis.regressors["amplitude_history"]
+        assert np.count_nonzero(binned.bin_counts >= MIN_BIN_COUNT) < settings.bins / 2
+        eta2, _ = beyond_foreign_structure(effect, analysis, residual, regressors,
+                                           frozenset({"amplitude_history"}), settings)
+        r2 = float(np.corrcoef(change, residual)[0, 1] ** 2)
+        if expected:
+            assert eta2 == pytest.approx(r2, rel=1e-6) and eta2 > settings.signature_eta2
+        else:
+            assert eta2 < settings.signature_eta2

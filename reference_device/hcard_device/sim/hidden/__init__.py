@@ -24,10 +24,13 @@ Effects of the calibration library (spec/calibration.md):
   piezos report through a first-order lag ``tau_a`` (the plate's mechanical response, section
   4.3.2: ~1.5 ms). The PI loop holds the sensed amplitude and the recording carries it, so the
   recorded amplitude leads what the finger feels. ``time_constant`` (1.5 ms; 0: none).
-- ``charge-leakage``: the bound charge leaks through the stratum corneum (Eqs. 3.19-3.23): the
-  voltage envelope acts through the high pass ``tau_d s / (1 + tau_d s)``, restarted from rest
-  at every touch-down (the skin arrives uncharged); the carrier's own leak stays in the
-  device's model. ``time_constant`` tau_d (7.7 ms, section 3.6.3; 10 s: no leakage).
+- ``charge-leakage``: the finger's stratum corneum leaks its bound charge with another time
+  constant than the profile's (Eqs. 3.19-3.23): the carrier reaches the skin with the gain
+  ``|H(f_c)|`` of Eq. 3.22 at the finger's ``tau_d(f_c)`` (Fig. 3.13: ``tau_d`` falls as
+  ``f^-0.7``) instead of the profile's. The 440 Hz carrier is far faster than any envelope
+  change, so on the envelope the leak is that gain (a touch-down's transient is under 0.5 % of
+  the force): from envelope recordings it is not told from the EV area (the calibration says
+  so). ``time_constant`` tau_d at 10 Hz (3 ms; the profile's 7.7 ms: none).
 - ``ultrasonic-speed``: the ultrasonic reduction ``1 - mu'`` times ``(U / U_ref)^a``, capped
   at 1 (Fig. 2.21e: it falls with sliding speed). ``speed_exponent`` a (-0.5),
   ``reference_speed`` U_ref (25 mm/s).

@@ -16,7 +16,10 @@ from hcard_builtins.physics.finger import FingerFriction
 FINGER_LOAD_INDEX = next(p.default for p in FingerFriction.parameters if p.name == "load_index")
 """The load index of the device's own finger (:class:`FingerFriction`'s default)."""
 NO_LEAKAGE_S = 10.0
-"""``charge-leakage`` time constant that stands for no leakage (the effect off exactly), s."""
+"""``charge-leakage`` time constant that stands for no leakage at all, s."""
+DEVICE_TAU_D_S = 7.7e-3
+"""The leakage time constant at 10 Hz of the device's own profile (section 3.6.3), s: the
+``charge-leakage`` value that leaves the device as it is."""
 NO_LOAD_DAMPING_N = 1e6
 """``plate-load-damping`` force that stands for no local damping (the effect off exactly), N."""
 IDEAL_SENSOR_HZ = 1e5
@@ -86,13 +89,15 @@ HIDDEN_EFFECTS: dict[str, HiddenEffect] = {e.name: e for e in (
     ),
     HiddenEffect(
         "charge-leakage",
-        "bound charge leaking through the stratum corneum: the voltage envelope acts through a "
-        "high pass of tau_d restarted at each touch-down (Eqs. 3.19-3.23)",
+        "bound charge leaking through the stratum corneum of a finger whose tau_d differs from "
+        "the profile's: the carrier reaches the skin with the gain of Eq. 3.22 at tau_d(f_c) "
+        "(Eqs. 3.19-3.23, Fig. 3.13)",
         EV,
-        (_p("time_constant", "s", 7.7e-3, (1e-5, NO_LEAKAGE_S),
-            f"Eq. 3.22, section 3.6.3 (7.7 ms), Fig. 3.13; {NO_LEAKAGE_S:g} s: no leakage",
-            "leakage time constant tau_d = (C_i + C_sc) R_sc"),),
-        {"time_constant": NO_LEAKAGE_S},
+        (_p("time_constant", "s", 3e-3, (1e-5, NO_LEAKAGE_S),
+            "Eq. 3.22, section 3.6.3 (7.7 ms at 10 Hz, the device profile's), Fig. 3.13 "
+            "(tau_d falls as f^-0.7); value chosen: a more conductive skin",
+            "the finger's leakage time constant tau_d at 10 Hz"),),
+        {"time_constant": DEVICE_TAU_D_S},
     ),
     HiddenEffect(
         "ultrasonic-speed",

@@ -9,7 +9,6 @@ frame instants.
 
 from __future__ import annotations
 
-import itertools
 import math
 
 import numpy as np
@@ -35,36 +34,6 @@ class FirstOrderLag:
 
         y, self._zi = lfilter(self._b, self._a, x, zi=self._zi)
         return np.asarray(y, dtype=np.float64)
-
-
-class RestartingHighPass:
-    """``tau s / (1 + tau s)`` (Eq. 3.22): ``y_k = a y_{k-1} + x_k - x_{k-1}``, ``a =
-    exp(-dt / tau)``, restarted from rest where asked (``y_k = x_k`` there: the input switched
-    on at that frame's instant).
-
-    Args:
-        time_constant_s: ``tau``, s (> 0).
-        frame_s: frame interval ``dt``, s.
-    """
-
-    def __init__(self, time_constant_s: float, frame_s: float) -> None:
-        a = math.exp(-frame_s / time_constant_s)
-        self._b, self._a = np.array([1.0, -1.0]), np.array([1.0, -a])
-        self._zi = np.zeros(1)  # a y_{k-1} - x_{k-1}: at rest
-
-    def run(self, x: np.ndarray, restart: np.ndarray) -> np.ndarray:
-        """The output at the frames of ``x``, restarted at the frames where ``restart``."""
-        from scipy.signal import lfilter
-
-        y = np.empty(x.shape[0])
-        cuts = [0, *np.flatnonzero(restart).tolist(), x.shape[0]]
-        for start, stop in itertools.pairwise(cuts):  # one per touch-down
-            if start == stop:
-                continue
-            if restart[start]:
-                self._zi = np.zeros(1)
-            y[start:stop], self._zi = lfilter(self._b, self._a, x[start:stop], zi=self._zi)
-        return y
 
 
 class SecondOrderSensor:

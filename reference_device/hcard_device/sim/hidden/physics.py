@@ -33,7 +33,7 @@ from hcard_device.sim.hidden.catalogue import (
     HIDDEN_EFFECTS,
     HiddenEffectError,
 )
-from hcard_device.sim.hidden.filters import FirstOrderLag, RestartingHighPass, SecondOrderSensor
+from hcard_device.sim.hidden.filters import FirstOrderLag, SecondOrderSensor
 from hcard_device.sim.hidden.finger_clock import FingerClock, FingerHistory
 from hcard_device.sim.hidden.pad import flattened_ratio
 
@@ -47,7 +47,7 @@ MIN_FORCE_N = 1e-3
 MIN_SPEED_M_S = 1e-3
 """``ultrasonic-speed`` takes the sliding speed as at least this, m/s (a finger at rest on the
 plate keeps the reduction of a 1 mm/s slide, not an unbounded one)."""
-CLOCKED = ("occlusion-drift", "skin-recovery", "charge-leakage")
+CLOCKED = ("occlusion-drift", "skin-recovery")
 """Effects that need the finger's history."""
 
 
@@ -75,7 +75,7 @@ class HiddenPhysics:
         self._lag = (FirstOrderLag(p["actuator-bandwidth"]["time_constant"], frame_s)
                      if "actuator-bandwidth" in p else None)
         self._damping_n = p.get("plate-load-damping", {}).get("damping_force")
-        self._leak = (RestartingHighPass(p["charge-leakage"]["time_constant"], frame_s)
+        self._leak = (carrier_gain_ratio(profile, p["charge-leakage"]["time_constant"])
                       if "charge-leakage" in p else None)
         self._sensor = (SecondOrderSensor(p["force-sensor-resonance"]["natural_frequency"],
                                           p["force-sensor-resonance"]["damping_ratio"], frame_s)
@@ -119,13 +119,12 @@ class HiddenPhysics:
         return amplitude
 
     def voltage(self, envelope_v: np.ndarray, history: FingerHistory | None) -> np.ndarray:
-        """The voltage envelope acting on the skin, V: the high pass of Eq. 3.22 restarted at
-        every touch-down (``charge-leakage``), as a magnitude (after a fall it swings negative:
-        the skin holds the opposite charge, and the force goes as its square)."""
+        """The voltage envelope the device's model takes for the one acting on the skin, V:
+        scaled by the ratio of the finger's carrier gain to the profile's (``charge-leakage``,
+        :func:`carrier_gain_ratio`)."""
         if self._leak is None:
             return envelope_v
-        assert history is not None
-        return np.abs(self._leak.run(envelope_v, history.touchdown))
+        return envelope_v * self._leak
 
     def sensor(self, force_n: np.ndarray) -> np.ndarray:
         """What the lateral force sensor reads of the true force, N."""
@@ -193,3 +192,21 @@ class HiddenPhysics:
             times(1.0 - self._recovery["depth"] * np.exp(
                 -history.stroke / self._recovery["strokes"]))
         return factor
+
+
+def carrier_gain_ratio(profile: DeviceProfile, tau_d_s: float) -> float:
+    """``|H(f_c)|`` of Eq. 3.22 for a finger whose leakage time constant at 10 Hz is
+    ``tau_d_s`` (s) over the profile's own carrier gain: the device's leakage model (Eqs.
+    3.19-3.23, ``tau_d`` falling with frequency as Fig. 3.13) with the finger's ``tau_d``, at
+    the carrier frequency ``f_c``. The carrier (440 Hz on the coupled stimulator) is far
+    faster than any envelope change, so the leak acts as this gain on the envelope; the
+    transient at a touch-down or an envelope step is of relative size ``1/(omega tau)``
+    squared in the force, under 0.5 % here, and left out."""
+    leakage, limits = profile.leakage, profile.limits
+    if leakage is None or limits is None:
+        raise HiddenEffectError("effect charge-leakage needs a device with an EV carrier and "
+                                "a leakage model")
+    finger = leakage.with_params(tau_d=tau_d_s)
+    gain = float(np.abs(np.asarray(finger.frequency_response(
+        np.asarray([limits.carrier_frequency])))).ravel()[0])
+    return gain / profile.carrier_gain
