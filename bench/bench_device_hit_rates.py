@@ -1,7 +1,7 @@
 """The calibration loop through the served reference device, for every effect the device can
 hide: does it name the hidden effect, recover its parameter and cut the rendered friction error;
 say "not explained" for what no library effect describes; say "no effect needed" when nothing is
-hidden. Issue 31, must-show 2; spec/calibration.md K14-K18.
+hidden. spec/calibration.md K14-K18 and section 10 (K35).
 
 Run: ``python bench/bench_device_hit_rates.py [--seeds 2] [--only air-layer none]
 [--transport served|sim] [--keep DIR]``

@@ -75,6 +75,7 @@ from hcard.calibration.judges import (
     claimed_regressors,
     earns_place,
     judge_round,
+    noise_aware,
     residual_structure,
     usable_effects,
     verdict_of,
@@ -638,6 +639,11 @@ def calibrate(
         f"base: held-out RMSE {format_error(search.current.test_rmse, unit)}, training RMSE "
         f"{format_error(search.current.train_rmse, unit)}"
     )
+    settings, lowered = noise_aware(settings, search.current.fit.residuals[data.test],
+                                    data.noise)
+    if lowered:
+        say(lowered)
+        search.settings = settings
     for round_number in range(1, settings.max_effects + 1):
         if not search.run_round(round_number):
             break

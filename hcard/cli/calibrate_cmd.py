@@ -545,16 +545,22 @@ def calibrate_command(
     if settle and verify_uri is None:
         raise CalibrateUsageError("--settle plays the separating experiment on the --verify "
                                   "device; give --verify URI")
-    if settle and _ambiguous_pair(result) is not None:
-        extra, separation = _settle(result, base_profile, voltage_form, output, verify_uri or "",
-                                    timeout, seed, say)
+    experiments: list[dict[str, Any]] = []
+    while (settle and _ambiguous_pair(result) is not None
+           and len(experiments) < MAX_SEPARATING_EXPERIMENTS):
+        extra, done = _settle(result, base_profile, voltage_form, output, verify_uri or "",
+                              timeout, seed, say, len(experiments) + 1)
         measurements = [*measurements, extra]
         prepared = prepare(measurements, split=split, test_fraction=held_out, seed=seed,
                            rezero=not no_rezero, contact_threshold_n=threshold_n)
         say("calibrating all recordings together")
         result = calibrate(prepared, base, candidates, free=free, settings=settings,
                            progress=say)
-        separation["after"] = _comparison_figures(result)
+        done["after"] = _comparison_figures(result)
+        experiments.append(done)
+    if experiments:
+        separation = {**experiments[0], "after": experiments[-1]["after"],
+                      "experiments": experiments}
     if bootstrap >= 2:
         say(f"stroke-block bootstrap of the final model: {bootstrap} refits")
         result = with_bootstrap(result, bootstrap, seed=seed, progress=say)
@@ -628,34 +634,42 @@ def _comparison_figures(result: Any) -> dict[str, Any]:
     return figures
 
 
+MAX_SEPARATING_EXPERIMENTS = 3
+"""Separating experiments ``--settle`` plays at most, each designed from the run before it
+(whose measured margins make the next one longer where the last one fell short)."""
+
+
 def _settle(result: Any, base_profile: DeviceProfile | None, voltage_form: str, output: Path,
-            uri: str, timeout: float, seed: int, say: Any) -> tuple[Measurement, dict[str, Any]]:
-    """Design the separating experiment from ``result``, play it on ``uri``; the recording
-    and what was done (spec/calibration.md K34)."""
+            uri: str, timeout: float, seed: int, say: Any, number: int
+            ) -> tuple[Measurement, dict[str, Any]]:
+    """Design the ``number``-th separating experiment from ``result``, play it on ``uri``; the
+    recording and what was done (spec/calibration.md K34)."""
     from hcard.calibration.profile import profile_of
     from hcard.calibration.report.writer import write_report
     from hcard.device.record_play import play_and_record
 
     first, second = _ambiguous_pair(result) or ("", "")
-    folder = output / "before-separation"
+    suffix = "" if number == 1 else f"-{number}"
+    folder = output / f"before-separation{suffix}"
     say(f"ambiguous between {first} and {second}: writing this run to {folder}")
     write_report(result, folder, figures=False,
                  profile=profile_of(result, base_profile, voltage_form=voltage_form))
     say("designing the separating experiment")
     device = "coupled"
-    written, lines = plan_separation(f"{first},{second}", device, output, folder, None, seed)
+    written, lines = plan_separation(f"{first},{second}", device, output / f"separate{suffix}",
+                                     folder, None, seed)
     for line in lines:
         say(line)
     from hcard.card_io import load
     from hcard.track import read_track_csv
 
-    recording = output / "separate-recording.csv"
+    recording = output / f"separate-recording{suffix}.csv"
     say(f"playing the separating experiment on {uri}")
     play_and_record(uri, load(written[0]), read_track_csv(written[1]), recording,
                     card_path=str(written[0]), track_path=str(written[1]), timeout_s=timeout)
     design_json = json.loads(written[2].read_text(encoding="utf-8"))
     return read_recording(recording, None), {
-        "design": DESIGN_JSON,
+        "design": f"separate{suffix}/{DESIGN_JSON}",
         "recording": recording.name,
         "before_folder": folder.name,
         "before": _comparison_figures(result),
