@@ -100,7 +100,7 @@ from hcard.calibration.results import (
     fitted_figure,
     format_error,
 )
-from hcard.calibration.runner_up import runner_up
+from hcard.calibration.runner_up import judged_within, runner_up
 from hcard.calibration.screening import (
     SCREEN_TOLERANCE,
     criterion_band,
@@ -604,6 +604,7 @@ def calibrate(
     settings: LoopSettings | None = None,
     progress: Progress | None = None,
     observation: str = "lateral_force",
+    separating: np.ndarray | None = None,
 ) -> CalibrationResult:
     """Run the calibration loop (module docstring) and return what it found.
 
@@ -619,6 +620,9 @@ def calibrate(
         observation: what ``data.observed`` is
             (:data:`~hcard.calibration.results.OBSERVATIONS`): the lateral force, N (default),
             or the model's own output in its unit.
+        separating: mask of the samples of separating experiments (spec/calibration.md K34):
+            the final model and its runner-up are judged on them
+            (:func:`~hcard.calibration.runner_up.judged_within`).
 
     Raises:
         PredictorError: an unusable base model, unknown free parameters, no held-out samples,
@@ -654,6 +658,8 @@ def calibrate(
                                    search.analyse.regressors)
     names = tuple(e.name for e in search.added)
     comparison = runner_up(current, pool, data, settings)
+    if comparison is not None and separating is not None:
+        comparison = judged_within(comparison, current, pool, data, settings, separating)
     verdict = verdict_of(structure, names, comparison)
     summary = summarise(base.name, verdict, search.steps[0], current, names, structure, unit)
     if comparison is not None:

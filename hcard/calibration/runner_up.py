@@ -17,6 +17,8 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+import numpy as np
+
 from hcard.calibration.dataset import CalibrationData
 from hcard.calibration.model_pool import EffectSet, ModelPool, held_out_criterion
 from hcard.calibration.residuals import effective_samples
@@ -162,3 +164,38 @@ def _best_rival(figures: RivalFigures, candidates: list[EffectSet]) -> EffectSet
         if not doubtful:
             return best
         figures.settle(doubtful)
+
+
+def judged_within(comparison: Comparison, final: ModelFit, pool: ModelPool,
+                  data: CalibrationData, settings: LoopSettings, within: np.ndarray
+                  ) -> Comparison:
+    """``comparison`` (the final model against its runner-up) judged again on the samples
+    ``within`` alone: the separating experiment's recordings (spec/calibration.md K34), where
+    the two models' predictions differ by design. Over every recording the margin of RMSE is
+    diluted by the samples where the two agree (the hidden air layer against the pad's
+    flattening: ``H`` +755 but RMSE +0.2 % over protocol and experiment together); on the
+    experiment's held-out samples it is the difference the experiment was made to show. ``H``
+    of both at the final model's effective sample count there. ``comparison`` itself when the
+    runner-up was not fitted on every sample or ``within`` holds no held-out sample."""
+    rival = pool.fits.get(frozenset(comparison.runner_up))
+    test = final.fit.test & within
+    if rival is None or frozenset(comparison.runner_up) in pool.screened or not test.any():
+        return comparison
+    _, fit = rival
+    n_eff = effective_samples(final.fit.residuals[test])
+
+    def figures(residuals: np.ndarray, n_free: int) -> tuple[float, float]:
+        mse = float(np.mean(residuals[test] ** 2))
+        return (n_eff * math.log(max(mse, np.finfo(float).tiny)) + 2 * n_free,
+                math.sqrt(mse))
+
+    final_h, final_rmse = figures(final.fit.residuals, final.fit.n_free)
+    rival_h, rival_rmse = figures(fit.residuals, fit.n_free)
+    used = data.used & within
+    observed = data.observed[used]
+    return compare(
+        comparison.chosen, final_h, final_rmse, observed - final.fit.residuals[used],
+        comparison.runner_up, rival_h, rival_rmse, observed - fit.residuals[used],
+        {name: values[used] for name, values in data.regressors.items()},
+        settings.separation(), settings.bins, decides=bool(final.effects),
+    )

@@ -546,6 +546,7 @@ def calibrate_command(
         raise CalibrateUsageError("--settle plays the separating experiment on the --verify "
                                   "device; give --verify URI")
     experiments: list[dict[str, Any]] = []
+    recorded = len(measurements)
     while (settle and _ambiguous_pair(result) is not None
            and len(experiments) < MAX_SEPARATING_EXPERIMENTS):
         extra, done = _settle(result, base_profile, voltage_form, output, verify_uri or "",
@@ -553,9 +554,10 @@ def calibrate_command(
         measurements = [*measurements, extra]
         prepared = prepare(measurements, split=split, test_fraction=held_out, seed=seed,
                            rezero=not no_rezero, contact_threshold_n=threshold_n)
-        say("calibrating all recordings together")
+        say("calibrating all recordings together; the runner-up judged on the separating "
+            "recordings (K34)")
         result = calibrate(prepared, base, candidates, free=free, settings=settings,
-                           progress=say)
+                           progress=say, separating=prepared.recording >= recorded)
         done["after"] = _comparison_figures(result)
         experiments.append(done)
     if experiments:
