@@ -54,10 +54,11 @@ def view(cards: tuple[Path, ...], port: int, source: Path | None, device_uri: st
             raise UsageError(f"--source: {source}: no such file")
         source_image = load_source(source, loaded[0])
     if device_uri is not None:
-        from hcard.device.uri import parse_uri
+        from hcard.device.open import driver_classes
+        from hcard.device.uri import SCHEMES, parse_uri
 
-        try:
-            parse_uri(device_uri)
+        try:  # the schemes open_device takes: the host library's and every driver plugin's
+            parse_uri(device_uri, schemes=tuple(dict.fromkeys((*SCHEMES, *driver_classes()))))
         except HcardError as exc:
             raise UsageError(f"--device: {exc}") from None
     state = ViewState(loaded, [path.name for path in cards], source_image, device_uri)

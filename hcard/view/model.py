@@ -402,6 +402,11 @@ def request_track(body: dict[str, Any]) -> FingerTrack:
     ...]``) with ``speed_mm_s``; or ``points`` (``[[t_s, x_mm, y_mm], ...]``) or
     ``track_csv`` (the text of a track file, spec/track-format.md) at their own times, or
     re-timed along their positions at ``speed_mm_s`` when it is given."""
+    return _request_track(body)[0]
+
+
+def _request_track(body: dict[str, Any]) -> tuple[FingerTrack, float | None]:
+    """:func:`request_track` and the speed it was timed at (None: the samples' own times)."""
     speed = body.get("speed_mm_s")
     speed_value = None if speed is None else _number(speed, "speed_mm_s", 1e-3, 1e5)
     rate = _number(body.get("touch_rate_hz", TOUCH_RATE_HZ), "touch_rate_hz", 1.0, 10_000.0)
@@ -413,7 +418,8 @@ def request_track(body: dict[str, Any]) -> FingerTrack:
         if given[0] == "path":
             if speed_value is None:
                 raise ViewRequestError("a path needs speed_mm_s")
-            return path_track(_float_rows(body["path"], 2, "path"), speed_value, rate)
+            path = _float_rows(body["path"], 2, "path")
+            return path_track(path, speed_value, rate), speed_value
         if given[0] == "points":
             rows = _float_rows(body["points"], 3, "points")
             track = make_track(rows[:, 0], rows[:, 1], rows[:, 2], source="points")
@@ -426,7 +432,9 @@ def request_track(body: dict[str, Any]) -> FingerTrack:
         raise
     except HcardError as exc:  # the track format's own message (TrackError)
         raise ViewRequestError(str(exc)) from None
-    return track if speed_value is None else retimed(track, speed_value, rate)
+    if speed_value is None:
+        return track, None
+    return retimed(track, speed_value, rate), speed_value
 
 
 def render_options(body: dict[str, Any]) -> RenderOptions:
@@ -457,9 +465,13 @@ def render_frames(card: pb.Card, track: FingerTrack, options: RenderOptions) -> 
     return Frames.concatenate(list(renderer.blocks(track)))
 
 
-def stroke_distance(track: FingerTrack, t: np.ndarray) -> np.ndarray:
-    """Distance along the track's samples at the times ``t`` (linear between samples, held
-    after the last), mm."""
+def stroke_distance(track: FingerTrack, t: np.ndarray, speed_mm_s: float | None = None
+                    ) -> np.ndarray:
+    """Distance along the stroke at the times ``t``, mm: ``speed_mm_s`` times the time since
+    the first sample for a stroke timed at that speed (its path's length at its end); else
+    along the straight lines between the track's samples (held after the last)."""
+    if speed_mm_s is not None:
+        return np.clip(speed_mm_s * (t - track.t[0]), 0.0, speed_mm_s * track.duration_s)
     distance = np.concatenate(([0.0], np.cumsum(np.hypot(np.diff(track.x), np.diff(track.y)))))
     return np.interp(t, track.t, distance)
 
@@ -467,10 +479,10 @@ def stroke_distance(track: FingerTrack, t: np.ndarray) -> np.ndarray:
 def render_json(card: pb.Card, body: dict[str, Any]) -> dict[str, Any]:
     """The answer to a render request: the track, and every frame's time, distance along the
     stroke, UV and EV targets, friction (``uv * ev``, thesis Eq. 4.1) and texture."""
-    track = request_track(body)
+    track, speed = _request_track(body)
     options = render_options(body)
     frames = render_frames(card, track, options)
-    distance = stroke_distance(track, frames.t)
+    distance = stroke_distance(track, frames.t, speed)
     friction = frames.friction
     return {
         "frame_rate_hz": options.frame_rate_hz,
