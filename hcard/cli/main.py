@@ -42,7 +42,7 @@ COMMAND_SUMMARIES = {
     "preview": "Draw CARD as a PNG picture of its taxtels and textures.",
     "render": "Render CARD along a finger track into target friction.",
     "validate": "Check each CARD against the spec; list problems by rule.",
-    "view": "See and try CARD... on a local page served on 127.0.0.1.",
+    "view": "Show each CARD on a local page; draw strokes and render them.",
 }
 """The first sentence of each core command's help, which ``hcard --help`` lists without
 importing any command module (tests/cli/test_cli.py checks them against the commands' own help)."""

@@ -11,6 +11,7 @@ from hcard.card_io import load
 from hcard.cli.input_files import INPUT_FILE
 from hcard.cli.verbosity import quiet, verbosity_options
 from hcard.errors import HcardError, UsageError
+from hcard.file_errors import os_reason
 
 
 @click.command("view")
@@ -28,12 +29,13 @@ from hcard.errors import HcardError, UsageError
               help="Open the page in the default web browser.")
 def view(cards: tuple[Path, ...], port: int, source: Path | None, device_uri: str | None,
          open_browser: bool) -> None:
-    """See and try CARD... on a local page served on 127.0.0.1.
+    """Show each CARD on a local page; draw strokes and render them.
 
-    The page draws each card's taxtel map to scale, a texture's spatial profile over a length
-    you set (mm) and its spectrum (cycles/mm), and renders a stroke you draw on the surface
-    (or a track CSV you load) with hcard's renderer, at the speed you set: the friction a
-    finger would feel along it, with the UV and EV drives. Two cards are shown side by side
+    The page is served on 127.0.0.1 (any free port unless --port says which). It draws each
+    card's taxtel map to scale, a texture's spatial profile over a length you set (mm) and
+    its spectrum (cycles/mm), and renders a stroke you draw on the surface (or a track CSV
+    you load) with hcard's renderer, at the speed you set: the friction a finger would feel
+    along it, with the UV and EV drives. Two cards are shown side by side
     with their difference; --source adds the encoder's error map; --device lets the page play
     the stroke on a device. Nothing is loaded from the network. Stop with Ctrl-C.
 
@@ -69,7 +71,7 @@ def view(cards: tuple[Path, ...], port: int, source: Path | None, device_uri: st
             raise UsageError(f"--port {port}: the port is in use on 127.0.0.1 (another "
                              "program listens on it); give another, or 0 for any free one"
                              ) from None
-        raise HcardError(f"cannot listen on 127.0.0.1:{port}: {exc.strerror}") from None
+        raise HcardError(f"cannot listen on 127.0.0.1:{port}: {os_reason(exc)}") from None
     click.echo(f"hcard view: {server.url} (Ctrl-C stops)")
     if open_browser:
         import webbrowser

@@ -64,6 +64,7 @@ function plot(canvas, series, labels) {
   const xs = series.flatMap((s) => s.x), ys = series.flatMap((s) => s.y);
   let [x0, x1] = extent(xs), [y0, y1] = extent(ys);
   if (labels.yFrom !== undefined) y0 = Math.min(y0, labels.yFrom);
+  if (labels.xFrom !== undefined) { x0 = Math.min(x0, labels.xFrom); x1 += 0.08 * (x1 - x0); }
   if (x1 <= x0) x1 = x0 + 1;
   if (y1 - y0 < 1e-6) { y0 -= 0.05; y1 += 0.05; }
   const pad = 0.06 * (y1 - y0); y0 -= pad; y1 += pad;
@@ -188,8 +189,8 @@ function attachPointer(k, canvas) {
   let down = null;
   canvas.addEventListener("pointerdown", (e) => {
     canvas.setPointerCapture(e.pointerId);
-    down = {start: toMm(k, e), moved: false};
-    view.stroke = [down.start]; view.track = null;
+    down = {start: toMm(k, e), moved: false, before: [view.stroke, view.track]};
+    view.stroke = [down.start];
   });
   canvas.addEventListener("pointermove", (e) => {
     if (!down) return;
@@ -201,8 +202,9 @@ function attachPointer(k, canvas) {
     if (!down) return;
     const p = toMm(k, e), last = view.stroke[view.stroke.length - 1];
     if (Math.hypot(p[0] - last[0], p[1] - last[1]) > 1e-9) { view.stroke.push(p); down.moved = true; }
-    if (!down.moved) { view.stroke = []; selectTaxtel(k, down.start); }
-    else { $("render-card").value = k; strokeInfo(); }
+    if (!down.moved) {  // a click: the stroke stays as it was
+      [view.stroke, view.track] = down.before; selectTaxtel(k, down.start);
+    } else { view.track = null; $("render-card").value = k; strokeInfo(); }
     down = null; drawAll();
   });
 }
@@ -253,7 +255,7 @@ async function showTexture() {
     const lines = p.spectrum.length ? p.spectrum : [{frequency_along: 0, amplitude: 0}];
     plot($("plot-spectrum"), [{x: lines.map((c) => c.frequency_along),
                                y: lines.map((c) => c.amplitude), stems: true}],
-         {x: "spatial frequency along it (cycles/mm)", y: "amplitude", yFrom: 0});
+         {x: "spatial frequency along it (cycles/mm)", y: "amplitude", yFrom: 0, xFrom: 0});
     const rows = t.components.map((c) => `<tr><td>${c.domain}</td><td>${fmt(c.frequency)} `
       + `${c.unit}</td><td>${fmt(c.amplitude)}</td><td>${fmt(c.phase_rad)}</td>`
       + `<td>${fmt(c.orientation_rad * 180 / Math.PI)}°</td><td>${c.channel}</td></tr>`);
