@@ -23,7 +23,7 @@ COMMAND_MODULES = {
     "encode": "encode_cmd", "info": "card_cmds", "validate": "card_cmds",
     "render": "render_cmd", "preview": "preview_cmd", "predict": "predict_cmd",
     "plugins": "plugins_cmd", "calibrate": "calibrate_cmd",
-    "import": "interchange_cmds", "export": "interchange_cmds",
+    "import": "interchange_cmds", "export": "interchange_cmds", "view": "view_cmd",
 }
 """Each core command's module under ``hcard.cli``, imported only when the command runs: ``hcard
 validate`` loads the card modules and not the renderer or the calibration loop
@@ -42,6 +42,7 @@ COMMAND_SUMMARIES = {
     "preview": "Draw CARD as a PNG picture of its taxtels and textures.",
     "render": "Render CARD along a finger track into target friction.",
     "validate": "Check each CARD against the spec; list problems by rule.",
+    "view": "Show each CARD on a local page; draw strokes and render them.",
 }
 """The first sentence of each core command's help, which ``hcard --help`` lists without
 importing any command module (tests/cli/test_cli.py checks them against the commands' own help)."""
