@@ -275,10 +275,12 @@ SEPARATE_CARD, SEPARATE_TRACK, DESIGN_JSON = "separate.hcard", "separate.csv", "
 
 
 def plan_separation(pair_text: str, device: str, output: Path, from_dir: Path | None,
-                    duration_s: float | None, seed: int) -> tuple[list[Path], list[str]]:
+                    duration_s: float | None, seed: int, *, max_duration_s: float | None = None
+                    ) -> tuple[list[Path], list[str]]:
     """Design the experiment separating the effects ``pair_text`` (``"A,B"``) on ``device``,
     from a calibration folder or the class's profile, and write its card, track and
-    ``design.json`` into ``output``; the paths written and the design in a few lines."""
+    ``design.json`` into ``output``; the paths written and the design in a few lines. A design
+    longer than ``max_duration_s`` (s) is made that long instead, and the lines say so."""
     from hcard.calibration.separation import design, separating_plan
     from hcard.calibration.separation_inputs import (
         check_device,
@@ -294,8 +296,13 @@ def plan_separation(pair_text: str, device: str, output: Path, from_dir: Path | 
     else:
         pair, noise = from_class(device, a, b)
     found = design(pair, noise, duration_s=duration_s)
+    shortened: list[str] = []
+    if max_duration_s is not None and found.duration_s > max_duration_s:
+        shortened = [f"shortened to {max_duration_s:.0f} s (--settle-time) from the "
+                     f"{found.duration_s:.0f} s it needs"]
+        found = design(pair, noise, duration_s=max_duration_s)
     plan = separating_plan(found, seed=seed)
-    return write_separation(output, device, found, plan), found.describe()
+    return write_separation(output, device, found, plan), [*found.describe(), *shortened]
 
 
 def write_separation(directory: Path, device: str, found: Any, plan: Plan) -> list[Path]:
@@ -435,6 +442,11 @@ def _verification_files(measurements: list[Measurement], card: Path | None,
                    "that separates them, play it on the --verify device, calibrate all "
                    "recordings together and report the settled verdict (spec/calibration.md "
                    "K34).")
+@click.option("--settle-time", "settle_time", default="120s", show_default=True,
+              metavar="DURATION",
+              help="Most recording time the separating experiments of --settle may take "
+                   "together, e.g. 90s or 5min (an experiment that needs more is played "
+                   "shortened and says so).")
 @click.option("--strict", is_flag=True,
               help="Exit with status 1 (a failed check) when structure is left that no effect "
                    "explains.")
@@ -464,6 +476,7 @@ def calibrate_command(
     bootstrap: int,
     strict: bool,
     settle: bool,
+    settle_time: str,
 ) -> None:
     """Fit the device's model to the recordings DATA, add the effects it lacks, report.
 
@@ -493,6 +506,7 @@ def calibrate_command(
         raise CalibrateUsageError("--bootstrap needs at least 2 refits (0: none)")
     held_out = _fraction(test_fraction, "--test-fraction")
     threshold_n = _contact_threshold(contact_threshold)
+    budget_s = _settle_budget(settle_time)
     settings = LoopSettings(
         min_improvement=_fraction(min_improvement, "--min-improvement"),
         max_effects=max_effects,
@@ -548,9 +562,11 @@ def calibrate_command(
     experiments: list[dict[str, Any]] = []
     recorded = len(measurements)
     while (settle and _ambiguous_pair(result) is not None
-           and len(experiments) < MAX_SEPARATING_EXPERIMENTS):
+           and len(experiments) < MAX_SEPARATING_EXPERIMENTS
+           and budget_s >= MIN_SEPARATING_S):
         extra, done = _settle(result, base_profile, voltage_form, output, verify_uri or "",
-                              timeout, seed, say, len(experiments) + 1)
+                              timeout, seed, say, len(experiments) + 1, budget_s)
+        budget_s -= done["duration_s"]
         measurements = [*measurements, extra]
         prepared = prepare(measurements, split=split, test_fraction=held_out, seed=seed,
                            rezero=not no_rezero, contact_threshold_n=threshold_n)
@@ -641,11 +657,29 @@ MAX_SEPARATING_EXPERIMENTS = 3
 (whose measured margins make the next one longer where the last one fell short)."""
 
 
+MIN_SEPARATING_S = 10.0
+"""Shortest separating experiment --settle plays, s (the design's own floor)."""
+
+
+def _settle_budget(text: str) -> float:
+    """``--settle-time`` in seconds (> 0), or a usage error naming the option."""
+    from hcard.quantities import UnitError, parse_quantity
+
+    try:
+        seconds = parse_quantity(text, "s")
+    except UnitError as exc:
+        raise CalibrateUsageError(f"--settle-time {text!r}: {exc}") from None
+    if not (math.isfinite(seconds) and seconds > 0):
+        raise CalibrateUsageError(f"--settle-time {text!r}: must be a duration > 0, e.g. 120s")
+    return seconds
+
+
 def _settle(result: Any, base_profile: DeviceProfile | None, voltage_form: str, output: Path,
-            uri: str, timeout: float, seed: int, say: Any, number: int
+            uri: str, timeout: float, seed: int, say: Any, number: int, budget_s: float
             ) -> tuple[Measurement, dict[str, Any]]:
-    """Design the ``number``-th separating experiment from ``result``, play it on ``uri``; the
-    recording and what was done (spec/calibration.md K34)."""
+    """Design the ``number``-th separating experiment from ``result`` (at most ``budget_s``
+    seconds long), play it on ``uri``; the recording and what was done (spec/calibration.md
+    K34)."""
     from hcard.calibration.profile import profile_of
     from hcard.calibration.report.writer import write_report
     from hcard.device.record_play import play_and_record
@@ -659,7 +693,7 @@ def _settle(result: Any, base_profile: DeviceProfile | None, voltage_form: str, 
     say("designing the separating experiment")
     device = "coupled"
     written, lines = plan_separation(f"{first},{second}", device, output / f"separate{suffix}",
-                                     folder, None, seed)
+                                     folder, None, seed, max_duration_s=budget_s)
     for line in lines:
         say(line)
     from hcard.card_io import load

@@ -117,3 +117,17 @@ def test_the_separating_experiment_settles_the_air_layer(tmp_path):
     assert after["effects"] == ["air-layer"], after
     assert not after["ambiguous"], after
     assert after["rmse_margin"] >= 0.01 and after["criterion_margin"] >= 10.0
+    assert (tmp_path / "calib" / "separate" / "design.json").exists()
+    assert separation["experiments"][0]["recording"] == "separate-recording.csv"
+    assert sum(e["duration_s"] for e in separation["experiments"]) <= 120.0  # --settle-time
+
+
+@pytest.mark.parametrize(("value", "words"), [("0s", "must be a duration > 0"),
+                                               ("soon", "--settle-time 'soon'")])
+def test_a_bad_settle_time_is_a_usage_error(tmp_path, value, words):
+    rec = tmp_path / "rec.csv"
+    rec.write_text("t_s,fn_n,fl_n,voltage_v\n0,0.5,0.2,0\n0.001,0.5,0.2,10\n")
+    result = run_hcard("calibrate", rec, "-o", tmp_path / "calib", "--settle", "--settle-time",
+                       value, "--verify", "sim://coupled")
+    assert result.exit_code == 2, result.output
+    assert words in result.output and "Traceback" not in result.output
