@@ -66,7 +66,7 @@ GUTTER_IN = 0.4
 """Width left of the first column of cells for its friction scale and its name, inches."""
 MAX_PLOT_IN = 2.2
 """Tallest plot area of a cell below the maps (and, beyond the style's least, beside them)."""
-WIDE_PLOT_ASPECT = 0.4
+WIDE_PLOT_ASPECT = 0.5
 """Below the maps a plot area is this fraction of its width tall (within the style's least and
 :data:`MAX_PLOT_IN`)."""
 TICK_IN = 0.035
@@ -275,7 +275,7 @@ class PlotSeries:
         ``"flat"`` without components."""
         if self.period is None:
             return "flat"
-        text = f"{self.period:.2g} {self.unit}"
+        text = f"{self.period:.3g} {self.unit}"
         if direction and self.direction_deg is not None:
             text += f" ∠{self.direction_deg:.0f}°"
         return text

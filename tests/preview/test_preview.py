@@ -166,7 +166,7 @@ def test_every_texture_has_a_labelled_cell() -> None:
     labels = _periods(preview_figure(card))[CELL_LABELS].texts
     assert len(labels) == 30
     assert labels[0] == "0 BIP auto\n10 mm ∠0°"  # one period of 0.1 cycles/mm
-    assert labels[29] == "29 BIP auto\n0.33 mm ∠0°"  # of 3 cycles/mm
+    assert labels[29] == "29 BIP auto\n0.333 mm ∠0°"  # of 3 cycles/mm
 
 
 def test_cell_draws_the_analytic_profile_on_the_shared_scale() -> None:
@@ -256,7 +256,7 @@ def test_a_full_palette_is_drawn_in_a_few_axes() -> None:
     marks = _periods(fig)
     assert len(marks[CURVES].get_paths()) == 256
     labels = marks[CELL_LABELS].texts
-    assert labels[255] == "255 UV pos.\n0.36 mm"  # one period of 2.75 cycles/mm
+    assert labels[255] == "255 UV pos.\n0.364 mm"  # one period of 2.75 cycles/mm
     # fewer cells a row beside the taxtel map than in the full-width rows below it
     rows: dict[float, int] = {}
     for _, y in marks[CELL_LABELS].get_offsets():
