@@ -147,7 +147,8 @@ if TYPE_CHECKING:
     "--preview",
     type=click.Path(path_type=Path),
     default=None,
-    help="Also write a PNG preview of the card to this file.",
+    help="Also write a PNG preview of the card to this file: taxtel map, error map in JND, "
+    "each texture's friction over one shared length.",
 )
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON instead of text.")
 @executor_options

@@ -1,4 +1,4 @@
-"""``hcard preview``: draw a card as a PNG picture (taxtel map and texture periods)."""
+"""``hcard preview``: draw a card as a PNG picture (taxtel map and texture profiles)."""
 
 from __future__ import annotations
 
@@ -33,8 +33,10 @@ from hcard.file_errors import writing
 def preview(card: Path, output: Path | None, dpi: int) -> None:
     """Draw CARD as a PNG picture of its taxtels and textures.
 
-    Left, the taxtel grid over the surface (mm, origin top-left, y downwards) coloured by
-    texture; right, each texture's relative friction over one period.
+    The taxtel grid over the surface (mm, origin top-left, y downwards) coloured by texture;
+    then each texture's relative friction and its UV and EV drives along its direction over one
+    length shared by all textures (mm, its period stated; a temporal part versus time in ms), on
+    one friction scale, with a legend above the cells.
 
     The PNG is written atomically: an existing file is replaced only once the picture is
     complete.

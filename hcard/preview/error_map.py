@@ -1,11 +1,14 @@
 """The error map of a preview: each taxtel's error in JND over the surface.
 
 The caller gives one figure per taxtel (for example the encoder's RMS reconstruction error, in
-relative friction, divided by :data:`hcard.limits.RELATIVE_FRICTION_JND`). The map colours
-errors up to 1 JND in blues and errors above it in yellows to reds (the colour bar gives the
-lower half of its length to 0-1 JND), and outlines the taxtels above 1 JND: a difference of
-relative friction below one JND is not felt (thesis appendix B.1, Fig. B.2; spec/README.md
-section 10), one above it is.
+relative friction, divided by :data:`hcard.limits.RELATIVE_FRICTION_JND`). Errors up to 1 JND
+are blues and errors above it yellows to reds, and the taxtels above 1 JND are outlined: a
+difference of relative friction below one JND is not felt (thesis appendix B.1, Fig. B.2;
+spec/README.md section 10), one above it is. The colour scale follows the data: a map whose
+largest error is below 1 JND spreads the whole range of blues over 0 to that largest error
+(rounded up), so that taxtels at 0.01 and 0.02 JND differ visibly; a map with errors above 1 JND
+gives the lower half of the colour bar to 0-1 JND and the upper half to 1 JND up to the largest.
+The title states the largest error, the 95th percentile and the scale's range.
 """
 
 from __future__ import annotations
@@ -17,11 +20,12 @@ import numpy as np
 from matplotlib import colormaps
 from matplotlib.axes import Axes
 from matplotlib.collections import LineCollection
-from matplotlib.colors import ListedColormap, TwoSlopeNorm
+from matplotlib.colors import Colormap, ListedColormap, Normalize, TwoSlopeNorm
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
 from hcard.limits import RELATIVE_FRICTION_JND
+from hcard.preview.periods import nice_ceil
 from hcard.v1 import card_pb2 as pb
 
 ERROR_AXES_LABEL = "error-map"
@@ -32,9 +36,12 @@ OUTLINE_LABEL = "over-1-jnd"
 """``Collection.get_label()`` of the outline of the taxtels above 1 JND."""
 THRESHOLD_JND = 1.0
 """Errors above this many JND are outlined."""
-MIN_SCALE_JND = 2.0
-"""The colour scale reaches at least this many JND, so a map without errors above 1 JND
-still shows where the threshold lies."""
+SCALE_STEPS = (1.0, 1.2, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0)
+"""A map without errors above 1 JND is coloured from 0 to its largest error rounded up to one
+of these times a power of ten (at most a quarter above it)."""
+BELOW_THRESHOLD = (0.06, 1.0)
+"""The span of matplotlib's ``Blues`` a map without errors above 1 JND spreads over its range
+(from nearly white to dark blue)."""
 
 
 @dataclass(frozen=True)
@@ -120,11 +127,43 @@ def error_colormap() -> ListedColormap:
     return ListedColormap(np.vstack([below, above]), name="hcard-error")
 
 
-def error_norm(values: np.ndarray) -> TwoSlopeNorm:
-    """0 JND to the colour map's bottom, 1 JND to its middle, the largest error (at least
-    :data:`MIN_SCALE_JND`) to its top."""
-    largest = float(np.nanmax(values)) if np.any(np.isfinite(values)) else 0.0
-    return TwoSlopeNorm(vmin=0.0, vcenter=THRESHOLD_JND, vmax=max(MIN_SCALE_JND, largest))
+def largest(values: np.ndarray) -> float:
+    """The largest error of the map, 0 when it has none."""
+    return float(np.nanmax(values)) if np.any(np.isfinite(values)) else 0.0
+
+
+def error_norm(values: np.ndarray) -> Normalize:
+    """The colour scale of ``values``: 0 to the largest error rounded up to
+    :data:`SCALE_STEPS` when it is at most 1 JND (a map without errors: 0 to 1 JND); else 0 JND
+    to the colour map's bottom, 1 JND to its middle and the largest error to its top."""
+    top = largest(values)
+    if top <= THRESHOLD_JND:
+        return Normalize(vmin=0.0, vmax=min(nice_ceil(top, SCALE_STEPS), THRESHOLD_JND)
+                         if top > 0 else THRESHOLD_JND)
+    return TwoSlopeNorm(vmin=0.0, vcenter=THRESHOLD_JND, vmax=top)
+
+
+def scale_colormap(norm: Normalize) -> Colormap:
+    """The colours of :func:`error_norm`'s scale: all blues below the threshold, else
+    :func:`error_colormap`."""
+    if isinstance(norm, TwoSlopeNorm):
+        return error_colormap()
+    return ListedColormap(colormaps["Blues"](np.linspace(*BELOW_THRESHOLD, 256)),
+                          name="hcard-error-below")
+
+
+def error_title(panel: ErrorPanel, top: float) -> str:
+    """The map's title: what it shows, its largest error and 95th percentile, the colour
+    scale's range and the taxtels above 1 JND."""
+    counted = int(np.count_nonzero(~np.isnan(panel.values)))
+    if counted == 0:
+        return f"{panel.label} (JND): no taxtel has a figure"
+    p95 = float(np.nanpercentile(panel.values, 95))
+    above = int(panel.above.sum())
+    felt = (f"{above} of {counted} taxtels above {THRESHOLD_JND:g} JND, outlined" if above else
+            f"all {counted} taxtels below {THRESHOLD_JND:g} JND (not felt)")
+    return (f"{panel.label}: max {largest(panel.values):.2g} JND, p95 {p95:.2g} JND\n"
+            f"colour scale 0-{top:.2g} JND; {felt}")
 
 
 def draw_error_map(fig: Figure, ax: Axes, cax: Axes, panel: ErrorPanel,
@@ -137,7 +176,7 @@ def draw_error_map(fig: Figure, ax: Axes, cax: Axes, panel: ErrorPanel,
     cax.set_label(ERROR_BAR_LABEL)
     image = ax.imshow(
         panel.values,
-        cmap=error_colormap(),
+        cmap=scale_colormap(norm),
         norm=norm,
         interpolation="nearest",
         origin="upper",
@@ -148,15 +187,17 @@ def draw_error_map(fig: Figure, ax: Axes, cax: Axes, panel: ErrorPanel,
     ax.add_collection(LineCollection(outline_segments(above, tw, th),  # type: ignore[arg-type]
                                      colors="black",
                                      linewidths=0.9, label=OUTLINE_LABEL, zorder=3))
-    counted = int(np.count_nonzero(~np.isnan(panel.values)))
-    ax.set_title(f"{panel.label} (JND): {int(above.sum())} of {counted} taxtels above "
-                 f"{THRESHOLD_JND:g} JND, outlined", fontsize=9, loc="left")
-
     top = norm.vmax
     assert top is not None  # error_norm sets both ends
-    upper = [v for v in MaxNLocator(nbins=4).tick_values(THRESHOLD_JND, top)
-             if THRESHOLD_JND < v <= top]
-    bar = fig.colorbar(image, cax=cax, ticks=[0.0, 0.5, THRESHOLD_JND, *upper])
-    bar.ax.axhline(THRESHOLD_JND, color="black", linewidth=1.2)
+    ax.set_title(error_title(panel, top), fontsize=9, loc="left")
+    if isinstance(norm, TwoSlopeNorm):
+        upper = [v for v in MaxNLocator(nbins=4).tick_values(THRESHOLD_JND, top)
+                 if THRESHOLD_JND < v <= top]
+        ticks = [0.0, 0.5, THRESHOLD_JND, *upper]
+    else:
+        ticks = [v for v in MaxNLocator(nbins=5).tick_values(0.0, top) if 0.0 <= v <= top]
+    bar = fig.colorbar(image, cax=cax, ticks=ticks)
+    if isinstance(norm, TwoSlopeNorm):
+        bar.ax.axhline(THRESHOLD_JND, color="black", linewidth=1.2)
     bar.set_label(f"JND (1 JND = {RELATIVE_FRICTION_JND:g} μ/μ0)", fontsize=8)
     bar.ax.tick_params(labelsize=7)

@@ -68,15 +68,23 @@ def _line_glyphs(path: str, line: str) -> tuple[list[tuple[np.ndarray, np.ndarra
     return glyphs, x
 
 
+def text_width(text: str, size_pt: float, font: str | None = None) -> float:
+    """Width of the longest line of ``text`` at ``size_pt`` points, inches (as drawn by
+    :class:`PathLabels`: advance widths, no kerning)."""
+    path = font or findfont(FontProperties())
+    return max(_line_glyphs(path, line)[1] for line in text.split("\n")) * size_pt / 72.0
+
+
 def label_outline(text: str, *, ha: str = "left", va: str = "top", font: str | None = None,
-                  size: float = 1.0) -> Path:
+                  size: float = 1.0, rotation: float = 0.0) -> Path:
     """The outline of ``text`` (lines split at ``"\n"``), y up, anchored at (0, 0), in units of
     ``size`` ems.
 
     ``ha``: ``"left"``, ``"center"`` or ``"right"`` (each line on its own); ``va``: ``"top"``
     (the first line's capitals touch 0), ``"center"`` (the block's capitals-to-last-baseline
     span centred on 0) or ``"baseline"`` (the first baseline at 0). ``font``: a font file
-    (default: matplotlib's default font).
+    (default: matplotlib's default font). ``rotation``: degrees counter-clockwise about the
+    anchor, after the alignment (90 for a y-axis label read from below).
     """
     path = font or findfont(FontProperties())
     cap = float(_glyph(path, CAP_HEIGHT_CHAR)[0][:, 1].max())
@@ -96,6 +104,10 @@ def label_outline(text: str, *, ha: str = "left", va: str = "top", font: str | N
         return Path(np.empty((0, 2)))
     counts = [len(piece) for piece in pieces]
     vertices = np.concatenate(pieces) + np.repeat(np.array(origins), counts, axis=0)
+    if rotation:
+        angle = np.radians(rotation)
+        cos, sin = np.cos(angle), np.sin(angle)
+        vertices = vertices @ np.array([[cos, sin], [-sin, cos]])
     return Path(vertices * size, np.concatenate(codes).astype(np.uint8))
 
 
@@ -110,14 +122,17 @@ class PathLabels(PathCollection):
         offset_transform: for example ``ax.transData``.
         ha, va: alignment to the anchor (see :func:`label_outline`).
         colors: one fill colour, or one per label.
+        rotation: degrees counter-clockwise about each anchor (see :func:`label_outline`).
     """
 
     def __init__(self, texts: Sequence[str], offsets: np.ndarray, *, size_pt: float,
                  inches: Transform, offset_transform: Transform, ha: str = "left",
-                 va: str = "top", colors: object = "black", **kwargs: Any) -> None:
+                 va: str = "top", colors: object = "black", rotation: float = 0.0,
+                 **kwargs: Any) -> None:
         self.texts = list(texts)
         font = findfont(FontProperties())
-        paths = [label_outline(text, ha=ha, va=va, font=font, size=size_pt / 72.0)
+        paths = [label_outline(text, ha=ha, va=va, font=font, size=size_pt / 72.0,
+                               rotation=rotation)
                  for text in self.texts]
         super().__init__(paths, offsets=np.asarray(offsets, dtype=float).reshape(-1, 2),
                          offset_transform=offset_transform, facecolors=colors,

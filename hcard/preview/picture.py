@@ -1,16 +1,18 @@
-"""A picture of a card a person can read: the taxtel map and every texture's relative friction
-over one period.
+"""A picture of a card a person can read: the taxtel map, the error map and every texture's
+relative friction along a common length.
 
-Left: the taxtel grid over the surface (millimetres, origin top-left, y downwards, equal aspect),
-coloured by texture index; below it, when the caller passes one, an error map of the taxtels in
-JND (:mod:`hcard.preview.error_map`). Right: one cell per texture, all of them (up to the
-format's 256), drawn as small multiples in a single axes (:mod:`hcard.preview.periods`): the
-texture's relative friction ``mu/mu0`` over one period, spatial components along the direction
-of the strongest one above temporal components versus time, every cell on the same friction
-scale. The layout is fixed (computed in
-inches, no constrained layout) and every cell is drawn with a handful of collections, so the
-cost hardly grows with the palette. Rendering uses matplotlib's Agg canvas directly (no pyplot,
-no display).
+Top left: the taxtel grid over the surface (millimetres, origin top-left, y downwards, equal
+aspect), coloured by texture index, with a colour bar naming the textures; beside it, when the
+caller passes one, an error map of the taxtels in JND (:mod:`hcard.preview.error_map`) with its
+colour bar. Then one cell per texture, all of them (up to the format's 256), drawn as small
+multiples in a single axes (:mod:`hcard.preview.periods`): the texture's relative friction
+``mu/mu0`` and its UV and EV drives along one shared length in mm (and, for a texture with
+temporal components, versus one shared time in ms), every cell on the same friction scale, an
+explanation with a legend above them. The cells fill the room right of the maps first, then
+full rows below them, so the picture has no empty blocks; its height follows the content. The
+layout is computed in inches (no constrained layout) and every kind of mark is drawn with one
+collection, so the cost hardly grows with the palette. Rendering uses matplotlib's Agg canvas
+directly (no pyplot, no display).
 
 >>> from hcard.preview.picture import render_preview
 >>> render_preview(card, "preview.png")          # doctest: +SKIP
@@ -32,7 +34,7 @@ from matplotlib.figure import Figure
 
 from hcard.atomic import write_atomically
 from hcard.preview.error_map import ErrorPanel, draw_error_map, error_panel
-from hcard.preview.glyph_labels import PathLabels
+from hcard.preview.glyph_labels import PathLabels, text_width
 from hcard.preview.periods import cells_layout, draw_cells
 from hcard.v1 import card_pb2 as pb
 from hcard.validate import require_valid
@@ -56,19 +58,21 @@ GRID_AXES_LABEL = "taxtel-grid"
 GRID_BAR_LABEL = "texture-colour-bar"
 """``Axes.get_label()`` of the taxtel map's colour bar."""
 PERIODS_AXES_LABEL = "texture-periods"
-"""``Axes.get_label()`` of the axes holding every texture's period strips."""
+"""``Axes.get_label()`` of the axes holding every texture's profile strips (it spans the
+figure; its data units are inches from the figure's top-left, y downwards)."""
 PNG_COMPRESS_LEVEL = 3
 """zlib level of the PNG: on a 256-texture preview as small as Pillow's default (6) and a third
 faster to write."""
 FIGURE_WIDTH_IN = 14.0
 """Width of the picture, inches."""
-MIN_HEIGHT_IN = 5.5
-"""Least height of the picture, inches."""
-_TOP_IN, _BOTTOM_IN = 0.45, 0.4  # title band, footnote band
+_TOP_IN, _BOTTOM_IN = 0.35, 0.12  # title band, margin below the cells
 _MAP_LEFT_IN, _MAP_WIDTH_IN, _MAP_MAX_HEIGHT_IN = 0.8, 4.3, 5.5
-_MAP_ABOVE_IN, _MAP_BELOW_IN = 0.35, 0.6  # title above a map, ticks and label below it
+_PAIR_MAP_MAX_WIDTH_IN = 5.0  # each of the taxtel and error maps side by side, at most
+_MAP_ABOVE_IN, _MAP_BELOW_IN = 0.5, 0.5  # title (two lines) above a map, ticks and label below
 _BAR_GAP_IN, _BAR_WIDTH_IN, _BAR_MIN_HEIGHT_IN = 0.12, 0.15, 1.5  # a map's colour bar
-_PANEL_LEFT_IN, _PANEL_RIGHT_IN = 6.75, 13.85
+_ERROR_BAR_LABELS_IN = 0.75  # tick labels and label right of the error map's colour bar
+_MAP_Y_LABELS_IN = 0.65  # y ticks and label left of the error map
+_RIGHT_IN, _BELOW_LEFT_IN = 0.15, 0.05  # margins of the cells' regions
 
 
 def texture_colors(count: int) -> np.ndarray:
@@ -158,12 +162,21 @@ def _frame_surface(ax: Axes, card: pb.Card) -> None:
     ax.tick_params(labelsize=8)
 
 
-def _map_size(surface: pb.Surface) -> tuple[float, float]:
-    """Width and height of a surface map, inches: :data:`_MAP_WIDTH_IN` wide unless that makes
-    it taller than :data:`_MAP_MAX_HEIGHT_IN`."""
+def _map_size(surface: pb.Surface, width_in: float = _MAP_WIDTH_IN) -> tuple[float, float]:
+    """Width and height of a surface map, inches: ``width_in`` wide unless that makes it taller
+    than :data:`_MAP_MAX_HEIGHT_IN`."""
     aspect = surface.height_mm / surface.width_mm
-    width = min(_MAP_WIDTH_IN, _MAP_MAX_HEIGHT_IN / aspect)
+    width = min(width_in, _MAP_MAX_HEIGHT_IN / aspect)
     return width, width * aspect
+
+
+def _bar_labels_width(card: pb.Card) -> float:
+    """Room the texture colour bar's tick labels take right of it, inches."""
+    count = len(card.textures)
+    if count > 32:
+        return text_width(str(count - 1), 7.0) + 0.15
+    names = [t.name if len(t.name) <= 18 else t.name[:17] + "…" for t in card.textures]
+    return max(text_width(f"{i} {name}".rstrip(), 7.0) for i, name in enumerate(names)) + 0.15
 
 
 def preview_figure(
@@ -201,13 +214,26 @@ def preview_figure(
     if error_map is not None:
         panel = error_panel(error_map, card.grid, error_label)
     textures = list(card.textures)
-    panel_w = _PANEL_RIGHT_IN - _PANEL_LEFT_IN
-    layout = cells_layout(textures, panel_w)
-    map_w, map_h = _map_size(card.surface)
+    labels_w = _bar_labels_width(card)
+    bar_room = _BAR_GAP_IN + _BAR_WIDTH_IN + labels_w
+    if panel is not None:  # the two maps side by side, as wide as the figure lets them
+        spare = (FIGURE_WIDTH_IN - _MAP_LEFT_IN - bar_room - _MAP_Y_LABELS_IN - _BAR_GAP_IN
+                 - _BAR_WIDTH_IN - _ERROR_BAR_LABELS_IN - _RIGHT_IN)
+        map_w, map_h = _map_size(card.surface, min(spare / 2, _PAIR_MAP_MAX_WIDTH_IN))
+    else:
+        map_w, map_h = _map_size(card.surface)
     bar_h = max(map_h, _BAR_MIN_HEIGHT_IN)
-    map_block = _MAP_ABOVE_IN + bar_h + _MAP_BELOW_IN
-    left_h = map_block * (2 if panel is not None else 1)
-    height = max(MIN_HEIGHT_IN, _TOP_IN + max(left_h, layout.height) + _BOTTOM_IN)
+    maps_h = _MAP_ABOVE_IN + bar_h + _MAP_BELOW_IN
+    maps_right = _MAP_LEFT_IN + map_w + bar_room
+    error_left = maps_right + _MAP_Y_LABELS_IN
+    if panel is not None:
+        maps_right = error_left + map_w + _BAR_GAP_IN + _BAR_WIDTH_IN + _ERROR_BAR_LABELS_IN
+    beside_w = FIGURE_WIDTH_IN - _RIGHT_IN - maps_right
+    layout = cells_layout(
+        textures, beside=(maps_right, _TOP_IN, beside_w, maps_h) if beside_w > 0 else None,
+        below=(_BELOW_LEFT_IN, FIGURE_WIDTH_IN - _BELOW_LEFT_IN - _RIGHT_IN),
+        below_top=_TOP_IN + maps_h, dpi=dpi)
+    height = max(_TOP_IN + maps_h, layout.bottom) + _BOTTOM_IN
 
     fig = Figure(figsize=(FIGURE_WIDTH_IN, height), dpi=dpi)
     FigureCanvasAgg(fig)
@@ -218,18 +244,19 @@ def preview_figure(
                 width_in / FIGURE_WIDTH_IN, height_in / height)
 
     colours = texture_colors(len(textures))
-    bar_left = _MAP_LEFT_IN + map_w + _BAR_GAP_IN
     top = _TOP_IN + _MAP_ABOVE_IN
     _draw_grid(fig, rect(_MAP_LEFT_IN, top, map_w, map_h),
-               rect(bar_left, top, _BAR_WIDTH_IN, bar_h), card, colours)
+               rect(_MAP_LEFT_IN + map_w + _BAR_GAP_IN, top, _BAR_WIDTH_IN, bar_h), card,
+               colours)
     if panel is not None:
-        top += map_block
-        ax = fig.add_axes(rect(_MAP_LEFT_IN, top, map_w, map_h))
-        cax = fig.add_axes(rect(bar_left, top, _BAR_WIDTH_IN, bar_h))
+        ax = fig.add_axes(rect(error_left, top, map_w, map_h))
+        cax = fig.add_axes(rect(error_left + map_w + _BAR_GAP_IN, top, _BAR_WIDTH_IN, bar_h))
         draw_error_map(fig, ax, cax, panel, card.grid)
         _frame_surface(ax, card)
-    periods = fig.add_axes(rect(_PANEL_LEFT_IN, _TOP_IN, panel_w, layout.height),
-                           label=PERIODS_AXES_LABEL)
+    periods = fig.add_axes((0.0, 0.0, 1.0, 1.0), label=PERIODS_AXES_LABEL)
+    periods.set_xlim(0.0, FIGURE_WIDTH_IN)
+    periods.set_ylim(height, 0.0)
+    periods.set_axis_off()
     draw_cells(periods, textures, colours, layout, dpi, fig.dpi_scale_trans)
 
     title = card.metadata.title or "(untitled card)"
@@ -244,16 +271,11 @@ def preview_figure(
         ha="center",
         va="top",
     )
-    # The explanation as glyph outlines: as Text, its 270 characters cost as much as 25 labels.
     fig.add_artist(PathLabels(
-        ["above each profile: the texture's number and colour, channel (BIP: bipolar), locking "
-         "(pos./vel./auto) and the profile windows: spatial length (∠ its direction, that of the "
-         "strongest component) | temporal length.\n"
-         "grey: what a UV-only (above 1) or EV-only (below 1) texture cannot render; dark band: "
-         f"components too fine to draw at this scale. hcard {__version__}"],
-        np.array([[1.0 - 0.07 / FIGURE_WIDTH_IN, 0.32 / height]]), size_pt=6.5,
-        inches=fig.dpi_scale_trans, offset_transform=fig.transFigure, ha="right", va="top",
-        colors="0.35"))
+        [f"hcard {__version__}"], np.array([[1.0 - _RIGHT_IN / FIGURE_WIDTH_IN,
+                                             1.0 - 0.12 / height]]),
+        size_pt=6.5, inches=fig.dpi_scale_trans, offset_transform=fig.transFigure, ha="right",
+        va="top", colors="0.45"))
     return fig
 
 

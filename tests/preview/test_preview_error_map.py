@@ -81,7 +81,9 @@ def test_error_map_shows_the_array_over_the_grid() -> None:
     assert image.norm(0.0) == pytest.approx(0.0)
     assert image.norm(1.0) == pytest.approx(0.5)
     assert image.norm(3.0) == pytest.approx(1.0)
-    assert ax.get_title(loc="left") == "RMS error (JND): 2 of 6 taxtels above 1 JND, outlined"
+    assert ax.get_title(loc="left") == (
+        "RMS error: max 3 JND, p95 2.6 JND\ncolour scale 0-3 JND; 2 of 6 taxtels above 1 JND, "
+        "outlined")
     # outlined: the 1.5 and 3.0 JND taxtels, a 20 x 10 mm block (1.0 JND itself is not above)
     (outline,) = [c for c in ax.collections if c.get_label() == OUTLINE_LABEL]
     assert _length(outline.get_segments()) == pytest.approx(60.0)
@@ -117,9 +119,10 @@ def test_no_taxtel_above_1_jnd_and_missing_figures() -> None:
     values = np.array([[0.1, np.nan, 0.4], [0.0, 0.99, 0.5]])
     ax = _error_axes(preview_figure(two_by_three_card(), error_map=values))
     assert ax.get_title(loc="left") == (
-        "reconstruction error (JND): 0 of 5 taxtels above 1 JND, outlined")
+        "reconstruction error: max 0.99 JND, p95 0.89 JND\n"
+        "colour scale 0-1 JND; all 5 taxtels below 1 JND (not felt)")
     (image,) = ax.get_images()
-    assert image.norm.vmax == 2.0  # the scale still shows where 1 JND lies
+    assert image.norm.vmax == 1.0  # the largest error, 0.99, rounded up
     outline = next(c for c in ax.collections if c.get_label() == OUTLINE_LABEL)
     assert len(outline.get_segments()) == 0
 
@@ -158,5 +161,5 @@ def test_the_encoders_error_map_fits_its_card(tmp_path: Path) -> None:
     above = result.stats["taxtels_over_jnd"]  # counted by the encoder: rms > 1 JND
     taxtels = result.card.grid.rows * result.card.grid.cols
     assert 0 < above < taxtels  # steps the taxtels do not follow: some above 1 JND, not all
-    assert ax.get_title(loc="left") == (
-        f"RMS error (JND): {above} of {taxtels} taxtels above 1 JND, outlined")
+    assert ax.get_title(loc="left").endswith(
+        f"; {above} of {taxtels} taxtels above 1 JND, outlined")
