@@ -19,11 +19,13 @@ from hcard.v1 import card_pb2 as pb
 
 def play_and_record(uri: str, card: pb.Card, track: FingerTrack, output: Path, *,
                     card_path: str, track_path: str, timeout_s: float = 1.0,
-                    profile: bytes | None = None) -> PlayResult:
+                    profile: bytes | None = None,
+                    ambient_pressure_pa: float | None = None) -> PlayResult:
     """Play ``card`` along ``track`` on the device at ``uri`` (``profile``: the bytes of a
     device profile to render with; None: the device's own), a whole session at real-time
     priority on a real-time device, and write the recording with its sidecar to ``output``
-    (naming ``card_path`` and ``track_path``).
+    (naming ``card_path`` and ``track_path``, and the air pressure the lab measured around
+    the plate, ``ambient_pressure_pa`` in Pa, when given).
 
     Raises:
         PlayTooLong: the track is longer than a play may be (nothing is sent).
@@ -35,7 +37,8 @@ def play_and_record(uri: str, card: pb.Card, track: FingerTrack, output: Path, *
             real_time_host() if driver.realtime else contextlib.nullcontext():
         result = play(driver, card, track, profile=profile, whole_session=True)
     try:
-        write_recording(result, output, track_path=track_path, card_path=card_path)
+        write_recording(result, output, track_path=track_path, card_path=card_path,
+                        ambient_pressure_pa=ambient_pressure_pa)
     except ValueError as exc:
         raise HcardError(f"{output}: {exc}") from None
     except OSError as exc:

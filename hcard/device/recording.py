@@ -156,8 +156,11 @@ def limits_record(limits: Limits) -> dict[str, float]:
 
 
 def sidecar(result: PlayResult, *, track_path: str | None = None,
-            card_path: str | None = None) -> dict[str, Any]:
-    """The conditions of a play session (rule MF9 keys)."""
+            card_path: str | None = None,
+            ambient_pressure_pa: float | None = None) -> dict[str, Any]:
+    """The conditions of a play session (rule MF9 keys); ``ambient_pressure_pa``: the air
+    pressure the lab measured around the plate, Pa (else the one an in-process device's URI
+    states, else none)."""
     info = result.info
     has_ev = bool(info.capabilities & Capability.EV)
     conditions: dict[str, Any] = {
@@ -194,8 +197,10 @@ def sidecar(result: PlayResult, *, track_path: str | None = None,
     }
     if result.limits_at_start is not None:
         conditions["limits_at_start"] = limits_record(result.limits_at_start)
-    pressure = stated_ambient_pressure(result.uri)
-    if pressure is not None:  # the air around an in-process device's plate
+    pressure = ambient_pressure_pa
+    if pressure is None:
+        pressure = stated_ambient_pressure(result.uri)
+    if pressure is not None:  # the air around the plate
         conditions["ambient_pressure_pa"] = pressure
     if has_ev:
         conditions["voltage_form"] = "envelope"
@@ -307,7 +312,8 @@ def force_recording(result: PlayResult) -> Measurement:
 
 
 def write_recording(result: PlayResult, path: str | os.PathLike[str], *,
-                    track_path: str | None = None, card_path: str | None = None) -> int:
+                    track_path: str | None = None, card_path: str | None = None,
+                    ambient_pressure_pa: float | None = None) -> int:
     """Write the session's recording (:func:`recording`) and its sidecar to ``path``, block by
     block (:data:`BLOCK_REPORTS` reports in memory at a time besides the packed reports),
     the CSV and its sidecar replacing the earlier pair together; returns the rows written.
@@ -318,5 +324,6 @@ def write_recording(result: PlayResult, path: str | os.PathLike[str], *,
             kept).
     """
     blocks = recording_blocks(result)
-    conditions = sidecar(result, track_path=track_path, card_path=card_path)
+    conditions = sidecar(result, track_path=track_path, card_path=card_path,
+                         ambient_pressure_pa=ambient_pressure_pa)
     return write_measurement_blocks(blocks, conditions, path)

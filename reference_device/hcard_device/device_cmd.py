@@ -283,8 +283,12 @@ def synthesize(device_class: str, uri: str | None, effect_names: tuple[str, ...]
                    "profile.json of `hcard calibrate`); default: the device's own.")
 @click.option("--timeout", default=1.0, show_default=True, type=click.FloatRange(min=0.001),
               help="Longest wait for any answer from the device, s.")
+@click.option("--ambient-pressure", "ambient_pressure", default=None, metavar="PRESSURE",
+              help="The air pressure around the plate as measured during the play, e.g. "
+                   "101.3kPa or 0.5atm: kept in the recording's sidecar (ambient_pressure_pa), "
+                   "where a calibration reads it (squeeze-film share, Eq. 2.10).")
 def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Path | None,
-         timeout: float) -> None:
+         timeout: float, ambient_pressure: str | None) -> None:
     """Play CARD on a device along a finger track and record it.
 
     The track is played in real time on hardware and USB/IP devices, as fast as possible on
@@ -316,6 +320,14 @@ def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Pat
     folder = output.parent if str(output.parent) else Path(".")
     if not folder.is_dir():  # checked before the device plays: the session is not lost
         raise HcardError(f"{output}: cannot write (no directory {folder})")
+    pressure_pa = None
+    if ambient_pressure is not None:
+        from hcard.device.uri import ambient_pressure as parse_pressure
+
+        try:
+            pressure_pa = parse_pressure(ambient_pressure)
+        except ValueError as exc:
+            raise click.BadParameter(str(exc), param_hint="--ambient-pressure") from None
     loaded = load(card)
     track = read_track_csv(track_path)
     try:
@@ -328,7 +340,7 @@ def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Pat
         DeviceProfile.from_json(profile_bytes, source=str(profile_path))  # checked before use
     result = play_and_record(uri, loaded, track, output, card_path=str(card),
                              track_path=str(track_path), timeout_s=timeout,
-                             profile=profile_bytes)
+                             profile=profile_bytes, ambient_pressure_pa=pressure_pa)
     click.echo(f"{output}: {len(result.states)} reports from {uri}")
     for line in summary(result):
         click.echo(printable(f"  {line}"))

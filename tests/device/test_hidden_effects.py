@@ -11,6 +11,7 @@ import pytest
 from click.testing import CliRunner
 
 from hcard import build
+from hcard.card_io import save as hcard_save
 from hcard.cli.main import cli
 from hcard.device import open_device
 from hcard.device.errors import UriError
@@ -192,4 +193,26 @@ def test_the_ambient_pressure_is_checked():
         pytest.approx(50662.5))
     refused = CliRunner().invoke(cli, ["device", "serve", "--ambient-pressure", "1kHz",
                                        "--port", "0"])
+    assert refused.exit_code == 2 and "--ambient-pressure" in refused.output
+
+
+def test_hcard_play_keeps_the_pressure_the_lab_measured(tmp_path):
+    """A served or real device cannot know the air around its plate; the lab states what it
+    measured (`hcard play --ambient-pressure`) and the recording keeps it, where the device's
+    own URI states none."""
+    card = tmp_path / "c.hcard"
+    hcard_save(build.card(20.0, 10.0, taxtel_mm=10.0, textures=[build.texture(0.6, channel="uv")]),
+               card)
+    track = tmp_path / "t.csv"
+    track.write_text("t_s,x_mm,y_mm,fn_n,contact\n0,2,5,0.5,1\n0.1,6,5,0.5,1\n0.2,10,5,0.5,1\n")
+    out = tmp_path / "rec.csv"
+    played = CliRunner().invoke(cli, ["play", str(card), "--track", str(track), "--device",
+                                      "usbip://loopback?device=evita", "-o", str(out), "-q",
+                                      "--ambient-pressure", "85kPa"])
+    assert played.exit_code == 0, played.output
+    assert json.loads((tmp_path / "rec.csv.json").read_text())["ambient_pressure_pa"] == (
+        pytest.approx(85e3))
+    refused = CliRunner().invoke(cli, ["play", str(card), "--track", str(track), "--device",
+                                       "sim://evita", "-o", str(out), "--ambient-pressure",
+                                       "3 s"])
     assert refused.exit_code == 2 and "--ambient-pressure" in refused.output

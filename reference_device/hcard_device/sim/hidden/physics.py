@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from hcard.physics.contracts import FrequencyResponse
 from hcard.physics.profile import DeviceProfile
 from hcard.quantities import ATMOSPHERE_PA
 from hcard.rates import DEFAULT_FRAME_RATE_HZ
@@ -203,10 +204,11 @@ def carrier_gain_ratio(profile: DeviceProfile, tau_d_s: float) -> float:
     transient at a touch-down or an envelope step is of relative size ``1/(omega tau)``
     squared in the force, under 0.5 % here, and left out."""
     leakage, limits = profile.leakage, profile.limits
-    if leakage is None or limits is None:
+    if not isinstance(leakage, FrequencyResponse) or limits is None:
         raise HiddenEffectError("effect charge-leakage needs a device with an EV carrier and "
-                                "a leakage model")
+                                "a leakage model with a frequency response")
     finger = leakage.with_params(tau_d=tau_d_s)
+    assert isinstance(finger, FrequencyResponse)
     gain = float(np.abs(np.asarray(finger.frequency_response(
         np.asarray([limits.carrier_frequency])))).ravel()[0])
     return gain / profile.carrier_gain
