@@ -17,9 +17,8 @@ Each run is what a lab does, each step a fresh ``hcard`` process:
    verify.csv``: the loop, the separating experiment played on the device when the verdict is
    ambiguous (spec/calibration.md K34), then the held-out textures played without and with the
    fitted profile.
-   ``squeeze-film-share`` shows only across ambient pressures: with ``--transport sim`` the
-   protocol is played at one atmosphere and at 50 kPa and both recordings calibrated together
-   (:data:`OTHER_PRESSURES`).
+   ``squeeze-film-share`` shows only across ambient pressures: the protocol is played at one
+   atmosphere and at 50 kPa and both recordings calibrated together (:data:`OTHER_PRESSURES`).
 
 A case is an effect the device lists (``hcard device serve --list-effects``) at its default
 (hidden) parameters, or ``none``. Whether the library has an effect of the same name decides
@@ -51,6 +50,7 @@ Prints one line per run, then the rates per class: hit, undecided, wrong, missed
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -78,10 +78,10 @@ of this bench). A hidden effect that leaves the own profile's error under ``MIN_
 it (an actuator lag of 1.5 ms against patches of 10 mm at 40-70 mm/s) has no 2x to cut; the
 table's ``cut>=2x`` counts the others."""
 OTHER_PRESSURES = {"squeeze-film-share": ("50kPa",)}
-"""Cases that show only across conditions: the protocol is played again at these ambient
-pressures and every recording calibrated together (``--transport sim`` only: a play over USB/IP
-cannot learn the pressure around a served device's plate, so there the case is one recording at
-one atmosphere, where the effect is invisible by its nature, Eq. 2.10)."""
+"""Cases that show only across conditions (Eq. 2.10: a squeeze film's share is invisible at one
+ambient pressure): the protocol is played again on the device at these pressures (served:
+a second server with ``--ambient-pressure``, the play stating what was measured with its own
+``--ambient-pressure``) and every recording calibrated together."""
 READY = re.compile(r"at (usbip://127\.0\.0\.1:\d+/\S+)")
 HOST_SILENCE = "of silence from this host"
 """A play that lost its session because this host stalled (spec QT3): measured again."""
@@ -141,9 +141,10 @@ def library_effects() -> dict[str, str]:
 class Server:
     """``hcard device serve`` in its own process while the block runs."""
 
-    def __init__(self, seed: int, effect: str | None) -> None:
+    def __init__(self, seed: int, effect: str | None, pressure: str | None = None) -> None:
         self.command = [*HCARD, "device", "serve", "--port", "0", "--device", DEVICE,
-                        "--seed", str(seed), *(["--effect", effect] if effect else [])]
+                        "--seed", str(seed), *(["--effect", effect] if effect else []),
+                        *(["--ambient-pressure", pressure] if pressure else [])]
 
     def __enter__(self) -> str:
         self.process = subprocess.Popen(self.command, stdout=subprocess.PIPE,
@@ -179,15 +180,17 @@ def sim_uri(seed: int, effect: str | None) -> str:
     return f"sim://{DEVICE}?seed={seed}" + (f"&effect={effect}" if effect else "")
 
 
-def loop(uri: str, plan: Path, out: Path, also: tuple[str, ...] = ()) -> dict:
-    """Play the protocol on ``uri`` (and on each of ``also``: the same device under other
-    conditions), calibrate on every recording, verify on ``uri``: the report."""
+def loop(uri: str, plan: Path, out: Path, also: tuple[tuple[str, str], ...] = ()) -> dict:
+    """Play the protocol on ``uri`` (and on each device of ``also``, ``(uri, pressure)``: the
+    same device under another ambient pressure, which the play states), calibrate on every
+    recording, verify on ``uri``: the report."""
     out.mkdir(parents=True, exist_ok=True)
     recordings = []
-    for index, where in enumerate((uri, *also)):
+    for index, (where, pressure) in enumerate(((uri, ""), *also)):
         recordings.append(out / ("rec.csv" if index == 0 else f"rec-{index}.csv"))
         hcard("play", plan / "protocol.hcard", "--track", plan / "protocol.csv", "--device",
-              where, "-o", recordings[-1], "-q")
+              where, "-o", recordings[-1], "-q",
+              *(["--ambient-pressure", pressure] if pressure else []))
     hcard("calibrate", *recordings, "-o", out / "calib", "--verify", uri, "--quiet",
           "--no-figures", "--settle", "--verify-card", plan / "verify.hcard", "--verify-track",
           plan / "verify.csv")
@@ -277,12 +280,16 @@ def one(case: str, seed: int, truth: dict[str, float], channel: str, plan: Path,
     for attempt in range(1, 4):
         out = keep / f"{case}-seed{seed}-attempt{attempt}"
         try:
+            pressures = OTHER_PRESSURES.get(case, ())
             if transport == "served":
-                with Server(seed, effect) as uri:
-                    report = loop(uri, plan, out)
+                with contextlib.ExitStack() as servers:
+                    uri = servers.enter_context(Server(seed, effect))
+                    also = tuple((servers.enter_context(Server(seed, effect, p)), p)
+                                 for p in pressures)
+                    report = loop(uri, plan, out, also)
             else:
                 uri = sim_uri(seed, effect)
-                also = tuple(f"{uri}&ambient_pressure={p}" for p in OTHER_PRESSURES.get(case, ()))
+                also = tuple((f"{uri}&ambient_pressure={p}", p) for p in pressures)
                 report = loop(uri, plan, out, also)
         except (RuntimeError, subprocess.TimeoutExpired) as exc:
             run.error = str(exc)
