@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import errno
+import signal
+from collections.abc import Iterator
 from pathlib import Path
 
 import click
@@ -78,11 +81,29 @@ def view(cards: tuple[Path, ...], port: int, source: Path | None, device_uri: st
 
         webbrowser.open(server.url)
     try:
-        server.serve_forever()
+        with _stopped_by_signals():
+            server.serve_forever()
     except KeyboardInterrupt:
         click.echo("hcard view: stopped", err=True)
     finally:
         server.server_close()
+
+
+@contextlib.contextmanager
+def _stopped_by_signals() -> Iterator[None]:
+    """Ctrl-C (SIGINT) and SIGTERM stop the server, whatever disposition the process
+    inherited: a command started in the background by a non-interactive shell (a CI script)
+    inherits SIGINT ignored, and Python then never raises KeyboardInterrupt; the previous
+    handlers are given back on exit."""
+    def interrupt(_signum: int, _frame: object) -> None:
+        raise KeyboardInterrupt
+
+    previous = {sig: signal.signal(sig, interrupt) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 COMMANDS = [view]
