@@ -58,6 +58,18 @@ def hidden_effect_options(where: str) -> Callable[[Callable[..., None]], Callabl
     return decorate
 
 
+def pressure_option(text: str | None) -> float | None:
+    """``--ambient-pressure`` in Pa (None when not given), or a usage error naming it."""
+    if text is None:
+        return None
+    from hcard.device.uri import ambient_pressure
+
+    try:
+        return ambient_pressure(text)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint="--ambient-pressure") from None
+
+
 def echo_hidden_effects() -> None:
     """One line per effect a simulated device can hide: devices, parameters, what it is."""
     from hcard_device.sim.hidden import HIDDEN_EFFECTS
@@ -137,14 +149,7 @@ def serve(host: str, port: int, variant: str, seed: int, ambient_pressure: str |
         echo_hidden_effects()
         return
     effects = hidden_effects(effect_names, assignments, variant)
-    pressure = None
-    if ambient_pressure is not None:
-        from hcard.device.uri import ambient_pressure as parse_pressure
-
-        try:
-            pressure = parse_pressure(ambient_pressure)
-        except ValueError as exc:
-            raise click.BadParameter(str(exc), param_hint="--ambient-pressure") from None
+    pressure = pressure_option(ambient_pressure)
     status = serve_device(variant, host, port, seed, effects=effects,
                           echo=lambda message, error: click.echo(message, err=error),
                           ambient_pressure_pa=pressure)
@@ -320,14 +325,7 @@ def play(card: Path, uri: str, track_path: Path, output: Path, profile_path: Pat
     folder = output.parent if str(output.parent) else Path(".")
     if not folder.is_dir():  # checked before the device plays: the session is not lost
         raise HcardError(f"{output}: cannot write (no directory {folder})")
-    pressure_pa = None
-    if ambient_pressure is not None:
-        from hcard.device.uri import ambient_pressure as parse_pressure
-
-        try:
-            pressure_pa = parse_pressure(ambient_pressure)
-        except ValueError as exc:
-            raise click.BadParameter(str(exc), param_hint="--ambient-pressure") from None
+    pressure_pa = pressure_option(ambient_pressure)
     loaded = load(card)
     track = read_track_csv(track_path)
     try:
